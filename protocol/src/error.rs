@@ -1,0 +1,367 @@
+//! Decode errors and their mapping to the LLRPStatus a reader answers with.
+
+use std::fmt;
+
+use crate::params::{FieldError, LlrpStatus, ParameterError};
+
+/// LLRPStatus status codes (LLRP 1.0.1 §16.2.8.1 plus 1.1's M_UnexpectedMessage).
+#[allow(non_camel_case_types, missing_docs)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u16)]
+pub enum StatusCode {
+    M_Success = 0,
+    M_ParameterError = 100,
+    M_FieldError = 101,
+    M_UnexpectedParameter = 102,
+    M_MissingParameter = 103,
+    M_DuplicateParameter = 104,
+    M_OverflowParameter = 105,
+    M_OverflowField = 106,
+    M_UnknownParameter = 107,
+    M_UnknownField = 108,
+    M_UnsupportedMessage = 109,
+    M_UnsupportedVersion = 110,
+    M_UnsupportedParameter = 111,
+    M_UnexpectedMessage = 112,
+    P_ParameterError = 200,
+    P_FieldError = 201,
+    P_UnexpectedParameter = 202,
+    P_MissingParameter = 203,
+    P_DuplicateParameter = 204,
+    P_OverflowParameter = 205,
+    P_OverflowField = 206,
+    P_UnknownParameter = 207,
+    P_UnknownField = 208,
+    P_UnsupportedParameter = 209,
+    A_Invalid = 300,
+    A_OutOfRange = 301,
+    R_DeviceError = 401,
+}
+
+impl StatusCode {
+    /// Every defined code, in numeric order.
+    pub const ALL: [StatusCode; 27] = [
+        Self::M_Success,
+        Self::M_ParameterError,
+        Self::M_FieldError,
+        Self::M_UnexpectedParameter,
+        Self::M_MissingParameter,
+        Self::M_DuplicateParameter,
+        Self::M_OverflowParameter,
+        Self::M_OverflowField,
+        Self::M_UnknownParameter,
+        Self::M_UnknownField,
+        Self::M_UnsupportedMessage,
+        Self::M_UnsupportedVersion,
+        Self::M_UnsupportedParameter,
+        Self::M_UnexpectedMessage,
+        Self::P_ParameterError,
+        Self::P_FieldError,
+        Self::P_UnexpectedParameter,
+        Self::P_MissingParameter,
+        Self::P_DuplicateParameter,
+        Self::P_OverflowParameter,
+        Self::P_OverflowField,
+        Self::P_UnknownParameter,
+        Self::P_UnknownField,
+        Self::P_UnsupportedParameter,
+        Self::A_Invalid,
+        Self::A_OutOfRange,
+        Self::R_DeviceError,
+    ];
+
+    /// The code's wire value.
+    pub fn code(self) -> u16 {
+        self as u16
+    }
+
+    /// The code with this wire value, if it is defined.
+    pub fn from_code(code: u16) -> Option<Self> {
+        Self::ALL.iter().copied().find(|c| c.code() == code)
+    }
+}
+
+impl fmt::Display for StatusCode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Debug::fmt(self, f)
+    }
+}
+
+/// One step of the path from the message to the place of an error.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PathSeg {
+    /// The message, with its type number.
+    Message {
+        /// Spec name, e.g. `ADD_ROSPEC`.
+        name: &'static str,
+        /// Message type number.
+        ty: u16,
+    },
+    /// A parameter, with its type number.
+    Param {
+        /// Spec name, e.g. `AISpec`.
+        name: &'static str,
+        /// Parameter type number.
+        ty: u16,
+    },
+    /// A field of the enclosing message or parameter.
+    Field {
+        /// Spec name, e.g. `AntennaIDs`.
+        name: &'static str,
+        /// Position of the field in its message or parameter, from 0.
+        index: u16,
+    },
+}
+
+impl PathSeg {
+    /// Spec name of this step.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PathSeg::Message { name, .. }
+            | PathSeg::Param { name, .. }
+            | PathSeg::Field { name, .. } => name,
+        }
+    }
+}
+
+/// What went wrong while decoding.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// A field runs past the end of its message or parameter.
+    Truncated,
+    /// A field holds a value outside its allowed range.
+    OutOfRange,
+    /// A field holds an invalid value (e.g. text that is not UTF-8).
+    Invalid,
+    /// A TLV parameter's length is below 4 or runs past its container.
+    BadParameterLength {
+        /// Parameter type.
+        ty: u16,
+        /// Length field value.
+        len: u16,
+    },
+    /// A parameter of a known type appears where the spec does not allow it.
+    UnexpectedParameter {
+        /// Parameter type.
+        ty: u16,
+    },
+    /// A required parameter is absent.
+    MissingParameter {
+        /// Type of the missing parameter.
+        ty: u16,
+        /// Spec name of the missing parameter.
+        name: &'static str,
+    },
+    /// A parameter allowed once appears twice.
+    DuplicateParameter {
+        /// Parameter type.
+        ty: u16,
+    },
+    /// A TV parameter of unknown type (its length cannot be known).
+    UnknownParameter {
+        /// TV type.
+        ty: u16,
+    },
+    /// Bytes left over after a message's or parameter's last sub-parameter.
+    TrailingBytes,
+    /// The message header's version is neither 1 nor 2.
+    UnsupportedVersion {
+        /// Version found.
+        version: u8,
+    },
+    /// The message length field disagrees with the bytes given.
+    BadMessageLength {
+        /// Length field value.
+        len: u32,
+    },
+}
+
+/// A message that could not be decoded: where, what and the LLRPStatus it deserves.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DecodeError {
+    /// Byte offset from the start of the frame.
+    pub offset: usize,
+    /// Message, parameters and (last) field leading to the error.
+    pub path: Vec<PathSeg>,
+    /// What went wrong.
+    pub kind: ErrorKind,
+}
+
+impl DecodeError {
+    /// An error at absolute address `at` (made relative to the frame by `Message::decode`).
+    pub(crate) fn at(at: *const u8, kind: ErrorKind) -> Self {
+        DecodeError {
+            offset: at as usize,
+            path: Vec::new(),
+            kind,
+        }
+    }
+
+    /// Prepends a step to the path (errors are built from the inside out).
+    pub(crate) fn within(mut self, seg: PathSeg) -> Self {
+        self.path.insert(0, seg);
+        self
+    }
+
+    /// The path as `ADD_ROSPEC/ROSpec/AISpec/AntennaIDs`.
+    pub fn path_string(&self) -> String {
+        let names: Vec<&str> = self.path.iter().map(PathSeg::name).collect();
+        names.join("/")
+    }
+
+    /// The status code a reader answers this error with (top level of [`Self::to_status`]).
+    pub fn status_code(&self) -> StatusCode {
+        self.to_status().code()
+    }
+
+    /// The LLRPStatus a reader answers with, with FieldError / ParameterError detail.
+    pub fn to_status(&self) -> LlrpStatus {
+        let description = self.to_string();
+        if let ErrorKind::UnsupportedVersion { .. } = self.kind {
+            return LlrpStatus::new(StatusCode::M_UnsupportedVersion, description);
+        }
+        let params: Vec<u16> = self
+            .path
+            .iter()
+            .filter_map(|s| match s {
+                PathSeg::Param { ty, .. } => Some(*ty),
+                _ => None,
+            })
+            .collect();
+        let field = self.path.iter().rev().find_map(|s| match s {
+            PathSeg::Field { index, .. } => Some(*index),
+            _ => None,
+        });
+        let field_code = match self.kind {
+            ErrorKind::OutOfRange => StatusCode::A_OutOfRange,
+            _ => StatusCode::A_Invalid,
+        };
+        // The error is either about a field of the innermost container, or about a
+        // sub-parameter of it (identified by type).
+        let (sub_ty, m_code, p_code) = match self.kind {
+            ErrorKind::UnexpectedParameter { ty } => (
+                Some(ty),
+                StatusCode::M_UnexpectedParameter,
+                StatusCode::P_UnexpectedParameter,
+            ),
+            ErrorKind::MissingParameter { ty, .. } => (
+                Some(ty),
+                StatusCode::M_MissingParameter,
+                StatusCode::P_MissingParameter,
+            ),
+            ErrorKind::DuplicateParameter { ty } => (
+                Some(ty),
+                StatusCode::M_DuplicateParameter,
+                StatusCode::P_DuplicateParameter,
+            ),
+            ErrorKind::UnknownParameter { ty } => (
+                Some(ty),
+                StatusCode::M_UnknownParameter,
+                StatusCode::P_UnknownParameter,
+            ),
+            ErrorKind::BadParameterLength { ty, .. } => (
+                Some(ty),
+                StatusCode::M_ParameterError,
+                StatusCode::P_ParameterError,
+            ),
+            _ => (None, StatusCode::M_FieldError, StatusCode::P_FieldError),
+        };
+        // Innermost detail first, then wrap it in each enclosing parameter.
+        let mut inner: Option<ParameterError> = sub_ty.map(|ty| ParameterError::new(ty, p_code));
+        let mut field_error = match (sub_ty, field) {
+            (None, Some(index)) => Some(FieldError {
+                field_num: index,
+                error_code: field_code.code(),
+                ..Default::default()
+            }),
+            _ => None,
+        };
+        for (depth, ty) in params.iter().enumerate().rev() {
+            let innermost = depth == params.len() - 1;
+            let code = if innermost && sub_ty.is_none() {
+                StatusCode::P_FieldError
+            } else {
+                StatusCode::P_ParameterError
+            };
+            let mut pe = ParameterError::new(*ty, code);
+            pe.field_error = field_error.take();
+            pe.parameter_error = inner.take().map(Box::new);
+            inner = Some(pe);
+        }
+        let code = if params.is_empty() {
+            if sub_ty.is_some() {
+                m_code
+            } else {
+                StatusCode::M_FieldError
+            }
+        } else {
+            StatusCode::M_ParameterError
+        };
+        let mut status = LlrpStatus::new(code, description);
+        status.field_error = field_error;
+        status.parameter_error = inner;
+        status
+    }
+}
+
+impl fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let what = match &self.kind {
+            ErrorKind::Truncated => "field runs past the end of its container".to_string(),
+            ErrorKind::OutOfRange => "field value out of range".to_string(),
+            ErrorKind::Invalid => "invalid field value".to_string(),
+            ErrorKind::BadParameterLength { ty, len } => {
+                format!("parameter type {ty} has bad length {len}")
+            }
+            ErrorKind::UnexpectedParameter { ty } => format!("unexpected parameter type {ty}"),
+            ErrorKind::MissingParameter { ty, name } => {
+                format!("missing parameter {name} (type {ty})")
+            }
+            ErrorKind::DuplicateParameter { ty } => format!("duplicate parameter type {ty}"),
+            ErrorKind::UnknownParameter { ty } => format!("unknown TV parameter type {ty}"),
+            ErrorKind::TrailingBytes => "trailing bytes after the last parameter".to_string(),
+            ErrorKind::UnsupportedVersion { version } => {
+                format!("unsupported protocol version {version}")
+            }
+            ErrorKind::BadMessageLength { len } => format!("bad message length {len}"),
+        };
+        write!(
+            f,
+            "{what} at offset {} in {}",
+            self.offset,
+            self.path_string()
+        )
+    }
+}
+
+impl std::error::Error for DecodeError {}
+
+/// Why a byte stream could not be split into frames.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// Length field below the 10-byte header size: the stream cannot be resynchronised.
+    #[error("message length {len} is below the 10-byte header (type {msg_type}, id {id})")]
+    TooShort {
+        /// Length field value.
+        len: u32,
+        /// Message type from the header.
+        msg_type: u16,
+        /// Message ID from the header.
+        id: u32,
+    },
+    /// Length field above the configured maximum.
+    #[error("message length {len} exceeds the maximum {max} (type {msg_type}, id {id})")]
+    TooLong {
+        /// Length field value.
+        len: u32,
+        /// Configured maximum.
+        max: u32,
+        /// Message type from the header.
+        msg_type: u16,
+        /// Message ID from the header.
+        id: u32,
+    },
+    /// Version other than 1 (LLRP 1.0.1) or 2 (LLRP 1.1); the frame can be skipped.
+    #[error("unsupported LLRP version {} (type {}, id {})", .0.version, .0.msg_type, .0.id)]
+    UnsupportedVersion(crate::frame::FrameHeader),
+}

@@ -1,0 +1,70 @@
+//! LLRPStatus and its error detail parameters.
+
+use crate::error::StatusCode;
+
+llrp_struct! {
+    /// Outcome of a request: a status code, a description and optional detail.
+    pub struct LlrpStatus: tlv [287] "LLRPStatus" {
+        status_code "StatusCode": u16,
+        error_description "ErrorDescription": String,
+    } {
+        field_error: opt FieldError,
+        parameter_error: opt ParameterError,
+    }
+}
+
+llrp_struct! {
+    /// Which field of a message or parameter was in error, and why.
+    pub struct FieldError: tlv [288] "FieldError" {
+        field_num "FieldNum": u16,
+        error_code "ErrorCode": u16,
+    } {}
+}
+
+llrp_struct! {
+    /// Which parameter was in error, and why; nests down to the innermost one.
+    pub struct ParameterError: tlv [289] "ParameterError" {
+        parameter_type "ParameterType": u16,
+        error_code "ErrorCode": u16,
+    } {
+        field_error: opt FieldError,
+        parameter_error: opt Box<ParameterError>,
+    }
+}
+
+impl LlrpStatus {
+    /// A status with this code and description and no detail.
+    pub fn new(code: StatusCode, description: impl Into<String>) -> Self {
+        LlrpStatus {
+            status_code: code.code(),
+            error_description: description.into(),
+            ..Default::default()
+        }
+    }
+
+    /// M_Success with an empty description.
+    pub fn success() -> Self {
+        Self::new(StatusCode::M_Success, "")
+    }
+
+    /// The status code, if it is a defined one.
+    pub fn code(&self) -> StatusCode {
+        StatusCode::from_code(self.status_code).unwrap_or(StatusCode::R_DeviceError)
+    }
+
+    /// True for M_Success.
+    pub fn is_success(&self) -> bool {
+        self.status_code == 0
+    }
+}
+
+impl ParameterError {
+    /// Error detail for parameter type `ty`.
+    pub fn new(ty: u16, code: StatusCode) -> Self {
+        ParameterError {
+            parameter_type: ty,
+            error_code: code.code(),
+            ..Default::default()
+        }
+    }
+}

@@ -1,0 +1,4 @@
+//! llrp-gateway: a simulated LLRP reader, a transparent gateway to real readers and a tag
+//! localizer. The LLRP codec lives in the `llrp` crate (`protocol/`).
+
+pub mod decode;
