@@ -116,7 +116,7 @@ impl Field for String {
     fn decode_field(i: &[u8]) -> FieldResult<'_, Self> {
         let (rest, n) = counted(i, 1)?;
         let s = std::str::from_utf8(&rest[..n])
-            .map_err(|_| DecodeError::at(rest.as_ptr(), ErrorKind::Invalid))?;
+            .map_err(|_| DecodeError::at(i.as_ptr(), ErrorKind::Invalid))?;
         Ok((&rest[n..], s.to_owned()))
     }
     fn encode_field(&self, buf: &mut BytesMut) {
@@ -297,7 +297,15 @@ impl ParamHeader {
                 ));
             };
             if i.len() < 1 + n {
-                return Err(DecodeError::at(i.as_ptr(), ErrorKind::Truncated));
+                // A TV parameter that runs past its container is treated like a TLV whose
+                // length does: a parameter error, not a field error of the container.
+                return Err(DecodeError::at(
+                    i.as_ptr(),
+                    ErrorKind::BadParameterLength {
+                        ty: ty.into(),
+                        len: u16::try_from(i.len()).unwrap_or(u16::MAX),
+                    },
+                ));
             }
             return Ok(ParamHeader {
                 tv: true,

@@ -353,8 +353,11 @@ macro_rules! message_body {
                     }
                 )*
                 if ty == CUSTOM_MESSAGE_TYPE {
-                    if body.len() < 5 {
+                    if body.len() < 4 {
                         return Err(DecodeError::at(body.as_ptr(), ErrorKind::Truncated).within(PathSeg::Field { name: "VendorIdentifier", index: 0 }));
+                    }
+                    if body.len() < 5 {
+                        return Err(DecodeError::at(body[4..].as_ptr(), ErrorKind::Truncated).within(PathSeg::Field { name: "MessageSubtype", index: 1 }));
                     }
                     let vendor = u32::from_be_bytes([body[0], body[1], body[2], body[3]]);
                     let subtype = body[4];
