@@ -248,18 +248,68 @@ impl BitWriter {
 }
 
 /// Header of a parameter as found on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+///
+/// Held as two whole words (read through accessors) so that the decoder's many copies of
+/// the pending header never mix narrow stores with wide loads.
+#[derive(Clone, Copy, PartialEq, Eq)]
 pub struct ParamHeader {
+    /// Bit 62: TV; bits 32..48: type; bits 0..32: whole encoded length.
+    word: u64,
+    /// Vendor (high half) and subtype (low half) of a Custom parameter.
+    custom: u64,
+}
+
+impl ParamHeader {
+    /// A header with these parts (vendor and subtype are 0 except for Custom parameters).
+    #[inline(always)]
+    pub fn new(tv: bool, ty: u16, len: usize, vendor: u32, subtype: u32) -> Self {
+        ParamHeader {
+            word: u64::from(tv) << 62 | u64::from(ty) << 32 | (len as u64 & 0xFFFF_FFFF),
+            custom: u64::from(vendor) << 32 | u64::from(subtype),
+        }
+    }
+
     /// True for a TV parameter (1-byte header, fixed size).
-    pub tv: bool,
+    #[inline(always)]
+    pub fn tv(&self) -> bool {
+        self.word & 1 << 62 != 0
+    }
+
     /// Type: 1..=127 for TV, up to 1023 for TLV.
-    pub ty: u16,
+    #[inline(always)]
+    pub fn ty(&self) -> u16 {
+        (self.word >> 32) as u16
+    }
+
     /// Whole encoded length, header included.
-    pub len: usize,
+    #[inline(always)]
+    pub fn size(&self) -> usize {
+        (self.word & 0xFFFF_FFFF) as usize
+    }
+
     /// Vendor ID of a Custom parameter (TLV 1023), else 0.
-    pub vendor: u32,
+    #[inline(always)]
+    pub fn vendor(&self) -> u32 {
+        (self.custom >> 32) as u32
+    }
+
     /// Subtype of a Custom parameter, else 0.
-    pub subtype: u32,
+    #[inline(always)]
+    pub fn subtype(&self) -> u32 {
+        self.custom as u32
+    }
+}
+
+impl std::fmt::Debug for ParamHeader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ParamHeader")
+            .field("tv", &self.tv())
+            .field("ty", &self.ty())
+            .field("size", &self.size())
+            .field("vendor", &self.vendor())
+            .field("subtype", &self.subtype())
+            .finish()
+    }
 }
 
 /// TLV type of a Custom (vendor) parameter.
@@ -286,6 +336,7 @@ pub fn tv_value_len(ty: u8) -> Option<usize> {
 
 impl ParamHeader {
     /// Reads and checks a parameter header at the front of `i` (which must not be empty).
+    #[inline(always)]
     pub fn read(i: &[u8]) -> Result<ParamHeader, DecodeError> {
         let b0 = i[0];
         if b0 & 0x80 != 0 {
@@ -307,13 +358,7 @@ impl ParamHeader {
                     },
                 ));
             }
-            return Ok(ParamHeader {
-                tv: true,
-                ty: ty.into(),
-                len: 1 + n,
-                vendor: 0,
-                subtype: 0,
-            });
+            return Ok(ParamHeader::new(true, ty.into(), 1 + n, 0, 0));
         }
         if i.len() < 4 {
             return Err(DecodeError::at(i.as_ptr(), ErrorKind::Truncated));
@@ -335,13 +380,13 @@ impl ParamHeader {
         } else {
             (0, 0)
         };
-        Ok(ParamHeader {
-            tv: false,
+        Ok(ParamHeader::new(
+            false,
             ty,
-            len: usize::from(len),
+            usize::from(len),
             vendor,
             subtype,
-        })
+        ))
     }
 }
 
@@ -426,146 +471,113 @@ impl<T: Absent> Absent for Box<T> {
     }
 }
 
-/// Walks the sub-parameters of a message or parameter in order.
+/// Reads the sub-parameters of a message or parameter, one header at a time.
 ///
+/// The generated decoders keep the current header in a local and assign each parameter to
+/// the first slot (in spec order, at or after the current one) whose type it matches.
 /// Parameters of unknown type, and Custom parameters where the container has no Custom
 /// slot, are set aside as [`Extra`]s with their position, so encoding puts them back.
-pub struct Subs<'a> {
+pub struct Walk<'a> {
     rest: &'a [u8],
-    next: Option<ParamHeader>,
-    accept: fn(&ParamHeader) -> bool,
     extras: Vec<Extra>,
     count: u16,
 }
 
-impl<'a> Subs<'a> {
-    /// Starts walking `rest`; `accept` says which parameters have a slot in this container.
-    pub fn new(rest: &'a [u8], accept: fn(&ParamHeader) -> bool) -> Self {
-        Subs {
+impl<'a> Walk<'a> {
+    /// Starts walking the sub-parameters in `rest`.
+    #[inline]
+    pub fn new(rest: &'a [u8]) -> Self {
+        Walk {
             rest,
-            next: None,
-            accept,
             extras: Vec::new(),
             count: 0,
         }
     }
 
-    /// Header of the next parameter with a slot here, setting aside unknown ones.
-    #[inline]
-    fn peek(&mut self) -> Result<Option<ParamHeader>, DecodeError> {
-        if self.next.is_some() {
-            return Ok(self.next);
+    /// Header of the next parameter, or `None` at the end.
+    #[inline(always)]
+    pub fn header(&self) -> Result<Option<ParamHeader>, DecodeError> {
+        if self.rest.is_empty() {
+            return Ok(None);
         }
-        while !self.rest.is_empty() {
-            let h = ParamHeader::read(self.rest)?;
-            if (self.accept)(&h) {
-                self.next = Some(h);
-                return Ok(self.next);
-            }
-            if !h.tv && (h.ty == CUSTOM_TYPE || !crate::params::is_known_tlv(h.ty)) {
-                self.extras.push(Extra {
-                    at: self.count,
-                    param: RawParam::new(self.rest[..h.len].to_vec()),
-                });
-                self.rest = &self.rest[h.len..];
-                continue;
-            }
-            return Err(DecodeError::at(
-                self.rest.as_ptr(),
-                ErrorKind::UnexpectedParameter { ty: h.ty },
-            ));
-        }
-        Ok(None)
+        ParamHeader::read(self.rest).map(Some)
     }
 
-    /// Decodes the pending parameter as `T`.
+    /// Whether a parameter no slot takes is kept as an [`Extra`] (unknown or vendor).
     #[inline]
-    fn take<T: Param>(&mut self, h: ParamHeader) -> Result<T, DecodeError> {
-        let (this, rest) = self.rest.split_at(h.len);
-        let v = T::decode_param(this, &h)?;
+    pub fn is_extra(h: &ParamHeader) -> bool {
+        !h.tv() && (h.ty() == CUSTOM_TYPE || !crate::params::is_known_tlv(h.ty()))
+    }
+
+    /// Sets the current parameter aside as an [`Extra`].
+    pub fn set_aside(&mut self, h: &ParamHeader) {
+        let (this, rest) = self.rest.split_at(h.size());
+        self.extras.push(Extra {
+            at: self.count,
+            param: RawParam::new(this.to_vec()),
+        });
         self.rest = rest;
-        self.next = None;
+    }
+
+    /// Decodes the current parameter as `T`.
+    #[inline]
+    pub fn take<T: Param>(&mut self, h: &ParamHeader) -> Result<T, DecodeError> {
+        let (this, rest) = self.rest.split_at(h.size());
+        let v = T::decode_param(this, h)?;
+        self.rest = rest;
         self.count = self.count.saturating_add(1);
         Ok(v)
     }
 
-    fn no_duplicate<T: Param>(&mut self) -> Result<(), DecodeError> {
-        match self.peek()? {
-            Some(h) if T::matches(&h) => Err(DecodeError::at(
-                self.rest.as_ptr(),
-                ErrorKind::DuplicateParameter { ty: h.ty },
-            )),
-            _ => Ok(()),
-        }
-    }
-
-    /// Exactly one `T`.
-    pub fn one<T: Param>(&mut self) -> Result<T, DecodeError> {
-        match self.peek()? {
-            Some(h) if T::matches(&h) => {
-                let v = self.take(h)?;
-                self.no_duplicate::<T>()?;
-                Ok(v)
-            }
-            _ => Err(DecodeError::at(
-                self.rest.as_ptr(),
-                ErrorKind::MissingParameter {
-                    ty: T::TYPE,
-                    name: T::NAME,
-                },
-            )),
-        }
-    }
-
-    /// Zero or one `T`.
+    /// Decodes the current parameter as the first of a list of `T`, sizing the list from
+    /// the bytes left (bounded, so hostile lengths cannot make it allocate much).
     #[inline]
-    pub fn opt<T: Param>(&mut self) -> Result<Option<T>, DecodeError> {
-        match self.peek()? {
-            Some(h) if T::matches(&h) => {
-                let v = self.take(h)?;
-                self.no_duplicate::<T>()?;
-                Ok(Some(v))
-            }
-            _ => Ok(None),
-        }
+    pub fn take_first<T: Param>(
+        &mut self,
+        h: &ParamHeader,
+        v: &mut Vec<T>,
+    ) -> Result<(), DecodeError> {
+        let by_len = self.rest.len() / h.size().max(1);
+        let by_mem = 4 * self.rest.len() / std::mem::size_of::<T>().max(1);
+        v.reserve_exact(by_len.min(by_mem).max(1));
+        v.push(self.take(h)?);
+        Ok(())
     }
 
-    /// Zero or more `T`.
-    pub fn many<T: Param>(&mut self) -> Result<Vec<T>, DecodeError> {
-        let mut v = Vec::new();
-        while let Some(h) = self.peek()? {
-            if !T::matches(&h) {
-                break;
-            }
-            v.push(self.take(h)?);
-        }
-        Ok(v)
+    /// A known parameter out of place here.
+    #[cold]
+    pub fn unexpected(&self, h: &ParamHeader) -> DecodeError {
+        DecodeError::at(
+            self.rest.as_ptr(),
+            ErrorKind::UnexpectedParameter { ty: h.ty() },
+        )
     }
 
-    /// One or more `T`.
-    pub fn many1<T: Param>(&mut self) -> Result<Vec<T>, DecodeError> {
-        let v = self.many()?;
-        if v.is_empty() {
-            return Err(DecodeError::at(
-                self.rest.as_ptr(),
-                ErrorKind::MissingParameter {
-                    ty: T::TYPE,
-                    name: T::NAME,
-                },
-            ));
-        }
-        Ok(v)
+    /// A second parameter where only one is allowed.
+    #[cold]
+    pub fn duplicate(&self, h: &ParamHeader) -> DecodeError {
+        DecodeError::at(
+            self.rest.as_ptr(),
+            ErrorKind::DuplicateParameter { ty: h.ty() },
+        )
     }
 
-    /// Ends the walk: anything left is a parameter out of place.
-    pub fn finish(mut self) -> Result<Vec<Extra>, DecodeError> {
-        if let Some(h) = self.peek()? {
-            return Err(DecodeError::at(
-                self.rest.as_ptr(),
-                ErrorKind::UnexpectedParameter { ty: h.ty },
-            ));
-        }
-        Ok(self.extras)
+    /// A required parameter absent before the current position.
+    #[cold]
+    pub fn missing<T: Param>(&self) -> DecodeError {
+        DecodeError::at(
+            self.rest.as_ptr(),
+            ErrorKind::MissingParameter {
+                ty: T::TYPE,
+                name: T::NAME,
+            },
+        )
+    }
+
+    /// Ends the walk, returning the parameters set aside.
+    #[inline]
+    pub fn finish(self) -> Vec<Extra> {
+        self.extras
     }
 }
 

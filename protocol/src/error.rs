@@ -177,8 +177,15 @@ pub enum ErrorKind {
 }
 
 /// A message that could not be decoded: where, what and the LLRPStatus it deserves.
+///
+/// Boxed so that decode results stay small on the hot path; the fields of
+/// [`DecodeErrorDetail`] read through it (`e.offset`, `e.path`, `e.kind`).
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct DecodeError {
+pub struct DecodeError(Box<DecodeErrorDetail>);
+
+/// The contents of a [`DecodeError`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DecodeErrorDetail {
     /// Byte offset from the start of the frame.
     pub offset: usize,
     /// Message, parameters and (last) field leading to the error.
@@ -187,14 +194,28 @@ pub struct DecodeError {
     pub kind: ErrorKind,
 }
 
+impl std::ops::Deref for DecodeError {
+    type Target = DecodeErrorDetail;
+    fn deref(&self) -> &DecodeErrorDetail {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for DecodeError {
+    fn deref_mut(&mut self) -> &mut DecodeErrorDetail {
+        &mut self.0
+    }
+}
+
 impl DecodeError {
     /// An error at absolute address `at` (made relative to the frame by `Message::decode`).
+    #[cold]
     pub(crate) fn at(at: *const u8, kind: ErrorKind) -> Self {
-        DecodeError {
+        DecodeError(Box::new(DecodeErrorDetail {
             offset: at as usize,
             path: Vec::new(),
             kind,
-        }
+        }))
     }
 
     /// Prepends a step to the path (errors are built from the inside out).

@@ -27,6 +27,6 @@ pub mod raw;
 pub mod sample;
 pub mod units;
 
-pub use error::{DecodeError, ErrorKind, FrameError, PathSeg, StatusCode};
+pub use error::{DecodeError, DecodeErrorDetail, ErrorKind, FrameError, PathSeg, StatusCode};
 pub use frame::{FrameHeader, FrameSplitter, Split};
 pub use message::{Message, MessageBody};

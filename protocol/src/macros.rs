@@ -32,19 +32,60 @@ macro_rules! field_enc {
     };
 }
 
-/// Decodes a sub-parameter slot.
-macro_rules! slot_dec {
-    (one, $subs:ident, $t:ty) => {
-        $subs.one::<$t>()
+/// Type of a sub-parameter slot while decoding (`one` slots start empty).
+macro_rules! slot_local_ty {
+    (one $t:ty) => { Option<$t> };
+    (opt $t:ty) => { Option<$t> };
+    (many $t:ty) => { Vec<$t> };
+    (many1 $t:ty) => { Vec<$t> };
+}
+
+/// Whether a required slot is still empty.
+macro_rules! slot_missing {
+    (one, $v:ident) => {
+        $v.is_none()
     };
-    (opt, $subs:ident, $t:ty) => {
-        $subs.opt::<$t>()
+    (many1, $v:ident) => {
+        $v.is_empty()
     };
-    (many, $subs:ident, $t:ty) => {
-        $subs.many::<$t>()
+    ($k:ident, $v:ident) => {
+        false
     };
-    (many1, $subs:ident, $t:ty) => {
-        $subs.many1::<$t>()
+}
+
+/// Decodes the current parameter into its slot.
+macro_rules! slot_put {
+    (one, $walk:ident, $h:ident, $v:ident, $t:ty) => {
+        slot_put!(opt, $walk, $h, $v, $t)
+    };
+    (opt, $walk:ident, $h:ident, $v:ident, $t:ty) => {
+        if $v.is_some() {
+            return Err($walk.duplicate(&$h));
+        }
+        $v = Some($walk.take::<$t>(&$h)?);
+    };
+    (many, $walk:ident, $h:ident, $v:ident, $t:ty) => {
+        if $v.is_empty() {
+            $walk.take_first::<$t>(&$h, &mut $v)?;
+        } else {
+            $v.push($walk.take::<$t>(&$h)?);
+        }
+    };
+    (many1, $walk:ident, $h:ident, $v:ident, $t:ty) => {
+        slot_put!(many, $walk, $h, $v, $t)
+    };
+}
+
+/// The decoded slot's final value.
+macro_rules! slot_final {
+    (one, $walk:ident, $v:ident, $t:ty) => {
+        match $v {
+            Some(v) => v,
+            None => return Err($walk.missing::<$t>()),
+        }
+    };
+    ($k:ident, $walk:ident, $v:ident, $t:ty) => {
+        $v
     };
 }
 
@@ -168,11 +209,6 @@ macro_rules! llrp_struct {
         impl $name {
             /// Spec name.
             pub const SPEC_NAME: &'static str = $spec;
-
-            #[allow(unused_variables)]
-            fn accepts(h: &$crate::codec::ParamHeader) -> bool {
-                false $(|| <$sty as $crate::codec::Param>::matches(h))*
-            }
         }
 
         impl $crate::codec::Absent for $name {
@@ -201,9 +237,57 @@ macro_rules! llrp_struct {
                     )?
                     idx += 1;
                 )*
-                let mut subs = $crate::codec::Subs::new(i, Self::accepts);
-                $( let $sname = slot_dec!($skind, subs, $sty)?; )*
-                let extra = subs.finish()?;
+                let mut walk = $crate::codec::Walk::new(i);
+                $( let mut $sname: slot_local_ty!($skind $sty) = Default::default(); )*
+                // Index of the slot the last parameter went to.
+                let mut slot = 0usize;
+                while let Some(h) = walk.header()? {
+                    // The first slot at or after `slot` taking this parameter.
+                    let mut k = 0usize;
+                    let mut found = usize::MAX;
+                    let mut any = false;
+                    $(
+                        if <$sty as $crate::codec::Param>::matches(&h) {
+                            any = true;
+                            if found == usize::MAX && k >= slot {
+                                found = k;
+                            }
+                        }
+                        k += 1;
+                    )*
+                    if found == usize::MAX {
+                        if !any && $crate::codec::Walk::is_extra(&h) {
+                            walk.set_aside(&h);
+                            continue;
+                        }
+                        return Err(walk.unexpected(&h));
+                    }
+                    // Required slots passed over are missing.
+                    let mut j = 0usize;
+                    $(
+                        if j >= slot && j < found && slot_missing!($skind, $sname) {
+                            return Err(walk.missing::<$sty>());
+                        }
+                        j += 1;
+                    )*
+                    slot = found;
+                    let mut j = 0usize;
+                    $(
+                        if j == found {
+                            slot_put!($skind, walk, h, $sname, $sty);
+                        }
+                        j += 1;
+                    )*
+                }
+                let mut j = 0usize;
+                $(
+                    if j >= slot && slot_missing!($skind, $sname) {
+                        return Err(walk.missing::<$sty>());
+                    }
+                    j += 1;
+                )*
+                $( let $sname = slot_final!($skind, walk, $sname, $sty); )*
+                let extra = walk.finish();
                 Ok(Self { $($fname,)* $($sname,)* extra })
             }
 
@@ -241,7 +325,7 @@ macro_rules! llrp_struct {
             const TYPE: u16 = $ty;
             #[inline]
             fn matches(h: &$crate::codec::ParamHeader) -> bool {
-                !h.tv && h.ty == $ty
+                !h.tv() && h.ty() == $ty
             }
             fn decode_param(
                 i: &[u8],
@@ -272,7 +356,7 @@ macro_rules! llrp_struct {
             const TYPE: u16 = $crate::codec::CUSTOM_TYPE;
             #[inline]
             fn matches(h: &$crate::codec::ParamHeader) -> bool {
-                !h.tv && h.ty == $crate::codec::CUSTOM_TYPE && h.vendor == $vendor && h.subtype == $subtype
+                !h.tv() && h.ty() == $crate::codec::CUSTOM_TYPE && h.vendor() == $vendor && h.subtype() == $subtype
             }
             fn decode_param(
                 i: &[u8],
@@ -326,7 +410,7 @@ macro_rules! tv_param {
             const TYPE: u16 = $ty;
             #[inline]
             fn matches(h: &$crate::codec::ParamHeader) -> bool {
-                h.tv && h.ty == $ty
+                h.tv() && h.ty() == $ty
             }
             #[inline]
             fn decode_param(
@@ -419,7 +503,7 @@ macro_rules! llrp_choice {
                 )*
                 Err($crate::error::DecodeError::at(
                     i.as_ptr(),
-                    $crate::error::ErrorKind::UnexpectedParameter { ty: h.ty },
+                    $crate::error::ErrorKind::UnexpectedParameter { ty: h.ty() },
                 ))
             }
             fn encode_param(&self, buf: &mut bytes::BytesMut) {

@@ -25,14 +25,14 @@ impl RawParam {
 
     /// TLV (or TV) type number, or 0 if the bytes are not a parameter.
     pub fn param_type(&self) -> u16 {
-        self.header().map_or(0, |h| h.ty)
+        self.header().map_or(0, |h| h.ty())
     }
 
     /// Vendor and subtype, for a Custom parameter.
     pub fn vendor_subtype(&self) -> Option<(u32, u32)> {
         self.header()
-            .filter(|h| !h.tv && h.ty == CUSTOM_TYPE)
-            .map(|h| (h.vendor, h.subtype))
+            .filter(|h| !h.tv() && h.ty() == CUSTOM_TYPE)
+            .map(|h| (h.vendor(), h.subtype()))
     }
 }
 

@@ -78,7 +78,7 @@ impl Param for RawCustom {
     const NAME: &'static str = "Custom";
     const TYPE: u16 = CUSTOM_TYPE;
     fn matches(h: &ParamHeader) -> bool {
-        !h.tv && h.ty == CUSTOM_TYPE
+        !h.tv() && h.ty() == CUSTOM_TYPE
     }
     fn decode_param(i: &[u8], _h: &ParamHeader) -> Result<Self, DecodeError> {
         Ok(RawCustom(RawParam::new(i.to_vec())))

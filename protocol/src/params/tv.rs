@@ -58,7 +58,7 @@ impl Param for C1g2SingulationDetails {
     const NAME: &'static str = "C1G2SingulationDetails";
     const TYPE: u16 = 18;
     fn matches(h: &ParamHeader) -> bool {
-        h.tv && h.ty == 18
+        h.tv() && h.ty() == 18
     }
     fn decode_param(i: &[u8], _h: &ParamHeader) -> Result<Self, DecodeError> {
         let wrap = |e: DecodeError| {
