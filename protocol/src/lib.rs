@@ -7,6 +7,8 @@
 //! * Parameters the codec does not type, and vendor parameters, are kept byte for byte in
 //!   their original position ([`raw::Extra`], [`params::RawCustom`]), so decode → encode is
 //!   lossless.
+//! * [`reads::tag_reads`] walks the tag reads of an RO_ACCESS_REPORT in place, without
+//!   allocating, for consumers that only need the reads.
 //! * A [`DecodeError`] carries the byte offset, the parameter path and the LLRPStatus a reader
 //!   would answer with ([`DecodeError::to_status`]).
 //!
@@ -23,6 +25,7 @@ pub mod impinj;
 pub mod message;
 pub mod params;
 pub mod raw;
+pub mod reads;
 #[cfg(feature = "arbitrary")]
 pub mod sample;
 pub mod units;
