@@ -6,6 +6,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use llrp_gateway::decode::{decode_stream, DecodeOptions};
+use llrp_gateway::net::clock::Speed;
+use llrp_gateway::scenario::Scenario;
+use llrp_gateway::sim::{self, SimOptions};
 
 #[derive(Parser)]
 #[command(
@@ -20,6 +23,22 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run simulated LLRP readers for a scenario (default: the embedded warehouse S1).
+    Sim {
+        /// Scenario file (JSON); without it the embedded default scenario S1 runs.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        /// Listen address, overriding the scenario's; repeat for each reader in order.
+        #[arg(long)]
+        listen: Vec<String>,
+        /// Simulated time per real time: a factor (1 = real time) or `max` (as fast as the
+        /// client takes reports).
+        #[arg(long, default_value = "1")]
+        speed: Speed,
+        /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
+        #[arg(long)]
+        truth: Option<PathBuf>,
+    },
     /// Decode LLRP frames and print one JSON object per message.
     Decode {
         /// Input file with LLRP frames; `-` or nothing reads standard input.
@@ -36,6 +55,19 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Sim {
+            scenario,
+            listen,
+            speed,
+            truth,
+        } => run_sim(
+            scenario,
+            SimOptions {
+                listen,
+                speed,
+                truth,
+            },
+        ),
         Command::Decode {
             file,
             hex,
@@ -68,4 +100,50 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Runs the simulated readers until Ctrl-C.
+fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let scenario = match scenario {
+        Some(path) => match Scenario::load(&path) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("llrp-gateway sim: {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+        },
+        None => Scenario::default_s1(),
+    };
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("llrp-gateway sim: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    runtime.block_on(async move {
+        let running = match sim::start(&scenario, &opts).await {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("llrp-gateway sim: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        for (name, addr) in running.names.iter().zip(&running.addrs) {
+            eprintln!(
+                "llrp-gateway sim: scenario '{}': reader '{name}' listening on {addr}",
+                scenario.name
+            );
+        }
+        let _ = tokio::signal::ctrl_c().await;
+        running.shutdown().await;
+        ExitCode::SUCCESS
+    })
 }

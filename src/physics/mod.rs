@@ -1,0 +1,361 @@
+//! The radio-channel model of a simulated reader: which tags each antenna reads, when, and
+//! with which RSSI, phase, channel and Doppler shift.
+//!
+//! [`Model`] is built once per reader from a [`Scenario`]; it precomputes robot drives and
+//! answers queries by simulated time (µs since scenario start). Every random draw is seeded
+//! from the scenario seed and the identity of the draw (reader, antenna, attempt slot), so the
+//! answers never depend on call order. The building blocks are public for testing against
+//! closed forms: [`phase`], [`rssi`], [`multipath`], [`antenna`], [`hopping`], [`schedule`],
+//! [`robot`], [`motion`], [`noise`].
+
+pub mod antenna;
+pub mod geometry;
+pub mod hopping;
+mod inventory;
+pub mod motion;
+pub mod multipath;
+pub mod noise;
+pub mod phase;
+pub mod robot;
+pub mod rssi;
+pub mod schedule;
+pub mod seed;
+
+#[cfg(test)]
+mod tests;
+
+use crate::scenario::tagmem::{default_tid, parse_epc, parse_words};
+use crate::scenario::{
+    AntennaSpec, Mount, Pose, PoseSample, Reflector, RobotSpec, Scenario, VerticalAxis,
+};
+use geometry::wrap_pi;
+use hopping::HopSchedule;
+use motion::PolylineMotion;
+use robot::RobotTrajectory;
+
+/// Position and boresight of an antenna at one instant.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct AntennaPose {
+    /// Position (m).
+    pub position: [f64; 3],
+    /// Boresight azimuth about +z (rad), 0 = +x.
+    pub yaw_rad: f64,
+    /// Boresight elevation (rad), positive up.
+    pub pitch_rad: f64,
+}
+
+/// One successful tag read.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Read {
+    /// Index into `scenario.tags`.
+    pub tag: usize,
+    /// Antenna port, 1-based.
+    pub antenna: u16,
+    /// Simulated µs since scenario start.
+    pub time_us: u64,
+    /// 1-based index into the reader's frequency table.
+    pub channel_index: u16,
+    /// Carrier frequency in kHz.
+    pub frequency_khz: u32,
+    /// Received backscatter power in dBm, unrounded.
+    pub rssi_dbm: f64,
+    /// Reported phase in `[0, 2π)`.
+    pub phase_rad: f64,
+    /// Doppler shift in Hz (positive when the tag approaches the antenna).
+    pub doppler_hz: f64,
+}
+
+/// How an antenna moves.
+#[derive(Clone, Debug)]
+enum Mover {
+    Fixed(AntennaPose),
+    Robot {
+        /// Index into `Model::robots`.
+        robot: usize,
+        offset: Pose,
+        vertical: Option<VerticalAxis>,
+    },
+    Recorded(Vec<PoseSample>),
+}
+
+#[derive(Clone, Debug)]
+struct AntennaModel {
+    spec: AntennaSpec,
+    mover: Mover,
+}
+
+#[derive(Clone, Debug)]
+struct TagModel {
+    epc: [u8; 12],
+    tid: Vec<u16>,
+    user: Vec<u16>,
+    motion: PolylineMotion,
+}
+
+/// The channel model of one reader of a scenario.
+#[derive(Clone, Debug)]
+pub struct Model {
+    seed: u64,
+    reader: usize,
+    table: Vec<u32>,
+    wavelengths: Vec<f64>,
+    hops: HopSchedule,
+    reads_per_second: f64,
+    antennas: Vec<AntennaModel>,
+    tags: Vec<TagModel>,
+    reflectors: Vec<Reflector>,
+    robots: Vec<RobotTrajectory>,
+}
+
+/// Every distinct robot of the scenario, in order of first appearance over all readers, so
+/// antennas sharing a robot (on any reader) share one drive and one odometry.
+fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
+    let mut robots: Vec<&RobotSpec> = Vec::new();
+    for antenna in scenario.readers.iter().flat_map(|r| &r.antennas) {
+        if let Mount::Robot { robot, .. } = &antenna.mount {
+            if !robots.contains(&robot) {
+                robots.push(robot);
+            }
+        }
+    }
+    robots
+}
+
+impl Model {
+    /// Builds the model of reader `reader` (index into `scenario.readers`); seeds derive from
+    /// `scenario.seed`. An index past the last reader gives a model with no antennas.
+    pub fn new(scenario: &Scenario, reader: usize) -> Model {
+        let spec = scenario.readers.get(reader);
+        let table = spec.map(|r| r.region.frequencies_khz()).unwrap_or_default();
+        let wavelengths = table.iter().map(|&f| phase::wavelength_m(f)).collect();
+        let hops = spec.map_or(HopSchedule::new(1, 1.0, None), |r| {
+            HopSchedule::new(table.len(), r.hop_dwell_ms, r.fixed_channel)
+        });
+        let all_robots = distinct_robots(scenario);
+        let mut robot_ids: Vec<usize> = Vec::new();
+        let mut robots = Vec::new();
+        let mut antennas = Vec::new();
+        for a in spec.map_or(&[][..], |r| &r.antennas) {
+            let mover = match &a.mount {
+                Mount::Fixed { pose } => Mover::Fixed(pose_from(pose)),
+                Mount::Recorded { poses, .. } => Mover::Recorded(poses.clone()),
+                Mount::Robot { robot, offset } => {
+                    // `robot` was collected from this very scenario, so it is in the list.
+                    let global = all_robots.iter().position(|r| *r == robot).unwrap_or(0);
+                    let local = match robot_ids.iter().position(|&g| g == global) {
+                        Some(i) => i,
+                        None => {
+                            let mut rng =
+                                seed::rng(&[scenario.seed, seed::domain::ROBOT, global as u64]);
+                            robots.push(RobotTrajectory::simulate(robot, &mut rng));
+                            robot_ids.push(global);
+                            robots.len() - 1
+                        }
+                    };
+                    Mover::Robot {
+                        robot: local,
+                        offset: offset.clone(),
+                        vertical: robot.vertical.clone(),
+                    }
+                }
+            };
+            antennas.push(AntennaModel {
+                spec: a.clone(),
+                mover,
+            });
+        }
+        let tags = scenario
+            .tags
+            .iter()
+            .map(|t| {
+                let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
+                TagModel {
+                    epc,
+                    tid: t
+                        .tid
+                        .as_deref()
+                        .and_then(|h| parse_words(h).ok())
+                        .unwrap_or_else(|| default_tid(&epc)),
+                    user: t
+                        .user
+                        .as_deref()
+                        .and_then(|h| parse_words(h).ok())
+                        .unwrap_or_default(),
+                    motion: PolylineMotion::new(t.position, t.path.as_ref()),
+                }
+            })
+            .collect();
+        Model {
+            seed: scenario.seed,
+            reader,
+            table,
+            wavelengths,
+            hops,
+            reads_per_second: spec.map_or(0.0, |r| r.reads_per_second),
+            antennas,
+            tags,
+            reflectors: scenario.reflectors.clone(),
+            robots,
+        }
+    }
+
+    /// Number of antenna ports.
+    pub fn antenna_count(&self) -> u16 {
+        u16::try_from(self.antennas.len()).unwrap_or(u16::MAX)
+    }
+
+    /// The reader's channel table in hop order (ChannelIndex k is `table[k - 1]`).
+    pub fn frequencies_khz(&self) -> &[u32] {
+        &self.table
+    }
+
+    /// Channel (1-based index into [`Model::frequencies_khz`]) in use at `t_us`: the table is
+    /// walked in order, `hop_dwell_ms` per channel, unless the scenario pins `fixed_channel`.
+    pub fn channel_at(&self, t_us: u64) -> u16 {
+        self.hops.channel_at(t_us)
+    }
+
+    /// The reader's hop schedule (channel count, dwell, pinned channel).
+    pub fn hop_schedule(&self) -> HopSchedule {
+        self.hops
+    }
+
+    /// The reader's read-attempt budget per second.
+    pub fn reads_per_second(&self) -> f64 {
+        self.reads_per_second
+    }
+
+    /// Wavelength (m) of channel `channel` (1-based); that of channel 1 if out of range.
+    pub fn wavelength_m(&self, channel: u16) -> f64 {
+        let i = usize::from(channel.max(1) - 1);
+        self.wavelengths
+            .get(i)
+            .or(self.wavelengths.first())
+            .copied()
+            .unwrap_or(phase::wavelength_m(866_300))
+    }
+
+    /// True position of tag `tag` at `t_us` (the origin for an unknown tag).
+    pub fn tag_position(&self, tag: usize, t_us: u64) -> [f64; 3] {
+        self.tags
+            .get(tag)
+            .map_or([0.0; 3], |t| t.motion.position(seconds(t_us)))
+    }
+
+    /// True pose of antenna `antenna` (1-based) at `t_us` (ground truth; the origin for an
+    /// unknown antenna).
+    pub fn antenna_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
+        self.pose(antenna, t_us, false)
+    }
+
+    /// Pose of antenna `antenna` as dead-reckoned from wheel odometry (what the robot
+    /// believes); the true pose for fixed and recorded antennas.
+    pub fn odometry_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
+        self.pose(antenna, t_us, true)
+    }
+
+    /// Number of tags.
+    pub fn tag_count(&self) -> usize {
+        self.tags.len()
+    }
+
+    /// EPC-96 of tag `tag` (zeros for an unknown tag).
+    pub fn tag_epc(&self, tag: usize) -> [u8; 12] {
+        self.tags.get(tag).map_or([0; 12], |t| t.epc)
+    }
+
+    /// TID memory of tag `tag` as 16-bit words.
+    pub fn tag_tid(&self, tag: usize) -> Vec<u16> {
+        self.tags.get(tag).map_or_else(Vec::new, |t| t.tid.clone())
+    }
+
+    /// User memory of tag `tag` as 16-bit words.
+    pub fn tag_user(&self, tag: usize) -> Vec<u16> {
+        self.tags.get(tag).map_or_else(Vec::new, |t| t.user.clone())
+    }
+
+    /// Phase offset φ0 (rad) of (antenna, tag, channel): the scenario's per-channel value if
+    /// given, otherwise uniform in `[0, 2π)` drawn from the seed.
+    pub fn phase_offset(&self, antenna: u16, tag: usize, channel: u16) -> f64 {
+        let given = self
+            .antennas
+            .get(usize::from(antenna.max(1) - 1))
+            .and_then(|a| a.spec.phase_offset_rad.get(usize::from(channel.max(1) - 1)));
+        match given {
+            Some(&phi0) => phi0,
+            None => {
+                let h = seed::mix(&[
+                    self.seed,
+                    seed::domain::PHASE_OFFSET,
+                    self.reader as u64,
+                    u64::from(antenna),
+                    tag as u64,
+                    u64::from(channel),
+                ]);
+                std::f64::consts::TAU * seed::unit(h)
+            }
+        }
+    }
+
+    fn pose(&self, antenna: u16, t_us: u64, odometry: bool) -> AntennaPose {
+        let origin = AntennaPose {
+            position: [0.0; 3],
+            yaw_rad: 0.0,
+            pitch_rad: 0.0,
+        };
+        let Some(a) = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))
+        else {
+            return origin;
+        };
+        let t = seconds(t_us);
+        match &a.mover {
+            Mover::Fixed(pose) => *pose,
+            Mover::Recorded(poses) => {
+                let p = motion::recorded_pose(poses, t);
+                AntennaPose {
+                    position: [p[0], p[1], p[2]],
+                    yaw_rad: p[3],
+                    pitch_rad: p[4],
+                }
+            }
+            Mover::Robot {
+                robot,
+                offset,
+                vertical,
+            } => {
+                let Some(trajectory) = self.robots.get(*robot) else {
+                    return origin;
+                };
+                let [x, y, theta] = if odometry {
+                    trajectory.odometry_pose(t)
+                } else {
+                    trajectory.true_pose(t)
+                };
+                let (s, c) = theta.sin_cos();
+                let [ox, oy, oz] = offset.position;
+                let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
+                AntennaPose {
+                    position: [x + c * ox - s * oy, y + s * ox + c * oy, z],
+                    yaw_rad: wrap_pi(theta + offset.yaw_deg.to_radians()),
+                    pitch_rad: offset.pitch_deg.to_radians(),
+                }
+            }
+        }
+    }
+}
+
+/// A scenario pose in radians.
+fn pose_from(p: &Pose) -> AntennaPose {
+    AntennaPose {
+        position: p.position,
+        yaw_rad: wrap_pi(p.yaw_deg.to_radians()),
+        pitch_rad: p.pitch_deg.to_radians(),
+    }
+}
+
+/// Microseconds to seconds.
+fn seconds(t_us: u64) -> f64 {
+    t_us as f64 * 1e-6
+}

@@ -1,0 +1,218 @@
+//! Multipath by the image method: each reflecting plane adds one first-order path from the
+//! antenna's mirror image to the tag, with the plane's reflection coefficient and a π phase
+//! flip; the paths are summed as complex phasors (\[G\] eq. 1's 1 + Σ H_i).
+
+use super::antenna::{gain_linear, off_axis_angle};
+use super::geometry::{add_scaled, distance, dot, norm, sub, Vec3};
+use super::AntennaPose;
+use crate::scenario::Reflector;
+
+/// One reflected path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImagePath {
+    /// The antenna mirrored across the reflector.
+    pub image: Vec3,
+    /// Where the path meets the reflector.
+    pub reflection_point: Vec3,
+    /// Total path length antenna → reflector → tag (m).
+    pub length_m: f64,
+    /// Signed amplitude reflection coefficient (−magnitude: the π flip).
+    pub coefficient: f64,
+}
+
+/// Mirror image of `point` across the plane through `plane_point` with normal `normal`
+/// (`point` itself if the normal is zero).
+pub fn mirror_point(point: Vec3, plane_point: Vec3, normal: Vec3) -> Vec3 {
+    let n = norm(normal);
+    if n == 0.0 || !n.is_finite() {
+        return point;
+    }
+    let unit = [normal[0] / n, normal[1] / n, normal[2] / n];
+    let d = dot(sub(point, plane_point), unit);
+    add_scaled(point, -2.0 * d, unit)
+}
+
+/// First-order image paths from `antenna` to `tag`, one per reflector that has both strictly
+/// on the same side (a plane between them, or touching either, reflects nothing).
+pub fn image_paths(antenna: Vec3, tag: Vec3, reflectors: &[Reflector]) -> Vec<ImagePath> {
+    let mut paths = Vec::with_capacity(reflectors.len());
+    for r in reflectors {
+        let n = norm(r.normal);
+        if n == 0.0 || !n.is_finite() {
+            continue;
+        }
+        let unit = [r.normal[0] / n, r.normal[1] / n, r.normal[2] / n];
+        let da = dot(sub(antenna, r.point), unit);
+        let dt = dot(sub(tag, r.point), unit);
+        if da * dt <= 0.0 {
+            continue;
+        }
+        let image = add_scaled(antenna, -2.0 * da, unit);
+        // The segment image → tag crosses the plane at the fraction da / (da + dt).
+        let s = da / (da + dt);
+        let reflection_point = add_scaled(image, s, sub(tag, image));
+        paths.push(ImagePath {
+            image,
+            reflection_point,
+            length_m: distance(image, tag),
+            coefficient: -r.coefficient,
+        });
+    }
+    paths
+}
+
+/// A complex number (phasor).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Complex {
+    /// Real part.
+    pub re: f64,
+    /// Imaginary part.
+    pub im: f64,
+}
+
+impl Complex {
+    /// `magnitude · e^{j·angle}`.
+    pub fn from_polar(magnitude: f64, angle: f64) -> Complex {
+        Complex {
+            re: magnitude * angle.cos(),
+            im: magnitude * angle.sin(),
+        }
+    }
+
+    /// Magnitude.
+    pub fn abs(self) -> f64 {
+        self.re.hypot(self.im)
+    }
+
+    /// Argument in `(−π, π]`.
+    pub fn arg(self) -> f64 {
+        self.im.atan2(self.re)
+    }
+}
+
+/// The radio channel between one antenna and one tag on one wavelength.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Channel {
+    /// Direct tag–antenna distance D (m).
+    pub distance_m: f64,
+    /// Reader antenna linear gain toward the tag (boresight gain × pattern).
+    pub gain_linear: f64,
+    /// |1 + Σ H_i|: multipath amplitude factor (1 in free space).
+    pub multipath_factor: f64,
+    /// Round-trip propagation phase (rad): 4πD/λ − 2·arg(1 + Σ H_i).
+    pub delay_rad: f64,
+}
+
+/// Smallest distance used, so a tag touching the antenna stays finite (m).
+pub const MIN_DISTANCE_M: f64 = 0.01;
+
+/// The channel for an antenna (`gain_dbi`, `beamwidth_deg`) at `pose` and a tag at `tag`:
+/// H_i = Γ_i · √(G(θ_i)/G(θ_0)) · (D/d_i) · e^{−j2π(d_i − D)/λ} for each image path i.
+pub fn channel(
+    pose: &AntennaPose,
+    gain_dbi: f64,
+    beamwidth_deg: f64,
+    tag: Vec3,
+    reflectors: &[Reflector],
+    wavelength_m: f64,
+) -> Channel {
+    let d = distance(pose.position, tag).max(MIN_DISTANCE_M);
+    let g0 = gain_linear(gain_dbi, beamwidth_deg, off_axis_angle(pose, tag));
+    let k = std::f64::consts::TAU / wavelength_m;
+    let mut sum = Complex { re: 1.0, im: 0.0 };
+    for p in image_paths(pose.position, tag, reflectors) {
+        let gi = gain_linear(
+            gain_dbi,
+            beamwidth_deg,
+            off_axis_angle(pose, p.reflection_point),
+        );
+        let amplitude = p.coefficient * (gi / g0).sqrt() * d / p.length_m.max(MIN_DISTANCE_M);
+        let h = Complex::from_polar(amplitude, -k * (p.length_m - d));
+        sum.re += h.re;
+        sum.im += h.im;
+    }
+    Channel {
+        distance_m: d,
+        gain_linear: g0,
+        multipath_factor: sum.abs(),
+        delay_rad: 2.0 * k * d - 2.0 * sum.arg(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::TAU;
+
+    fn floor(coefficient: f64) -> Reflector {
+        Reflector {
+            name: "floor".into(),
+            point: [0.0, 0.0, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            coefficient,
+        }
+    }
+
+    #[test]
+    fn mirror_and_reflection_point() {
+        let m = mirror_point([1.0, 2.0, 3.0], [0.0, 0.0, 1.0], [0.0, 0.0, 5.0]);
+        assert_eq!(m, [1.0, 2.0, -1.0]);
+        let paths = image_paths([0.0, 0.0, 1.0], [4.0, 0.0, 3.0], &[floor(0.5)]);
+        assert_eq!(paths.len(), 1);
+        let p = paths[0];
+        assert_eq!(p.image, [0.0, 0.0, -1.0]);
+        assert!(p.reflection_point[2].abs() < 1e-12);
+        // Equal angles: the reflection point splits x in the ratio of the heights 1 : 3.
+        assert!((p.reflection_point[0] - 1.0).abs() < 1e-12);
+        assert!((p.length_m - (16.0f64 + 16.0).sqrt()).abs() < 1e-12);
+        assert_eq!(p.coefficient, -0.5);
+        // A plane between antenna and tag reflects nothing.
+        let wall = Reflector {
+            name: "wall".into(),
+            point: [2.0, 0.0, 0.0],
+            normal: [1.0, 0.0, 0.0],
+            coefficient: 0.5,
+        };
+        assert!(image_paths([0.0, 0.0, 1.0], [4.0, 0.0, 3.0], &[wall]).is_empty());
+    }
+
+    #[test]
+    fn one_floor_reflection_matches_the_two_ray_sum() {
+        let (h1, h2, rho, lambda) = (1.2, 0.7, 0.6, 0.3463);
+        let pose = AntennaPose {
+            position: [0.0, 0.0, h1],
+            yaw_rad: 0.0,
+            pitch_rad: 0.0,
+        };
+        for x in [0.5, 1.0, 2.3, 4.0, 6.7] {
+            let tag = [x, 0.0, h2];
+            // Isotropic antenna (360°) so both rays have the same gain.
+            let ch = channel(&pose, 0.0, 360.0, tag, &[floor(rho)], lambda);
+            let d_direct = (x * x + (h1 - h2) * (h1 - h2)).sqrt();
+            let d_image = (x * x + (h1 + h2) * (h1 + h2)).sqrt();
+            let k = TAU / lambda;
+            // One-way field: e^{−jkD}/D − ρ·e^{−jk d_r}/d_r.
+            let re = (-k * d_direct).cos() / d_direct - rho * (-k * d_image).cos() / d_image;
+            let im = (-k * d_direct).sin() / d_direct - rho * (-k * d_image).sin() / d_image;
+            let field = Complex { re, im };
+            assert!((ch.distance_m - d_direct).abs() < 1e-12);
+            assert!((ch.multipath_factor - field.abs() * d_direct).abs() < 1e-9);
+            let expected_delay = (-2.0 * field.arg()).rem_euclid(TAU);
+            let diff = (ch.delay_rad.rem_euclid(TAU) - expected_delay).abs();
+            assert!(diff.min(TAU - diff) < 1e-9, "x {x}: {diff}");
+        }
+    }
+
+    #[test]
+    fn free_space_channel_is_the_direct_path() {
+        let pose = AntennaPose {
+            position: [0.0; 3],
+            yaw_rad: 0.0,
+            pitch_rad: 0.0,
+        };
+        let ch = channel(&pose, 6.0, 70.0, [3.0, 0.0, 0.0], &[], 0.33);
+        assert_eq!(ch.multipath_factor, 1.0);
+        assert!((ch.delay_rad - 4.0 * std::f64::consts::PI * 3.0 / 0.33).abs() < 1e-9);
+        assert!((ch.gain_linear - 10f64.powf(0.6)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,199 @@
+//! Draws of the measurement noises: Gaussian phase and RSSI noise, the perturbed read range,
+//! and the optional extra phase noise n_opt of \[G\] eq. 4.
+
+use rand::Rng;
+use rand_distr::{Cauchy, ChiSquared, Distribution, Exp, Gamma, LogNormal, Normal, Weibull};
+
+use crate::scenario::NoiseDist;
+
+/// A draw from N(0, σ²); 0 when σ is 0 or invalid.
+pub fn gaussian<R: Rng + ?Sized>(rng: &mut R, sigma: f64) -> f64 {
+    match Normal::new(0.0, sigma) {
+        Ok(d) if sigma > 0.0 => d.sample(rng),
+        _ => 0.0,
+    }
+}
+
+/// A draw of the extra phase noise n_opt; 0 for parameters the distribution rejects (the
+/// scenario validation refuses those) and for a non-finite draw.
+pub fn extra<R: Rng + ?Sized>(rng: &mut R, dist: &NoiseDist) -> f64 {
+    let x = match *dist {
+        NoiseDist::Uniform { low, high } => {
+            if high > low {
+                rng.gen_range(low..high)
+            } else {
+                low
+            }
+        }
+        NoiseDist::Exponential { lambda } => Exp::new(lambda).map_or(0.0, |d| d.sample(rng)),
+        NoiseDist::Gamma { shape, scale } => {
+            Gamma::new(shape, scale).map_or(0.0, |d| d.sample(rng))
+        }
+        NoiseDist::Weibull { scale, shape } => {
+            Weibull::new(scale, shape).map_or(0.0, |d| d.sample(rng))
+        }
+        NoiseDist::Normal { mean, std } => Normal::new(mean, std).map_or(0.0, |d| d.sample(rng)),
+        NoiseDist::Lognormal { mu, sigma } => {
+            LogNormal::new(mu, sigma).map_or(0.0, |d| d.sample(rng))
+        }
+        NoiseDist::ChiSquared { k } => ChiSquared::new(k).map_or(0.0, |d| d.sample(rng)),
+        NoiseDist::Cauchy { median, scale } => {
+            Cauchy::new(median, scale).map_or(0.0, |d| d.sample(rng))
+        }
+    };
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// Validates a distribution's parameters; the reason names the bad parameter.
+pub fn check(dist: &NoiseDist) -> Result<(), String> {
+    fn finite(name: &str, v: f64) -> Result<(), String> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(format!("{name} must be finite, got {v}"))
+        }
+    }
+    fn positive(name: &str, v: f64) -> Result<(), String> {
+        if v > 0.0 && v.is_finite() {
+            Ok(())
+        } else {
+            Err(format!("{name} must be > 0, got {v}"))
+        }
+    }
+    match *dist {
+        NoiseDist::Uniform { low, high } => {
+            finite("low", low)?;
+            finite("high", high)?;
+            if high > low {
+                Ok(())
+            } else {
+                Err(format!("high must be > low, got low {low}, high {high}"))
+            }
+        }
+        NoiseDist::Exponential { lambda } => positive("lambda", lambda),
+        NoiseDist::Gamma { shape, scale } => {
+            positive("shape", shape)?;
+            positive("scale", scale)
+        }
+        NoiseDist::Weibull { scale, shape } => {
+            positive("scale", scale)?;
+            positive("shape", shape)
+        }
+        NoiseDist::Normal { mean, std } => {
+            finite("mean", mean)?;
+            if std >= 0.0 && std.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("std must be >= 0, got {std}"))
+            }
+        }
+        NoiseDist::Lognormal { mu, sigma } => {
+            finite("mu", mu)?;
+            if sigma >= 0.0 && sigma.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("sigma must be >= 0, got {sigma}"))
+            }
+        }
+        NoiseDist::ChiSquared { k } => positive("k", k),
+        NoiseDist::Cauchy { median, scale } => {
+            finite("median", median)?;
+            positive("scale", scale)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    fn mean_of(dist: &NoiseDist) -> f64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let n = 20_000;
+        (0..n).map(|_| extra(&mut rng, dist)).sum::<f64>() / n as f64
+    }
+
+    #[test]
+    fn sample_means_match_the_distributions() {
+        let cases = [
+            (
+                NoiseDist::Uniform {
+                    low: 0.0,
+                    high: 0.4,
+                },
+                0.2,
+            ),
+            (NoiseDist::Exponential { lambda: 10.0 }, 0.1),
+            (
+                NoiseDist::Gamma {
+                    shape: 2.0,
+                    scale: 0.05,
+                },
+                0.1,
+            ),
+            (
+                NoiseDist::Normal {
+                    mean: 0.3,
+                    std: 0.1,
+                },
+                0.3,
+            ),
+            (NoiseDist::ChiSquared { k: 1.0 }, 1.0),
+            (
+                NoiseDist::Lognormal {
+                    mu: -2.0,
+                    sigma: 0.1,
+                },
+                (-2.0f64 + 0.005).exp(),
+            ),
+        ];
+        for (dist, expected) in cases {
+            let m = mean_of(&dist);
+            assert!(
+                (m - expected).abs() < 0.05 * expected.abs() + 0.01,
+                "{dist:?}: {m}"
+            );
+        }
+        // Weibull(scale 1, shape 1) is Exp(1).
+        assert!(
+            (mean_of(&NoiseDist::Weibull {
+                scale: 1.0,
+                shape: 1.0
+            }) - 1.0)
+                .abs()
+                < 0.05
+        );
+    }
+
+    #[test]
+    fn cauchy_draws_are_finite_and_bad_parameters_are_refused() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let d = NoiseDist::Cauchy {
+            median: 0.0,
+            scale: 0.1,
+        };
+        assert!((0..10_000).all(|_| extra(&mut rng, &d).is_finite()));
+        assert!(check(&NoiseDist::Gamma {
+            shape: -1.0,
+            scale: 1.0
+        })
+        .is_err());
+        assert!(check(&NoiseDist::Uniform {
+            low: 1.0,
+            high: 1.0
+        })
+        .is_err());
+        assert!(check(&NoiseDist::Normal {
+            mean: 0.0,
+            std: 0.1
+        })
+        .is_ok());
+        assert_eq!(gaussian(&mut rng, 0.0), 0.0);
+    }
+}

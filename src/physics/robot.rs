@@ -1,0 +1,261 @@
+//! A differential-drive robot driven through waypoints (\[M\] eqs. 1–11), integrated once with a
+//! fixed time step, with the pose it would dead-reckon from noisy wheel odometry.
+//!
+//! Control (on the true pose, as a robot with good localization would): heading error
+//! e_θ = wrap(atan2(Δy, Δx) − θ), ω = K_ω·e_θ, v = min(K_v·δ, v_max)·max(cos e_θ, 0) (the cosine
+//! factor, ours, makes the robot turn on the spot at sharp corners instead of circling), and
+//! both wheel rim speeds v ± ω·d/2 are kept within v_max. Wheel displacements u_R, u_L
+//! move the true pose; odometry sees û = u + η with Var η = K·|u| (\[M\] eq. 5) and integrates
+//! û from the known start: Δs = (û_R + û_L)/2, Δθ = (û_R − û_L)/d, midpoint heading.
+
+use rand_chacha::ChaCha8Rng;
+
+use super::geometry::wrap_pi;
+use super::noise::gaussian;
+use crate::scenario::RobotSpec;
+
+/// Integration time step in seconds.
+pub const TIME_STEP_S: f64 = 0.01;
+/// Integration steps per stored sample (poses are kept every 50 ms and interpolated).
+pub const STORE_EVERY: usize = 5;
+/// Longest simulated drive in seconds; a looping robot stops after it.
+pub const MAX_DURATION_S: f64 = 7200.0;
+
+/// A precomputed robot drive: true and dead-reckoned poses `[x, y, θ]` at a fixed interval.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotTrajectory {
+    sample_dt_s: f64,
+    truth: Vec<[f64; 3]>,
+    odometry: Vec<[f64; 3]>,
+}
+
+/// Linear and angular speed commanded toward `target` from `pose`.
+fn control(spec: &RobotSpec, pose: [f64; 3], target: [f64; 2]) -> (f64, f64) {
+    let (dx, dy) = (target[0] - pose[0], target[1] - pose[1]);
+    let delta = dx.hypot(dy);
+    let e_theta = wrap_pi(dy.atan2(dx) - pose[2]);
+    let mut omega = spec.k_omega * e_theta;
+    let mut v = (spec.k_v * delta).min(spec.speed) * e_theta.cos().max(0.0);
+    // Keep both wheel rim speeds within the speed limit.
+    let rim = v.abs() + omega.abs() * spec.wheel_base / 2.0;
+    if rim > spec.speed && rim > 0.0 {
+        v *= spec.speed / rim;
+        omega *= spec.speed / rim;
+    }
+    (v, omega)
+}
+
+/// Moves `pose` by wheel displacements `u_r`, `u_l` (m) for a wheel base `d`.
+fn advance(pose: &mut [f64; 3], u_r: f64, u_l: f64, d: f64) {
+    let ds = (u_r + u_l) / 2.0;
+    let dtheta = (u_r - u_l) / d;
+    let mid = pose[2] + dtheta / 2.0;
+    pose[0] += ds * mid.cos();
+    pose[1] += ds * mid.sin();
+    pose[2] += dtheta;
+}
+
+fn usable(spec: &RobotSpec) -> bool {
+    let positive = |x: f64| x > 0.0 && x.is_finite();
+    let non_negative = |x: f64| x >= 0.0 && x.is_finite();
+    positive(spec.speed)
+        && positive(spec.wheel_base)
+        && positive(spec.wheel_radius)
+        && positive(spec.k_v)
+        && positive(spec.k_omega)
+        && positive(spec.tolerance_m)
+        && non_negative(spec.k_r)
+        && non_negative(spec.k_l)
+        && spec.start.iter().all(|v| v.is_finite())
+        && spec.waypoints.iter().flatten().all(|v| v.is_finite())
+}
+
+impl RobotTrajectory {
+    /// Simulates the drive of `spec` from t = 0 until the last waypoint is reached (or, for a
+    /// looping path, for [`MAX_DURATION_S`]); `rng` draws the odometry noise. A spec with
+    /// unusable values (not validated) leaves the robot at its start.
+    pub fn simulate(spec: &RobotSpec, rng: &mut ChaCha8Rng) -> RobotTrajectory {
+        let start = spec.start;
+        let mut truth = start;
+        let mut odo = start;
+        let mut out = RobotTrajectory {
+            sample_dt_s: TIME_STEP_S * STORE_EVERY as f64,
+            truth: vec![truth],
+            odometry: vec![odo],
+        };
+        if !usable(spec) || spec.waypoints.is_empty() {
+            return out;
+        }
+        let n = spec.waypoints.len();
+        let max_steps = (MAX_DURATION_S / TIME_STEP_S) as usize;
+        let mut target = 0;
+        let mut done = false;
+        for step in 1..=max_steps {
+            // Skip waypoints already reached (at most one lap per step).
+            for _ in 0..n {
+                let w = spec.waypoints[target];
+                if (w[0] - truth[0]).hypot(w[1] - truth[1]) > spec.tolerance_m {
+                    break;
+                }
+                target += 1;
+                if target == n {
+                    if spec.loop_path {
+                        target = 0;
+                    } else {
+                        done = true;
+                        break;
+                    }
+                }
+            }
+            if done {
+                // Stopped: the next stored sample is the resting pose.
+                out.truth.push(truth);
+                out.odometry.push(odo);
+                break;
+            }
+            let (v, omega) = control(spec, truth, spec.waypoints[target]);
+            let half = omega * spec.wheel_base / 2.0;
+            let u_r = (v + half) * TIME_STEP_S;
+            let u_l = (v - half) * TIME_STEP_S;
+            advance(&mut truth, u_r, u_l, spec.wheel_base);
+            let m_r = u_r + gaussian(rng, (spec.k_r * u_r.abs()).sqrt());
+            let m_l = u_l + gaussian(rng, (spec.k_l * u_l.abs()).sqrt());
+            advance(&mut odo, m_r, m_l, spec.wheel_base);
+            if step % STORE_EVERY == 0 {
+                out.truth.push(truth);
+                out.odometry.push(odo);
+            }
+        }
+        out
+    }
+
+    /// Time (s) of the last stored sample: the robot rests after it.
+    pub fn duration_s(&self) -> f64 {
+        (self.truth.len() - 1) as f64 * self.sample_dt_s
+    }
+
+    /// True pose `[x, y, θ]` at `t_s` (θ wrapped to (−π, π]).
+    pub fn true_pose(&self, t_s: f64) -> [f64; 3] {
+        interpolate(&self.truth, self.sample_dt_s, t_s)
+    }
+
+    /// Dead-reckoned pose `[x, y, θ]` at `t_s`.
+    pub fn odometry_pose(&self, t_s: f64) -> [f64; 3] {
+        interpolate(&self.odometry, self.sample_dt_s, t_s)
+    }
+}
+
+/// Linear interpolation in samples taken every `dt` from t = 0 (θ is stored unwrapped).
+fn interpolate(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
+    let last = samples.len() - 1;
+    let x = if t_s.is_finite() {
+        (t_s / dt).max(0.0)
+    } else {
+        0.0
+    };
+    let i = x.floor() as usize;
+    let p = if i >= last {
+        samples[last]
+    } else {
+        let f = x - i as f64;
+        let (a, b) = (samples[i], samples[i + 1]);
+        [
+            a[0] + f * (b[0] - a[0]),
+            a[1] + f * (b[1] - a[1]),
+            a[2] + f * (b[2] - a[2]),
+        ]
+    };
+    [p[0], p[1], wrap_pi(p[2])]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn spec(k: f64) -> RobotSpec {
+        RobotSpec {
+            start: [0.0, 0.0, 0.0],
+            waypoints: vec![[5.0, 0.0], [5.0, 4.0], [1.0, 4.0]],
+            speed: 1.0,
+            wheel_radius: 0.2,
+            wheel_base: 0.5,
+            k_r: k,
+            k_l: k,
+            k_v: 1.0,
+            k_omega: 2.0,
+            tolerance_m: 0.05,
+            vertical: None,
+            loop_path: false,
+        }
+    }
+
+    fn end_error(t: &RobotTrajectory) -> f64 {
+        let (a, b) = (t.true_pose(1e9), t.odometry_pose(1e9));
+        (a[0] - b[0]).hypot(a[1] - b[1])
+    }
+
+    #[test]
+    fn reaches_every_waypoint_without_noise() {
+        let s = spec(0.0);
+        let t = RobotTrajectory::simulate(&s, &mut ChaCha8Rng::seed_from_u64(1));
+        let dt = 0.01;
+        let steps = (t.duration_s() / dt) as usize + 1;
+        for w in &s.waypoints {
+            let closest = (0..=steps)
+                .map(|i| {
+                    let p = t.true_pose(i as f64 * dt);
+                    (p[0] - w[0]).hypot(p[1] - w[1])
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(closest <= s.tolerance_m + 1e-3, "{w:?}: {closest}");
+        }
+        let end = t.true_pose(t.duration_s() + 100.0);
+        assert!((end[0] - 1.0).hypot(end[1] - 4.0) <= s.tolerance_m);
+        // About 13 m at ≤ 1 m/s, with turns: between 13 s and a minute.
+        assert!(
+            t.duration_s() > 13.0 && t.duration_s() < 60.0,
+            "{}",
+            t.duration_s()
+        );
+        // Without noise, odometry is the truth.
+        assert_eq!(end_error(&t), 0.0);
+        // Never faster than the speed limit.
+        for i in 0..steps {
+            let (a, b) = (t.true_pose(i as f64 * dt), t.true_pose((i + 1) as f64 * dt));
+            assert!((b[0] - a[0]).hypot(b[1] - a[1]) <= s.speed * dt + 1e-9);
+        }
+    }
+
+    #[test]
+    fn odometry_drift_grows_with_k() {
+        let mean_error = |k: f64| {
+            (0..20)
+                .map(|seed| {
+                    let t =
+                        RobotTrajectory::simulate(&spec(k), &mut ChaCha8Rng::seed_from_u64(seed));
+                    end_error(&t)
+                })
+                .sum::<f64>()
+                / 20.0
+        };
+        let (e6, e5, e4) = (mean_error(1e-6), mean_error(1e-5), mean_error(1e-4));
+        assert!(e6 > 0.0);
+        assert!(e6 < e5 && e5 < e4, "{e6} {e5} {e4}");
+        // Error grows like √K: a factor 100 in K is about a factor 10 in drift.
+        assert!(e4 / e6 > 4.0 && e4 / e6 < 25.0, "{}", e4 / e6);
+    }
+
+    #[test]
+    fn looping_robot_keeps_driving_and_bad_spec_stays_put() {
+        let mut s = spec(0.0);
+        s.loop_path = true;
+        s.waypoints = vec![[3.0, 0.0], [3.0, 3.0], [0.0, 3.0], [0.0, 0.0]];
+        let t = RobotTrajectory::simulate(&s, &mut ChaCha8Rng::seed_from_u64(1));
+        assert!((t.duration_s() - MAX_DURATION_S).abs() < 0.1);
+        let mut bad = spec(0.0);
+        bad.speed = f64::NAN;
+        let t = RobotTrajectory::simulate(&bad, &mut ChaCha8Rng::seed_from_u64(1));
+        assert_eq!(t.true_pose(10.0), [0.0, 0.0, 0.0]);
+    }
+}

@@ -1,0 +1,209 @@
+//! What the simulated reader says about itself: GET_READER_CAPABILITIES content built from the
+//! scenario (antennas, regulatory region with its real channel table, power and mode tables).
+
+use llrp::message::GetReaderCapabilitiesResponse;
+use llrp::params::*;
+
+use super::ReaderProfile;
+
+/// Impinj's IANA private enterprise number (DeviceManufacturerName of an Impinj reader).
+pub const IMPINJ_VENDOR: u32 = 25882;
+/// ModelName of an Impinj Speedway R420 (what Octane-era clients expect to see).
+pub const MODEL_R420: u32 = 2001002;
+/// Firmware version string reported in GeneralDeviceCapabilities.
+pub const FIRMWARE: &str = "5.12.0.240";
+/// Lowest power of the transmit power table, hundredths of dBm (index 1).
+pub const POWER_MIN_CDBM: i16 = 1000;
+/// Power table step, hundredths of dBm (0.25 dB, as Impinj readers).
+pub const POWER_STEP_CDBM: i16 = 25;
+/// Number of entries of the transmit power table (10.00 … 32.50 dBm).
+pub const POWER_LEVELS: u16 = 91;
+/// Number of entries of the receive sensitivity table.
+pub const SENSITIVITY_LEVELS: u16 = 42;
+/// ModeIdentifiers of the C1G2 RF mode table.
+pub const RF_MODES: [u32; 5] = [0, 1, 2, 3, 1000];
+
+/// Transmit power in dBm of a power-table index (1-based); `None` outside the table.
+pub fn power_dbm(index: u16) -> Option<f64> {
+    (1..=POWER_LEVELS)
+        .contains(&index)
+        .then(|| f64::from(POWER_MIN_CDBM + (index as i16 - 1) * POWER_STEP_CDBM) / 100.0)
+}
+
+/// The power-table index closest to `dbm`.
+pub fn power_index(dbm: f64) -> u16 {
+    let steps = ((dbm * 100.0 - f64::from(POWER_MIN_CDBM)) / f64::from(POWER_STEP_CDBM)).round();
+    (steps.clamp(0.0, f64::from(POWER_LEVELS - 1)) as u16) + 1
+}
+
+fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
+    GeneralDeviceCapabilities {
+        max_number_of_antenna_supported: p.antennas,
+        can_set_antenna_properties: false,
+        has_utc_clock_capability: true,
+        device_manufacturer_name: IMPINJ_VENDOR,
+        model_name: MODEL_R420,
+        reader_firmware_version: FIRMWARE.into(),
+        receive_sensitivity_table_entry: (1..=SENSITIVITY_LEVELS)
+            .map(|i| ReceiveSensitivityTableEntry {
+                index: i,
+                // Index 1 is the full sensitivity (0 dB); higher indices desensitise (Impinj).
+                receive_sensitivity_value: if i == 1 { 0 } else { i as i16 + 8 },
+                ..Default::default()
+            })
+            .collect(),
+        per_antenna_receive_sensitivity_range: (1..=p.antennas)
+            .map(|a| PerAntennaReceiveSensitivityRange {
+                antenna_id: a,
+                receive_sensitivity_index_min: 1,
+                receive_sensitivity_index_max: SENSITIVITY_LEVELS,
+                ..Default::default()
+            })
+            .collect(),
+        gpio_capabilities: GpioCapabilities {
+            num_gpis: 4,
+            num_gpos: 4,
+            ..Default::default()
+        },
+        per_antenna_air_protocol: (1..=p.antennas)
+            .map(|a| PerAntennaAirProtocol {
+                antenna_id: a,
+                protocol_ids: vec![1],
+                ..Default::default()
+            })
+            .collect(),
+        ..Default::default()
+    }
+}
+
+fn llrp_caps() -> LlrpCapabilities {
+    LlrpCapabilities {
+        can_do_rf_survey: false,
+        can_report_buffer_fill_warning: true,
+        supports_client_request_op_spec: false,
+        can_do_tag_inventory_state_aware_singulation: true,
+        supports_event_and_report_holding: true,
+        max_num_priority_levels_supported: 8,
+        client_request_op_spec_timeout: 0,
+        max_num_ro_specs: super::MAX_ROSPECS,
+        max_num_specs_per_ro_spec: 32,
+        max_num_inventory_parameter_specs_per_ai_spec: 1,
+        max_num_access_specs: super::MAX_ACCESS_SPECS,
+        max_num_op_specs_per_access_spec: 8,
+        ..Default::default()
+    }
+}
+
+fn rf_mode(id: u32) -> C1g2UhfRfModeTableEntry {
+    // (DR 64/3?, M, forward modulation, spectral mask, BLF Hz, PIE ×1000, Tari min/max/step ns)
+    let (dr, m, fwd, mask, bdr, pie, tmin, tmax) = match id {
+        0 => (true, 0, 2, 2, 640_000, 1500, 6250, 6250),
+        1 => (true, 1, 2, 2, 640_000, 1500, 6250, 6250),
+        2 => (true, 2, 0, 3, 274_000, 2000, 20000, 20000),
+        3 => (true, 3, 0, 3, 170_600, 2000, 20000, 20000),
+        _ => (true, 2, 0, 3, 250_000, 2000, 20000, 25000),
+    };
+    C1g2UhfRfModeTableEntry {
+        mode_identifier: id,
+        dr_value: dr,
+        epc_hag_tc_conformance: false,
+        m_value: m,
+        forward_link_modulation: fwd,
+        spectral_mask_indicator: mask,
+        bdr_value: bdr,
+        pie_value: pie,
+        min_tari_value: tmin,
+        max_tari_value: tmax,
+        step_tari_value: 0,
+        ..Default::default()
+    }
+}
+
+/// The hop table or fixed frequency table the reader advertises (and reports channels into).
+pub fn frequency_information(p: &ReaderProfile) -> FrequencyInformation {
+    if p.hopping {
+        FrequencyInformation {
+            hopping: true,
+            frequency_hop_table: vec![FrequencyHopTable {
+                hop_table_id: 1,
+                frequencies: p.frequencies_khz.clone(),
+                ..Default::default()
+            }],
+            ..Default::default()
+        }
+    } else {
+        FrequencyInformation {
+            hopping: false,
+            fixed_frequency_table: Some(FixedFrequencyTable {
+                frequencies: p.frequencies_khz.clone(),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+}
+
+fn regulatory(p: &ReaderProfile) -> RegulatoryCapabilities {
+    RegulatoryCapabilities {
+        country_code: p.country_code,
+        communications_standard: p.communications_standard,
+        uhf_band_capabilities: Some(UhfBandCapabilities {
+            transmit_power_level_table_entry: (1..=POWER_LEVELS)
+                .map(|i| TransmitPowerLevelTableEntry {
+                    index: i,
+                    transmit_power_value: POWER_MIN_CDBM + (i as i16 - 1) * POWER_STEP_CDBM,
+                    ..Default::default()
+                })
+                .collect(),
+            frequency_information: frequency_information(p),
+            c1g2_uhf_rf_mode_table: vec![C1g2UhfRfModeTable {
+                entries: RF_MODES.iter().map(|&m| rf_mode(m)).collect(),
+                ..Default::default()
+            }],
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+fn c1g2_caps() -> C1g2LlrpCapabilities {
+    C1g2LlrpCapabilities {
+        can_support_block_erase: false,
+        can_support_block_write: false,
+        max_num_select_filters_per_query: 2,
+        ..Default::default()
+    }
+}
+
+/// GET_READER_CAPABILITIES_RESPONSE body for RequestedData `requested` (0 all, 1 general,
+/// 2 LLRP, 3 regulatory, 4 air protocol); `None` for an unknown value.
+pub fn capabilities(p: &ReaderProfile, requested: u8) -> Option<GetReaderCapabilitiesResponse> {
+    let all = requested == 0;
+    if requested > 4 {
+        return None;
+    }
+    Some(GetReaderCapabilitiesResponse {
+        llrp_status: LlrpStatus::success(),
+        general_device_capabilities: (all || requested == 1).then(|| general(p)),
+        llrp_capabilities: (all || requested == 2).then(llrp_caps),
+        regulatory_capabilities: (all || requested == 3).then(|| regulatory(p)),
+        c1g2_llrp_capabilities: (all || requested == 4).then(c1g2_caps),
+        ..Default::default()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_table_round_trips_indices() {
+        for i in 1..=POWER_LEVELS {
+            let dbm = power_dbm(i).expect("index in table");
+            assert_eq!(power_index(dbm), i);
+        }
+        assert_eq!(power_dbm(0), None);
+        assert_eq!(power_dbm(POWER_LEVELS + 1), None);
+        assert_eq!(power_dbm(POWER_LEVELS), Some(32.5));
+    }
+}

@@ -1,0 +1,378 @@
+//! Reader configuration: what GET_READER_CONFIG reports and SET_READER_CONFIG changes
+//! (antenna settings, default report spec, event notifications, keepalive, event holding).
+
+use llrp::message::{GetReaderConfig, GetReaderConfigResponse, SetReaderConfig};
+use llrp::params::*;
+use llrp::StatusCode;
+
+use super::{caps, field_error, ReaderProfile};
+
+/// Number of reader event types (0 hopping … 8 antenna; 9 SpecLoop is LLRP 1.1).
+pub const EVENT_TYPES: u16 = 10;
+
+/// The reader's current configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReaderConfig {
+    /// Per antenna (index = antenna ID − 1): its configuration as last set.
+    pub antennas: Vec<AntennaConfiguration>,
+    /// Default ROReportSpec, used by ROSpecs that carry none.
+    pub ro_report_spec: RoReportSpec,
+    /// When access results are reported.
+    pub access_report_spec: AccessReportSpec,
+    /// Notification state per event type.
+    pub events: Vec<bool>,
+    /// Keepalive settings.
+    pub keepalive: KeepaliveSpec,
+    /// Hold events and reports after a reconnect until ENABLE_EVENTS_AND_REPORTS.
+    pub events_and_reports: EventsAndReports,
+    /// Opaque configuration-state value the client may compare.
+    pub state_value: u32,
+}
+
+impl ReaderConfig {
+    /// Factory defaults (what ResetToFactoryDefault restores).
+    pub fn factory(p: &ReaderProfile) -> Self {
+        let antennas = (1..=p.antennas)
+            .map(|a| AntennaConfiguration {
+                antenna_id: a,
+                rf_receiver: Some(RfReceiver {
+                    receiver_sensitivity: 1,
+                    ..Default::default()
+                }),
+                rf_transmitter: Some(RfTransmitter {
+                    hop_table_id: 1,
+                    channel_index: if p.hopping { 0 } else { 1 },
+                    transmit_power: p
+                        .default_power_index
+                        .get(usize::from(a - 1))
+                        .copied()
+                        .unwrap_or(caps::POWER_LEVELS),
+                    ..Default::default()
+                }),
+                c1g2_inventory_command: vec![C1g2InventoryCommand {
+                    tag_inventory_state_aware: false,
+                    c1g2_rf_control: Some(C1g2RfControl {
+                        mode_index: 1000,
+                        tari: 0,
+                        ..Default::default()
+                    }),
+                    c1g2_singulation_control: Some(C1g2SingulationControl {
+                        session: 2,
+                        tag_population: 32,
+                        tag_transit_time: 0,
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                }],
+                ..Default::default()
+            })
+            .collect();
+        ReaderConfig {
+            antennas,
+            ro_report_spec: RoReportSpec {
+                ro_report_trigger: 2,
+                n: 1,
+                tag_report_content_selector: TagReportContentSelector {
+                    enable_ro_spec_id: true,
+                    enable_antenna_id: true,
+                    enable_peak_rssi: true,
+                    enable_first_seen_timestamp: true,
+                    enable_last_seen_timestamp: true,
+                    enable_tag_seen_count: true,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            access_report_spec: AccessReportSpec {
+                access_report_trigger: 0,
+                ..Default::default()
+            },
+            events: vec![false; usize::from(EVENT_TYPES)],
+            keepalive: KeepaliveSpec {
+                keepalive_trigger_type: 0,
+                periodic_trigger_value: 0,
+                ..Default::default()
+            },
+            events_and_reports: EventsAndReports::default(),
+            state_value: 0,
+        }
+    }
+
+    /// Keepalive period in ms, when periodic keepalives are on.
+    pub fn keepalive_period_ms(&self) -> Option<u64> {
+        (self.keepalive.keepalive_trigger_type == 1 && self.keepalive.periodic_trigger_value > 0)
+            .then_some(u64::from(self.keepalive.periodic_trigger_value))
+    }
+
+    /// Whether notifications of event type `ty` are on.
+    pub fn event_enabled(&self, ty: u16) -> bool {
+        self.events.get(usize::from(ty)).copied().unwrap_or(false)
+    }
+
+    /// Configured transmit power of `antenna` in dBm.
+    pub fn tx_power_dbm(&self, antenna: u16) -> Option<f64> {
+        let a = self.antennas.get(usize::from(antenna).checked_sub(1)?)?;
+        caps::power_dbm(a.rf_transmitter.as_ref()?.transmit_power)
+    }
+
+    /// GET_READER_CONFIG_RESPONSE for a request.
+    pub fn get(
+        &self,
+        p: &ReaderProfile,
+        m: &GetReaderConfig,
+        now_us: u64,
+    ) -> GetReaderConfigResponse {
+        let mut r = GetReaderConfigResponse {
+            llrp_status: LlrpStatus::success(),
+            ..Default::default()
+        };
+        let want = |k: u8| m.requested_data == 0 || m.requested_data == k;
+        if m.requested_data > 11 {
+            r.llrp_status = field_error(1, StatusCode::A_OutOfRange, "RequestedData");
+            return r;
+        }
+        if m.antenna_id > p.antennas {
+            r.llrp_status = field_error(0, StatusCode::A_OutOfRange, "AntennaID");
+            return r;
+        }
+        if (m.gpi_port_num > 4 || m.gpo_port_num > 4) && (want(9) || want(10)) {
+            r.llrp_status = field_error(2, StatusCode::A_OutOfRange, "GPI/GPO port");
+            return r;
+        }
+        let antenna_ok = |id: u16| m.antenna_id == 0 || m.antenna_id == id;
+        if want(1) {
+            r.identification = Some(Identification {
+                id_type: 0,
+                reader_id: p.reader_id.clone(),
+                ..Default::default()
+            });
+        }
+        if want(2) {
+            r.antenna_properties = (1..=p.antennas)
+                .filter(|&a| antenna_ok(a))
+                .map(|a| AntennaProperties {
+                    antenna_connected: true,
+                    antenna_id: a,
+                    antenna_gain: p
+                        .antenna_gain_dbi
+                        .get(usize::from(a - 1))
+                        .map(|g| (g * 100.0).round() as i16)
+                        .unwrap_or(0),
+                    ..Default::default()
+                })
+                .collect();
+        }
+        if want(3) {
+            r.antenna_configuration = self
+                .antennas
+                .iter()
+                .filter(|a| antenna_ok(a.antenna_id))
+                .cloned()
+                .collect();
+        }
+        if want(4) {
+            r.ro_report_spec = Some(self.ro_report_spec.clone());
+        }
+        if want(5) {
+            r.reader_event_notification_spec = Some(ReaderEventNotificationSpec {
+                event_notification_state: (0..9)
+                    .map(|t| EventNotificationState {
+                        event_type: t,
+                        notification_state: self.event_enabled(t),
+                        ..Default::default()
+                    })
+                    .collect(),
+                ..Default::default()
+            });
+        }
+        if want(6) {
+            r.access_report_spec = Some(self.access_report_spec.clone());
+        }
+        if want(7) {
+            r.llrp_configuration_state_value = Some(LlrpConfigurationStateValue {
+                llrp_configuration_state_value: self.state_value,
+                ..Default::default()
+            });
+        }
+        if want(8) {
+            r.keepalive_spec = Some(self.keepalive.clone());
+        }
+        if want(9) {
+            r.gpi_port_current_state = (1..=4)
+                .filter(|&g| m.gpi_port_num == 0 || m.gpi_port_num == g)
+                .map(|g| GpiPortCurrentState {
+                    gpi_port_num: g,
+                    config: true,
+                    state: 0,
+                    ..Default::default()
+                })
+                .collect();
+        }
+        if want(10) {
+            r.gpo_write_data = (1..=4)
+                .filter(|&g| m.gpo_port_num == 0 || m.gpo_port_num == g)
+                .map(|g| GpoWriteData {
+                    gpo_port_number: g,
+                    gpo_data: false,
+                    ..Default::default()
+                })
+                .collect();
+        }
+        if want(11) {
+            r.events_and_reports = Some(self.events_and_reports.clone());
+        }
+        let _ = now_us;
+        r
+    }
+
+    /// Applies SET_READER_CONFIG; nothing changes unless the whole request is valid.
+    pub fn set(&mut self, p: &ReaderProfile, m: SetReaderConfig) -> LlrpStatus {
+        let mut next = if m.reset_to_factory_default {
+            ReaderConfig::factory(p)
+        } else {
+            self.clone()
+        };
+        if let Some(spec) = &m.reader_event_notification_spec {
+            for s in &spec.event_notification_state {
+                if s.event_type >= EVENT_TYPES {
+                    return param_field_error(244, 245, 0, StatusCode::A_OutOfRange);
+                }
+                next.events[usize::from(s.event_type)] = s.notification_state;
+            }
+        }
+        for c in &m.antenna_configuration {
+            if let Err(s) = validate_antenna_config(p, c) {
+                return s;
+            }
+            let targets: Vec<u16> = if c.antenna_id == 0 {
+                (1..=p.antennas).collect()
+            } else {
+                vec![c.antenna_id]
+            };
+            for a in targets {
+                let slot = &mut next.antennas[usize::from(a - 1)];
+                if let Some(rx) = &c.rf_receiver {
+                    slot.rf_receiver = Some(rx.clone());
+                }
+                if let Some(tx) = &c.rf_transmitter {
+                    slot.rf_transmitter = Some(tx.clone());
+                }
+                if !c.c1g2_inventory_command.is_empty() {
+                    slot.c1g2_inventory_command = c.c1g2_inventory_command.clone();
+                }
+            }
+        }
+        if !m.antenna_properties.is_empty() {
+            // CanSetAntennaProperties is 0, as on Impinj readers.
+            let mut s = LlrpStatus::new(
+                StatusCode::M_ParameterError,
+                "antenna properties cannot be set",
+            );
+            s.parameter_error = Some(ParameterError::new(221, StatusCode::P_UnsupportedParameter));
+            return s;
+        }
+        if let Some(r) = &m.ro_report_spec {
+            if r.ro_report_trigger > 2 {
+                return param_field_error(237, 0, 0, StatusCode::A_OutOfRange);
+            }
+            next.ro_report_spec = r.clone();
+        }
+        if let Some(a) = &m.access_report_spec {
+            if a.access_report_trigger > 1 {
+                return param_field_error(239, 0, 0, StatusCode::A_OutOfRange);
+            }
+            next.access_report_spec = a.clone();
+        }
+        if let Some(k) = &m.keepalive_spec {
+            if k.keepalive_trigger_type > 1 {
+                return param_field_error(220, 0, 0, StatusCode::A_OutOfRange);
+            }
+            next.keepalive = k.clone();
+        }
+        if !m.gpo_write_data.is_empty() || !m.gpi_port_current_state.is_empty() {
+            for g in &m.gpo_write_data {
+                if g.gpo_port_number == 0 || g.gpo_port_number > 4 {
+                    return param_field_error(219, 0, 0, StatusCode::A_OutOfRange);
+                }
+            }
+            for g in &m.gpi_port_current_state {
+                if g.gpi_port_num == 0 || g.gpi_port_num > 4 {
+                    return param_field_error(225, 0, 0, StatusCode::A_OutOfRange);
+                }
+            }
+        }
+        if let Some(e) = &m.events_and_reports {
+            next.events_and_reports = e.clone();
+        }
+        next.state_value = next.state_value.wrapping_add(1);
+        *self = next;
+        LlrpStatus::success()
+    }
+}
+
+/// Checks an AntennaConfiguration against the reader (antenna, power index, hop table).
+pub fn validate_antenna_config(
+    p: &ReaderProfile,
+    c: &AntennaConfiguration,
+) -> Result<(), LlrpStatus> {
+    if c.antenna_id > p.antennas {
+        return Err(param_field_error(222, 0, 0, StatusCode::A_OutOfRange));
+    }
+    if let Some(tx) = &c.rf_transmitter {
+        if caps::power_dbm(tx.transmit_power).is_none() {
+            return Err(param_field_error(222, 224, 2, StatusCode::A_OutOfRange));
+        }
+        if p.hopping && tx.hop_table_id != 1 {
+            return Err(param_field_error(222, 224, 0, StatusCode::A_OutOfRange));
+        }
+        if !p.hopping && usize::from(tx.channel_index) > p.frequencies_khz.len() {
+            return Err(param_field_error(222, 224, 1, StatusCode::A_OutOfRange));
+        }
+    }
+    if let Some(rx) = &c.rf_receiver {
+        if rx.receiver_sensitivity == 0 || rx.receiver_sensitivity > caps::SENSITIVITY_LEVELS {
+            return Err(param_field_error(222, 223, 0, StatusCode::A_OutOfRange));
+        }
+    }
+    for cmd in &c.c1g2_inventory_command {
+        if let Some(rf) = &cmd.c1g2_rf_control {
+            if !caps::RF_MODES.contains(&u32::from(rf.mode_index)) {
+                return Err(param_field_error(330, 335, 0, StatusCode::A_OutOfRange));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// M_ParameterError for field `field` of parameter `inner` (0: of `outer` itself) inside
+/// parameter `outer`.
+pub(crate) fn param_field_error(
+    outer: u16,
+    inner: u16,
+    field: u16,
+    code: StatusCode,
+) -> LlrpStatus {
+    let fe = FieldError {
+        field_num: field,
+        error_code: code.code(),
+        ..Default::default()
+    };
+    let mut pe = ParameterError::new(
+        outer,
+        if inner == 0 {
+            StatusCode::P_FieldError
+        } else {
+            StatusCode::P_ParameterError
+        },
+    );
+    if inner == 0 {
+        pe.field_error = Some(fe);
+    } else {
+        let mut ie = ParameterError::new(inner, StatusCode::P_FieldError);
+        ie.field_error = Some(fe);
+        pe.parameter_error = Some(Box::new(ie));
+    }
+    let mut s = LlrpStatus::new(StatusCode::M_ParameterError, "invalid parameter value");
+    s.parameter_error = Some(pe);
+    s
+}

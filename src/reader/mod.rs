@@ -1,0 +1,726 @@
+//! The simulated reader's LLRP state machine, sans IO: requests in, responses, reports and
+//! events out, driven by a simulated clock. `net::server` feeds it bytes and time; tests can
+//! drive it directly.
+//!
+//! It behaves like an Impinj-class reader: the ROSpec and AccessSpec lifecycles, start/stop
+//! triggers, report triggers, event notifications, keepalives and the Impinj extensions.
+
+// An LLRPStatus is the natural error of request handling (it is what goes on the wire); it is
+// built only on a client's mistake, so its size on the error path does not matter.
+#![allow(clippy::result_large_err)]
+
+mod access;
+pub mod caps;
+mod config;
+pub mod report;
+mod rospec;
+
+use std::sync::Arc;
+
+use llrp::message::*;
+use llrp::params::*;
+use llrp::{DecodeError, FrameHeader, Message, StatusCode};
+
+use crate::physics::Model;
+use crate::scenario::Scenario;
+
+pub use config::ReaderConfig;
+pub use rospec::SpecState;
+
+/// Most ROSpecs the reader holds at once.
+pub const MAX_ROSPECS: u32 = 32;
+/// Most AccessSpecs the reader holds at once.
+pub const MAX_ACCESS_SPECS: u32 = 64;
+
+/// ConnectionAttemptEvent status: the connection is accepted.
+pub const CONNECTION_SUCCESS: u16 = 0;
+/// ConnectionAttemptEvent status sent to a refused second client.
+pub const CONNECTION_CLIENT_EXISTS: u16 = 2;
+/// ConnectionAttemptEvent status sent to the connected client when another one tried.
+pub const CONNECTION_ANOTHER_ATTEMPTED: u16 = 4;
+
+/// Most events and reports held for a client that has not sent ENABLE_EVENTS_AND_REPORTS.
+pub const MAX_HELD: usize = 10_000;
+
+/// Keepalives that may go unanswered before the reader drops the client.
+pub const KEEPALIVE_MISSES: u32 = 3;
+
+/// What the reader knows about itself, fixed for its lifetime (from the scenario).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReaderProfile {
+    /// Reader name in the scenario.
+    pub name: String,
+    /// Number of antenna ports.
+    pub antennas: u16,
+    /// Frequency hopping (FCC) or a fixed channel list (ETSI).
+    pub hopping: bool,
+    /// The advertised channel table, kHz (ChannelIndex k is entry k − 1).
+    pub frequencies_khz: Vec<u32>,
+    /// RegulatoryCapabilities.CommunicationsStandard.
+    pub communications_standard: u16,
+    /// RegulatoryCapabilities.CountryCode.
+    pub country_code: u16,
+    /// Power-table index of each antenna's scenario transmit power.
+    pub default_power_index: Vec<u16>,
+    /// Gain of each antenna, dBi.
+    pub antenna_gain_dbi: Vec<f64>,
+    /// Reader identity (MAC-like EPC of the reader) for Identification.
+    pub reader_id: Vec<u8>,
+}
+
+impl ReaderProfile {
+    /// The profile of reader `index` of a scenario.
+    pub fn from_scenario(s: &Scenario, index: usize, model: &Model) -> Self {
+        let r = &s.readers[index];
+        let mut id = vec![0x00, 0x16, 0x25, 0x00, 0x00];
+        id.push(index as u8);
+        ReaderProfile {
+            name: r.name.clone(),
+            antennas: model.antenna_count(),
+            hopping: r.region.hopping(),
+            frequencies_khz: model.frequencies_khz().to_vec(),
+            communications_standard: r.region.communications_standard(),
+            country_code: r.region.country_code(),
+            default_power_index: r
+                .antennas
+                .iter()
+                .map(|a| caps::power_index(a.tx_power_dbm))
+                .collect(),
+            antenna_gain_dbi: r.antennas.iter().map(|a| a.gain_dbi).collect(),
+            reader_id: id,
+        }
+    }
+}
+
+/// Something the connection must do.
+#[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::large_enum_variant)] // almost every output is a message; Close comes once
+pub enum Output {
+    /// Send this message.
+    Send(Message),
+    /// Close the connection (after sending what came before).
+    Close,
+}
+
+/// The simulated reader: configuration, ROSpecs, AccessSpecs, report buffer and clock.
+pub struct Reader {
+    profile: ReaderProfile,
+    model: Arc<Model>,
+    /// UTC of simulated time 0, µs since the Unix epoch.
+    utc_epoch_us: u64,
+    /// Simulated time the reader has run up to, µs.
+    now_us: u64,
+    /// Whether inventory runs only while a client is connected (it does; see `connect`).
+    connected: bool,
+    /// Protocol version of the session (1 = LLRP 1.0.1, 2 = LLRP 1.1).
+    version: u8,
+    /// Impinj extensions enabled on this connection.
+    impinj: bool,
+    /// Events and reports held until ENABLE_EVENTS_AND_REPORTS.
+    holding: bool,
+    held: Vec<Message>,
+    next_id: u32,
+    config: ReaderConfig,
+    specs: rospec::Specs,
+    access: access::AccessSpecs,
+    /// Wall-clock ms of the next keepalive, and how many went unanswered.
+    keepalive_due_ms: Option<u64>,
+    keepalive_unanswered: u32,
+}
+
+impl Reader {
+    /// A reader for `model` (its scenario reader), with UTC `utc_epoch_us` at simulated time 0.
+    pub fn new(profile: ReaderProfile, model: Arc<Model>, utc_epoch_us: u64) -> Self {
+        let config = ReaderConfig::factory(&profile);
+        Reader {
+            profile,
+            model,
+            utc_epoch_us,
+            now_us: 0,
+            connected: false,
+            version: 1,
+            impinj: false,
+            holding: false,
+            held: Vec::new(),
+            next_id: 1,
+            config,
+            specs: rospec::Specs::default(),
+            access: access::AccessSpecs::default(),
+            keepalive_due_ms: None,
+            keepalive_unanswered: 0,
+        }
+    }
+
+    /// The reader's fixed description.
+    pub fn profile(&self) -> &ReaderProfile {
+        &self.profile
+    }
+
+    /// The physics model behind the reader.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Simulated time the reader has run up to, µs.
+    pub fn now_us(&self) -> u64 {
+        self.now_us
+    }
+
+    /// UTC of a simulated time, µs since the Unix epoch.
+    pub fn utc_us(&self, sim_us: u64) -> u64 {
+        self.utc_epoch_us + sim_us
+    }
+
+    /// Whether an ROSpec is executing.
+    pub fn inventorying(&self) -> bool {
+        self.specs.active().is_some()
+    }
+
+    /// State of ROSpec `id`, if it exists.
+    pub fn rospec_state(&self, id: u32) -> Option<SpecState> {
+        self.specs.get(id).map(|s| s.state)
+    }
+
+    fn alloc_id(&mut self) -> u32 {
+        let id = self.next_id;
+        self.next_id = self.next_id.wrapping_add(1).max(1);
+        id
+    }
+
+    fn message(&mut self, body: impl Into<MessageBody>) -> Message {
+        let id = self.alloc_id();
+        Message {
+            version: self.version,
+            id,
+            body: body.into(),
+        }
+    }
+
+    fn timestamp(&self) -> Timestamp {
+        Timestamp::Utc(UtcTimestamp {
+            microseconds: self.utc_us(self.now_us),
+            ..Default::default()
+        })
+    }
+
+    /// A READER_EVENT_NOTIFICATION with a ConnectionAttemptEvent of `status`.
+    pub fn connection_event(&mut self, status: u16) -> Message {
+        let data = ReaderEventNotificationData {
+            timestamp: self.timestamp(),
+            connection_attempt_event: Some(ConnectionAttemptEvent {
+                status,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        self.message(ReaderEventNotification {
+            reader_event_notification_data: data,
+            ..Default::default()
+        })
+    }
+
+    /// A client connected at simulated time `now_us` (wall clock `wall_ms`): the greeting.
+    ///
+    /// While no client is connected the reader does not inventory; ROSpecs and configuration
+    /// persist across connections as on a real reader, and time spent disconnected is skipped.
+    pub fn connect(&mut self, now_us: u64, wall_ms: u64) -> Vec<Output> {
+        self.now_us = self.now_us.max(now_us);
+        self.specs.skip_to(self.now_us);
+        self.connected = true;
+        self.version = 1;
+        self.impinj = false;
+        self.holding = self
+            .config
+            .events_and_reports
+            .hold_events_and_reports_upon_reconnect;
+        self.keepalive_unanswered = 0;
+        self.keepalive_due_ms = self.config.keepalive_period_ms().map(|p| wall_ms + p);
+        vec![Output::Send(self.connection_event(CONNECTION_SUCCESS))]
+    }
+
+    /// The client went away (closed, or dropped by the reader).
+    pub fn disconnect(&mut self) {
+        self.connected = false;
+        self.impinj = false;
+        self.keepalive_due_ms = None;
+    }
+
+    /// The message a reader answers a frame it could not decode with: the request's
+    /// response type carrying the error status, or ERROR_MESSAGE.
+    pub fn reject(&mut self, header: &FrameHeader, frame: &[u8], err: &DecodeError) -> Message {
+        let status = err.to_status();
+        let ty = header.msg_type;
+        let (vendor, subtype) = custom_ids(ty, frame);
+        let body = response_for(ty, vendor, subtype, status.clone())
+            .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)));
+        Message {
+            version: header.version.clamp(1, 2),
+            id: header.id,
+            body,
+        }
+    }
+
+    /// ERROR_MESSAGE for a frame whose version the reader does not speak.
+    pub fn unsupported_version(header: &FrameHeader) -> Message {
+        Message {
+            version: header.version,
+            id: header.id,
+            body: MessageBody::ErrorMessage(error_message(LlrpStatus::new(
+                StatusCode::M_UnsupportedVersion,
+                format!("unsupported LLRP version {}", header.version),
+            ))),
+        }
+    }
+
+    /// Handles one decoded request at simulated time `now_us` (wall clock `wall_ms`).
+    pub fn handle(&mut self, msg: Message, now_us: u64, wall_ms: u64) -> Vec<Output> {
+        let mut out = self.advance(now_us, wall_ms);
+        let id = msg.id;
+        let version = msg.version;
+        if version != self.version && !matches!(msg.body, MessageBody::GetSupportedVersion(_)) {
+            // A message in another version than the session's: LLRP 1.1 says answer with
+            // M_UnsupportedVersion (and a 1.0.1 reader does not know 1.1 at all).
+            let status = LlrpStatus::new(
+                StatusCode::M_UnsupportedVersion,
+                format!("session uses LLRP version {}", self.version),
+            );
+            let body = response_for(msg.msg_type(), 0, 0, status.clone())
+                .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)));
+            out.push(Output::Send(Message { version, id, body }));
+            return out;
+        }
+        self.specs.default_trigger = self.config.ro_report_spec.ro_report_trigger;
+        let reply = |body: MessageBody| Output::Send(Message { version, id, body });
+        match msg.body {
+            MessageBody::GetReaderCapabilities(m) => {
+                let body = match caps::capabilities(&self.profile, m.requested_data) {
+                    Some(c) => c,
+                    None => GetReaderCapabilitiesResponse {
+                        llrp_status: field_error(0, StatusCode::A_OutOfRange, "RequestedData"),
+                        ..Default::default()
+                    },
+                };
+                out.push(reply(body.into()));
+            }
+            MessageBody::GetReaderConfig(m) => {
+                let body = self.config.get(&self.profile, &m, self.now_us);
+                out.push(reply(body.into()));
+            }
+            MessageBody::SetReaderConfig(m) => {
+                let status = self.config.set(&self.profile, m);
+                if status.is_success() {
+                    self.keepalive_due_ms = self.config.keepalive_period_ms().map(|p| wall_ms + p);
+                }
+                out.push(reply(
+                    SetReaderConfigResponse {
+                        llrp_status: status,
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            MessageBody::CloseConnection(_) => {
+                out.push(reply(
+                    CloseConnectionResponse {
+                        llrp_status: LlrpStatus::success(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+                out.push(Output::Close);
+            }
+            MessageBody::AddRospec(m) => {
+                let status = self.specs.add(&self.profile, m.ro_spec, self.version);
+                out.push(reply(AddRospecResponse::with(status).into()));
+            }
+            MessageBody::DeleteRospec(m) => {
+                let (status, events) = self.specs.delete(m.ro_spec_id, self.now_us);
+                let reports = self.specs.take_halt_reports();
+                self.send_reports(reports, &mut out, false);
+                self.emit(events, &mut out);
+                out.push(reply(DeleteRospecResponse::with(status).into()));
+            }
+            MessageBody::StartRospec(m) => {
+                let (status, events) = self.specs.start(m.ro_spec_id, self.now_us);
+                let reports = self.specs.take_halt_reports();
+                self.send_reports(reports, &mut out, false);
+                self.emit(events, &mut out);
+                out.push(reply(StartRospecResponse::with(status).into()));
+            }
+            MessageBody::StopRospec(m) => {
+                let (status, events) = self.specs.stop(m.ro_spec_id, self.now_us);
+                let reports = self.specs.take_halt_reports();
+                self.send_reports(reports, &mut out, false);
+                self.emit(events, &mut out);
+                out.push(reply(StopRospecResponse::with(status).into()));
+            }
+            MessageBody::EnableRospec(m) => {
+                let (status, events) = self.specs.enable(m.ro_spec_id, self.now_us);
+                let reports = self.specs.take_halt_reports();
+                self.send_reports(reports, &mut out, false);
+                self.emit(events, &mut out);
+                out.push(reply(EnableRospecResponse::with(status).into()));
+            }
+            MessageBody::DisableRospec(m) => {
+                let (status, events) = self.specs.disable(m.ro_spec_id, self.now_us);
+                let reports = self.specs.take_halt_reports();
+                self.send_reports(reports, &mut out, false);
+                self.emit(events, &mut out);
+                out.push(reply(DisableRospecResponse::with(status).into()));
+            }
+            MessageBody::GetRospecs(_) => {
+                out.push(reply(
+                    GetRospecsResponse {
+                        llrp_status: LlrpStatus::success(),
+                        ro_specs: self.specs.list(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            MessageBody::AddAccessspec(m) => {
+                let status = self.access.add(&self.profile, m.access_spec);
+                out.push(reply(AddAccessspecResponse::with(status).into()));
+            }
+            MessageBody::DeleteAccessspec(m) => {
+                let status = self.access.delete(m.access_spec_id);
+                out.push(reply(DeleteAccessspecResponse::with(status).into()));
+            }
+            MessageBody::EnableAccessspec(m) => {
+                let status = self.access.set_enabled(m.access_spec_id, true);
+                out.push(reply(EnableAccessspecResponse::with(status).into()));
+            }
+            MessageBody::DisableAccessspec(m) => {
+                let status = self.access.set_enabled(m.access_spec_id, false);
+                out.push(reply(DisableAccessspecResponse::with(status).into()));
+            }
+            MessageBody::GetAccessspecs(_) => {
+                out.push(reply(
+                    GetAccessspecsResponse {
+                        llrp_status: LlrpStatus::success(),
+                        access_specs: self.access.list(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            MessageBody::GetSupportedVersion(_) => {
+                out.push(reply(
+                    GetSupportedVersionResponse {
+                        current_version: self.version,
+                        supported_version: 2,
+                        llrp_status: LlrpStatus::success(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            MessageBody::SetProtocolVersion(m) => {
+                let status = if matches!(m.protocol_version, 1 | 2) {
+                    self.version = m.protocol_version;
+                    LlrpStatus::success()
+                } else {
+                    field_error(0, StatusCode::A_OutOfRange, "ProtocolVersion")
+                };
+                out.push(reply(SetProtocolVersionResponse::with(status).into()));
+            }
+            MessageBody::GetReport(_) => {
+                // No response message: the buffered reports are the answer.
+                let reports = self.specs.take_reports();
+                self.send_reports(reports, &mut out, true);
+            }
+            MessageBody::EnableEventsAndReports(_) => {
+                // No response message: release what was held.
+                self.holding = false;
+                out.extend(std::mem::take(&mut self.held).into_iter().map(Output::Send));
+            }
+            MessageBody::KeepaliveAck(_) => {
+                self.keepalive_unanswered = 0;
+            }
+            MessageBody::ImpinjEnableExtensions(_) => {
+                self.impinj = true;
+                out.push(reply(
+                    ImpinjEnableExtensionsResponse {
+                        llrp_status: LlrpStatus::success(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            MessageBody::ImpinjSaveSettings(_) => {
+                out.push(reply(
+                    ImpinjSaveSettingsResponse {
+                        llrp_status: LlrpStatus::success(),
+                        ..Default::default()
+                    }
+                    .into(),
+                ));
+            }
+            other => {
+                // Reader-to-client messages, CLIENT_REQUEST_OP answers without a request, other
+                // vendors' CUSTOM_MESSAGEs and unknown types.
+                let code = if version >= 2 && is_reader_message(other.msg_type()) {
+                    StatusCode::M_UnexpectedMessage
+                } else {
+                    StatusCode::M_UnsupportedMessage
+                };
+                let status = LlrpStatus::new(
+                    code,
+                    format!("message {} is not supported here", other.name()),
+                );
+                out.push(reply(MessageBody::ErrorMessage(error_message(status))));
+            }
+        }
+        out
+    }
+
+    /// Runs the reader up to simulated time `now_us` (wall clock `wall_ms`): inventory,
+    /// triggers, reports, events and keepalives that fall due.
+    pub fn advance(&mut self, now_us: u64, wall_ms: u64) -> Vec<Output> {
+        let mut out = Vec::new();
+        if !self.connected {
+            return out;
+        }
+        if now_us > self.now_us {
+            let ctx = rospec::RunContext {
+                model: &self.model,
+                profile: &self.profile,
+                config: &self.config,
+                access: &mut self.access,
+                utc_epoch_us: self.utc_epoch_us,
+                impinj: self.impinj,
+            };
+            let produced = self.specs.run(ctx, self.now_us, now_us);
+            self.now_us = now_us;
+            for p in produced {
+                match p {
+                    rospec::Produced::Reports(r) => self.send_reports(r, &mut out, false),
+                    rospec::Produced::Event(e) => self.emit(vec![e], &mut out),
+                }
+            }
+        }
+        if let Some(due) = self.keepalive_due_ms {
+            if wall_ms >= due {
+                if self.keepalive_unanswered >= KEEPALIVE_MISSES {
+                    // The client stopped answering: say why, then close.
+                    let data = ReaderEventNotificationData {
+                        timestamp: self.timestamp(),
+                        connection_close_event: Some(ConnectionCloseEvent::default()),
+                        ..Default::default()
+                    };
+                    let m = self.message(ReaderEventNotification {
+                        reader_event_notification_data: data,
+                        ..Default::default()
+                    });
+                    out.push(Output::Send(m));
+                    out.push(Output::Close);
+                    self.keepalive_due_ms = None;
+                } else {
+                    let m = self.message(Keepalive::default());
+                    out.push(Output::Send(m));
+                    self.keepalive_unanswered += 1;
+                    let period = self.config.keepalive_period_ms().unwrap_or(u64::MAX / 2);
+                    self.keepalive_due_ms = Some(due.saturating_add(period).max(wall_ms));
+                }
+            }
+        }
+        out
+    }
+
+    /// Simulated time at which something is next due (a trigger or the end of a slice), if
+    /// anything is running.
+    pub fn next_deadline_us(&self) -> Option<u64> {
+        self.specs.next_deadline(self.now_us)
+    }
+
+    /// Wall-clock ms at which the next keepalive is due.
+    pub fn next_keepalive_ms(&self) -> Option<u64> {
+        self.keepalive_due_ms
+    }
+
+    fn send_reports(&mut self, reports: Vec<TagReportData>, out: &mut Vec<Output>, always: bool) {
+        if reports.is_empty() && !always {
+            return;
+        }
+        // Keep each RO_ACCESS_REPORT well under the frame limit clients use.
+        for chunk in reports.chunks(500) {
+            let m = self.message(RoAccessReport {
+                tag_report_data: chunk.to_vec(),
+                ..Default::default()
+            });
+            self.deliver(m, out);
+        }
+        if reports.is_empty() {
+            let m = self.message(RoAccessReport::default());
+            self.deliver(m, out);
+        }
+    }
+
+    fn emit(&mut self, events: Vec<rospec::Event>, out: &mut Vec<Output>) {
+        for e in events {
+            let enabled = self.config.event_enabled(e.notification_type());
+            if !enabled {
+                continue;
+            }
+            let mut data = ReaderEventNotificationData {
+                timestamp: Timestamp::Utc(UtcTimestamp {
+                    microseconds: self.utc_us(e.at_us),
+                    ..Default::default()
+                }),
+                ..Default::default()
+            };
+            match e.kind {
+                rospec::EventKind::RoSpec {
+                    event_type,
+                    ro_spec_id,
+                    preempting,
+                } => {
+                    data.ro_spec_event = Some(RoSpecEvent {
+                        event_type,
+                        ro_spec_id,
+                        preempting_ro_spec_id: preempting,
+                        ..Default::default()
+                    })
+                }
+                rospec::EventKind::AiSpecEnd {
+                    ro_spec_id,
+                    spec_index,
+                } => {
+                    data.ai_spec_event = Some(AiSpecEvent {
+                        event_type: 0,
+                        ro_spec_id,
+                        spec_index,
+                        ..Default::default()
+                    })
+                }
+            }
+            let m = self.message(ReaderEventNotification {
+                reader_event_notification_data: data,
+                ..Default::default()
+            });
+            self.deliver(m, out);
+        }
+    }
+
+    fn deliver(&mut self, m: Message, out: &mut Vec<Output>) {
+        if self.holding {
+            if self.held.len() >= MAX_HELD {
+                // A real reader's buffer is finite too: the oldest held message is lost.
+                self.held.remove(0);
+            }
+            self.held.push(m);
+        } else {
+            out.push(Output::Send(m));
+        }
+    }
+}
+
+/// Builds `X_RESPONSE { llrp_status }` for the status-only responses.
+trait WithStatus: Default {
+    fn with(status: LlrpStatus) -> Self;
+}
+
+macro_rules! with_status {
+    ($($t:ty),*) => {$(
+        impl WithStatus for $t {
+            fn with(status: LlrpStatus) -> Self {
+                Self { llrp_status: status, ..Default::default() }
+            }
+        }
+    )*};
+}
+
+with_status!(
+    AddRospecResponse,
+    DeleteRospecResponse,
+    StartRospecResponse,
+    StopRospecResponse,
+    EnableRospecResponse,
+    DisableRospecResponse,
+    AddAccessspecResponse,
+    DeleteAccessspecResponse,
+    EnableAccessspecResponse,
+    DisableAccessspecResponse,
+    SetProtocolVersionResponse,
+    SetReaderConfigResponse,
+    CloseConnectionResponse,
+    GetReaderCapabilitiesResponse,
+    GetReaderConfigResponse,
+    GetRospecsResponse,
+    GetAccessspecsResponse,
+    GetSupportedVersionResponse,
+    ImpinjEnableExtensionsResponse,
+    ImpinjSaveSettingsResponse
+);
+
+/// An ERROR_MESSAGE body.
+fn error_message(status: LlrpStatus) -> llrp::message::ErrorMessage {
+    llrp::message::ErrorMessage {
+        llrp_status: status,
+        ..Default::default()
+    }
+}
+
+/// LLRPStatus for a bad field of the message itself.
+pub(crate) fn field_error(field: u16, code: StatusCode, what: &str) -> LlrpStatus {
+    let mut s = LlrpStatus::new(StatusCode::M_FieldError, format!("invalid {what}"));
+    s.field_error = Some(FieldError {
+        field_num: field,
+        error_code: code.code(),
+        ..Default::default()
+    });
+    s
+}
+
+/// Vendor and subtype of a CUSTOM_MESSAGE frame (zeros otherwise).
+fn custom_ids(ty: u16, frame: &[u8]) -> (u32, u8) {
+    if ty == CUSTOM_MESSAGE_TYPE && frame.len() >= 15 {
+        (
+            u32::from_be_bytes([frame[10], frame[11], frame[12], frame[13]]),
+            frame[14],
+        )
+    } else {
+        (0, 0)
+    }
+}
+
+/// Whether `ty` is a message only a reader sends.
+fn is_reader_message(ty: u16) -> bool {
+    matches!(
+        ty,
+        4 | 11..=13 | 30..=36 | 45 | 50..=57 | 61..=63 | 100
+    )
+}
+
+/// The response a reader sends to request type `ty` (vendor/subtype for CUSTOM_MESSAGE),
+/// carrying `status`; `None` when the request has no response (ERROR_MESSAGE then).
+fn response_for(ty: u16, vendor: u32, subtype: u8, status: LlrpStatus) -> Option<MessageBody> {
+    use llrp::message::*;
+    Some(match ty {
+        t if t == GetReaderCapabilities::TYPE => GetReaderCapabilitiesResponse::with(status).into(),
+        t if t == GetReaderConfig::TYPE => GetReaderConfigResponse::with(status).into(),
+        t if t == SetReaderConfig::TYPE => SetReaderConfigResponse::with(status).into(),
+        t if t == CloseConnection::TYPE => CloseConnectionResponse::with(status).into(),
+        t if t == AddRospec::TYPE => AddRospecResponse::with(status).into(),
+        t if t == DeleteRospec::TYPE => DeleteRospecResponse::with(status).into(),
+        t if t == StartRospec::TYPE => StartRospecResponse::with(status).into(),
+        t if t == StopRospec::TYPE => StopRospecResponse::with(status).into(),
+        t if t == EnableRospec::TYPE => EnableRospecResponse::with(status).into(),
+        t if t == DisableRospec::TYPE => DisableRospecResponse::with(status).into(),
+        t if t == GetRospecs::TYPE => GetRospecsResponse::with(status).into(),
+        t if t == AddAccessspec::TYPE => AddAccessspecResponse::with(status).into(),
+        t if t == DeleteAccessspec::TYPE => DeleteAccessspecResponse::with(status).into(),
+        t if t == EnableAccessspec::TYPE => EnableAccessspecResponse::with(status).into(),
+        t if t == DisableAccessspec::TYPE => DisableAccessspecResponse::with(status).into(),
+        t if t == GetAccessspecs::TYPE => GetAccessspecsResponse::with(status).into(),
+        t if t == GetSupportedVersion::TYPE => GetSupportedVersionResponse::with(status).into(),
+        t if t == SetProtocolVersion::TYPE => SetProtocolVersionResponse::with(status).into(),
+        CUSTOM_MESSAGE_TYPE if vendor == caps::IMPINJ_VENDOR && subtype == 21 => {
+            ImpinjEnableExtensionsResponse::with(status).into()
+        }
+        CUSTOM_MESSAGE_TYPE if vendor == caps::IMPINJ_VENDOR && subtype == 23 => {
+            ImpinjSaveSettingsResponse::with(status).into()
+        }
+        _ => return None,
+    })
+}

@@ -1,0 +1,366 @@
+//! The scenario file's data types: what a JSON scenario may contain, with its defaults.
+//!
+//! Every struct refuses unknown fields, so a misspelt key is an error naming its JSON path.
+
+use serde::{Deserialize, Serialize};
+
+use super::recorded::PoseSample;
+
+/// Axis-aligned box that contains every tag, antenna and waypoint of the scenario (metres).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldBounds {
+    /// Lowest corner `[x, y, z]`.
+    pub min: [f64; 3],
+    /// Highest corner `[x, y, z]`.
+    pub max: [f64; 3],
+}
+
+/// An infinite reflecting plane (wall, floor, rack face) used by the image method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reflector {
+    /// Free-text label, e.g. `"floor"`.
+    #[serde(default)]
+    pub name: String,
+    /// Any point on the plane.
+    pub point: [f64; 3],
+    /// Plane normal (need not be unit length, must not be zero).
+    pub normal: [f64; 3],
+    /// Magnitude of the reflection coefficient in `[0, 1]`; the reflection also flips phase by π.
+    pub coefficient: f64,
+}
+
+/// Straight-line motion of a tag through waypoints at constant speed, starting at its position.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Path {
+    /// Points visited after the tag's `position`, in order.
+    pub waypoints: Vec<[f64; 3]>,
+    /// Speed along the path in m/s.
+    pub speed: f64,
+    /// Simulated time (s) at which the tag starts moving.
+    #[serde(default)]
+    pub start_s: f64,
+    /// Return to `position` after the last waypoint and repeat forever.
+    #[serde(default)]
+    pub loop_path: bool,
+}
+
+/// One EPC-96 tag.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TagSpec {
+    /// EPC-96 as 24 hex digits.
+    pub epc: String,
+    /// Position at time 0 (metres).
+    pub position: [f64; 3],
+    /// Optional motion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path: Option<Path>,
+    /// A reference tag: its position is known to the localizer (fingerprinting, calibration).
+    #[serde(default)]
+    pub reference: bool,
+    /// TID memory as hex (whole 16-bit words); default `E2801160` followed by 16 hex digits
+    /// derived from the EPC.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tid: Option<String>,
+    /// User memory as hex (whole 16-bit words); default empty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub user: Option<String>,
+}
+
+/// Frequency plan of a reader.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Region {
+    /// ETSI EN 302 208 four-channel plan: 865.7, 866.3, 866.9, 867.5 MHz.
+    Etsi,
+    /// FCC part 15: 50 channels 902.75 + 0.5·k MHz, listed in a fixed pseudo-random hop order.
+    Fcc,
+    /// Any hop table, in hop order (kHz).
+    Custom {
+        /// Channel frequencies in kHz, in hop order.
+        hop_table_khz: Vec<u32>,
+    },
+}
+
+/// One reader (one LLRP endpoint).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReaderSpec {
+    /// Reader name (unique in the scenario).
+    pub name: String,
+    /// TCP address the simulated reader listens on.
+    #[serde(default = "default_listen")]
+    pub listen: String,
+    /// Frequency plan.
+    pub region: Region,
+    /// Time on each channel before hopping to the next, in ms. Defaults: FCC and custom
+    /// tables 400 ms (the FCC part 15 maximum dwell), ETSI 4000 ms (EN 302 208's 4 s limit of
+    /// continuous transmission on one channel).
+    #[serde(default = "unset_f64")]
+    pub hop_dwell_ms: f64,
+    /// Stay on this channel (1-based index into the table) instead of rotating.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixed_channel: Option<u16>,
+    /// The reader's total read-attempt budget per second, shared by its antennas in time.
+    #[serde(default = "default_reads_per_second")]
+    pub reads_per_second: f64,
+    /// Antennas; antenna port `i + 1` is `antennas[i]`.
+    pub antennas: Vec<AntennaSpec>,
+}
+
+/// Orientation and position of an antenna or an antenna offset.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pose {
+    /// Position (metres).
+    pub position: [f64; 3],
+    /// Boresight azimuth about +z in degrees, 0 = +x, 90 = +y.
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Boresight elevation in degrees, positive up.
+    #[serde(default)]
+    pub pitch_deg: f64,
+}
+
+/// Vertical axis moving a robot's antenna up and down (triangle wave, starting at `min_z`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VerticalAxis {
+    /// Lowest antenna height (world z, metres).
+    pub min_z: f64,
+    /// Highest antenna height (world z, metres).
+    pub max_z: f64,
+    /// Vertical speed in m/s.
+    pub speed: f64,
+}
+
+/// A differential-drive robot following waypoints (\[M\] eqs. 1–11).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSpec {
+    /// Start pose `[x m, y m, heading rad]` (heading 0 = +x); odometry starts from it.
+    pub start: [f64; 3],
+    /// Waypoints `[x, y]` visited in order.
+    pub waypoints: Vec<[f64; 2]>,
+    /// Maximum linear speed in m/s (at most 2).
+    pub speed: f64,
+    /// Wheel radius r in metres.
+    #[serde(default = "default_wheel_radius")]
+    pub wheel_radius: f64,
+    /// Distance d between the wheels in metres.
+    #[serde(default = "default_wheel_base")]
+    pub wheel_base: f64,
+    /// Right-wheel odometry noise: variance (m²) per metre of wheel travel.
+    #[serde(default = "default_k_odometry")]
+    pub k_r: f64,
+    /// Left-wheel odometry noise: variance (m²) per metre of wheel travel.
+    #[serde(default = "default_k_odometry")]
+    pub k_l: f64,
+    /// Proportional gain of the linear speed on the distance to the waypoint (1/s).
+    #[serde(default = "default_k_v")]
+    pub k_v: f64,
+    /// Proportional gain of the turn rate on the heading error (1/s).
+    #[serde(default = "default_k_omega")]
+    pub k_omega: f64,
+    /// Distance (m) at which a waypoint counts as reached.
+    #[serde(default = "default_tolerance")]
+    pub tolerance_m: f64,
+    /// Optional vertical axis carrying the antenna.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertical: Option<VerticalAxis>,
+    /// After the last waypoint, start again from the first.
+    #[serde(default)]
+    pub loop_path: bool,
+}
+
+/// Where an antenna is and how it moves. JSON: `{"type": "fixed", "pose": {...}}`,
+/// `{"type": "robot", "robot": {...}, "offset": {...}}` or `{"type": "recorded", "file": "..."}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Mount {
+    /// A fixed antenna.
+    Fixed {
+        /// Its pose in the world.
+        pose: Pose,
+    },
+    /// An antenna on a robot.
+    Robot {
+        /// The robot and its path.
+        robot: RobotSpec,
+        /// Antenna pose in the robot frame (x forward, y left, z up from the floor).
+        offset: Pose,
+    },
+    /// An antenna moved along a recorded pose list.
+    Recorded {
+        /// CSV (header `t_s,x,y,z,yaw_deg,pitch_deg`) or JSONL with the same keys; a relative
+        /// path resolves against the scenario file's directory.
+        file: String,
+        /// The poses read from `file` when the scenario was loaded.
+        #[serde(skip)]
+        poses: Vec<PoseSample>,
+    },
+}
+
+/// Distribution of the optional extra phase noise n_opt (\[G\] eq. 4), in radians.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum NoiseDist {
+    /// Uniform on `[low, high)`.
+    Uniform {
+        /// Lower bound.
+        low: f64,
+        /// Upper bound.
+        high: f64,
+    },
+    /// Exponential with rate `lambda`.
+    Exponential {
+        /// Rate (1/rad).
+        lambda: f64,
+    },
+    /// Gamma with `shape` k and `scale` θ.
+    Gamma {
+        /// Shape k.
+        shape: f64,
+        /// Scale θ.
+        scale: f64,
+    },
+    /// Weibull with `scale` λ and `shape` k.
+    Weibull {
+        /// Scale λ.
+        scale: f64,
+        /// Shape k.
+        shape: f64,
+    },
+    /// Normal with `mean` and standard deviation `std`.
+    Normal {
+        /// Mean.
+        mean: f64,
+        /// Standard deviation.
+        std: f64,
+    },
+    /// Log-normal: exp of a normal with mean `mu` and standard deviation `sigma`.
+    Lognormal {
+        /// Mean of the underlying normal.
+        mu: f64,
+        /// Standard deviation of the underlying normal.
+        sigma: f64,
+    },
+    /// Chi-squared with `k` degrees of freedom.
+    ChiSquared {
+        /// Degrees of freedom.
+        k: f64,
+    },
+    /// Cauchy with `median` and `scale`.
+    Cauchy {
+        /// Median.
+        median: f64,
+        /// Scale.
+        scale: f64,
+    },
+}
+
+/// One antenna port of a reader.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AntennaSpec {
+    /// Where the antenna is.
+    pub mount: Mount,
+    /// Boresight gain in dBi (\[G\] Table 1 "gain 3" is linear: 4.77 dBi).
+    #[serde(default = "default_gain_dbi")]
+    pub gain_dbi: f64,
+    /// Full −3 dB beamwidth in degrees, in (0, 360]; 360 is isotropic.
+    #[serde(default = "default_beamwidth")]
+    pub beamwidth_deg: f64,
+    /// Conducted transmit power in dBm (before the cable).
+    #[serde(default = "default_tx_power")]
+    pub tx_power_dbm: f64,
+    /// Cable loss in dB (counted on the way out and on the way back).
+    #[serde(default = "default_cable_loss")]
+    pub cable_loss_db: f64,
+    /// Power a tag chip needs to wake up, in dBm.
+    #[serde(default = "default_tag_sensitivity")]
+    pub tag_sensitivity_dbm: f64,
+    /// Phase offset φ0 per channel (index 0 = channel 1); missing channels get offsets
+    /// derived from the seed, different per tag.
+    #[serde(default)]
+    pub phase_offset_rad: Vec<f64>,
+    /// +1: φ = φ0 + 4πD/λ (\[G\] eq. 4); −1: φ = φ0 − 4πD/λ (\[M\] eq. 13).
+    #[serde(default = "default_phase_sign")]
+    pub phase_sign: f64,
+    /// Standard deviation σ_φ of the Gaussian phase noise (rad).
+    #[serde(default = "default_phase_noise")]
+    pub phase_noise_rad: f64,
+    /// Standard deviation of the noise added inside the RSSI log (\[G\] eq. 5).
+    #[serde(default = "default_rssi_noise")]
+    pub rssi_noise: f64,
+    /// Optional extra phase noise n_opt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extra_phase_noise: Option<NoiseDist>,
+    /// Nominal read range r (metres).
+    #[serde(default = "default_range")]
+    pub range_m: f64,
+    /// Relative standard deviation σ_r of the read range.
+    #[serde(default = "default_range_sigma")]
+    pub range_sigma: f64,
+}
+
+fn default_listen() -> String {
+    "127.0.0.1:5084".to_string()
+}
+/// Marks a field whose default depends on other fields; replaced before validation.
+fn unset_f64() -> f64 {
+    f64::NAN
+}
+fn default_reads_per_second() -> f64 {
+    1000.0
+}
+fn default_wheel_radius() -> f64 {
+    0.20
+}
+fn default_wheel_base() -> f64 {
+    0.50
+}
+fn default_k_odometry() -> f64 {
+    1e-5
+}
+fn default_k_v() -> f64 {
+    1.0
+}
+fn default_k_omega() -> f64 {
+    2.0
+}
+fn default_tolerance() -> f64 {
+    0.05
+}
+fn default_gain_dbi() -> f64 {
+    4.77
+}
+fn default_beamwidth() -> f64 {
+    70.0
+}
+fn default_tx_power() -> f64 {
+    30.0
+}
+fn default_cable_loss() -> f64 {
+    1.0
+}
+fn default_tag_sensitivity() -> f64 {
+    -18.0
+}
+fn default_phase_sign() -> f64 {
+    1.0
+}
+fn default_phase_noise() -> f64 {
+    0.1
+}
+fn default_rssi_noise() -> f64 {
+    0.01
+}
+fn default_range() -> f64 {
+    7.0
+}
+fn default_range_sigma() -> f64 {
+    0.05
+}

@@ -1,0 +1,146 @@
+//! Scenarios: the world a simulated reader lives in — tags, readers, antennas and how they
+//! move — read from JSON files and checked before use.
+
+mod format;
+mod mount;
+pub mod recorded;
+pub mod region;
+pub mod tagmem;
+mod validate;
+
+use serde::{Deserialize, Serialize};
+
+pub use format::{
+    AntennaSpec, Mount, NoiseDist, Path, Pose, ReaderSpec, Reflector, Region, RobotSpec, TagSpec,
+    VerticalAxis, WorldBounds,
+};
+pub use recorded::PoseSample;
+
+/// A complete simulation scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name.
+    pub name: String,
+    /// What the scenario models and where its geometry comes from.
+    #[serde(default)]
+    pub description: String,
+    /// Seed of every random draw of the simulation.
+    pub seed: u64,
+    /// Box containing everything.
+    pub world: WorldBounds,
+    /// Reflecting planes (image method); none means free space.
+    #[serde(default)]
+    pub reflectors: Vec<Reflector>,
+    /// The tags.
+    pub tags: Vec<TagSpec>,
+    /// The readers.
+    pub readers: Vec<ReaderSpec>,
+}
+
+/// Why a scenario could not be loaded. Displays as `<path>: <reason>`.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// A file could not be read.
+    #[error("{file}: {source}")]
+    Io {
+        /// The file.
+        file: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The JSON is malformed or does not fit the format (unknown field, wrong type ...).
+    #[error("{path}: {reason}")]
+    Json {
+        /// JSON path of the offending value, e.g. `readers[0].antennas[1].gain_dbi`.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// JSON path of the offending value.
+        path: String,
+        /// What is wrong, with the value found.
+        reason: String,
+    },
+}
+
+impl Scenario {
+    /// Parses and validates a scenario; relative recorded-pose files resolve against the
+    /// current directory.
+    pub fn from_json(text: &str) -> Result<Scenario, ScenarioError> {
+        Self::from_json_in(text, std::path::Path::new("."))
+    }
+
+    /// Reads, parses and validates a scenario file; relative recorded-pose files resolve
+    /// against the file's directory.
+    pub fn load(path: &std::path::Path) -> Result<Scenario, ScenarioError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
+            file: path.display().to_string(),
+            source,
+        })?;
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
+        Self::from_json_in(&text, dir)
+    }
+
+    /// The embedded default scenario S1 (`fixtures/scenarios/s1.json`).
+    pub fn default_s1() -> Scenario {
+        Scenario::from_json(include_str!("../../fixtures/scenarios/s1.json"))
+            // The embedded file is validated by the unit test `default_s1_is_valid`.
+            .expect("embedded s1.json is a valid scenario")
+    }
+
+    /// Parses and validates, resolving relative files against `dir`.
+    fn from_json_in(text: &str, dir: &std::path::Path) -> Result<Scenario, ScenarioError> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let mut scenario: Scenario = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let path = json_path(&e.path().to_string());
+            let reason = e.into_inner().to_string();
+            // A mount reports the path inside it at the start of its message.
+            match reason
+                .strip_prefix(mount::INNER_PATH_MARK)
+                .and_then(|r| r.split_once(": "))
+            {
+                Some((inner, rest)) => ScenarioError::Json {
+                    path: format!("{path}.{inner}"),
+                    reason: rest.to_string(),
+                },
+                None => ScenarioError::Json { path, reason },
+            }
+        })?;
+        de.end().map_err(|e| ScenarioError::Json {
+            path: "(root)".to_string(),
+            reason: e.to_string(),
+        })?;
+        scenario.fill_defaults();
+        validate::validate(&scenario)?;
+        validate::load_recorded(&mut scenario, dir)?;
+        Ok(scenario)
+    }
+
+    /// Replaces defaults that depend on other fields (the region's dwell time).
+    fn fill_defaults(&mut self) {
+        for reader in &mut self.readers {
+            if reader.hop_dwell_ms.is_nan() {
+                reader.hop_dwell_ms = reader.region.default_dwell_ms();
+            }
+        }
+    }
+}
+
+/// serde_path_to_error writes the root as `.`; say `(root)` instead.
+fn json_path(path: &str) -> String {
+    if path == "." || path.is_empty() {
+        "(root)".to_string()
+    } else {
+        path.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests;

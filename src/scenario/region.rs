@@ -1,0 +1,162 @@
+//! Frequency plans: the ETSI 4-channel plan, the FCC 50-channel plan in hop order, custom tables.
+
+use serde::de::{self, Deserializer};
+use serde::ser::{SerializeMap, Serializer};
+use serde::{Deserialize, Serialize};
+
+use super::format::Region;
+
+/// The ETSI EN 302 208 four-channel plan in kHz (ChannelIndex 1..4).
+pub const ETSI_CHANNELS_KHZ: [u32; 4] = [865_700, 866_300, 866_900, 867_500];
+
+/// The FCC part 15 plan (902.75 + 0.5·k MHz, k = 0..49) in the fixed pseudo-random order a
+/// reader advertises and hops through (a Fisher–Yates shuffle drawn once with SplitMix64; a
+/// real reader also lists its table in hop order, not ascending).
+pub const FCC_HOP_TABLE_KHZ: [u32; 50] = [
+    920_250, 904_750, 903_750, 912_750, 904_250, 922_750, 919_250, 918_250, 922_250, 913_750,
+    923_250, 914_250, 909_750, 903_250, 924_250, 905_750, 925_250, 907_250, 902_750, 924_750,
+    915_750, 915_250, 917_250, 912_250, 916_750, 921_750, 927_250, 907_750, 910_750, 917_750,
+    918_750, 911_750, 921_250, 909_250, 925_750, 908_750, 906_250, 926_750, 910_250, 920_750,
+    919_750, 913_250, 906_750, 911_250, 914_750, 916_250, 908_250, 926_250, 905_250, 923_750,
+];
+
+/// Default dwell per channel for hopping tables (FCC part 15's 0.4 s maximum), in ms.
+pub const DEFAULT_HOP_DWELL_MS: f64 = 400.0;
+/// Default dwell per channel for the ETSI plan (EN 302 208: at most 4 s of continuous
+/// transmission on one channel), in ms.
+pub const DEFAULT_ETSI_DWELL_MS: f64 = 4000.0;
+
+impl Region {
+    /// The channel table in hop order: ChannelIndex k (1-based) is `table[k - 1]`.
+    pub fn frequencies_khz(&self) -> Vec<u32> {
+        match self {
+            Region::Etsi => ETSI_CHANNELS_KHZ.to_vec(),
+            Region::Fcc => FCC_HOP_TABLE_KHZ.to_vec(),
+            Region::Custom { hop_table_khz } => hop_table_khz.clone(),
+        }
+    }
+
+    /// Whether LLRP advertises a FrequencyHopTable (true) or a FixedFrequencyTable (ETSI).
+    pub fn hopping(&self) -> bool {
+        !matches!(self, Region::Etsi)
+    }
+
+    /// LLRP CommunicationsStandard: 1 FCC part 15, 2 ETSI 302.208, 0 unspecified.
+    pub fn communications_standard(&self) -> u16 {
+        match self {
+            Region::Fcc => 1,
+            Region::Etsi => 2,
+            Region::Custom { .. } => 0,
+        }
+    }
+
+    /// ISO 3166 numeric country code a reader reports: 840 (USA) for FCC, 0 otherwise (the
+    /// ETSI plan is not one country's; 0 = unspecified).
+    pub fn country_code(&self) -> u16 {
+        match self {
+            Region::Fcc => 840,
+            Region::Etsi | Region::Custom { .. } => 0,
+        }
+    }
+
+    /// Default dwell per channel in ms when the scenario gives none.
+    pub fn default_dwell_ms(&self) -> f64 {
+        match self {
+            Region::Etsi => DEFAULT_ETSI_DWELL_MS,
+            Region::Fcc | Region::Custom { .. } => DEFAULT_HOP_DWELL_MS,
+        }
+    }
+}
+
+impl Serialize for Region {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Region::Etsi => serializer.serialize_str("etsi"),
+            Region::Fcc => serializer.serialize_str("fcc"),
+            Region::Custom { hop_table_khz } => {
+                let mut map = serializer.serialize_map(Some(1))?;
+                map.serialize_entry("hop_table_khz", hop_table_khz)?;
+                map.end()
+            }
+        }
+    }
+}
+
+/// The JSON object form of a custom region.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CustomRegion {
+    hop_table_khz: Vec<u32>,
+}
+
+/// Either a plan name or a custom table.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RegionRepr {
+    Name(String),
+    Custom(CustomRegion),
+}
+
+impl<'de> Deserialize<'de> for Region {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        const EXPECTED: &str = "expected \"etsi\", \"fcc\" or {\"hop_table_khz\": [kHz, ...]}";
+        let repr = RegionRepr::deserialize(deserializer)
+            .map_err(|_| de::Error::custom(format!("invalid region: {EXPECTED}")))?;
+        match repr {
+            RegionRepr::Name(name) => match name.to_ascii_lowercase().as_str() {
+                "etsi" => Ok(Region::Etsi),
+                "fcc" => Ok(Region::Fcc),
+                _ => Err(de::Error::custom(format!(
+                    "unknown region \"{name}\": {EXPECTED}"
+                ))),
+            },
+            RegionRepr::Custom(c) => Ok(Region::Custom {
+                hop_table_khz: c.hop_table_khz,
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fcc_table_is_a_permutation_of_the_50_channels_not_ascending() {
+        let mut sorted = FCC_HOP_TABLE_KHZ.to_vec();
+        sorted.sort_unstable();
+        let expected: Vec<u32> = (0..50).map(|i| 902_750 + 500 * i).collect();
+        assert_eq!(sorted, expected);
+        assert_ne!(FCC_HOP_TABLE_KHZ.to_vec(), expected);
+    }
+
+    #[test]
+    fn region_codes() {
+        assert!(!Region::Etsi.hopping());
+        assert!(Region::Fcc.hopping());
+        assert_eq!(Region::Fcc.communications_standard(), 1);
+        assert_eq!(Region::Etsi.communications_standard(), 2);
+        assert_eq!(Region::Fcc.country_code(), 840);
+        assert_eq!(Region::Etsi.frequencies_khz().len(), 4);
+    }
+
+    #[test]
+    fn region_json_forms_round_trip() {
+        for (json, region) in [
+            ("\"etsi\"", Region::Etsi),
+            ("\"fcc\"", Region::Fcc),
+            (
+                "{\"hop_table_khz\":[867000]}",
+                Region::Custom {
+                    hop_table_khz: vec![867_000],
+                },
+            ),
+        ] {
+            let parsed: Region = serde_json::from_str(json).expect("valid region JSON");
+            assert_eq!(parsed, region);
+            assert_eq!(serde_json::to_string(&region).expect("serializable"), json);
+        }
+        assert!(serde_json::from_str::<Region>("\"mars\"").is_err());
+        assert!(serde_json::from_str::<Region>("{\"hop_table\":[1]}").is_err());
+    }
+}

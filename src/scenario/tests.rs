@@ -1,0 +1,230 @@
+//! Tests of scenario loading and validation.
+
+use super::*;
+
+const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios");
+
+/// A small valid scenario as JSON, to be broken by the tests.
+fn base() -> serde_json::Value {
+    serde_json::json!({
+        "name": "t",
+        "seed": 1,
+        "world": { "min": [0, 0, 0], "max": [10, 10, 3] },
+        "tags": [ { "epc": "300833B2DDD9014000000001", "position": [5, 5, 1] } ],
+        "readers": [ {
+            "name": "r",
+            "region": "fcc",
+            "antennas": [
+                { "mount": { "type": "fixed", "pose": { "position": [1, 5, 1] } } },
+                { "mount": { "type": "robot",
+                             "robot": { "start": [1, 1, 0], "waypoints": [[9, 1]], "speed": 1.0 },
+                             "offset": { "position": [0, 0, 1], "yaw_deg": 90 } } }
+            ]
+        } ]
+    })
+}
+
+/// Loads `v` and returns the error message (panics if it loads).
+fn error_of(v: &serde_json::Value) -> String {
+    match Scenario::from_json(&v.to_string()) {
+        Ok(_) => panic!("scenario should have been refused: {v}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn default_s1_is_valid() {
+    let s = Scenario::from_json(include_str!("../../fixtures/scenarios/s1.json"));
+    assert!(s.is_ok(), "{:?}", s.err());
+}
+
+#[test]
+fn fixtures_load_and_default_s1_equals_the_file() {
+    let dir = std::path::Path::new(FIXTURES);
+    let s1 = Scenario::load(&dir.join("s1.json")).expect("s1 loads");
+    assert_eq!(Scenario::default_s1(), s1);
+    assert_eq!(s1.tags.len(), 10);
+    assert_eq!(s1.readers[0].antennas.len(), 1);
+    assert_eq!(s1.readers[0].listen, "127.0.0.1:5084");
+    let s2 = Scenario::load(&dir.join("s2.json")).expect("s2 loads");
+    assert_eq!(s2.tags.len(), 100);
+    assert_eq!(s2.readers[0].antennas.len(), 8);
+    assert!(!s2.reflectors.is_empty());
+    let s3 = Scenario::load(&dir.join("s3.json")).expect("s3 loads");
+    assert_eq!(s3.tags.len(), 1);
+    assert!(s3.reflectors.is_empty());
+    assert_eq!(s3.readers[0].region.frequencies_khz(), vec![867_000]);
+    assert_eq!(s3.readers[0].antennas[0].phase_noise_rad, 0.2);
+}
+
+#[test]
+fn defaults_are_filled_and_round_trip_through_json() {
+    let s = Scenario::from_json(&base().to_string()).expect("base is valid");
+    let r = &s.readers[0];
+    assert_eq!(r.listen, "127.0.0.1:5084");
+    assert_eq!(r.hop_dwell_ms, 400.0);
+    assert_eq!(r.reads_per_second, 1000.0);
+    let a = &r.antennas[0];
+    assert_eq!(
+        (a.phase_noise_rad, a.rssi_noise, a.range_m),
+        (0.1, 0.01, 7.0)
+    );
+    let mut etsi = base();
+    etsi["readers"][0]["region"] = "etsi".into();
+    let s_etsi = Scenario::from_json(&etsi.to_string()).expect("valid");
+    assert_eq!(s_etsi.readers[0].hop_dwell_ms, 4000.0);
+    let again = Scenario::from_json(&serde_json::to_string(&s).expect("serializable"))
+        .expect("serialized scenario loads");
+    assert_eq!(again, s);
+}
+
+/// A change that breaks the base scenario.
+type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+
+#[test]
+fn errors_name_the_field_path_and_the_reason() {
+    let cases: Vec<(Edit, &str, &str)> = vec![
+        (
+            Box::new(|v| v["readers"][0]["antennas"][1]["beamwidth_deg"] = (-5).into()),
+            "readers[0].antennas[1].beamwidth_deg: must be in (0, 360], got -5",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["colour"] = "red".into()),
+            "tags[0].colour: unknown field `colour`",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["epc"] = "300833B2DDD90140000000".into()),
+            "tags[0].epc: must be 24 hex digits (EPC-96), got 22 characters",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"] = serde_json::json!([])),
+            "readers[0].antennas: must list at least one antenna",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][1]["mount"]["robot"]["speed"] = 2.5.into()),
+            "readers[0].antennas[1].mount.robot.speed: must be in (0, 2], got 2.5",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][1]["mount"]["robot"]["sped"] = 1.into()),
+            "readers[0].antennas[1].mount.robot.sped: unknown field `sped`",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][0]["gain_dbi"] = "high".into()),
+            "readers[0].antennas[0].gain_dbi",
+            "invalid type",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["region"] = "mars".into()),
+            "readers[0].region",
+            "unknown region",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][0]["mount"]["type"] = "ceiling".into()),
+            "readers[0].antennas[0].mount.type: unknown mount type \"ceiling\"",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["position"] = serde_json::json!([50, 5, 1])),
+            "tags[0].position: must be inside the world box",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][0]["phase_sign"] = 0.5.into()),
+            "readers[0].antennas[0].phase_sign: must be 1 or -1, got 0.5",
+            "",
+        ),
+        (
+            Box::new(|v| {
+                v["readers"][0]["antennas"][0]["extra_phase_noise"] =
+                    serde_json::json!({ "gamma": { "shape": -1, "scale": 1 } })
+            }),
+            "readers[0].antennas[0].extra_phase_noise: shape must be > 0, got -1",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["fixed_channel"] = 51.into()),
+            "readers[0].fixed_channel: must be a channel index in [1, 50], got 51",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["tid"] = "E28011".into()),
+            "tags[0].tid: must be whole 16-bit words",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["listen"] = "localhost".into()),
+            "readers[0].listen: must be an IP address and port",
+            "",
+        ),
+        (
+            Box::new(|v| {
+                v["tags"].as_array_mut().expect("tags is an array").push(
+                    serde_json::json!({ "epc": "300833B2DDD9014000000001", "position": [1, 1, 1] }),
+                )
+            }),
+            "tags[1].epc: duplicate EPC",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["antennas"][1]["mount"]["robot"]["speed"] = "fast".into()),
+            "readers[0].antennas[1].mount.robot.speed: invalid type: string \"fast\", expected f64",
+            "",
+        ),
+        (
+            Box::new(|v| v["seed"] = (-1).into()),
+            "seed",
+            "invalid value",
+        ),
+    ];
+    for (edit, prefix, contains) in cases {
+        let mut v = base();
+        edit(&mut v);
+        let msg = error_of(&v);
+        assert!(msg.starts_with(prefix), "expected `{prefix}…`, got `{msg}`");
+        assert!(msg.contains(contains), "expected `{contains}` in `{msg}`");
+    }
+}
+
+#[test]
+fn recorded_mount_resolves_against_the_scenario_directory() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    std::fs::write(
+        dir.path().join("poses.csv"),
+        "t_s,x,y,z,yaw_deg,pitch_deg\n0,1,1,1,0,0\n10,9,1,1,0,0\n",
+    )
+    .expect("write poses");
+    let mut v = base();
+    v["readers"][0]["antennas"][0]["mount"] =
+        serde_json::json!({ "type": "recorded", "file": "poses.csv" });
+    let path = dir.path().join("scenario.json");
+    std::fs::write(&path, v.to_string()).expect("write scenario");
+    let s = Scenario::load(&path).expect("loads with the relative pose file");
+    match &s.readers[0].antennas[0].mount {
+        Mount::Recorded { poses, .. } => assert_eq!(poses.len(), 2),
+        other => panic!("expected a recorded mount, got {other:?}"),
+    }
+    // From a string, the same relative name resolves against the current directory: missing.
+    let err = Scenario::from_json(&v.to_string()).unwrap_err().to_string();
+    assert!(
+        err.starts_with("readers[0].antennas[0].mount.file: cannot read"),
+        "{err}"
+    );
+    let missing = Scenario::load(&dir.path().join("nope.json"))
+        .unwrap_err()
+        .to_string();
+    assert!(missing.contains("nope.json"), "{missing}");
+}
+
+#[test]
+fn trailing_garbage_and_bad_json_are_errors() {
+    let text = format!("{} x", base());
+    assert!(Scenario::from_json(&text).is_err());
+    let err = Scenario::from_json("{").unwrap_err().to_string();
+    assert!(err.contains("EOF"), "{err}");
+}

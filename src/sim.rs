@@ -1,0 +1,218 @@
+//! `llrp-gateway sim`: builds one simulated reader per scenario reader, listens on each one's
+//! LLRP address and writes ground truth (tag positions, antenna poses over time) as JSONL.
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+use crate::net::clock::{Clock, Speed};
+use crate::net::server::{serve, Observer, SimReader};
+use crate::physics::Model;
+use crate::reader::{Reader, ReaderProfile};
+use crate::scenario::Scenario;
+
+/// Simulated time between two ground-truth lines, µs.
+pub const TRUTH_INTERVAL_US: u64 = 100_000;
+
+/// How to run the simulation.
+#[derive(Clone, Debug)]
+pub struct SimOptions {
+    /// Listen addresses overriding the scenario's, reader by reader (in scenario order).
+    pub listen: Vec<String>,
+    /// How fast simulated time runs.
+    pub speed: Speed,
+    /// Where to write ground truth (JSONL), if anywhere.
+    pub truth: Option<PathBuf>,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            listen: Vec::new(),
+            speed: Speed::Factor(1.0),
+            truth: None,
+        }
+    }
+}
+
+/// Why the simulation could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The scenario has no reader.
+    #[error("the scenario has no reader")]
+    NoReader,
+    /// A listen address could not be bound.
+    #[error("reader {reader}: cannot listen on {addr}: {source}")]
+    Listen {
+        /// Reader name.
+        reader: String,
+        /// The address.
+        addr: String,
+        /// Why.
+        source: io::Error,
+    },
+    /// The truth file could not be created.
+    #[error("cannot create truth file {path}: {source}")]
+    Truth {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: io::Error,
+    },
+}
+
+/// A running simulation: its listeners and how to stop it.
+pub struct RunningSim {
+    /// Bound address of each reader, in scenario order.
+    pub addrs: Vec<SocketAddr>,
+    /// Names of the readers, in scenario order.
+    pub names: Vec<String>,
+    shutdown: watch::Sender<bool>,
+    tasks: Vec<JoinHandle<io::Result<()>>>,
+}
+
+impl RunningSim {
+    /// Stops accepting clients and waits for the listeners to end.
+    pub async fn shutdown(self) {
+        let _ = self.shutdown.send(true);
+        for t in self.tasks {
+            let _ = t.await;
+        }
+    }
+}
+
+/// Ground-truth writer shared by the readers.
+struct Truth {
+    out: Mutex<BufWriter<File>>,
+}
+
+impl Truth {
+    fn line(&self, value: &serde_json::Value) {
+        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        // Truth is best effort: a full disk must not stop the reader.
+        if serde_json::to_writer(&mut *out, value).is_ok() {
+            let _ = out.write_all(b"\n");
+            let _ = out.flush();
+        }
+    }
+}
+
+fn hex(epc: &[u8]) -> String {
+    epc.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The observer that writes reader `name`'s antenna poses (true and odometry) and the
+/// tags' positions every [`TRUTH_INTERVAL_US`] of simulated time.
+fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64) -> Observer {
+    let next = Mutex::new(0u64);
+    Box::new(move |r: &Reader| {
+        let mut next = next.lock().unwrap_or_else(|e| e.into_inner());
+        let m = r.model();
+        while *next <= r.now_us() {
+            let t = *next;
+            let antennas: Vec<_> = (1..=m.antenna_count())
+                .map(|a| {
+                    serde_json::json!({
+                        "antenna": a,
+                        "pose": m.antenna_pose(a, t),
+                        "odometry": m.odometry_pose(a, t),
+                    })
+                })
+                .collect();
+            let tags: Vec<usize> = if t == 0 {
+                (0..m.tag_count()).collect()
+            } else {
+                moving.clone()
+            };
+            let tags: Vec<_> = tags
+                .into_iter()
+                .map(|k| serde_json::json!({"epc": hex(&m.tag_epc(k)), "position": m.tag_position(k, t)}))
+                .collect();
+            truth.line(&serde_json::json!({
+                "reader": name,
+                "t_us": t,
+                "utc_us": utc0 + t,
+                "antennas": antennas,
+                "tags": tags,
+            }));
+            *next += TRUTH_INTERVAL_US;
+        }
+    })
+}
+
+/// Starts every reader of `scenario`; returns once all listen.
+pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim, SimError> {
+    if scenario.readers.is_empty() {
+        return Err(SimError::NoReader);
+    }
+    let utc0 = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0);
+    let truth = match &opts.truth {
+        Some(path) => Some(Arc::new(Truth {
+            out: Mutex::new(BufWriter::new(File::create(path).map_err(|source| {
+                SimError::Truth {
+                    path: path.clone(),
+                    source,
+                }
+            })?)),
+        })),
+        None => None,
+    };
+    let moving: Vec<usize> = scenario
+        .tags
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.path.is_some())
+        .map(|(i, _)| i)
+        .collect();
+    let clock = Arc::new(Clock::new(opts.speed));
+    let (shutdown, rx) = watch::channel(false);
+    let mut addrs = Vec::new();
+    let mut names = Vec::new();
+    let mut tasks = Vec::new();
+    for (i, spec) in scenario.readers.iter().enumerate() {
+        let addr = opts
+            .listen
+            .get(i)
+            .cloned()
+            .unwrap_or_else(|| spec.listen.clone());
+        let listener = TcpListener::bind(&addr)
+            .await
+            .map_err(|source| SimError::Listen {
+                reader: spec.name.clone(),
+                addr: addr.clone(),
+                source,
+            })?;
+        let bound = listener.local_addr().map_err(|source| SimError::Listen {
+            reader: spec.name.clone(),
+            addr: addr.clone(),
+            source,
+        })?;
+        let model = Arc::new(Model::new(scenario, i));
+        let profile = ReaderProfile::from_scenario(scenario, i, &model);
+        let reader = Reader::new(profile, model, utc0);
+        let observer = truth
+            .as_ref()
+            .map(|t| truth_observer(t.clone(), spec.name.clone(), moving.clone(), utc0));
+        let sim = SimReader::new(reader, clock.clone(), observer);
+        tracing::info!(reader = %spec.name, %bound, "simulated reader listening");
+        tasks.push(tokio::spawn(serve(listener, sim, rx.clone())));
+        addrs.push(bound);
+        names.push(spec.name.clone());
+    }
+    Ok(RunningSim {
+        addrs,
+        names,
+        shutdown,
+        tasks,
+    })
+}

@@ -1,0 +1,580 @@
+//! The simulated reader's LLRP behaviour over loopback, driven by the crate's own client:
+//! connection rules, capabilities, configuration, the ROSpec lifecycle and error answers.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use llrp::message::*;
+use llrp::params::*;
+use llrp::{FrameHeader, StatusCode};
+use llrp_gateway::net::client::Client;
+use llrp_gateway::net::clock::Speed;
+
+#[tokio::test]
+async fn second_client_is_refused_and_first_is_told() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut first = connect(&sim).await;
+    let mut second = Client::connect(sim.addrs[0]).await.expect("tcp connects");
+    let m = second.recv(T).await.expect("refusal");
+    assert_eq!(connection_status(&m), Some(2), "{m:?}");
+    assert!(second.recv(T).await.is_err(), "refused client is closed");
+    let told = first.recv(T).await.expect("notice");
+    assert_eq!(connection_status(&told), Some(4), "{told:?}");
+    // The first client is undisturbed.
+    let code = request_status(&mut first, GetReaderCapabilities::default()).await;
+    assert_eq!(code, 0);
+    // Once it leaves, a new client is accepted.
+    first.close().await.expect("close");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let _third = connect(&sim).await;
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn capabilities_follow_the_scenario() {
+    let scenario = s1();
+    let sim = start(&scenario, Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    let r = c
+        .request(GetReaderCapabilities::default(), T)
+        .await
+        .expect("response");
+    let MessageBody::GetReaderCapabilitiesResponse(caps) = r.body else {
+        panic!("unexpected {r:?}")
+    };
+    let g = caps.general_device_capabilities.expect("general");
+    assert_eq!(
+        usize::from(g.max_number_of_antenna_supported),
+        scenario.readers[0].antennas.len()
+    );
+    assert_eq!(g.device_manufacturer_name, 25882);
+    let reg = caps.regulatory_capabilities.expect("regulatory");
+    let band = reg.uhf_band_capabilities.expect("band");
+    let table = &band.transmit_power_level_table_entry;
+    assert!(
+        table
+            .iter()
+            .enumerate()
+            .all(|(i, e)| usize::from(e.index) == i + 1),
+        "contiguous power table"
+    );
+    let freqs = match &band.frequency_information {
+        f if f.hopping => f.frequency_hop_table[0].frequencies.clone(),
+        f => f
+            .fixed_frequency_table
+            .as_ref()
+            .expect("fixed table")
+            .frequencies
+            .clone(),
+    };
+    assert_eq!(freqs, scenario.readers[0].region.frequencies_khz());
+    assert!(!band.c1g2_uhf_rf_mode_table[0].entries.is_empty());
+    // An unknown RequestedData is a field error, not a crash.
+    let bad = c
+        .request(
+            GetReaderCapabilities {
+                requested_data: 9,
+                ..Default::default()
+            },
+            T,
+        )
+        .await
+        .expect("response");
+    assert_eq!(status(&bad).status_code, StatusCode::M_FieldError.code());
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn configuration_round_trips_and_resets() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    let set = SetReaderConfig {
+        keepalive_spec: Some(KeepaliveSpec {
+            keepalive_trigger_type: 1,
+            periodic_trigger_value: 60_000,
+            ..Default::default()
+        }),
+        antenna_configuration: vec![AntennaConfiguration {
+            antenna_id: 1,
+            rf_transmitter: Some(RfTransmitter {
+                hop_table_id: 1,
+                channel_index: 1,
+                transmit_power: 5,
+                ..Default::default()
+            }),
+            ..Default::default()
+        }],
+        reader_event_notification_spec: Some(ReaderEventNotificationSpec {
+            event_notification_state: vec![EventNotificationState {
+                event_type: 2,
+                notification_state: true,
+                ..Default::default()
+            }],
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, set).await, 0);
+    let r = c
+        .request(GetReaderConfig::default(), T)
+        .await
+        .expect("config");
+    let MessageBody::GetReaderConfigResponse(cfg) = r.body else {
+        panic!("{r:?}")
+    };
+    assert_eq!(
+        cfg.keepalive_spec
+            .as_ref()
+            .map(|k| k.periodic_trigger_value),
+        Some(60_000)
+    );
+    let a1 = &cfg.antenna_configuration[0];
+    assert_eq!(
+        a1.rf_transmitter.as_ref().map(|t| t.transmit_power),
+        Some(5)
+    );
+    let ev = cfg.reader_event_notification_spec.expect("events");
+    assert!(ev
+        .event_notification_state
+        .iter()
+        .any(|s| s.event_type == 2 && s.notification_state));
+    // A power index outside the table is refused and changes nothing.
+    let bad = SetReaderConfig {
+        antenna_configuration: vec![AntennaConfiguration {
+            antenna_id: 1,
+            rf_transmitter: Some(RfTransmitter {
+                hop_table_id: 1,
+                channel_index: 1,
+                transmit_power: 999,
+                ..Default::default()
+            }),
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let r = c.request(bad, T).await.expect("response");
+    let st = status(&r);
+    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(
+        st.parameter_error.as_ref().map(|p| p.parameter_type),
+        Some(222)
+    );
+    // Factory reset restores the defaults.
+    let reset = SetReaderConfig {
+        reset_to_factory_default: true,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, reset).await, 0);
+    let r = c
+        .request(GetReaderConfig::default(), T)
+        .await
+        .expect("config");
+    let MessageBody::GetReaderConfigResponse(cfg) = r.body else {
+        panic!("{r:?}")
+    };
+    assert_ne!(
+        cfg.antenna_configuration[0]
+            .rf_transmitter
+            .as_ref()
+            .map(|t| t.transmit_power),
+        Some(5)
+    );
+    assert_eq!(
+        cfg.keepalive_spec
+            .as_ref()
+            .map(|k| k.keepalive_trigger_type),
+        Some(0)
+    );
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn rospec_lifecycle_and_its_errors() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    // Deleting everything when there is nothing succeeds (sllurp relies on it).
+    assert_eq!(request_status(&mut c, DeleteAccessspec::default()).await, 0);
+    assert_eq!(request_status(&mut c, DeleteRospec::default()).await, 0);
+    let spec = rospec(7, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    assert_eq!(
+        request_status(
+            &mut c,
+            AddRospec {
+                ro_spec: spec.clone(),
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    // Same ID twice, and a spec not added Disabled, are refused.
+    assert_eq!(
+        request_status(
+            &mut c,
+            AddRospec {
+                ro_spec: spec.clone(),
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_ParameterError.code()
+    );
+    let mut active = spec.clone();
+    active.ro_spec_id = 8;
+    active.current_state = 2;
+    assert_eq!(
+        request_status(
+            &mut c,
+            AddRospec {
+                ro_spec: active,
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_ParameterError.code()
+    );
+    // Antenna 99 does not exist.
+    let mut far = spec.clone();
+    far.ro_spec_id = 9;
+    far.specs = vec![SpecParameter::AiSpec(AiSpec {
+        antenna_ids: vec![99],
+        ai_spec_stop_trigger: ai_null(),
+        inventory_parameter_specs: vec![InventoryParameterSpec {
+            inventory_parameter_spec_id: 1,
+            protocol_id: 1,
+            ..Default::default()
+        }],
+        ..Default::default()
+    })];
+    let r = c
+        .request(
+            AddRospec {
+                ro_spec: far,
+                ..Default::default()
+            },
+            T,
+        )
+        .await
+        .expect("response");
+    let st = status(&r);
+    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    let pe = st.parameter_error.expect("detail");
+    assert_eq!(pe.parameter_type, 177);
+    assert_eq!(pe.parameter_error.map(|p| p.parameter_type), Some(183));
+    // START before ENABLE is refused; unknown IDs are field errors.
+    assert_eq!(
+        request_status(
+            &mut c,
+            StartRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_FieldError.code()
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            EnableRospec {
+                ro_spec_id: 42,
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_FieldError.code()
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            EnableRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    // Immediate start: the spec becomes Active without START_ROSPEC.
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let r = c.request(GetRospecs::default(), T).await.expect("list");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    assert_eq!(list.ro_specs.len(), 1);
+    assert_eq!(list.ro_specs[0].current_state, 2, "active");
+    assert_eq!(
+        request_status(
+            &mut c,
+            StopRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            StopRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_FieldError.code(),
+        "stopping an inactive spec"
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            StartRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            DisableRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    let r = c.request(GetRospecs::default(), T).await.expect("list");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    assert_eq!(list.ro_specs[0].current_state, 0, "disabled");
+    assert_eq!(
+        request_status(
+            &mut c,
+            DeleteRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        0
+    );
+    let r = c.request(GetRospecs::default(), T).await.expect("list");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    assert!(list.ro_specs.is_empty());
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn malformed_and_unsupported_requests_get_llrp_answers() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    // A truncated ADD_ROSPEC: the ADD_ROSPEC_RESPONSE carries the decoder's status.
+    c.send_raw(&hex("0414 0000000f 00000007 00b1 0005 00"))
+        .await
+        .expect("send");
+    let r = c.wait_for(|m| m.id == 7, T).await.expect("answer");
+    assert_eq!(r.name(), "ADD_ROSPEC_RESPONSE");
+    let st = status(&r);
+    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(st.parameter_error.map(|p| p.parameter_type), Some(177));
+    // An unknown message type: ERROR_MESSAGE M_UnsupportedMessage with the same ID.
+    c.send_raw(&hex("0555 0000000a 00000031"))
+        .await
+        .expect("send");
+    let r = c.wait_for(|m| m.id == 0x31, T).await.expect("answer");
+    assert_eq!(r.name(), "ERROR_MESSAGE");
+    assert_eq!(
+        status(&r).status_code,
+        StatusCode::M_UnsupportedMessage.code()
+    );
+    // A version-3 header: ERROR_MESSAGE M_UnsupportedVersion echoing version and ID.
+    let mut frame = Vec::new();
+    FrameHeader {
+        version: 3,
+        msg_type: 1,
+        length: 11,
+        id: 77,
+    }
+    .encode(&mut frame);
+    frame.push(0);
+    c.send_raw(&frame).await.expect("send");
+    let mut raw = c.recv_raw(T).await.expect("answer");
+    let h = FrameHeader::peek(&raw).expect("header");
+    assert_eq!((h.version, h.msg_type, h.id), (3, 100, 77));
+    raw[0] = (raw[0] & 0x03) | (1 << 2);
+    let r = llrp::Message::decode(&raw).expect("ERROR_MESSAGE body");
+    assert_eq!(
+        status(&r).status_code,
+        StatusCode::M_UnsupportedVersion.code()
+    );
+    // A reader-to-client message sent to the reader.
+    let code = request_status(&mut c, Keepalive::default()).await;
+    assert_eq!(code, StatusCode::M_UnsupportedMessage.code());
+    // Unsupported access operations are refused with the right status.
+    let access = AccessSpec {
+        access_spec_id: 3,
+        antenna_id: 0,
+        protocol_id: 1,
+        current_state: false,
+        ro_spec_id: 0,
+        access_command: AccessCommand {
+            c1g2_tag_spec: C1g2TagSpec {
+                c1g2_target_tag: vec![C1g2TargetTag {
+                    mb: 1,
+                    is_match: true,
+                    pointer: 32,
+                    ..Default::default()
+                }],
+                ..Default::default()
+            },
+            op_specs: vec![OpSpec::C1g2Write(C1g2Write {
+                op_spec_id: 1,
+                mb: 3,
+                write_data: vec![1],
+                ..Default::default()
+            })],
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let r = c
+        .request(
+            AddAccessspec {
+                access_spec: access,
+                ..Default::default()
+            },
+            T,
+        )
+        .await
+        .expect("answer");
+    let st = status(&r);
+    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    let inner = st
+        .parameter_error
+        .and_then(|p| p.parameter_error)
+        .and_then(|p| p.parameter_error);
+    assert_eq!(
+        inner.map(|p| (p.parameter_type, p.error_code)),
+        Some((342, StatusCode::P_UnsupportedParameter.code()))
+    );
+    // The connection survived all of it.
+    assert_eq!(
+        request_status(&mut c, GetReaderCapabilities::default()).await,
+        0
+    );
+    // A length field below 10 cannot be resynchronised: ERROR_MESSAGE, then close.
+    c.send_raw(&hex("0401 00000004 00000099"))
+        .await
+        .expect("send");
+    let r = c.recv(T).await.expect("answer");
+    assert_eq!(r.name(), "ERROR_MESSAGE");
+    assert!(
+        c.recv(T).await.is_err(),
+        "closed after an unrecoverable frame"
+    );
+    // The simulator itself is fine.
+    let _again = connect(&sim).await;
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn keepalives_flow_and_a_silent_client_is_dropped() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    let set = SetReaderConfig {
+        keepalive_spec: Some(KeepaliveSpec {
+            keepalive_trigger_type: 1,
+            periodic_trigger_value: 100,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, set).await, 0);
+    let k = c
+        .wait_for(|m| m.name() == "KEEPALIVE", T)
+        .await
+        .expect("keepalive");
+    c.send(KeepaliveAck::default()).await.expect("ack");
+    let _ = k;
+    // Stop answering: after a few unanswered keepalives the reader says goodbye and closes.
+    let bye = c
+        .wait_for(
+            |m| match &m.body {
+                MessageBody::ReaderEventNotification(n) => n
+                    .reader_event_notification_data
+                    .connection_close_event
+                    .is_some(),
+                _ => false,
+            },
+            T,
+        )
+        .await
+        .expect("connection close event");
+    assert_eq!(bye.name(), "READER_EVENT_NOTIFICATION");
+    let mut closed = false;
+    for _ in 0..10 {
+        match c.recv(Duration::from_secs(2)).await {
+            Ok(_) => continue,
+            Err(_) => {
+                closed = true;
+                break;
+            }
+        }
+    }
+    assert!(closed);
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn close_connection_is_answered_then_closed() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    let r = c
+        .request(CloseConnection::default(), T)
+        .await
+        .expect("answer");
+    assert_eq!(status(&r).status_code, 0);
+    assert!(c.recv(T).await.is_err());
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn supported_version_and_impinj_extensions() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    c.set_version(2);
+    let r = c
+        .request(GetSupportedVersion::default(), T)
+        .await
+        .expect("answer");
+    let MessageBody::GetSupportedVersionResponse(v) = &r.body else {
+        panic!("{r:?}")
+    };
+    assert_eq!((v.current_version, v.supported_version), (1, 2));
+    c.set_version(1);
+    let r = c
+        .request(ImpinjEnableExtensions::default(), T)
+        .await
+        .expect("answer");
+    assert_eq!(r.name(), "IMPINJ_ENABLE_EXTENSIONS_RESPONSE");
+    assert_eq!(status(&r).status_code, 0);
+    sim.shutdown().await;
+}
+
+fn hex(s: &str) -> Vec<u8> {
+    let s: String = s.split_whitespace().collect();
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).expect("hex"))
+        .collect()
+}

@@ -1,0 +1,198 @@
+//! Unmodified `sllurp inventory` (sllurp 2.0.1 from the test venv) against the simulated
+//! reader over loopback: the whole client sequence must succeed and the tags it prints must be
+//! the scenario's, with channel indices from the region's table and Impinj values in range.
+//! Needs the venv; `./scripts/test` creates it and sets `LLRP_VENV`.
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use common::*;
+use llrp_gateway::net::clock::Speed;
+use llrp_gateway::scenario::Scenario;
+use serde_json::Value;
+
+fn venv() -> PathBuf {
+    PathBuf::from(
+        std::env::var("LLRP_VENV")
+            .expect("LLRP_VENV must name the sllurp venv (set by ./scripts/test)"),
+    )
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs `sllurp inventory ARGS` against `port` for `seconds`, interrupts it like Ctrl-C, and
+/// returns the tag reports it logged (one Vec per RO_ACCESS_REPORT) and its whole log.
+fn run_sllurp(port: u16, args: &[&str], seconds: f64) -> (Vec<Vec<Value>>, String) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let log = dir.path().join("sllurp.log");
+    let mut cmd = Command::new(venv().join("bin").join("sllurp"));
+    cmd.arg("-l")
+        .arg(&log)
+        .arg("inventory")
+        .arg("-p")
+        .arg(port.to_string());
+    cmd.args(args).arg("127.0.0.1");
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("sllurp starts");
+    std::thread::sleep(Duration::from_secs_f64(seconds));
+    // Ctrl-C: sllurp deletes its AccessSpecs and ROSpecs, then disconnects.
+    let _ = Command::new("kill")
+        .arg("-INT")
+        .arg(child.id().to_string())
+        .status();
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            break;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    let out = Command::new(venv().join("bin").join("python"))
+        .arg(root().join("scripts/interop/sllurp_tags.py"))
+        .arg(&log)
+        .output()
+        .expect("parser runs");
+    assert!(
+        out.status.success(),
+        "parser failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let reports = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<Vec<Value>>(l).expect("json report"))
+        .collect();
+    (reports, text)
+}
+
+fn epcs(s: &Scenario) -> Vec<String> {
+    s.tags.iter().map(|t| t.epc.to_lowercase()).collect()
+}
+
+/// Checks every tag report against the scenario; returns the number of tags reported.
+fn check_tags(s: &Scenario, reports: &[Vec<Value>], impinj: bool) -> usize {
+    let known = epcs(s);
+    let channels = s.readers[0].region.frequencies_khz().len() as u64;
+    let now_us = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .expect("clock")
+        .as_micros() as u64;
+    let mut n = 0;
+    for tag in reports.iter().flatten() {
+        n += 1;
+        let epc = tag["EPC-96"].as_str().expect("EPC-96");
+        assert!(known.contains(&epc.to_string()), "unknown EPC {epc}");
+        let ch = tag["ChannelIndex"].as_u64().expect("ChannelIndex");
+        assert!(
+            (1..=channels).contains(&ch),
+            "channel {ch} outside 1..={channels}"
+        );
+        assert!(tag["TagSeenCount"].as_u64().expect("TagSeenCount") >= 1);
+        let seen = tag["LastSeenTimestampUTC"]
+            .as_u64()
+            .expect("LastSeenTimestampUTC");
+        assert!(
+            seen <= now_us && seen + 120_000_000 > now_us,
+            "timestamp {seen} is not recent UTC µs"
+        );
+        if impinj {
+            let phase = tag["ImpinjRFPhaseAngle"]
+                .as_u64()
+                .expect("ImpinjRFPhaseAngle");
+            assert!(phase < 4096);
+            let rssi = tag["ImpinjPeakRSSI"].as_i64().expect("ImpinjPeakRSSI");
+            assert!(
+                (-10_000..=-1_000).contains(&rssi),
+                "ImpinjPeakRSSI {rssi} cdBm"
+            );
+            assert!(tag.get("ImpinjRFDopplerFrequency").is_some());
+        } else {
+            assert!(tag.get("ImpinjRFPhaseAngle").is_none());
+        }
+    }
+    n
+}
+
+async fn with_sim(
+    args: &'static [&'static str],
+    seconds: f64,
+) -> (Scenario, Vec<Vec<Value>>, String) {
+    let s = s1();
+    let sim = start(&s, Speed::Factor(1.0)).await;
+    let port = sim.addrs[0].port();
+    let (reports, log) = tokio::task::spawn_blocking(move || run_sllurp(port, args, seconds))
+        .await
+        .expect("join");
+    sim.shutdown().await;
+    (s, reports, log)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn impinj_reports_all_antennas_every_tag() {
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-n", "1"], 4.0).await;
+    assert!(
+        log.contains("Impinj"),
+        "sllurp enabled the extensions:\n{log}"
+    );
+    assert!(
+        reports.len() >= 2,
+        "reports keep coming with -n 1 (got {}):\n{log}",
+        reports.len()
+    );
+    assert!(check_tags(&s, &reports, true) >= 2);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn plain_reports_one_antenna_every_tag() {
+    let (s, reports, log) = with_sim(&["-a", "1", "-n", "1"], 4.0).await;
+    assert!(reports.len() >= 2, "got {} reports:\n{log}", reports.len());
+    assert!(check_tags(&s, &reports, false) >= 2);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn default_reporting_with_a_duration() {
+    // Report trigger "end of AISpec" with a 2 s AISpec: one aggregated report per run.
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-t", "2"], 4.0).await;
+    assert!(
+        !reports.is_empty(),
+        "no report at the end of the AISpec:\n{log}"
+    );
+    let first = &reports[0];
+    assert!(
+        first
+            .iter()
+            .any(|t| t["TagSeenCount"].as_u64().unwrap_or(0) > 1),
+        "reads aggregate per tag"
+    );
+    check_tags(&s, &reports, true);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn default_reporting_one_antenna_short_duration() {
+    // Without -n the reader reports at the end of the AISpec (N = 0), as real readers do; a
+    // run interrupted before that ends would report after sllurp stopped listening, so the
+    // duration is what makes default reporting visible.
+    let (s, reports, log) = with_sim(&["-a", "1", "-t", "1"], 3.0).await;
+    assert!(
+        !reports.is_empty(),
+        "no report at the end of the AISpec:\n{log}"
+    );
+    check_tags(&s, &reports, false);
+}
