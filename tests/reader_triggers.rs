@@ -1,0 +1,219 @@
+//! Start/stop triggers, priorities and ground truth, with simulated time running at `max`.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use llrp::message::*;
+use llrp::params::*;
+use llrp::Message;
+use llrp_gateway::net::client::Client;
+use llrp_gateway::net::clock::Speed;
+use llrp_gateway::sim::{self, SimOptions};
+
+async fn enable_rospec_events(c: &mut Client) {
+    let set = SetReaderConfig {
+        reader_event_notification_spec: Some(ReaderEventNotificationSpec {
+            event_notification_state: vec![EventNotificationState {
+                event_type: 2,
+                notification_state: true,
+                ..Default::default()
+            }],
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(request_status(c, set).await, 0);
+}
+
+/// (event type, ROSpec, preempting ROSpec, UTC µs) of a ROSpecEvent.
+fn rospec_event(m: &Message) -> Option<(u8, u32, u32, u64)> {
+    let MessageBody::ReaderEventNotification(n) = &m.body else {
+        return None;
+    };
+    let d = &n.reader_event_notification_data;
+    let e = d.ro_spec_event.as_ref()?;
+    let Timestamp::Utc(t) = &d.timestamp else {
+        return None;
+    };
+    Some((
+        e.event_type,
+        e.ro_spec_id,
+        e.preempting_ro_spec_id,
+        t.microseconds,
+    ))
+}
+
+async fn add(c: &mut Client, spec: RoSpec) {
+    let code = request_status(
+        c,
+        AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        },
+    )
+    .await;
+    assert_eq!(code, 0);
+}
+
+#[tokio::test]
+async fn periodic_start_with_duration_stop() {
+    let sim = start(&s1(), Speed::Max).await;
+    let mut c = connect(&sim).await;
+    enable_rospec_events(&mut c).await;
+    let mut spec = rospec(5, vec![1], ro_duration(200), ai_null(), full_report(2, 0));
+    spec.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger {
+        ro_spec_start_trigger_type: 2,
+        periodic_trigger_value: Some(PeriodicTriggerValue {
+            offset: 500,
+            period: 1000,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    add(&mut c, spec).await;
+    let enable = EnableRospec {
+        ro_spec_id: 5,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    let mut starts = Vec::new();
+    let mut ends = Vec::new();
+    while starts.len() < 4 {
+        let m = c.recv(T).await.expect("events keep coming");
+        if let Some((ty, id, _, t)) = rospec_event(&m) {
+            assert_eq!(id, 5);
+            match ty {
+                0 => starts.push(t),
+                1 => ends.push(t),
+                _ => panic!("unexpected event {ty}"),
+            }
+        }
+    }
+    for w in starts.windows(2) {
+        assert_eq!(w[1] - w[0], 1_000_000, "one start per 1000 ms period");
+    }
+    for (s, e) in starts.iter().zip(&ends) {
+        assert_eq!(e - s, 200_000, "the duration trigger stops it after 200 ms");
+    }
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn higher_priority_preempts_and_immediate_resumes() {
+    let sim = start(&s1(), Speed::Max).await;
+    let mut c = connect(&sim).await;
+    enable_rospec_events(&mut c).await;
+    let mut low = rospec(1, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    low.priority = 3;
+    add(&mut c, low).await;
+    let mut high = rospec(2, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    high.priority = 1;
+    high.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger::default();
+    add(&mut c, high).await;
+    for id in [1, 2] {
+        let enable = EnableRospec {
+            ro_spec_id: id,
+            ..Default::default()
+        };
+        assert_eq!(request_status(&mut c, enable).await, 0);
+    }
+    c.wait_for(|m| rospec_event(m).is_some_and(|e| e.0 == 0 && e.1 == 1), T)
+        .await
+        .expect("low-priority spec starts");
+    let start2 = StartRospec {
+        ro_spec_id: 2,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, start2).await, 0);
+    c.wait_for(|m| rospec_event(m).is_some_and(|e| e == (2, 1, 2, e.3)), T)
+        .await
+        .expect("spec 1 preempted by spec 2");
+    let r = c.request(GetRospecs::default(), T).await.expect("list");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    let state = |id: u32| {
+        list.ro_specs
+            .iter()
+            .find(|s| s.ro_spec_id == id)
+            .map(|s| s.current_state)
+    };
+    assert_eq!((state(1), state(2)), (Some(1), Some(2)));
+    // A lower priority cannot preempt: starting spec 1 by hand leaves it waiting.
+    let start1 = StartRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, start1).await, 0);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let r = c.request(GetRospecs::default(), T).await.expect("list");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    let states: Vec<(u32, u8)> = list
+        .ro_specs
+        .iter()
+        .map(|s| (s.ro_spec_id, s.current_state))
+        .collect();
+    assert_eq!(states, vec![(1, 1), (2, 2)]);
+    let stop2 = StopRospec {
+        ro_spec_id: 2,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, stop2).await, 0);
+    c.wait_for(|m| rospec_event(m).is_some_and(|e| e.0 == 0 && e.1 == 1), T)
+        .await
+        .expect("the Immediate spec resumes once the preempting one stops");
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn ground_truth_is_written_as_jsonl() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("truth.jsonl");
+    let scenario = s1();
+    let opts = SimOptions {
+        speed: Speed::Max,
+        truth: Some(path.clone()),
+        ..Default::default()
+    };
+    let sim = sim::start(&scenario, &opts).await.expect("starts");
+    let mut c = connect(&sim).await;
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 100)),
+    )
+    .await;
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    let _ = collect_reports(&mut c, Duration::from_secs(3), |t| t.len() >= 200).await;
+    c.close().await.expect("close");
+    sim.shutdown().await;
+    let text = std::fs::read_to_string(&path).expect("truth written");
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    assert!(lines.len() >= 10, "{} lines", lines.len());
+    let first = &lines[0];
+    assert_eq!(first["t_us"], 0);
+    let tags = first["tags"].as_array().expect("tags");
+    assert_eq!(tags.len(), scenario.tags.len());
+    for (t, spec) in tags.iter().zip(&scenario.tags) {
+        assert_eq!(t["epc"].as_str(), Some(spec.epc.to_lowercase().as_str()));
+        let p: Vec<f64> = serde_json::from_value(t["position"].clone()).expect("position");
+        assert_eq!(p, spec.position.to_vec());
+    }
+    for w in lines.windows(2) {
+        let dt = w[1]["t_us"].as_u64().expect("t") - w[0]["t_us"].as_u64().expect("t");
+        assert_eq!(dt, 100_000);
+    }
+    // S1's antenna rides a robot: its true pose changes over time.
+    let pos = |l: &serde_json::Value| l["antennas"][0]["pose"]["position"].clone();
+    assert_ne!(pos(&lines[0]), pos(lines.last().expect("lines")));
+}
