@@ -522,3 +522,55 @@ async fn access_spec_reads_tid_memory() {
     assert_eq!(r.read_data, vec![0xE280, 0x1160]);
     sim.shutdown().await;
 }
+
+#[tokio::test]
+async fn impinj_fixed_frequency_list_pins_the_channels() {
+    let s = line_scenario(&[1.0, 2.0]);
+    let sim = start(&s, Speed::Max).await;
+    let mut c = connect(&sim).await;
+    let mut spec = rospec(1, vec![1], ro_null(), ai_null(), full_report(1, 1));
+    let list = |channels: Vec<u16>| {
+        vec![AntennaConfiguration {
+            antenna_id: 1,
+            c1g2_inventory_command: vec![C1g2InventoryCommand {
+                custom: vec![Custom::ImpinjFixedFrequencyList(ImpinjFixedFrequencyList {
+                    fixed_frequency_mode: 2,
+                    channel_list: channels,
+                    ..Default::default()
+                })],
+                ..Default::default()
+            }],
+            ..Default::default()
+        }]
+    };
+    // Channel 9 does not exist in the 4-channel ETSI table.
+    let mut bad = spec.clone();
+    if let SpecParameter::AiSpec(ai) = &mut bad.specs[0] {
+        ai.inventory_parameter_specs[0].antenna_configuration = list(vec![9]);
+    }
+    let add = AddRospec {
+        ro_spec: bad,
+        ..Default::default()
+    };
+    assert_eq!(
+        request_status(&mut c, add).await,
+        llrp::StatusCode::M_ParameterError.code()
+    );
+    if let SpecParameter::AiSpec(ai) = &mut spec.specs[0] {
+        ai.inventory_parameter_specs[0].antenna_configuration = list(vec![3]);
+    }
+    let add = AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, add).await, 0);
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    let (tags, _) = collect_reports(&mut c, T, |t| t.len() >= 50).await;
+    assert!(tags.len() >= 50);
+    assert!(tags.iter().all(|t| t.channel_index.map(|c| c.0) == Some(3)));
+    sim.shutdown().await;
+}

@@ -335,6 +335,23 @@ pub fn validate_antenna_config(
         }
     }
     for cmd in &c.c1g2_inventory_command {
+        for custom in &cmd.custom {
+            if let Custom::ImpinjFixedFrequencyList(l) = custom {
+                let channels = p.frequencies_khz.len();
+                let bad = l.fixed_frequency_mode > 2
+                    || l.channel_list
+                        .iter()
+                        .any(|&ch| ch == 0 || usize::from(ch) > channels);
+                if bad {
+                    let mut e = param_field_error(330, 1023, 1, StatusCode::A_OutOfRange);
+                    e.error_description = format!(
+                        "ImpinjFixedFrequencyList: mode {} with channels {:?} (the table has 1..={channels})",
+                        l.fixed_frequency_mode, l.channel_list
+                    );
+                    return Err(e);
+                }
+            }
+        }
         if let Some(rf) = &cmd.c1g2_rf_control {
             if !caps::RF_MODES.contains(&u32::from(rf.mode_index)) {
                 return Err(param_field_error(330, 335, 0, StatusCode::A_OutOfRange));

@@ -563,7 +563,7 @@ impl Specs {
         if let Some(n) = self.next_start_after(t) {
             end = end.min(n.max(t + 1));
         }
-        let end = end.max(t);
+        let mut end = end.max(t);
 
         let antennas: Vec<u16> = if ai.antenna_ids.contains(&0) {
             (1..=ctx.profile.antennas).collect()
@@ -582,6 +582,15 @@ impl Specs {
                     .and_then(|tx| super::caps::power_dbm(tx.transmit_power))
             })
             .or_else(|| ctx.config.tx_power_dbm(antenna));
+        // ImpinjFixedFrequencyList (mode 2, channel list) in the ROSpec's or the reader's
+        // antenna configuration restricts the channels, which rotate at the region's dwell.
+        let channels = fixed_channel_list(ips, ctx.config, antenna);
+        let hop = ctx.model.hop_schedule();
+        let channel = (!channels.is_empty())
+            .then(|| channels[((t / hop.dwell_us) % channels.len() as u64) as usize]);
+        if channel.is_some() {
+            end = end.min(hop.dwell_start(t) + hop.dwell_us).max(t);
+        }
         let aggregate = !(report_spec.ro_report_trigger != 0 && report_spec.n == 1);
         let n_trigger = usize::from(report_spec.n);
 
@@ -590,7 +599,7 @@ impl Specs {
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
         if end > t {
-            let reads = ctx.model.inventory(antenna, t, end, power);
+            let reads = ctx.model.inventory_on(antenna, t, end, power, channel);
             for r in reads {
                 let (op_spec_results, access_spec_id) =
                     ctx.access.apply(ctx.model, r.tag, antenna, ro_id);
@@ -714,6 +723,34 @@ impl Specs {
             },
         }));
     }
+}
+
+/// The channel list of an ImpinjFixedFrequencyList in mode 2 (Channel_List) configured for
+/// `antenna`, in the ROSpec's InventoryParameterSpec or else in the reader configuration.
+fn fixed_channel_list(
+    ips: Option<&InventoryParameterSpec>,
+    config: &ReaderConfig,
+    antenna: u16,
+) -> Vec<u16> {
+    let in_spec = ips.into_iter().flat_map(|p| {
+        p.antenna_configuration
+            .iter()
+            .filter(move |c| c.antenna_id == antenna || c.antenna_id == 0)
+    });
+    let in_config = config.antennas.get(usize::from(antenna).saturating_sub(1));
+    in_spec
+        .chain(in_config)
+        .flat_map(|c| c.c1g2_inventory_command.iter())
+        .flat_map(|cmd| cmd.custom.iter())
+        .find_map(|p| match p {
+            Custom::ImpinjFixedFrequencyList(l)
+                if l.fixed_frequency_mode == 2 && !l.channel_list.is_empty() =>
+            {
+                Some(l.channel_list.clone())
+            }
+            _ => None,
+        })
+        .unwrap_or_default()
 }
 
 /// When an enabled spec first starts: Immediate now, Periodic after its offset, else never
