@@ -568,6 +568,43 @@ async fn supported_version_and_impinj_extensions() {
         .expect("answer");
     assert_eq!(r.name(), "IMPINJ_ENABLE_EXTENSIONS_RESPONSE");
     assert_eq!(status(&r).status_code, 0);
+    // With the extensions on, ImpinjRequestedData adds Impinj's own parameters.
+    let ask = |n: u32| {
+        vec![Custom::ImpinjRequestedData(ImpinjRequestedData {
+            requested_data: n,
+            ..Default::default()
+        })]
+    };
+    let caps = GetReaderCapabilities {
+        custom: ask(1000),
+        ..Default::default()
+    };
+    let r = c.request(caps, T).await.expect("answer");
+    let MessageBody::GetReaderCapabilitiesResponse(caps) = r.body else {
+        panic!("{r:?}")
+    };
+    let mut table = s1().readers[0].region.frequencies_khz();
+    table.sort_unstable();
+    assert!(caps
+        .custom
+        .iter()
+        .any(|p| matches!(p, Custom::ImpinjDetailedVersion(_))));
+    assert!(caps
+        .custom
+        .iter()
+        .any(|p| matches!(p, Custom::ImpinjFrequencyCapabilities(f) if f.frequency_list == table)));
+    let cfg = GetReaderConfig {
+        custom: ask(2000),
+        ..Default::default()
+    };
+    let r = c.request(cfg, T).await.expect("answer");
+    let MessageBody::GetReaderConfigResponse(cfg) = r.body else {
+        panic!("{r:?}")
+    };
+    assert!(cfg
+        .custom
+        .iter()
+        .any(|p| matches!(p, Custom::ImpinjSubRegulatoryRegion(r) if r.regulatory_region == 7)));
     sim.shutdown().await;
 }
 

@@ -217,3 +217,58 @@ async fn ground_truth_is_written_as_jsonl() {
     let pos = |l: &serde_json::Value| l["antennas"][0]["pose"]["position"].clone();
     assert_ne!(pos(&lines[0]), pos(lines.last().expect("lines")));
 }
+
+#[tokio::test]
+async fn reports_are_held_after_a_reconnect_until_enabled() {
+    let sim = start(&s1(), Speed::Max).await;
+    let mut c = connect(&sim).await;
+    let hold = SetReaderConfig {
+        events_and_reports: Some(EventsAndReports {
+            hold_events_and_reports_upon_reconnect: true,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, hold).await, 0);
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 1)),
+    )
+    .await;
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    let (first, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
+    assert!(!first.is_empty(), "reports flow on the first connection");
+    c.close().await.expect("close");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    // Reconnect: the ROSpec still runs, but reports wait for ENABLE_EVENTS_AND_REPORTS.
+    let mut c = connect(&sim).await;
+    let (held, _) = collect_reports(&mut c, Duration::from_millis(500), |_| false).await;
+    assert!(held.is_empty(), "{} reports leaked while held", held.len());
+    c.send(EnableEventsAndReports::default())
+        .await
+        .expect("send");
+    let (released, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
+    assert!(!released.is_empty(), "held reports arrive once enabled");
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn every_reader_of_a_scenario_listens() {
+    let mut scenario = s1();
+    let mut second = scenario.readers[0].clone();
+    second.name = "reader-2".into();
+    scenario.readers.push(second);
+    let sim = start(&scenario, Speed::Factor(1.0)).await;
+    assert_eq!(sim.addrs.len(), 2);
+    assert_ne!(sim.addrs[0], sim.addrs[1]);
+    for addr in &sim.addrs {
+        let mut c = Client::connect(*addr).await.expect("connects");
+        let m = c.recv(T).await.expect("greeting");
+        assert_eq!(connection_status(&m), Some(0));
+    }
+    sim.shutdown().await;
+}

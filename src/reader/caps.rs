@@ -192,6 +192,59 @@ pub fn capabilities(p: &ReaderProfile, requested: u8) -> Option<GetReaderCapabil
     })
 }
 
+/// Impinj capability parameters for ImpinjRequestedData `requested` (1000 all, 1001 detailed
+/// version, 1002 frequency capabilities).
+pub fn impinj_capabilities(p: &ReaderProfile, requested: u32) -> Vec<Custom> {
+    let mut out = Vec::new();
+    if matches!(requested, 1000 | 1001) {
+        out.push(Custom::ImpinjDetailedVersion(Box::new(
+            ImpinjDetailedVersion {
+                model_name: "Speedway R420 (llrp-gateway simulation)".into(),
+                serial_number: p.reader_id.iter().map(|b| format!("{b:02x}")).collect(),
+                software_version: FIRMWARE.into(),
+                firmware_version: FIRMWARE.into(),
+                fpga_version: "0.0.0.0".into(),
+                pcba_version: "0.0.0.0".into(),
+                ..Default::default()
+            },
+        )));
+    }
+    if matches!(requested, 1000 | 1002) {
+        let mut all = p.frequencies_khz.clone();
+        all.sort_unstable();
+        out.push(Custom::ImpinjFrequencyCapabilities(
+            ImpinjFrequencyCapabilities {
+                frequency_list: all,
+                ..Default::default()
+            },
+        ));
+    }
+    out
+}
+
+/// Impinj configuration parameters for ImpinjRequestedData `requested` (2000 all, 2001
+/// sub-regulatory region, 2004 reader temperature).
+pub fn impinj_configuration(p: &ReaderProfile, requested: u32) -> Vec<Custom> {
+    let mut out = Vec::new();
+    if matches!(requested, 2000 | 2001) {
+        // Impinj region codes: 0 FCC Part 15.247, 7 ETSI EN 302 208 v1.2.1.
+        let region = if p.communications_standard == 2 { 7 } else { 0 };
+        out.push(Custom::ImpinjSubRegulatoryRegion(
+            ImpinjSubRegulatoryRegion {
+                regulatory_region: region,
+                ..Default::default()
+            },
+        ));
+    }
+    if matches!(requested, 2000 | 2004) {
+        out.push(Custom::ImpinjReaderTemperature(ImpinjReaderTemperature {
+            temperature: 38,
+            ..Default::default()
+        }));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

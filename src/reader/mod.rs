@@ -293,17 +293,29 @@ impl Reader {
         let reply = |body: MessageBody| Output::Send(Message { version, id, body });
         match msg.body {
             MessageBody::GetReaderCapabilities(m) => {
-                let body = match caps::capabilities(&self.profile, m.requested_data) {
+                let mut body = match caps::capabilities(&self.profile, m.requested_data) {
                     Some(c) => c,
                     None => GetReaderCapabilitiesResponse {
                         llrp_status: field_error(0, StatusCode::A_OutOfRange, "RequestedData"),
                         ..Default::default()
                     },
                 };
+                if body.llrp_status.is_success() && self.impinj {
+                    for r in impinj_requested(&m.custom) {
+                        body.custom
+                            .extend(caps::impinj_capabilities(&self.profile, r));
+                    }
+                }
                 out.push(reply(body.into()));
             }
             MessageBody::GetReaderConfig(m) => {
-                let body = self.config.get(&self.profile, &m, self.now_us);
+                let mut body = self.config.get(&self.profile, &m, self.now_us);
+                if body.llrp_status.is_success() && self.impinj {
+                    for r in impinj_requested(&m.custom) {
+                        body.custom
+                            .extend(caps::impinj_configuration(&self.profile, r));
+                    }
+                }
                 out.push(reply(body.into()));
             }
             MessageBody::SetReaderConfig(m) => {
@@ -652,6 +664,17 @@ with_status!(
     ImpinjEnableExtensionsResponse,
     ImpinjSaveSettingsResponse
 );
+
+/// The ImpinjRequestedData values among a request's Custom parameters.
+fn impinj_requested(custom: &[Custom]) -> Vec<u32> {
+    custom
+        .iter()
+        .filter_map(|c| match c {
+            Custom::ImpinjRequestedData(r) => Some(r.requested_data),
+            _ => None,
+        })
+        .collect()
+}
 
 /// An ERROR_MESSAGE body.
 fn error_message(status: LlrpStatus) -> llrp::message::ErrorMessage {
