@@ -2,6 +2,7 @@
 //! priorities and the execution of AISpecs over simulated time.
 
 use std::collections::HashSet;
+use std::sync::Arc;
 
 use llrp::params::*;
 use llrp::StatusCode;
@@ -107,7 +108,8 @@ pub struct RunContext<'a> {
 /// One ROSpec and its execution state.
 #[derive(Clone, Debug)]
 pub struct Spec {
-    spec: RoSpec,
+    /// Shared so each execution step can hold it while the spec list changes.
+    spec: Arc<RoSpec>,
     /// Current state.
     pub state: SpecState,
     /// When its start trigger next fires (Immediate restarts, periodic starts).
@@ -164,7 +166,7 @@ impl Specs {
         self.specs
             .iter()
             .map(|s| {
-                let mut r = s.spec.clone();
+                let mut r = RoSpec::clone(&s.spec);
                 r.current_state = s.state.code();
                 r
             })
@@ -215,7 +217,7 @@ impl Specs {
             );
         }
         self.specs.push(Spec {
-            spec,
+            spec: Arc::new(spec),
             state: SpecState::Disabled,
             next_start_us: None,
             run: None,
@@ -497,16 +499,17 @@ impl Specs {
         to: u64,
         out: &mut Vec<Produced>,
     ) -> u64 {
-        let spec = self.specs[a].spec.clone();
+        let spec = Arc::clone(&self.specs[a].spec);
         let ro_id = spec.ro_spec_id;
-        let report_spec = spec
+        let config = ctx.config;
+        let report_spec: &RoReportSpec = spec
             .ro_report_spec
-            .clone()
-            .unwrap_or_else(|| ctx.config.ro_report_spec.clone());
+            .as_ref()
+            .unwrap_or(&config.ro_report_spec);
         let content = Content {
             selector: report_spec.tag_report_content_selector.clone(),
             impinj: if ctx.impinj {
-                ImpinjContent::from_report_spec(&report_spec)
+                ImpinjContent::from_report_spec(report_spec)
             } else {
                 ImpinjContent::default()
             },
@@ -525,10 +528,10 @@ impl Specs {
             _ => None,
         };
         let ai = match spec.specs.get(run.spec_idx) {
-            Some(SpecParameter::AiSpec(ai)) => ai.clone(),
+            Some(SpecParameter::AiSpec(ai)) => ai,
             // Validation admits only AISpecs; anything else ends the ROSpec.
             _ => {
-                self.finish_ro(a, t, &report_spec, out);
+                self.finish_ro(a, t, report_spec, out);
                 return t;
             }
         };
@@ -667,10 +670,10 @@ impl Specs {
         }
         self.specs[a].run = Some(run);
         if ro_done {
-            self.end_ai(a, reached, &report_spec, out);
-            self.finish_ro(a, reached, &report_spec, out);
+            self.end_ai(a, reached, report_spec, out);
+            self.finish_ro(a, reached, report_spec, out);
         } else if ai_done {
-            self.end_ai(a, reached, &report_spec, out);
+            self.end_ai(a, reached, report_spec, out);
             let s = &mut self.specs[a];
             let run = s
                 .run
@@ -684,7 +687,7 @@ impl Specs {
             run.antenna_pos = 0;
             run.slice_end_us = reached + ANTENNA_DWELL_US;
             if run.spec_idx >= s.spec.specs.len() {
-                self.finish_ro(a, reached, &report_spec, out);
+                self.finish_ro(a, reached, report_spec, out);
             }
         }
         reached
