@@ -561,6 +561,30 @@ async fn supported_version_and_impinj_extensions() {
         panic!("{r:?}")
     };
     assert_eq!((v.current_version, v.supported_version), (1, 2));
+    // Version-2 requests are refused until the session switches to LLRP 1.1.
+    let r = c
+        .request(GetReaderConfig::default(), T)
+        .await
+        .expect("answer");
+    assert_eq!(
+        status(&r).status_code,
+        StatusCode::M_UnsupportedVersion.code()
+    );
+    let set = SetProtocolVersion {
+        protocol_version: 2,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, set).await, 0);
+    let r = c
+        .request(GetReaderConfig::default(), T)
+        .await
+        .expect("answer");
+    assert_eq!((r.version, status(&r).status_code), (2, 0));
+    let back = SetProtocolVersion {
+        protocol_version: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, back).await, 0);
     c.set_version(1);
     let r = c
         .request(ImpinjEnableExtensions::default(), T)

@@ -277,7 +277,11 @@ impl Reader {
         let mut out = self.advance(now_us, wall_ms);
         let id = msg.id;
         let version = msg.version;
-        if version != self.version && !matches!(msg.body, MessageBody::GetSupportedVersion(_)) {
+        let negotiation = matches!(
+            msg.body,
+            MessageBody::GetSupportedVersion(_) | MessageBody::SetProtocolVersion(_)
+        );
+        if version != self.version && !negotiation {
             // A message in another version than the session's: LLRP 1.1 says answer with
             // M_UnsupportedVersion (and a 1.0.1 reader does not know 1.1 at all).
             let status = LlrpStatus::new(
@@ -429,6 +433,8 @@ impl Reader {
             }
             MessageBody::SetProtocolVersion(m) => {
                 let status = if matches!(m.protocol_version, 1 | 2) {
+                    // The response goes out in the request's version; later messages use
+                    // the new one.
                     self.version = m.protocol_version;
                     LlrpStatus::success()
                 } else {
