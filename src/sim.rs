@@ -76,14 +76,18 @@ pub struct RunningSim {
     pub names: Vec<String>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<io::Result<()>>>,
+    truth: Option<Arc<Truth>>,
 }
 
 impl RunningSim {
-    /// Stops accepting clients and waits for the listeners to end.
+    /// Stops accepting clients, waits for the listeners to end and flushes the ground truth.
     pub async fn shutdown(self) {
         let _ = self.shutdown.send(true);
         for t in self.tasks {
             let _ = t.await;
+        }
+        if let Some(t) = &self.truth {
+            t.flush();
         }
     }
 }
@@ -94,13 +98,17 @@ struct Truth {
 }
 
 impl Truth {
+    /// Appends one line (buffered; a full disk must not stop the reader, so errors are
+    /// dropped).
     fn line(&self, value: &serde_json::Value) {
         let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
-        // Truth is best effort: a full disk must not stop the reader.
         if serde_json::to_writer(&mut *out, value).is_ok() {
             let _ = out.write_all(b"\n");
-            let _ = out.flush();
         }
+    }
+
+    fn flush(&self) {
+        let _ = self.out.lock().unwrap_or_else(|e| e.into_inner()).flush();
     }
 }
 
@@ -214,5 +222,6 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         names,
         shutdown,
         tasks,
+        truth,
     })
 }
