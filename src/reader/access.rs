@@ -167,6 +167,9 @@ impl AccessSpecs {
         antenna: u16,
         ro_spec_id: u32,
     ) -> (Vec<OpSpecResult>, u32) {
+        if !self.entries.iter().any(|e| e.enabled) {
+            return (Vec::new(), 0);
+        }
         let epc = model.tag_epc(tag);
         let pos = self.entries.iter().position(|e| {
             e.enabled

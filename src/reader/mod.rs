@@ -39,6 +39,9 @@ pub const CONNECTION_CLIENT_EXISTS: u16 = 2;
 /// ConnectionAttemptEvent status sent to the connected client when another one tried.
 pub const CONNECTION_ANOTHER_ATTEMPTED: u16 = 4;
 
+/// Most TagReportData in one RO_ACCESS_REPORT (about 40 kB with every field).
+pub const REPORT_CHUNK: usize = 500;
+
 /// Most events and reports held for a client that has not sent ENABLE_EVENTS_AND_REPORTS.
 pub const MAX_HELD: usize = 10_000;
 
@@ -561,16 +564,22 @@ impl Reader {
             return;
         }
         // Keep each RO_ACCESS_REPORT well under the frame limit clients use.
-        for chunk in reports.chunks(500) {
+        let mut rest = reports;
+        loop {
+            let tail = if rest.len() > REPORT_CHUNK {
+                rest.split_off(REPORT_CHUNK)
+            } else {
+                Vec::new()
+            };
             let m = self.message(RoAccessReport {
-                tag_report_data: chunk.to_vec(),
+                tag_report_data: rest,
                 ..Default::default()
             });
             self.deliver(m, out);
-        }
-        if reports.is_empty() {
-            let m = self.message(RoAccessReport::default());
-            self.deliver(m, out);
+            if tail.is_empty() {
+                break;
+            }
+            rest = tail;
         }
     }
 
