@@ -4,7 +4,7 @@
 
 use std::io;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use bytes::{Buf, BytesMut};
 use llrp::params::LlrpStatus;
@@ -117,21 +117,22 @@ async fn refuse(mut stream: TcpStream, msg: Message) {
     let _ = stream.shutdown().await;
 }
 
-/// Writes outputs; returns false if the connection must close.
-async fn write_outputs(wr: &mut OwnedWriteHalf, outputs: Vec<Output>) -> io::Result<bool> {
-    let mut buf = BytesMut::new();
-    let mut open = true;
+/// Encodes outputs into `buf`; returns false if the connection must close after it is sent.
+fn encode_outputs(buf: &mut BytesMut, outputs: Vec<Output>) -> bool {
     for o in outputs {
         match o {
-            Output::Send(m) => m.encode(&mut buf),
-            Output::Close => {
-                open = false;
-                break;
-            }
+            Output::Send(m) => m.encode(buf),
+            Output::Close => return false,
         }
     }
+    true
+}
+
+/// Sends what `buf` holds; shuts the connection down if `open` is false. Returns `open`.
+async fn flush(wr: &mut OwnedWriteHalf, buf: &mut BytesMut, open: bool) -> io::Result<bool> {
     if !buf.is_empty() {
-        wr.write_all(&buf).await?;
+        wr.write_all(buf).await?;
+        buf.clear();
     }
     if !open {
         wr.shutdown().await?;
@@ -204,7 +205,23 @@ fn handle_frames(
     }
 }
 
+/// `--speed max`: output is sent once this much is waiting...
+const FLUSH_BYTES: usize = 64 * 1024;
+/// ... or this long after the last send, so a slow scenario still streams.
+const FLUSH_AFTER: Duration = Duration::from_millis(1);
+/// `--speed max`: most steps, and longest time, run before the connection looks at its
+/// socket again.
+const STEPS_PER_TURN: usize = 64;
+const TURN: Duration = Duration::from_millis(2);
+
 /// Serves one client until it leaves, the reader closes it, or shutdown.
+///
+/// At `--speed max` the reader steps simulated time while it has work and the client keeps
+/// up: steps run in turns of up to [`STEPS_PER_TURN`] (or [`TURN`]), their messages collect in one buffer
+/// that is sent once it holds [`FLUSH_BYTES`] (or [`FLUSH_AFTER`] has passed), and the next
+/// turn waits until the socket has taken it, so a slow client slows simulated time down and
+/// the buffer never grows beyond one turn's output. Requests are read between turns and
+/// answered at once.
 async fn connection(
     stream: TcpStream,
     sim: Arc<SimReader>,
@@ -214,59 +231,93 @@ async fn connection(
     let (mut rd, mut wr) = stream.into_split();
     let splitter = FrameSplitter::default();
     let mut buf = BytesMut::with_capacity(64 * 1024);
+    let mut out = BytesMut::with_capacity(2 * FLUSH_BYTES);
     let greeting = sim
         .reader()
         .connect(sim.clock.now_us(), sim.clock.wall_ms());
-    if !write_outputs(&mut wr, greeting).await? {
+    let open = encode_outputs(&mut out, greeting);
+    if !flush(&mut wr, &mut out, open).await? {
         return Ok(());
     }
     let max = sim.clock.speed() == Speed::Max;
     let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut flushed = Instant::now();
     loop {
         let busy = max && sim.reader().next_deadline_us().is_some();
-        let outputs = tokio::select! {
+        // Whether what `out` holds must go now.
+        let urgent = tokio::select! {
             biased;
             r = rd.read_buf(&mut buf) => {
                 match r {
                     Ok(0) => return Ok(()),
                     Ok(_) => {
-                        let (out, in_sync) = handle_frames(&sim, &mut buf, &splitter);
-                        if !in_sync {
-                            write_outputs(&mut wr, out).await?;
+                        let (outputs, in_sync) = handle_frames(&sim, &mut buf, &splitter);
+                        let open = encode_outputs(&mut out, outputs);
+                        if !in_sync || !open {
+                            flush(&mut wr, &mut out, false).await?;
                             return Ok(());
                         }
-                        out
+                        true
                     }
                     Err(e) => return Err(e),
                 }
             }
             Some(status) = notices.recv() => {
-                vec![Output::Send(sim.reader().connection_event(status))]
+                let m = sim.reader().connection_event(status);
+                m.encode(&mut out);
+                true
             }
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {
                     return Ok(());
                 }
-                Vec::new()
+                false
             }
             _ = std::future::ready(()), if busy => {
-                let now = sim.clock.step();
-                let mut r = sim.reader();
-                let out = r.advance(now, sim.clock.wall_ms());
-                sim.observe(&r);
-                out
+                let open = {
+                    let mut r = sim.reader();
+                    let mut open = true;
+                    let turn = Instant::now();
+                    for _ in 0..STEPS_PER_TURN {
+                        let now = sim.clock.step();
+                        let outputs = r.advance(now, sim.clock.wall_ms());
+                        sim.observe(&r);
+                        open = encode_outputs(&mut out, outputs);
+                        if !open
+                            || out.len() >= FLUSH_BYTES
+                            || r.next_deadline_us().is_none()
+                            || turn.elapsed() >= TURN
+                        {
+                            break;
+                        }
+                    }
+                    open
+                };
+                if !open {
+                    flush(&mut wr, &mut out, false).await?;
+                    return Ok(());
+                }
+                out.len() >= FLUSH_BYTES || flushed.elapsed() >= FLUSH_AFTER
             }
             _ = tick.tick() => {
-                let now = sim.clock.now_us();
-                let mut r = sim.reader();
-                let out = r.advance(now, sim.clock.wall_ms());
-                sim.observe(&r);
-                out
+                let outputs = {
+                    let now = sim.clock.now_us();
+                    let mut r = sim.reader();
+                    let outputs = r.advance(now, sim.clock.wall_ms());
+                    sim.observe(&r);
+                    outputs
+                };
+                if !encode_outputs(&mut out, outputs) {
+                    flush(&mut wr, &mut out, false).await?;
+                    return Ok(());
+                }
+                true
             }
         };
-        if !write_outputs(&mut wr, outputs).await? {
-            return Ok(());
+        if urgent || !busy {
+            flush(&mut wr, &mut out, true).await?;
+            flushed = Instant::now();
         }
         if busy {
             // `--speed max` always has work: give the other tasks on this thread a turn.

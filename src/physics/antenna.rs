@@ -26,8 +26,21 @@ pub fn pattern_exponent(beamwidth_deg: f64) -> f64 {
 /// Relative power gain in `(0, 1]` at `off_axis_rad` from boresight, for a full −3 dB
 /// beamwidth `beamwidth_deg`.
 pub fn gain_pattern(off_axis_rad: f64, beamwidth_deg: f64) -> f64 {
-    let floor = 10f64.powf(BACK_LOBE_DB / 10.0);
-    let n = pattern_exponent(beamwidth_deg);
+    pattern_with(
+        off_axis_rad,
+        beamwidth_deg,
+        pattern_exponent(beamwidth_deg),
+        back_lobe_floor(),
+    )
+}
+
+/// The back-lobe floor as a linear power ratio.
+fn back_lobe_floor() -> f64 {
+    10f64.powf(BACK_LOBE_DB / 10.0)
+}
+
+/// [`gain_pattern`] with its exponent `n` and floor already computed.
+fn pattern_with(off_axis_rad: f64, beamwidth_deg: f64, n: f64, floor: f64) -> f64 {
     if n == 0.0 {
         return 1.0;
     }
@@ -47,7 +60,58 @@ pub fn gain_pattern(off_axis_rad: f64, beamwidth_deg: f64) -> f64 {
 
 /// Linear power gain (boresight gain `gain_dbi` times the pattern) at `off_axis_rad`.
 pub fn gain_linear(gain_dbi: f64, beamwidth_deg: f64, off_axis_rad: f64) -> f64 {
-    10f64.powf(gain_dbi / 10.0) * gain_pattern(off_axis_rad, beamwidth_deg)
+    Lobe::new(gain_dbi, beamwidth_deg).gain(off_axis_rad)
+}
+
+/// An antenna's gain pattern with its constants computed once; [`Lobe::gain`] returns exactly
+/// what [`gain_linear`] does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lobe {
+    /// Full −3 dB beamwidth (degrees).
+    pub beamwidth_deg: f64,
+    /// Boresight gain as a linear power ratio.
+    pub boresight: f64,
+    /// Exponent of the cos^n lobe ([`pattern_exponent`]).
+    pub exponent: f64,
+    /// Back-lobe floor as a linear power ratio.
+    pub floor: f64,
+}
+
+impl Lobe {
+    /// The lobe of an antenna of `gain_dbi` and `beamwidth_deg`.
+    pub fn new(gain_dbi: f64, beamwidth_deg: f64) -> Lobe {
+        Lobe {
+            beamwidth_deg,
+            boresight: 10f64.powf(gain_dbi / 10.0),
+            exponent: pattern_exponent(beamwidth_deg),
+            floor: back_lobe_floor(),
+        }
+    }
+
+    /// Linear power gain at `off_axis_rad` from boresight.
+    pub fn gain(&self, off_axis_rad: f64) -> f64 {
+        self.boresight * pattern_with(off_axis_rad, self.beamwidth_deg, self.exponent, self.floor)
+    }
+
+    /// Linear power gain toward a direction at cos θ = `cos_off_axis` from boresight: the
+    /// same lobe as [`Lobe::gain`] (cos θ for the cos^n lobe, cos(θ/2) = √((1 + cos θ)/2) for
+    /// the wide one) without going through the angle.
+    pub fn gain_cos(&self, cos_off_axis: f64) -> f64 {
+        if self.exponent == 0.0 {
+            return self.boresight;
+        }
+        let c = cos_off_axis.clamp(-1.0, 1.0);
+        let lobe = if self.beamwidth_deg < 180.0 {
+            if c > 0.0 {
+                c.powf(self.exponent)
+            } else {
+                0.0
+            }
+        } else {
+            ((1.0 + c) * 0.5).sqrt().powf(self.exponent)
+        };
+        self.boresight * lobe.max(self.floor)
+    }
 }
 
 /// Angle in `[0, π]` between the antenna's boresight and the direction to `point`.
@@ -83,6 +147,18 @@ mod tests {
         assert!((db(g) - BACK_LOBE_DB).abs() < 1e-9);
         assert_eq!(gain_pattern(2.0, 360.0), 1.0);
         assert!((db(gain_linear(4.77, 70.0, 0.0)) - 4.77).abs() < 1e-9);
+    }
+
+    #[test]
+    fn gain_by_cosine_matches_gain_by_angle() {
+        for bw in [30.0, 65.0, 70.0, 179.0, 180.0, 240.0, 360.0] {
+            let lobe = Lobe::new(6.0, bw);
+            for k in 0..=200 {
+                let theta = std::f64::consts::PI * f64::from(k) / 200.0;
+                let (a, b) = (lobe.gain(theta), lobe.gain_cos(theta.cos()));
+                assert!((a - b).abs() <= 1e-12 * a, "bw {bw}, θ {theta}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]

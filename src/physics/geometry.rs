@@ -48,6 +48,9 @@ pub fn angle_between(a: Vec3, b: Vec3) -> f64 {
 
 /// Wraps an angle to `(-π, π]`.
 pub fn wrap_pi(a: f64) -> f64 {
+    if a > -std::f64::consts::PI && a <= std::f64::consts::PI {
+        return a;
+    }
     let tau = std::f64::consts::TAU;
     let w = (a + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI;
     if w <= -std::f64::consts::PI {

@@ -9,6 +9,7 @@
 //! [`robot`], [`motion`], [`noise`].
 
 pub mod antenna;
+mod field;
 pub mod geometry;
 pub mod hopping;
 mod inventory;
@@ -28,9 +29,12 @@ use crate::scenario::tagmem::{default_tid, parse_epc, parse_words};
 use crate::scenario::{
     AntennaSpec, Mount, Pose, PoseSample, Reflector, RobotSpec, Scenario, VerticalAxis,
 };
+use antenna::Lobe;
+use field::{FieldCache, GainTable};
 use geometry::wrap_pi;
 use hopping::HopSchedule;
 use motion::PolylineMotion;
+use multipath::Plane;
 use robot::RobotTrajectory;
 
 /// Position and boresight of an antenna at one instant.
@@ -82,6 +86,12 @@ enum Mover {
 struct AntennaModel {
     spec: AntennaSpec,
     mover: Mover,
+    /// The gain pattern's constants.
+    lobe: Lobe,
+    /// The gain over the direction cosine, for the field bounds.
+    gains: GainTable,
+    /// From this time (µs) on neither the antenna nor any tag moves (`u64::MAX`: never).
+    rest_us: u64,
 }
 
 #[derive(Clone, Debug)]
@@ -104,7 +114,11 @@ pub struct Model {
     antennas: Vec<AntennaModel>,
     tags: Vec<TagModel>,
     reflectors: Vec<Reflector>,
+    /// The reflectors with usable normals, prepared for the channel.
+    planes: Vec<Plane>,
     robots: Vec<RobotTrajectory>,
+    /// Field classifications per antenna ([`field`]); never changes a result.
+    field_cache: FieldCache,
 }
 
 /// Every distinct robot of the scenario, in order of first appearance over all readers, so
@@ -159,12 +173,29 @@ impl Model {
                     }
                 }
             };
+            let lobe = Lobe::new(a.gain_dbi, a.beamwidth_deg);
+            let still_s = match &mover {
+                Mover::Fixed(_) => Some(0.0),
+                Mover::Recorded(poses) => Some(poses.last().map_or(0.0, |p| p.t_s + REST_MARGIN_S)),
+                Mover::Robot {
+                    robot, vertical, ..
+                } => match vertical {
+                    Some(v) if v.speed > 0.0 && v.max_z > v.min_z => None,
+                    // A moment after the last stored sample, the pose is that sample's.
+                    _ => robots
+                        .get(*robot)
+                        .map(|r: &RobotTrajectory| r.duration_s() + REST_MARGIN_S),
+                },
+            };
             antennas.push(AntennaModel {
                 spec: a.clone(),
                 mover,
+                lobe,
+                gains: GainTable::new(&lobe),
+                rest_us: still_s.map_or(u64::MAX, rest_time_us),
             });
         }
-        let tags = scenario
+        let tags: Vec<TagModel> = scenario
             .tags
             .iter()
             .map(|t| {
@@ -185,6 +216,20 @@ impl Model {
                 }
             })
             .collect();
+        // Tags stop too: an antenna's field stops changing once both have.
+        let tags_rest = tags
+            .iter()
+            .map(|t| {
+                t.motion
+                    .rest_s()
+                    .map_or(u64::MAX, |s| rest_time_us(s + REST_MARGIN_S))
+            })
+            .max()
+            .unwrap_or(0);
+        for a in &mut antennas {
+            a.rest_us = field::rest_grid(a.rest_us.max(tags_rest));
+        }
+        let field_cache = FieldCache::new(antennas.len());
         Model {
             seed: scenario.seed,
             reader,
@@ -195,7 +240,9 @@ impl Model {
             antennas,
             tags,
             reflectors: scenario.reflectors.clone(),
+            planes: multipath::planes(&scenario.reflectors),
             robots,
+            field_cache,
         }
     }
 
@@ -297,6 +344,35 @@ impl Model {
         }
     }
 
+    /// True position of antenna `antenna` at `t_us` (that of [`Model::antenna_pose`], without
+    /// working out the boresight).
+    pub fn antenna_position(&self, antenna: u16, t_us: u64) -> [f64; 3] {
+        let Some(a) = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))
+        else {
+            return [0.0; 3];
+        };
+        match &a.mover {
+            Mover::Robot {
+                robot,
+                offset,
+                vertical,
+            } => {
+                let Some(trajectory) = self.robots.get(*robot) else {
+                    return [0.0; 3];
+                };
+                let t = seconds(t_us);
+                let [x, y, theta] = trajectory.true_pose(t);
+                let (s, c) = theta.sin_cos();
+                let [ox, oy, oz] = offset.position;
+                let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
+                [x + c * ox - s * oy, y + s * ox + c * oy, z]
+            }
+            _ => self.pose(antenna, t_us, false).position,
+        }
+    }
+
     fn pose(&self, antenna: u16, t_us: u64, odometry: bool) -> AntennaPose {
         let origin = AntennaPose {
             position: [0.0; 3],
@@ -352,6 +428,19 @@ fn pose_from(p: &Pose) -> AntennaPose {
         position: p.position,
         yaw_rad: wrap_pi(p.yaw_deg.to_radians()),
         pitch_rad: p.pitch_deg.to_radians(),
+    }
+}
+
+/// Added to the time something stops, so that interpolation has surely reached its last point.
+const REST_MARGIN_S: f64 = 0.1;
+
+/// A rest time in seconds as µs, rounded up (`u64::MAX` when it is not a finite time).
+fn rest_time_us(t_s: f64) -> u64 {
+    let us = (t_s.max(0.0) * 1e6).ceil();
+    if us.is_finite() && us < u64::MAX as f64 {
+        us as u64
+    } else {
+        u64::MAX
     }
 }
 

@@ -54,6 +54,27 @@ impl PolylineMotion {
         }
     }
 
+    /// Speed along the path (m/s; 0 for a still tag): no position moves faster.
+    pub fn speed(&self) -> f64 {
+        if self.lengths.last().is_some_and(|&l| l > 0.0) {
+            self.speed
+        } else {
+            0.0
+        }
+    }
+
+    /// Time (s) from which the tag stays where it is; `None` if it never stops (a loop).
+    pub fn rest_s(&self) -> Option<f64> {
+        let total = self.lengths.last().copied().unwrap_or(0.0);
+        if self.speed <= 0.0 || total <= 0.0 {
+            Some(0.0)
+        } else if self.looping {
+            None
+        } else {
+            Some(self.start_s.max(0.0) + total / self.speed)
+        }
+    }
+
     /// Position at time `t_s` (seconds).
     pub fn position(&self, t_s: f64) -> Vec3 {
         let total = self.lengths.last().copied().unwrap_or(0.0);
@@ -116,6 +137,35 @@ pub fn recorded_pose(poses: &[PoseSample], t_s: f64) -> [f64; 5] {
         wrap_pi(a[3] + f * wrap_pi(b[3] - a[3])),
         lerp(a[4], b[4]),
     ]
+}
+
+/// How far a recorded pose strays from its value at `t0_s` during `[t0_s, t1_s]`: the largest
+/// change of x, y and z (m) and a bound on the boresight's turn (rad: the yaw and pitch steps
+/// summed).
+pub fn recorded_excursion(poses: &[PoseSample], t0_s: f64, t1_s: f64) -> [f64; 4] {
+    let start = recorded_pose(poses, t0_s);
+    let end = recorded_pose(poses, t1_s);
+    let turn = |a: [f64; 5], b: [f64; 5]| wrap_pi(b[3] - a[3]).abs() + (b[4] - a[4]).abs();
+    let mut far = [0.0f64; 4];
+    let mut see = |p: [f64; 5]| {
+        for i in 0..3 {
+            far[i] = far[i].max((p[i] - start[i]).abs());
+        }
+    };
+    // Positions are linear between samples (each change peaks at a sample or at the end);
+    // the boresight turns at most by the sum of the steps between them.
+    see(end);
+    let (mut swing, mut last) = (0.0, start);
+    if t0_s.is_finite() && t1_s.is_finite() {
+        for p in poses.iter().filter(|p| p.t_s > t0_s && p.t_s < t1_s) {
+            let here = recorded_pose(poses, p.t_s);
+            see(here);
+            swing += turn(last, here);
+            last = here;
+        }
+    }
+    far[3] = swing + turn(last, end);
+    far
 }
 
 /// Height of an antenna on a vertical axis at `t_s`: a triangle wave starting at `min_z`,

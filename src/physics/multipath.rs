@@ -2,8 +2,8 @@
 //! antenna's mirror image to the tag, with the plane's reflection coefficient and a π phase
 //! flip; the paths are summed as complex phasors (\[G\] eq. 1's 1 + Σ H_i).
 
-use super::antenna::{gain_linear, off_axis_angle};
-use super::geometry::{add_scaled, distance, dot, norm, sub, Vec3};
+use super::antenna::Lobe;
+use super::geometry::{add_scaled, boresight, distance, dot, norm, sub, Vec3};
 use super::AntennaPose;
 use crate::scenario::Reflector;
 
@@ -32,33 +32,63 @@ pub fn mirror_point(point: Vec3, plane_point: Vec3, normal: Vec3) -> Vec3 {
     add_scaled(point, -2.0 * d, unit)
 }
 
+/// A reflector with its unit normal computed once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    /// A point of the plane.
+    pub point: Vec3,
+    /// Unit normal.
+    pub unit: Vec3,
+    /// Reflection coefficient magnitude (the scenario's `coefficient`).
+    pub coefficient: f64,
+}
+
+/// The reflectors with a usable normal, prepared for [`channel_with`] (a zero or non-finite
+/// normal reflects nothing, as in [`image_paths`]).
+pub fn planes(reflectors: &[Reflector]) -> Vec<Plane> {
+    reflectors
+        .iter()
+        .filter_map(|r| {
+            let n = norm(r.normal);
+            if n == 0.0 || !n.is_finite() {
+                return None;
+            }
+            Some(Plane {
+                point: r.point,
+                unit: [r.normal[0] / n, r.normal[1] / n, r.normal[2] / n],
+                coefficient: r.coefficient,
+            })
+        })
+        .collect()
+}
+
+/// The image path of `antenna` to `tag` across `plane`, if both are strictly on one side.
+fn image_path(antenna: Vec3, tag: Vec3, plane: &Plane) -> Option<ImagePath> {
+    let unit = plane.unit;
+    let da = dot(sub(antenna, plane.point), unit);
+    let dt = dot(sub(tag, plane.point), unit);
+    if da * dt <= 0.0 {
+        return None;
+    }
+    let image = add_scaled(antenna, -2.0 * da, unit);
+    // The segment image → tag crosses the plane at the fraction da / (da + dt).
+    let s = da / (da + dt);
+    let reflection_point = add_scaled(image, s, sub(tag, image));
+    Some(ImagePath {
+        image,
+        reflection_point,
+        length_m: distance(image, tag),
+        coefficient: -plane.coefficient,
+    })
+}
+
 /// First-order image paths from `antenna` to `tag`, one per reflector that has both strictly
 /// on the same side (a plane between them, or touching either, reflects nothing).
 pub fn image_paths(antenna: Vec3, tag: Vec3, reflectors: &[Reflector]) -> Vec<ImagePath> {
-    let mut paths = Vec::with_capacity(reflectors.len());
-    for r in reflectors {
-        let n = norm(r.normal);
-        if n == 0.0 || !n.is_finite() {
-            continue;
-        }
-        let unit = [r.normal[0] / n, r.normal[1] / n, r.normal[2] / n];
-        let da = dot(sub(antenna, r.point), unit);
-        let dt = dot(sub(tag, r.point), unit);
-        if da * dt <= 0.0 {
-            continue;
-        }
-        let image = add_scaled(antenna, -2.0 * da, unit);
-        // The segment image → tag crosses the plane at the fraction da / (da + dt).
-        let s = da / (da + dt);
-        let reflection_point = add_scaled(image, s, sub(tag, image));
-        paths.push(ImagePath {
-            image,
-            reflection_point,
-            length_m: distance(image, tag),
-            coefficient: -r.coefficient,
-        });
-    }
-    paths
+    planes(reflectors)
+        .iter()
+        .filter_map(|p| image_path(antenna, tag, p))
+        .collect()
 }
 
 /// A complex number (phasor).
@@ -116,27 +146,104 @@ pub fn channel(
     reflectors: &[Reflector],
     wavelength_m: f64,
 ) -> Channel {
-    let d = distance(pose.position, tag).max(MIN_DISTANCE_M);
-    let g0 = gain_linear(gain_dbi, beamwidth_deg, off_axis_angle(pose, tag));
+    channel_with(
+        &Aim::new(pose),
+        &Lobe::new(gain_dbi, beamwidth_deg),
+        tag,
+        &planes(reflectors),
+        wavelength_m,
+    )
+}
+
+/// An antenna pose with its boresight computed once, for many off-axis angles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aim {
+    /// Antenna position.
+    pub position: Vec3,
+    /// Boresight vector (unit up to rounding).
+    pub boresight: Vec3,
+    /// Its computed length.
+    pub boresight_norm: f64,
+}
+
+impl Aim {
+    /// The aim of an antenna at `pose`.
+    pub fn new(pose: &AntennaPose) -> Aim {
+        let b = boresight(pose.yaw_rad, pose.pitch_rad);
+        Aim {
+            position: pose.position,
+            boresight: b,
+            boresight_norm: norm(b),
+        }
+    }
+
+    /// Cosine of the angle between the boresight and `v`, a vector of length `len` from the
+    /// antenna (1 for a zero vector, whose angle counts as 0).
+    pub fn cos_of(&self, v: Vec3, len: f64) -> f64 {
+        let n = self.boresight_norm * len;
+        if n == 0.0 || !n.is_finite() {
+            return 1.0;
+        }
+        (dot(self.boresight, v) / n).clamp(-1.0, 1.0)
+    }
+}
+
+/// [`channel`] with the pose, lobe and reflectors prepared.
+pub fn channel_with(
+    aim: &Aim,
+    lobe: &Lobe,
+    tag: Vec3,
+    planes: &[Plane],
+    wavelength_m: f64,
+) -> Channel {
+    let (d, g0, sum, k) = phasors(aim, lobe, tag, planes, wavelength_m);
+    Channel {
+        distance_m: d,
+        gain_linear: g0,
+        multipath_factor: (sum.re * sum.re + sum.im * sum.im).sqrt(),
+        delay_rad: 2.0 * k * d - 2.0 * sum.arg(),
+    }
+}
+
+/// g₀·|1 + Σ Hᵢ|²/D² of [`channel_with`]'s channel (the forward link's power gain up to
+/// constants), without the phase.
+pub fn power_gain_with(
+    aim: &Aim,
+    lobe: &Lobe,
+    tag: Vec3,
+    planes: &[Plane],
+    wavelength_m: f64,
+) -> f64 {
+    let (d, g0, sum, _) = phasors(aim, lobe, tag, planes, wavelength_m);
+    g0 * (sum.re * sum.re + sum.im * sum.im) / (d * d)
+}
+
+/// Distance D (clamped), direct gain g₀, the sum 1 + Σ Hᵢ and the wave number.
+fn phasors(
+    aim: &Aim,
+    lobe: &Lobe,
+    tag: Vec3,
+    planes: &[Plane],
+    wavelength_m: f64,
+) -> (f64, f64, Complex, f64) {
+    let v = sub(tag, aim.position);
+    let dist = norm(v);
+    let d = dist.max(MIN_DISTANCE_M);
+    let g0 = lobe.gain_cos(aim.cos_of(v, dist));
     let k = std::f64::consts::TAU / wavelength_m;
     let mut sum = Complex { re: 1.0, im: 0.0 };
-    for p in image_paths(pose.position, tag, reflectors) {
-        let gi = gain_linear(
-            gain_dbi,
-            beamwidth_deg,
-            off_axis_angle(pose, p.reflection_point),
-        );
+    for plane in planes {
+        let Some(p) = image_path(aim.position, tag, plane) else {
+            continue;
+        };
+        let w = sub(p.reflection_point, aim.position);
+        let gi = lobe.gain_cos(aim.cos_of(w, norm(w)));
         let amplitude = p.coefficient * (gi / g0).sqrt() * d / p.length_m.max(MIN_DISTANCE_M);
         let h = Complex::from_polar(amplitude, -k * (p.length_m - d));
         sum.re += h.re;
         sum.im += h.im;
     }
-    Channel {
-        distance_m: d,
-        gain_linear: g0,
-        multipath_factor: sum.abs(),
-        delay_rad: 2.0 * k * d - 2.0 * sum.arg(),
-    }
+    (d, g0, sum, k)
 }
 
 #[cfg(test)]

@@ -143,10 +143,41 @@ impl RobotTrajectory {
     pub fn odometry_pose(&self, t_s: f64) -> [f64; 3] {
         interpolate(&self.odometry, self.sample_dt_s, t_s)
     }
+
+    /// How far the true pose strays from its value at `t0_s` during `[t0_s, t1_s]`: the
+    /// largest change of x and of y (m) and of the heading (rad, unwrapped).
+    pub fn excursion(&self, t0_s: f64, t1_s: f64) -> [f64; 3] {
+        let dt = self.sample_dt_s;
+        let start = interpolate_raw(&self.truth, dt, t0_s);
+        let mut far = [0.0f64; 3];
+        let mut see = |p: [f64; 3]| {
+            for (f, (a, b)) in far.iter_mut().zip(p.iter().zip(start)) {
+                *f = f.max((a - b).abs());
+            }
+        };
+        // Between samples the pose is linear in time, so each change is largest at a sample
+        // or at the end.
+        see(interpolate_raw(&self.truth, dt, t1_s));
+        if t0_s.is_finite() && t1_s.is_finite() {
+            let last = self.truth.len() - 1;
+            let first = ((t0_s / dt).max(0.0).floor() as usize + 1).min(last + 1);
+            let end = ((t1_s / dt).max(0.0).ceil() as usize).min(last);
+            for sample in self.truth.get(first..=end).unwrap_or(&[]) {
+                see(*sample);
+            }
+        }
+        far
+    }
 }
 
 /// Linear interpolation in samples taken every `dt` from t = 0 (θ is stored unwrapped).
 fn interpolate(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
+    let p = interpolate_raw(samples, dt, t_s);
+    [p[0], p[1], wrap_pi(p[2])]
+}
+
+/// [`interpolate`] without wrapping θ.
+fn interpolate_raw(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
     let last = samples.len() - 1;
     let x = if t_s.is_finite() {
         (t_s / dt).max(0.0)
@@ -154,7 +185,7 @@ fn interpolate(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
         0.0
     };
     let i = x.floor() as usize;
-    let p = if i >= last {
+    if i >= last {
         samples[last]
     } else {
         let f = x - i as f64;
@@ -164,8 +195,7 @@ fn interpolate(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
             a[1] + f * (b[1] - a[1]),
             a[2] + f * (b[2] - a[2]),
         ]
-    };
-    [p[0], p[1], wrap_pi(p[2])]
+    }
 }
 
 #[cfg(test)]

@@ -2,15 +2,15 @@
 //! how likely an attempt is to succeed near the edge of the read zone.
 //!
 //! Slot k covers `[k·P, (k+1)·P)` µs with P = 10⁶ / reads_per_second; its attempt happens at a
-//! jittered instant inside the slot, drawn from a generator seeded by the slot number. A window
+//! jittered instant inside the slot, drawn from a generator seeded by the slot number (a
+//! SplitMix64 stream, [`seed::stream`]: an attempt draws only a handful of numbers). A window
 //! `[t0, t1)` holds exactly the attempts whose instants fall inside it, so windows of any
 //! length — shorter than one slot too — average the right rate, and splitting a window in two
 //! gives the same attempts.
 
 use rand::Rng;
-use rand_chacha::ChaCha8Rng;
 
-use super::seed;
+use super::seed::{self, Stream};
 
 /// Slot period in µs for a read budget (attempts per second).
 pub fn slot_period_us(reads_per_second: f64) -> f64 {
@@ -24,7 +24,7 @@ pub struct Slot {
     /// Instant of the attempt (µs).
     pub time_us: u64,
     /// Generator for every draw of this attempt.
-    pub rng: ChaCha8Rng,
+    pub rng: Stream,
 }
 
 /// Most attempt slots one call returns (a window beyond that is cut short; at 1000 reads/s
@@ -34,26 +34,69 @@ pub const MAX_SLOTS: u64 = 10_000_000;
 /// The attempt slots whose instants fall in `[t0_us, t1_us)`, in time order (at most
 /// [`MAX_SLOTS`]). `key` identifies the draw stream (scenario seed, reader, antenna).
 pub fn slots(key: [u64; 3], reads_per_second: f64, t0_us: u64, t1_us: u64) -> Vec<Slot> {
-    let mut out = Vec::new();
-    if !(reads_per_second > 0.0 && reads_per_second.is_finite()) || t1_us <= t0_us {
-        return out;
-    }
+    slot_iter(key, reads_per_second, t0_us, t1_us).collect()
+}
+
+/// The slots of [`slots`], one at a time.
+pub fn slot_iter(key: [u64; 3], reads_per_second: f64, t0_us: u64, t1_us: u64) -> SlotIter {
+    let usable = reads_per_second > 0.0 && reads_per_second.is_finite() && t1_us > t0_us;
     let period = slot_period_us(reads_per_second);
-    let first = (t0_us as f64 / period).floor().max(0.0) as u64;
-    let last = ((t1_us as f64 / period).ceil() as u64).min(first.saturating_add(MAX_SLOTS));
-    for k in first..=last {
-        let mut rng = seed::rng(&[key[0], seed::domain::SLOT, key[1], key[2], k]);
-        let jitter: f64 = rng.gen();
-        let t = ((k as f64 + jitter) * period).floor();
-        if !t.is_finite() || t < 0.0 {
-            continue;
-        }
-        let time_us = t as u64;
-        if time_us >= t0_us && time_us < t1_us {
-            out.push(Slot { k, time_us, rng });
-        }
+    let (next, last) = if usable {
+        let first = (t0_us as f64 / period).floor().max(0.0) as u64;
+        let last = ((t1_us as f64 / period).ceil() as u64).min(first.saturating_add(MAX_SLOTS));
+        (first, last)
+    } else {
+        (1, 0)
+    };
+    SlotIter {
+        key,
+        period,
+        t0_us,
+        t1_us,
+        next,
+        last,
     }
-    out
+}
+
+/// Iterator over the attempt slots of a window; see [`slot_iter`].
+#[derive(Clone, Debug)]
+pub struct SlotIter {
+    key: [u64; 3],
+    period: f64,
+    t0_us: u64,
+    t1_us: u64,
+    /// Next slot number to look at; none left once it passes `last`.
+    next: u64,
+    last: u64,
+}
+
+impl Iterator for SlotIter {
+    type Item = Slot;
+
+    fn next(&mut self) -> Option<Slot> {
+        while self.next <= self.last {
+            let k = self.next;
+            self.next += 1;
+            let key = self.key;
+            let mut rng = seed::stream(&[key[0], seed::domain::SLOT, key[1], key[2], k]);
+            let jitter: f64 = rng.gen();
+            let t = (k as f64 + jitter) * self.period;
+            if !(t.is_finite() && t >= 0.0) {
+                continue;
+            }
+            // Truncation is the floor of a non-negative time.
+            let time_us = t as u64;
+            if time_us >= self.t1_us {
+                // Instants grow with k: nothing later falls in the window.
+                self.next = self.last.saturating_add(1);
+                return None;
+            }
+            if time_us >= self.t0_us {
+                return Some(Slot { k, time_us, rng });
+            }
+        }
+        None
+    }
 }
 
 /// Midpoint of the success probability, in dB of forward-link margin above the tag's

@@ -1,7 +1,7 @@
 //! Deterministic seeds: SplitMix64 mixing of the scenario seed with the identity of a draw, so
 //! each draw depends only on what it is, never on call order.
 
-use rand::SeedableRng;
+use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// One SplitMix64 step: a well-mixed 64-bit function of `x`.
@@ -29,6 +29,42 @@ pub fn rng(words: &[u64]) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(mix(words))
 }
 
+/// A SplitMix64 stream seeded from the mixed words: the generator of one read attempt, which
+/// draws a handful of numbers (ChaCha8 would spend most of its time setting up).
+pub fn stream(words: &[u64]) -> Stream {
+    Stream { state: mix(words) }
+}
+
+/// The SplitMix64 sequence from a 64-bit state ([`stream`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Stream {
+    state: u64,
+}
+
+impl RngCore for Stream {
+    fn next_u32(&mut self) -> u32 {
+        (self.next_u64() >> 32) as u32
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        let x = self.state;
+        self.state = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        splitmix64(x)
+    }
+
+    fn fill_bytes(&mut self, dest: &mut [u8]) {
+        for chunk in dest.chunks_mut(8) {
+            let bytes = self.next_u64().to_le_bytes();
+            chunk.copy_from_slice(&bytes[..chunk.len()]);
+        }
+    }
+
+    fn try_fill_bytes(&mut self, dest: &mut [u8]) -> Result<(), rand::Error> {
+        self.fill_bytes(dest);
+        Ok(())
+    }
+}
+
 /// Domain tags keeping the different kinds of draws apart.
 pub mod domain {
     /// Per-slot read attempts.
@@ -44,6 +80,23 @@ pub mod domain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn streams_are_splitmix64_sequences() {
+        let mut a = stream(&[1, 2, 3]);
+        let mut b = stream(&[1, 2, 3]);
+        let xs: Vec<u64> = (0..4).map(|_| a.next_u64()).collect();
+        assert_eq!(xs, (0..4).map(|_| b.next_u64()).collect::<Vec<_>>());
+        // Consecutive outputs are SplitMix64 of consecutive states.
+        let s0 = mix(&[1, 2, 3]);
+        assert_eq!(xs[0], splitmix64(s0));
+        assert_eq!(xs[1], splitmix64(s0.wrapping_add(0x9E37_79B9_7F4A_7C15)));
+        assert_ne!(stream(&[1, 2, 4]).next_u64(), xs[0]);
+        let mut bytes = [0u8; 11];
+        stream(&[1, 2, 3]).fill_bytes(&mut bytes);
+        assert_eq!(bytes[..8], xs[0].to_le_bytes());
+        assert_eq!(bytes[8..], xs[1].to_le_bytes()[..3]);
+    }
 
     #[test]
     fn mixing_is_order_sensitive_and_unit_is_in_range() {

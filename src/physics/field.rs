@@ -1,0 +1,880 @@
+//! Which tags are in an antenna's field — within reach and powered by the forward link — at
+//! the start of a 10 ms bucket ([`super::inventory`]), and a uniform draw among them, without
+//! evaluating the full channel of every tag in every bucket.
+//!
+//! Time is cut into intervals on a fixed grid ([`MAX_SPAN_US`] long, halved while the antenna
+//! moves or turns too much in them, down to one bucket), so the interval of a bucket depends on
+//! nothing but the bucket. For each interval, bounds on how far the antenna and each tag can
+//! move give every tag a status valid at every bucket start in it, on every channel:
+//! * **out**: beyond reach, or even the most favourable gains, distances and an in-phase sum
+//!   of all paths (|a₀| + Σ|aᵢ|) stay below the power threshold;
+//! * **in**: within reach and even the least favourable direct path minus every reflected
+//!   path at its strongest (|a₀| − Σ|aᵢ|) clears the threshold;
+//! * **undecided**: evaluated exactly (the channel of [`super::multipath`]) when drawn.
+//!
+//! Once neither the antenna nor any tag moves any more, one interval lasts for ever and the
+//! field of each channel is evaluated once.
+//!
+//! A draw picks uniformly among the bucket's in and undecided tags and draws again while it
+//! hits one that is not powered (rejection sampling): every tag of the field is equally likely,
+//! as when the field is listed in full, and the draw depends only on the attempt's generator
+//! and the field, never on earlier draws. The bounds keep margins far above rounding errors,
+//! so they never change which tags are in the field (unit tests check every decision against
+//! the exact evaluation on the fixtures and on a scenario where everything moves).
+
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+
+use rand::Rng;
+
+use super::antenna::Lobe;
+use super::geometry::{add_scaled, distance, dot, norm, sub, Vec3};
+use super::multipath::{power_gain_with, Aim, Channel, Plane, MIN_DISTANCE_M};
+use super::{rssi, Model, Mover};
+
+/// Longest interval one classification covers, µs: a power-of-two number of buckets, so the
+/// halves of an interval are whole buckets down to one.
+pub const MAX_SPAN_US: u64 = 256 * super::inventory::FIELD_BUCKET_US;
+/// Largest antenna displacement (m) one classification allows: the interval is halved until
+/// the antenna stays within it (or is one bucket long).
+const MAX_EXCURSION_M: f64 = 0.2;
+/// Largest boresight turn (rad) one classification allows, likewise.
+const MAX_TURN_RAD: f64 = 0.1;
+/// Added to every distance bound (m): far above the rounding errors of either computation.
+const SLACK_M: f64 = 1e-9;
+/// Added to every direction-cosine bound.
+const SLACK_COS: f64 = 1e-9;
+/// Relative margin on every gain and power-threshold bound.
+const SLACK_REL: f64 = 1e-9;
+/// Steps of the gain table over the direction cosine in [−1, 1].
+const TABLE_STEPS: usize = 2048;
+
+/// Status of one tag for one classification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Status {
+    Out,
+    In,
+    Undecided,
+}
+
+/// One antenna's classification: valid for bucket starts in `[t0_us, t1_us)` at `tx_bits`.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Classified {
+    t0_us: u64,
+    t1_us: u64,
+    tx_bits: u64,
+    /// Tags in the field at every bucket start, ascending.
+    inside: Vec<usize>,
+    /// Tags to evaluate bucket by bucket, ascending.
+    undecided: Vec<usize>,
+    /// Once nothing moves any more (the interval never ends), the field on each channel of
+    /// the table (index channel − 1), evaluated once; empty otherwise.
+    at_rest: Vec<Vec<usize>>,
+    /// Then too, the channel and forward-link margin of each tag on each channel (index
+    /// (channel − 1)·tags + tag), computed on first use: they no longer change.
+    links: Vec<OnceLock<(Channel, f64)>>,
+}
+
+/// Per-antenna classifications of a model (a cache: the field never depends on it). The lock
+/// is held only to look one up or to store one, so several threads share it freely.
+#[derive(Debug, Default)]
+pub(super) struct FieldCache(Vec<Mutex<Option<Arc<Classified>>>>);
+
+impl Clone for FieldCache {
+    fn clone(&self) -> Self {
+        FieldCache::new(self.0.len())
+    }
+}
+
+impl FieldCache {
+    /// An empty cache for `antennas` antennas.
+    pub(super) fn new(antennas: usize) -> FieldCache {
+        FieldCache((0..antennas).map(|_| Mutex::new(None)).collect())
+    }
+
+    /// The classification slot of antenna index `i` (0-based), if there is such an antenna.
+    fn slot(&self, i: usize) -> Option<MutexGuard<'_, Option<Arc<Classified>>>> {
+        // A panic while holding the lock leaves at worst a stale entry, which is checked for
+        // validity before use; the cache can always be rebuilt.
+        self.0
+            .get(i)
+            .map(|m| m.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+impl Classified {
+    /// Whether this classification holds at bucket start `t_us` for `tx_power_dbm`.
+    fn holds(&self, t_us: u64, tx_power_dbm: f64) -> bool {
+        self.t0_us <= t_us && t_us < self.t1_us && self.tx_bits == tx_power_dbm.to_bits()
+    }
+}
+
+/// Amplitude gain √(boresight × pattern) of a lobe tabulated over the direction cosine, for
+/// bounds: it never decreases with the cosine.
+#[derive(Clone, Debug)]
+pub(super) struct GainTable(Vec<f64>);
+
+impl GainTable {
+    /// The table of `lobe`.
+    pub(super) fn new(lobe: &Lobe) -> GainTable {
+        GainTable(
+            (0..=TABLE_STEPS)
+                .map(|i| {
+                    lobe.gain_cos(-1.0 + 2.0 * i as f64 / TABLE_STEPS as f64)
+                        .sqrt()
+                })
+                .collect(),
+        )
+    }
+
+    /// Position of cosine `c` in the table, clamped to it (NaN gives 0).
+    fn index(c: f64) -> f64 {
+        ((c + 1.0) * 0.5 * TABLE_STEPS as f64).clamp(0.0, TABLE_STEPS as f64)
+    }
+
+    /// At least the amplitude gain at any direction cosine ≤ `c`.
+    fn above(&self, c: f64) -> f64 {
+        let x = if c.is_nan() {
+            TABLE_STEPS as f64
+        } else {
+            Self::index(c)
+        };
+        // x ≥ 0: truncation is floor; step up unless x is whole.
+        let i = x as usize;
+        let i = if (i as f64) < x { i + 1 } else { i };
+        self.0[i.min(TABLE_STEPS)] * (1.0 + SLACK_REL)
+    }
+
+    /// At most the amplitude gain at any direction cosine ≥ `c`.
+    fn below(&self, c: f64) -> f64 {
+        let i = Self::index(c) as usize;
+        self.0[i.min(TABLE_STEPS)] * (1.0 - SLACK_REL)
+    }
+}
+
+/// How far an antenna may move during an interval.
+#[derive(Clone, Copy, Debug, Default)]
+struct Motion {
+    /// Largest change of each coordinate (m).
+    axes: Vec3,
+    /// Largest boresight turn (rad).
+    turn: f64,
+}
+
+impl Motion {
+    /// Largest displacement (m).
+    fn total(&self) -> f64 {
+        norm(self.axes)
+    }
+
+    /// Largest displacement along the unit vector `u` (m).
+    fn along(&self, u: Vec3) -> f64 {
+        u[0].abs() * self.axes[0] + u[1].abs() * self.axes[1] + u[2].abs() * self.axes[2]
+    }
+}
+
+/// A boresight turn (rad), with its sine and cosine.
+#[derive(Clone, Copy, Debug)]
+struct Turn {
+    rad: f64,
+    sin: f64,
+    cos: f64,
+}
+
+impl Turn {
+    fn new(rad: f64) -> Turn {
+        let (sin, cos) = rad.sin_cos();
+        Turn { rad, sin, cos }
+    }
+}
+
+/// The range `(highest, lowest)` of cos θ when θ, whose cosine is `c0`, changes by at most
+/// asin(x) + `turn`; the whole range [−1, 1] when that is not below π.
+fn widen(c0: f64, x: f64, turn: Turn) -> (f64, f64) {
+    if !(x < 1.0 && turn.rad < std::f64::consts::FRAC_PI_2) {
+        return (1.0, -1.0);
+    }
+    let c0 = c0.clamp(-1.0, 1.0);
+    let s0 = (1.0 - c0 * c0).max(0.0).sqrt();
+    let sa = x.max(0.0);
+    let ca = (1.0 - sa * sa).max(0.0).sqrt();
+    // δ = asin(x) + turn < π: cos θ ∈ [cos(θ + δ), cos(max(θ − δ, 0))].
+    let (sd, cd) = (sa * turn.cos + ca * turn.sin, ca * turn.cos - sa * turn.sin);
+    let hi = if c0 >= cd { 1.0 } else { c0 * cd + s0 * sd };
+    let lo = if c0 <= -cd { -1.0 } else { c0 * cd - s0 * sd };
+    (hi + SLACK_COS, lo - SLACK_COS)
+}
+
+/// A plane seen from the antenna at the start of an interval.
+struct Mirror {
+    plane: Plane,
+    /// Signed distance of the antenna from the plane.
+    da: f64,
+    /// Largest change of `da` in the interval.
+    da_moves: f64,
+    /// The antenna's image.
+    image: Vec3,
+    /// Largest boresight · (image − antenna) over the interval: (image − antenna) is
+    /// −2·da·n̂, with da within `da_moves` of its start value and boresight · n̂ within `turn`.
+    e1: f64,
+}
+
+/// An antenna at the start of an interval, with how far it may move during it.
+struct Around<'a> {
+    aim: Aim,
+    /// Largest antenna displacement (m) and boresight turn in the interval.
+    moved: f64,
+    turn: Turn,
+    gains: &'a GainTable,
+    reach: f64,
+    mirrors: Vec<Mirror>,
+    /// Amplitude thresholds over the channel table: the field needs A ≥ threshold(λ).
+    threshold_low: f64,
+    threshold_high: f64,
+}
+
+impl Around<'_> {
+    /// Status of a tag at `q` at the interval start that moves at most `moves` metres in it.
+    ///
+    /// With a₀ = √g₀/D and aᵢ = Γᵢ·√gᵢ/dᵢ, the forward link powers the tag when
+    /// A = |a₀ + Σ aᵢ·e^{jφᵢ}| reaches the threshold (the channel of
+    /// [`super::multipath::channel`]: √g₀·|1 + Σ Hᵢ|/D = A).
+    fn status(&self, q: Vec3, moves: f64) -> Status {
+        let p = self.aim.position;
+        let (b, bn) = (self.aim.boresight, self.aim.boresight_norm);
+        let moved = self.moved;
+        let r = moved + moves + SLACK_M;
+        let v = sub(q, p);
+        let d0 = norm(v);
+        if d0 - r > self.reach {
+            return Status::Out;
+        }
+        let within = d0 + r < self.reach;
+        let bv = dot(b, v);
+        // The direct path turns by at most asin(r/D), the boresight by `turn`.
+        let (c_hi, c_lo) = widen(bv / (bn * d0), r / d0, self.turn);
+        let d_min = (d0 - r).max(MIN_DISTANCE_M);
+        let d_max = (d0 + r).max(MIN_DISTANCE_M);
+        let direct_hi = self.gains.above(c_hi) / d_min;
+        let direct_lo = self.gains.below(c_lo) / d_max;
+        let mut reflected = 0.0;
+        for m in &self.mirrors {
+            let dt = dot(sub(q, m.plane.point), m.plane.unit);
+            let mn = m.da_moves + SLACK_M;
+            let mt = moves + SLACK_M;
+            // The path exists only while antenna and tag are strictly on one side.
+            if (m.da - mn > 0.0 && dt + mt < 0.0) || (m.da + mn < 0.0 && dt - mt > 0.0) {
+                continue;
+            }
+            let length = distance(m.image, q);
+            let l_min = (length - r).max(MIN_DISTANCE_M);
+            let (ad, at) = (m.da.abs(), dt.abs());
+            let c_up = if m.da * dt > 0.0 && ad > mn && at > mt {
+                // Both stay on their side. The reflection point seen from the antenna is
+                // w = (image − antenna) + s·(tag − image) with s = |da|/(|da| + |dt|):
+                // image − antenna = −2·da·n̂ changes by at most 2·Δda, s by at most `ds`,
+                // tag − image by at most both displacements.
+                let s = ad / (ad + at);
+                let ds = ((at + mt) * mn + (ad + mn) * mt) / ((ad - mn) + (at - mt)).powi(2);
+                let rp = add_scaled(m.image, s, sub(q, m.image));
+                let w = sub(rp, p);
+                let ell = norm(w);
+                let rho = 2.0 * mn + (s + ds).min(1.0) * (mt + moved) + ds * length + SLACK_M;
+                widen(dot(b, w) / (bn * ell), rho / ell, self.turn).0
+            } else {
+                // The reflection point lies on the segment image → tag and on the plane: the
+                // boresight component toward it is at most that toward either end, and it
+                // is at least |da| away from the antenna.
+                let e = m.e1.max(bv + self.turn.rad * (d0 + r) + r);
+                let h = ad - mn;
+                if e <= 0.0 {
+                    SLACK_COS
+                } else if h <= 0.0 {
+                    1.0
+                } else {
+                    (e / (bn * h)).min(1.0) + SLACK_COS
+                }
+            };
+            reflected += m.plane.coefficient.abs() * self.gains.above(c_up) / l_min;
+        }
+        let (a_hi, a_lo) = (direct_hi + reflected, direct_lo - reflected);
+        if a_hi < self.threshold_low {
+            Status::Out
+        } else if within && a_lo > self.threshold_high {
+            Status::In
+        } else {
+            Status::Undecided
+        }
+    }
+}
+
+/// Whether a candidate tag is in the bucket's field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Known {
+    In,
+    Out,
+    Unknown,
+}
+
+/// One bucket's draw state: the tags that may be in its field, and what is known of each.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Bucket {
+    antenna: u16,
+    t_us: u64,
+    wavelength_m: f64,
+    /// The field needs g₀·|1 + Σ Hᵢ|²/D² at least this (the tag sensitivity at this power and
+    /// wavelength).
+    threshold: f64,
+    /// Reach of the antenna (m).
+    reach: f64,
+    /// Candidates in tag order.
+    pool: Vec<(usize, Known)>,
+    /// How many candidates are known not to be in the field.
+    out: usize,
+    /// The antenna at the bucket start, once an undecided tag needed it.
+    aim: Option<Aim>,
+    /// The classification when nothing moves any more (its links serve the attempts).
+    rest: Option<Arc<Classified>>,
+}
+
+impl Model {
+    /// Prepares `bucket` for draws in the field of `antenna` at bucket start `t_us` on
+    /// `channel`, with the antenna's classification for it in `held` (replaced if it does not
+    /// hold there).
+    pub(super) fn open_bucket(
+        &self,
+        antenna: u16,
+        tx_power_dbm: f64,
+        t_us: u64,
+        channel: u16,
+        held: &mut Option<Arc<Classified>>,
+        bucket: &mut Bucket,
+    ) {
+        if !held.as_ref().is_some_and(|c| c.holds(t_us, tx_power_dbm)) {
+            *held = Some(self.classification(antenna, tx_power_dbm, t_us));
+        }
+        self.prepare(bucket, antenna, tx_power_dbm, t_us, channel);
+        let Some(c) = held.as_deref() else {
+            return;
+        };
+        if let Some(field) = c.at_rest.get(usize::from(channel).wrapping_sub(1)) {
+            bucket.pool.extend(field.iter().map(|&t| (t, Known::In)));
+            bucket.rest = held.clone();
+            return;
+        }
+        let (mut i, mut u) = (0, 0);
+        loop {
+            match (c.inside.get(i), c.undecided.get(u)) {
+                (Some(&x), Some(&y)) if x < y => {
+                    bucket.pool.push((x, Known::In));
+                    i += 1;
+                }
+                (Some(&x), None) => {
+                    bucket.pool.push((x, Known::In));
+                    i += 1;
+                }
+                (_, Some(&y)) => {
+                    bucket.pool.push((y, Known::Unknown));
+                    u += 1;
+                }
+                (None, None) => break,
+            }
+        }
+    }
+
+    /// Empties `bucket` for the field of `antenna` at `t_us` on `channel`.
+    fn prepare(
+        &self,
+        bucket: &mut Bucket,
+        antenna: u16,
+        tx_power_dbm: f64,
+        t_us: u64,
+        channel: u16,
+    ) {
+        let spec = &self.antennas[usize::from(antenna) - 1].spec;
+        bucket.antenna = antenna;
+        bucket.t_us = t_us;
+        bucket.wavelength_m = self.wavelength_m(channel);
+        bucket.threshold = (amplitude_threshold(spec, tx_power_dbm) / bucket.wavelength_m).powi(2);
+        bucket.reach = reach_m(spec);
+        bucket.aim = None;
+        bucket.pool.clear();
+        bucket.out = 0;
+        bucket.rest = None;
+    }
+
+    /// The channel and forward-link margin of `tag` from `antenna` at `t_us` on channel
+    /// `channel`: those of [`Model::margin_with`] at the antenna's pose then, taken from
+    /// `bucket`'s classification once nothing moves any more.
+    pub(super) fn link(
+        &self,
+        bucket: &Bucket,
+        antenna: u16,
+        tag: usize,
+        t_us: u64,
+        channel: u16,
+        tx_power_dbm: f64,
+    ) -> (Channel, f64) {
+        let lambda = self.wavelength_m(channel);
+        let compute = || {
+            let aim = Aim::new(&self.antenna_pose(antenna, t_us));
+            let position = self.tag_position(tag, t_us);
+            self.margin_with(antenna, &aim, position, lambda, tx_power_dbm)
+        };
+        let cached = bucket.rest.as_ref().and_then(|c| {
+            let i = usize::from(channel).checked_sub(1)? * self.tags.len() + tag;
+            let slot = c.links.get(i)?;
+            (t_us >= c.t0_us && c.tx_bits == tx_power_dbm.to_bits())
+                .then(|| *slot.get_or_init(compute))
+        });
+        cached.unwrap_or_else(compute)
+    }
+
+    /// A tag drawn uniformly from the field of the bucket, or `None` when it is empty.
+    pub(super) fn draw<R: Rng + ?Sized>(&self, bucket: &mut Bucket, rng: &mut R) -> Option<usize> {
+        while bucket.out < bucket.pool.len() {
+            let i = rng.gen_range(0..bucket.pool.len());
+            let (tag, known) = bucket.pool[i];
+            match known {
+                Known::In => return Some(tag),
+                Known::Out => {}
+                Known::Unknown => {
+                    if self.in_field(bucket, tag) {
+                        bucket.pool[i].1 = Known::In;
+                        return Some(tag);
+                    }
+                    bucket.pool[i].1 = Known::Out;
+                    bucket.out += 1;
+                }
+            }
+        }
+        None
+    }
+
+    /// Whether `tag` is in the field at the bucket start: within reach and powered.
+    fn in_field(&self, bucket: &mut Bucket, tag: usize) -> bool {
+        let antenna = bucket.antenna;
+        let t_us = bucket.t_us;
+        let aim = *bucket
+            .aim
+            .get_or_insert_with(|| Aim::new(&self.antenna_pose(antenna, t_us)));
+        let a = &self.antennas[usize::from(antenna) - 1];
+        let position = self.tag_position(tag, t_us);
+        distance(aim.position, position) <= bucket.reach
+            && power_gain_with(&aim, &a.lobe, position, &self.planes, bucket.wavelength_m)
+                >= bucket.threshold
+    }
+
+    /// The classification of `antenna` holding at bucket start `t_us`: cached, or made and
+    /// cached.
+    fn classification(&self, antenna: u16, tx_power_dbm: f64, t_us: u64) -> Arc<Classified> {
+        let i = usize::from(antenna).saturating_sub(1);
+        if let Some(c) = self.field_cache.slot(i).and_then(|s| s.clone()) {
+            if c.holds(t_us, tx_power_dbm) {
+                return c;
+            }
+        }
+        let c = Arc::new(self.classify(antenna, tx_power_dbm, t_us));
+        if let Some(mut s) = self.field_cache.slot(i) {
+            *s = Some(c.clone());
+        }
+        c
+    }
+
+    /// Classifies every tag for `antenna` over the grid interval holding bucket start `t_us`.
+    fn classify(&self, antenna: u16, tx_power_dbm: f64, t_us: u64) -> Classified {
+        let bucket = super::inventory::FIELD_BUCKET_US;
+        let a = &self.antennas[usize::from(antenna) - 1];
+        let rest = a.rest_us;
+        let (t0_us, t1_us, motion) = if t_us >= rest {
+            // Nothing moves any more: one interval for ever.
+            (rest, u64::MAX, Motion::default())
+        } else {
+            let (mut t0_us, mut span) = (t_us / MAX_SPAN_US * MAX_SPAN_US, MAX_SPAN_US);
+            let motion = loop {
+                let m = self.excursion(antenna, t0_us, t0_us.saturating_add(span));
+                if (m.total() <= MAX_EXCURSION_M && m.turn <= MAX_TURN_RAD) || span <= bucket {
+                    break m;
+                }
+                span /= 2;
+                if t_us >= t0_us + span {
+                    t0_us += span;
+                }
+            };
+            (t0_us, t0_us.saturating_add(span), motion)
+        };
+        let spec = &a.spec;
+        let aim = Aim::new(&self.antenna_pose(antenna, t0_us));
+        let mirrors = self
+            .planes
+            .iter()
+            .map(|plane| {
+                let da = dot(sub(aim.position, plane.point), plane.unit);
+                let da_moves = motion.along(plane.unit) + SLACK_M;
+                let image = add_scaled(aim.position, -2.0 * da, plane.unit);
+                let beta = dot(aim.boresight, plane.unit);
+                let turn = motion.turn + SLACK_COS;
+                let mut e1 = f64::NEG_INFINITY;
+                for d in [da - da_moves, da + da_moves] {
+                    for b in [beta - turn, beta + turn] {
+                        e1 = e1.max(-2.0 * d * b);
+                    }
+                }
+                Mirror {
+                    plane: *plane,
+                    da,
+                    da_moves,
+                    image,
+                    e1,
+                }
+            })
+            .collect();
+        let base = amplitude_threshold(spec, tx_power_dbm);
+        let fallback = [self.wavelength_m(1)];
+        let lambdas = if self.wavelengths.is_empty() {
+            &fallback[..]
+        } else {
+            &self.wavelengths[..]
+        };
+        let lambda_max = lambdas.iter().copied().fold(f64::NAN, f64::max);
+        let lambda_min = lambdas.iter().copied().fold(f64::NAN, f64::min);
+        let around = Around {
+            aim,
+            moved: motion.total() + SLACK_M,
+            turn: Turn::new(motion.turn + SLACK_COS),
+            gains: &a.gains,
+            reach: reach_m(spec),
+            mirrors,
+            threshold_low: base / lambda_max * (1.0 - SLACK_REL),
+            threshold_high: base / lambda_min * (1.0 + SLACK_REL),
+        };
+        let seconds = if t1_us == u64::MAX {
+            0.0
+        } else {
+            (t1_us - t0_us) as f64 * 1e-6
+        };
+        let mut c = Classified {
+            t0_us,
+            t1_us,
+            tx_bits: tx_power_dbm.to_bits(),
+            ..Default::default()
+        };
+        for (k, tag) in self.tags.iter().enumerate() {
+            let q = tag.motion.position(super::seconds(t0_us));
+            match around.status(q, tag.motion.speed() * seconds) {
+                Status::In => c.inside.push(k),
+                Status::Undecided => c.undecided.push(k),
+                Status::Out => {}
+            }
+        }
+        if t1_us == u64::MAX {
+            c.at_rest = self.fields_at_rest(antenna, tx_power_dbm, t0_us, &c);
+            c.links = (0..c.at_rest.len() * self.tags.len())
+                .map(|_| OnceLock::new())
+                .collect();
+        }
+        c
+    }
+
+    /// The field on every channel at `t_us` and for ever after, when nothing moves: `c`'s in
+    /// tags and those of its undecided tags that each channel powers.
+    fn fields_at_rest(
+        &self,
+        antenna: u16,
+        tx_power_dbm: f64,
+        t_us: u64,
+        c: &Classified,
+    ) -> Vec<Vec<usize>> {
+        let channels = u16::try_from(self.table.len().max(1)).unwrap_or(u16::MAX);
+        (1..=channels)
+            .map(|channel| {
+                let mut b = Bucket::default();
+                self.prepare(&mut b, antenna, tx_power_dbm, t_us, channel);
+                let mut field = c.inside.clone();
+                field.extend(c.undecided.iter().filter(|&&t| self.in_field(&mut b, t)));
+                field.sort_unstable();
+                field
+            })
+            .collect()
+    }
+
+    /// How far antenna `antenna` moves and turns at most during `[t0_us, t1_us]`.
+    fn excursion(&self, antenna: u16, t0_us: u64, t1_us: u64) -> Motion {
+        let Some(a) = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))
+        else {
+            return Motion::default();
+        };
+        let (t0, t1) = (super::seconds(t0_us), super::seconds(t1_us));
+        match &a.mover {
+            Mover::Fixed(_) => Motion::default(),
+            Mover::Recorded(poses) => {
+                let [x, y, z, turn] = super::motion::recorded_excursion(poses, t0, t1);
+                Motion {
+                    axes: [x, y, z],
+                    turn,
+                }
+            }
+            Mover::Robot {
+                robot,
+                offset,
+                vertical,
+            } => {
+                let Some(trajectory) = self.robots.get(*robot) else {
+                    return Motion::default();
+                };
+                // The antenna sits at the robot's position plus its offset turned by the
+                // heading: each coordinate moves by at most the robot's plus the arm times
+                // the turn.
+                let [dx, dy, dtheta] = trajectory.excursion(t0, t1);
+                let arm = offset.position[0].hypot(offset.position[1]) * dtheta;
+                let dz = vertical
+                    .as_ref()
+                    .filter(|v| v.speed.is_finite() && v.speed > 0.0)
+                    .map_or(0.0, |v| v.speed * (t1 - t0));
+                Motion {
+                    axes: [dx + arm, dy + arm, dz],
+                    turn: dtheta,
+                }
+            }
+        }
+    }
+}
+
+/// The forward link powers a tag when A = √g₀·|1 + Σ Hᵢ|/D reaches this over λ:
+/// P_tag = P_tx − L + 10·log10(G_T) + 20·log10(λ/4π) + 20·log10(A) ≥ the tag's sensitivity.
+fn amplitude_threshold(spec: &crate::scenario::AntennaSpec, tx_power_dbm: f64) -> f64 {
+    10f64.powf(
+        (spec.tag_sensitivity_dbm - tx_power_dbm + spec.cable_loss_db - rssi::TAG_GAIN_DBI) / 20.0,
+    ) * 4.0
+        * std::f64::consts::PI
+}
+
+/// The grid point at or after `t_us` (`u64::MAX` stays): where the interval that lasts for
+/// ever begins once nothing moves.
+pub(super) fn rest_grid(t_us: u64) -> u64 {
+    t_us.div_ceil(MAX_SPAN_US).saturating_mul(MAX_SPAN_US)
+}
+
+/// Reach of an antenna: r·(1 + 4σ_r).
+pub(super) fn reach_m(spec: &crate::scenario::AntennaSpec) -> f64 {
+    spec.range_m * (1.0 + super::inventory::RANGE_SIGMAS * spec.range_sigma)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    /// Exact membership of `tag` at `t_us` on a wavelength, as listing the field in full does.
+    fn exact(m: &Model, antenna: u16, tx: f64, t_us: u64, lambda: f64, tag: usize) -> bool {
+        let spec = &m.antennas[usize::from(antenna) - 1].spec;
+        let aim = Aim::new(&m.antenna_pose(antenna, t_us));
+        let position = m.tag_position(tag, t_us);
+        let by_margin = distance(aim.position, position) <= reach_m(spec)
+            && m.margin_with(antenna, &aim, position, lambda, tx).1 >= 0.0;
+        let mut b = Bucket {
+            antenna,
+            t_us,
+            wavelength_m: lambda,
+            threshold: (amplitude_threshold(spec, tx) / lambda).powi(2),
+            reach: reach_m(spec),
+            ..Default::default()
+        };
+        // The linear test agrees with the margin in dB.
+        assert_eq!(m.in_field(&mut b, tag), by_margin, "tag {tag} at {t_us} µs");
+        by_margin
+    }
+
+    /// Every tag a classification calls in (out) is in (out of) the field at every bucket
+    /// start of its interval, on the first, last and middle channel; returns how many tags
+    /// were decided and how many left undecided.
+    fn check(m: &Model, tx: f64, starts: impl Iterator<Item = u64>) -> (usize, usize) {
+        let (mut decided, mut undecided) = (0, 0);
+        let table = m.frequencies_khz().len().max(1) as u16;
+        for t in starts {
+            for antenna in 1..=m.antenna_count() {
+                let c = m.classify(antenna, tx, t);
+                assert!(c.t0_us <= t && t < c.t1_us);
+                undecided += c.undecided.len();
+                let bucket = crate::physics::inventory::FIELD_BUCKET_US;
+                // An interval that never ends is probed an hour on.
+                let end = c.t1_us.min(c.t0_us + 3_600_000_000);
+                let probes = [
+                    c.t0_us,
+                    t,
+                    (c.t0_us + end) / 2 / bucket * bucket,
+                    end - bucket,
+                ];
+                for probe in probes {
+                    for ch in [1, table / 2 + 1, table] {
+                        let lambda = m.wavelength_m(ch);
+                        if let Some(field) = c.at_rest.get(usize::from(ch) - 1) {
+                            let exact: Vec<usize> = (0..m.tag_count())
+                                .filter(|&tag| exact(m, antenna, tx, probe, lambda, tag))
+                                .collect();
+                            assert_eq!(field, &exact, "antenna {antenna} at rest, t {probe}");
+                        }
+                        for tag in 0..m.tag_count() {
+                            let inside = c.inside.binary_search(&tag).is_ok();
+                            let maybe = c.undecided.binary_search(&tag).is_ok();
+                            if maybe {
+                                continue;
+                            }
+                            decided += 1;
+                            assert_eq!(
+                                exact(m, antenna, tx, probe, lambda, tag),
+                                inside,
+                                "antenna {antenna}, tag {tag}, t {probe} µs, channel {ch}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        (decided, undecided)
+    }
+
+    fn fixture(name: &str) -> Scenario {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures/scenarios")
+            .join(format!("{name}.json"));
+        Scenario::load(&path).expect("fixture loads")
+    }
+
+    #[test]
+    fn classification_agrees_with_exact_evaluation_on_the_fixtures() {
+        for (name, horizon_s, tx) in [("s1", 50, 30.0), ("s2", 210, 27.0), ("s2", 120, 20.0)] {
+            let s = fixture(name);
+            let m = Model::new(&s, 0);
+            let (decided, undecided) = check(&m, tx, (0..horizon_s).map(|k| k * 1_000_000));
+            // The bounds must decide most tags, or they save nothing.
+            assert!(decided > 4 * undecided, "{name}: {decided} vs {undecided}");
+        }
+        let s = fixture("s3");
+        let m = Model::new(&s, 0);
+        check(&m, 30.0, (0..300).map(|k| k * 1_370_000));
+    }
+
+    #[test]
+    fn fields_at_rest_are_exact() {
+        // S2's robot stops after 200 s; S1's after 44 s.
+        for (name, from_s) in [("s2", 200), ("s1", 40)] {
+            let m = Model::new(&fixture(name), 0);
+            check(&m, 27.0, (from_s..from_s + 20).map(|k| k * 1_000_000));
+            let late = 10_000_000_000;
+            for antenna in 1..=m.antenna_count() {
+                let c = m.classify(antenna, 27.0, late);
+                assert_eq!(c.t1_us, u64::MAX, "{name}: the robot rests");
+                assert_eq!(c.at_rest.len(), m.frequencies_khz().len());
+                // Links served from the classification are those computed afresh.
+                let (mut held, mut bucket) = (None, Bucket::default());
+                m.open_bucket(antenna, 27.0, late, 1, &mut held, &mut bucket);
+                assert!(bucket.rest.is_some());
+                let lambda = m.wavelength_m(1);
+                for tag in 0..m.tag_count() {
+                    for t in [late + 1234, 2 * late] {
+                        let aim = Aim::new(&m.antenna_pose(antenna, t));
+                        let fresh =
+                            m.margin_with(antenna, &aim, m.tag_position(tag, t), lambda, 27.0);
+                        assert_eq!(m.link(&bucket, antenna, tag, t, 1, 27.0), fresh);
+                    }
+                    // The Doppler shortcut gives what the central difference gives.
+                    let range =
+                        |t| distance(m.antenna_position(antenna, t), m.tag_position(tag, t));
+                    let v_r = (range(late + 10_000) - range(late - 10_000)) / 0.02;
+                    assert_eq!(
+                        m.doppler_hz(antenna, tag, late, lambda).to_bits(),
+                        crate::physics::phase::doppler_hz(v_r, lambda).to_bits()
+                    );
+                }
+            }
+        }
+        // A fixed antenna and still tags rest from the start; a looping tag never does.
+        let v = |looping: bool| {
+            serde_json::json!({
+                "name": "fixed",
+                "seed": 5,
+                "world": { "min": [-5, -5, 0], "max": [5, 5, 3] },
+                "reflectors": [ { "point": [0, 0, 0], "normal": [0, 0, 1], "coefficient": 0.5 } ],
+                "tags": [
+                    { "epc": "E20000000000000000000001", "position": [2, 0, 1] },
+                    { "epc": "E20000000000000000000002", "position": [3, 1, 1],
+                      "path": { "waypoints": [[3, -1, 1]], "speed": 0.5, "loop_path": looping } }
+                ],
+                "readers": [ { "name": "r", "region": "etsi", "antennas": [
+                    { "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } } } ] } ]
+            })
+        };
+        let m = Model::new(
+            &Scenario::from_json(&v(false).to_string()).expect("valid"),
+            0,
+        );
+        assert_eq!(
+            m.classify(1, 30.0, 0).t1_us,
+            MAX_SPAN_US,
+            "the tag still moves at 0 s"
+        );
+        assert_eq!(m.classify(1, 30.0, 9_000_000).t1_us, u64::MAX);
+        check(&m, 30.0, [0, 2_000_000, 5_000_000, 9_000_000].into_iter());
+        let m = Model::new(
+            &Scenario::from_json(&v(true).to_string()).expect("valid"),
+            0,
+        );
+        assert!(m.classify(1, 30.0, 900_000_000).t1_us < u64::MAX);
+    }
+
+    #[test]
+    fn classification_agrees_with_exact_evaluation_when_everything_moves() {
+        // A turning robot on a lift with a tilted, wide antenna; moving tags; a sloped and a
+        // vertical reflector close to the path.
+        let mut tags = Vec::new();
+        for i in 0..40 {
+            let x = 0.5 + 0.25 * f64::from(i);
+            tags.push(serde_json::json!({
+                "epc": format!("E2000000000000000000{i:04X}"),
+                "position": [x, 2.0 + 0.1 * f64::from(i % 7), 0.3 + 0.05 * f64::from(i % 11)],
+                "path": if i % 3 == 0 {
+                    serde_json::json!({ "waypoints": [[x, 0.5, 1.0], [x + 1.0, 3.0, 1.5]],
+                                        "speed": 0.3, "loop_path": true })
+                } else {
+                    serde_json::Value::Null
+                }
+            }));
+        }
+        for t in &mut tags {
+            if let Some(o) = t.as_object_mut() {
+                o.retain(|_, v| !v.is_null());
+            }
+        }
+        let antenna = |yaw: f64, pitch: f64, bw: f64| {
+            serde_json::json!({
+                "mount": { "type": "robot", "robot": {
+                    "start": [1, 1, 0], "waypoints": [[6, 1], [6, 3], [2, 2.5], [9, 1]],
+                    "speed": 0.8, "loop_path": true,
+                    "vertical": { "min_z": 0.3, "max_z": 1.8, "speed": 0.4 } },
+                  "offset": { "position": [0.2, 0.3, 0.5], "yaw_deg": yaw, "pitch_deg": pitch } },
+                "beamwidth_deg": bw, "gain_dbi": 7.0, "tx_power_dbm": 26, "range_m": 4
+            })
+        };
+        let v = serde_json::json!({
+            "name": "everything-moves",
+            "seed": 11,
+            "world": { "min": [-1, -1, -1], "max": [12, 6, 4] },
+            "reflectors": [
+                { "point": [0, 0, 0], "normal": [0, 0, 1], "coefficient": 0.6 },
+                { "point": [0, 4, 0], "normal": [0, -1, 0.3], "coefficient": 0.5 },
+                { "point": [10, 0, 0], "normal": [-1, 0, 0], "coefficient": 0.4 }
+            ],
+            "tags": tags,
+            "readers": [ { "name": "r", "region": "fcc", "antennas": [
+                antenna(90.0, 0.0, 65.0), antenna(45.0, 20.0, 240.0), antenna(-30.0, -15.0, 30.0)
+            ] } ]
+        });
+        let s = Scenario::from_json(&v.to_string()).expect("valid scenario");
+        let m = Model::new(&s, 0);
+        for tx in [30.0, 22.0] {
+            check(&m, tx, (0..120).map(|k| k * 470_000));
+        }
+    }
+}
