@@ -514,7 +514,8 @@ impl Specs {
                 ImpinjContent::default()
             },
         };
-        let Some(run) = self.specs[a].run.clone() else {
+        // Taken out for the step (its `seen` set would be costly to clone) and put back below.
+        let Some(run) = self.specs[a].run.take() else {
             return to;
         };
         let stop = &spec.ro_boundary_spec.ro_spec_stop_trigger;
@@ -531,6 +532,7 @@ impl Specs {
             Some(SpecParameter::AiSpec(ai)) => ai,
             // Validation admits only AISpecs; anything else ends the ROSpec.
             _ => {
+                self.specs[a].run = Some(run);
                 self.finish_ro(a, t, report_spec, out);
                 return t;
             }
