@@ -272,3 +272,120 @@ async fn every_reader_of_a_scenario_listens() {
     }
     sim.shutdown().await;
 }
+
+/// The TagReportData of each RO_ACCESS_REPORT received within `limit`, one Vec per report.
+async fn reports_by_message(
+    c: &mut Client,
+    limit: Duration,
+    want: usize,
+) -> Vec<Vec<TagReportData>> {
+    let deadline = tokio::time::Instant::now() + limit;
+    let mut out = Vec::new();
+    while out.len() < want {
+        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        match c.recv(left).await {
+            Ok(Message {
+                body: MessageBody::RoAccessReport(r),
+                ..
+            }) => out.push(r.tag_report_data),
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    out
+}
+
+fn last_seen(report: &[TagReportData]) -> u64 {
+    report
+        .iter()
+        .filter_map(|t| t.last_seen_timestamp_utc.map(|s| s.0))
+        .max()
+        .expect("reports carry LastSeenTimestampUTC")
+}
+
+#[tokio::test]
+async fn an_aispec_without_end_reports_at_the_reader_interval() {
+    // sllurp's default ROSpec: Null stop triggers, ROReportTrigger 1 with N = 0. Impinj
+    // readers report such an AISpec while it runs; the scenario's reader says how often.
+    let mut scenario = s1();
+    scenario.readers[0].report_interval_ms = 500;
+    let sim = start(&scenario, Speed::Max).await;
+    let mut c = connect(&sim).await;
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
+    )
+    .await;
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    let reports = reports_by_message(&mut c, T, 6).await;
+    assert_eq!(
+        reports.len(),
+        6,
+        "reports keep coming while the AISpec runs"
+    );
+    for r in &reports {
+        let mut epcs: Vec<_> = r.iter().map(|t| format!("{:?}", t.epc)).collect();
+        let n = epcs.len();
+        epcs.sort();
+        epcs.dedup();
+        assert_eq!(epcs.len(), n, "one aggregated entry per tag in each report");
+        assert!(
+            r.iter().any(|t| t.tag_seen_count.map_or(0, |n| n.0) > 1),
+            "reads aggregate between reports"
+        );
+    }
+    // Consecutive reports cover consecutive 500 ms windows of simulated time.
+    for w in reports.windows(2) {
+        let gap = last_seen(&w[1]) - last_seen(&w[0]);
+        assert!(
+            (250_000..=750_000).contains(&gap),
+            "last reads {gap} µs apart, expected about 500 ms"
+        );
+    }
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
+    let mut scenario = s1();
+    scenario.readers[0].report_interval_ms = 0;
+    let sim = start(&scenario, Speed::Factor(20.0)).await;
+    let mut c = connect(&sim).await;
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
+    )
+    .await;
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, enable).await, 0);
+    // 0.6 s at 20× is 12 s of simulated inventory.
+    let held = reports_by_message(&mut c, Duration::from_millis(600), 1).await;
+    assert!(held.is_empty(), "reads must wait for the end of the ROSpec");
+    c.send(StopRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    })
+    .await
+    .expect("send");
+    let end = reports_by_message(&mut c, T, 1).await;
+    assert_eq!(end.len(), 1, "stopping the ROSpec reports what it held");
+    assert!(
+        end[0]
+            .iter()
+            .map(|t| u32::from(t.tag_seen_count.map_or(0, |n| n.0)))
+            .sum::<u32>()
+            > 100,
+        "the held report aggregates seconds of reads"
+    );
+    sim.shutdown().await;
+}

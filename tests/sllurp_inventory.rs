@@ -186,13 +186,34 @@ async fn default_reporting_with_a_duration() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn default_reporting_one_antenna_short_duration() {
-    // Without -n the reader reports at the end of the AISpec (N = 0), as real readers do; a
-    // run interrupted before that ends would report after sllurp stopped listening, so the
-    // duration is what makes default reporting visible.
+    // Without -n the reader reports at the end of the AISpec (N = 0): with -t 1 that is one
+    // report after a second.
     let (s, reports, log) = with_sim(&["-a", "1", "-t", "1"], 3.0).await;
     assert!(
         !reports.is_empty(),
         "no report at the end of the AISpec:\n{log}"
     );
     check_tags(&s, &reports, false);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn the_readme_command_shows_live_reads() {
+    // `sllurp inventory --impinj-reports -a 0 HOST` with nothing else: Null stop triggers and
+    // ROReportTrigger 1 with N = 0. Like an Impinj reader, the simulator reports the running
+    // AISpec every second (the scenario's report_interval_ms), aggregated per tag.
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0"], 3.6).await;
+    assert!(
+        reports.len() >= 2,
+        "a report every second while inventory runs (got {}):\n{log}",
+        reports.len()
+    );
+    assert!(
+        reports
+            .iter()
+            .flatten()
+            .any(|t| t["TagSeenCount"].as_u64().unwrap_or(0) > 1),
+        "reads aggregate per tag between reports"
+    );
+    assert!(check_tags(&s, &reports, true) >= 2);
 }

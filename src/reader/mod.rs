@@ -69,6 +69,9 @@ pub struct ReaderProfile {
     pub antenna_gain_dbi: Vec<f64>,
     /// Reader identity (MAC-like EPC of the reader) for Identification.
     pub reader_id: Vec<u8>,
+    /// How often an AISpec without its own end reports under ROReportTrigger 1 with N = 0,
+    /// µs (0: only when the ROSpec ends).
+    pub report_interval_us: u64,
 }
 
 impl ReaderProfile {
@@ -91,6 +94,7 @@ impl ReaderProfile {
                 .collect(),
             antenna_gain_dbi: r.antennas.iter().map(|a| a.gain_dbi).collect(),
             reader_id: id,
+            report_interval_us: u64::from(r.report_interval_ms) * 1000,
         }
     }
 }

@@ -127,6 +127,8 @@ struct Run {
     seen: HashSet<usize>,
     last_new_us: u64,
     rounds: u32,
+    /// When the current AISpec last reported on its own interval (see `report_interval_us`).
+    last_report_us: u64,
 }
 
 /// All ROSpecs of the reader and the report buffer they fill.
@@ -405,6 +407,7 @@ impl Specs {
             seen: HashSet::new(),
             last_new_us: now,
             rounds: 0,
+            last_report_us: now,
         });
         events.push(Event {
             at_us: now,
@@ -568,6 +571,17 @@ impl Specs {
         if let Some(n) = self.next_start_after(t) {
             end = end.min(n.max(t + 1));
         }
+        // An Impinj-class reader does not hold the reads of an AISpec that cannot end by itself
+        // forever when ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
+        let interval = ctx.profile.report_interval_us;
+        let periodic = interval > 0
+            && report_spec.ro_report_trigger == 1
+            && report_spec.n == 0
+            && ai_end.is_none()
+            && matches!(trig.ai_spec_stop_trigger_type, 0 | 2);
+        if periodic {
+            end = end.min(run.last_report_us + interval);
+        }
         let mut end = end.max(t);
 
         let antennas: Vec<u16> = if ai.antenna_ids.contains(&0) {
@@ -649,6 +663,12 @@ impl Specs {
                 }
             }
         }
+        if periodic && reached >= run.last_report_us + interval {
+            run.last_report_us = reached;
+            if !self.buffer.is_empty() {
+                out.push(Produced::Reports(self.buffer.take()));
+            }
+        }
         // Antenna rotation.
         if reached >= run.slice_end_us {
             run.antenna_pos += 1;
@@ -686,6 +706,7 @@ impl Specs {
             run.seen.clear();
             run.last_new_us = reached;
             run.rounds = 0;
+            run.last_report_us = reached;
             run.antenna_pos = 0;
             run.slice_end_us = reached + ANTENNA_DWELL_US;
             if run.spec_idx >= s.spec.specs.len() {

@@ -64,6 +64,7 @@ fn defaults_are_filled_and_round_trip_through_json() {
     assert_eq!(r.listen, "127.0.0.1:5084");
     assert_eq!(r.hop_dwell_ms, 400.0);
     assert_eq!(r.reads_per_second, 1000.0);
+    assert_eq!(r.report_interval_ms, 1000);
     let a = &r.antennas[0];
     assert_eq!(
         (a.phase_noise_rad, a.rssi_noise, a.range_m),
@@ -150,6 +151,11 @@ fn errors_name_the_field_path_and_the_reason() {
         (
             Box::new(|v| v["readers"][0]["fixed_channel"] = 51.into()),
             "readers[0].fixed_channel: must be a channel index in [1, 50], got 51",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["report_interval_ms"] = 3_600_001.into()),
+            "readers[0].report_interval_ms: must be at most 3600000",
             "",
         ),
         (

@@ -13,6 +13,8 @@ pub const MAX_ROBOT_SPEED: f64 = 2.0;
 pub const MAX_TAG_SPEED: f64 = 10.0;
 /// Highest read budget: one attempt per µs of simulated time at most.
 pub const MAX_READS_PER_SECOND: f64 = 100_000.0;
+/// Longest interval between the reports of an AISpec without its own end (one hour), ms.
+pub const MAX_REPORT_INTERVAL_MS: u32 = 3_600_000;
 /// Most antenna ports per reader.
 pub const MAX_ANTENNAS: usize = 64;
 
@@ -230,6 +232,15 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
         r.reads_per_second,
         MAX_READS_PER_SECOND,
     )?;
+    if r.report_interval_ms > MAX_REPORT_INTERVAL_MS {
+        return Err(invalid(
+            format!("{p}.report_interval_ms"),
+            format!(
+                "must be at most {MAX_REPORT_INTERVAL_MS} (one hour; 0 holds reads until the ROSpec ends), got {}",
+                r.report_interval_ms
+            ),
+        ));
+    }
     if r.antennas.is_empty() {
         return Err(invalid(
             format!("{p}.antennas"),
