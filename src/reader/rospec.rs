@@ -124,11 +124,41 @@ struct Run {
     spec_started_us: u64,
     antenna_pos: usize,
     slice_end_us: u64,
-    seen: HashSet<usize>,
+    seen: TagSet,
     last_new_us: u64,
     rounds: u32,
     /// When the current AISpec last reported on its own interval (see `report_interval_us`).
     last_report_us: u64,
+}
+
+/// The scenario tags (by index) an AISpec has seen: a bitset, as tag indices are dense.
+#[derive(Clone, Debug, Default)]
+struct TagSet {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl TagSet {
+    /// Adds `tag`; whether it was new.
+    fn insert(&mut self, tag: usize) -> bool {
+        let (w, bit) = (tag / 64, 1u64 << (tag % 64));
+        if w >= self.words.len() {
+            self.words.resize(w + 1, 0);
+        }
+        let new = self.words[w] & bit == 0;
+        self.words[w] |= bit;
+        self.len += usize::from(new);
+        new
+    }
+
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn clear(&mut self) {
+        self.words.fill(0);
+        self.len = 0;
+    }
 }
 
 /// All ROSpecs of the reader and the report buffer they fill.
@@ -404,7 +434,7 @@ impl Specs {
             spec_started_us: now,
             antenna_pos: 0,
             slice_end_us: now + ANTENNA_DWELL_US,
-            seen: HashSet::new(),
+            seen: TagSet::default(),
             last_new_us: now,
             rounds: 0,
             last_report_us: now,
@@ -984,4 +1014,22 @@ fn missing(a: u16, b: u16, missing: u16) -> LlrpStatus {
     );
     s.parameter_error = Some(outer);
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TagSet;
+
+    #[test]
+    fn tag_set_counts_each_tag_once_and_clears() {
+        let mut s = TagSet::default();
+        assert!(s.insert(3));
+        assert!(s.insert(200));
+        assert!(!s.insert(3));
+        assert!(s.insert(64));
+        assert_eq!(s.len(), 3);
+        s.clear();
+        assert_eq!(s.len(), 0);
+        assert!(s.insert(200), "a cleared set forgets its tags");
+    }
 }
