@@ -15,6 +15,11 @@
 //! Once neither the antenna nor any tag moves any more, one interval lasts for ever and the
 //! field of each channel is evaluated once.
 //!
+//! An undecided tag drawn in a bucket is first tested with the antenna's exact position then:
+//! the phasor sum with tabulated gains and polynomial phase factors, whose error is bounded,
+//! decides unless the amplitude lies within that bound of the threshold, when the exact sum of
+//! [`super::multipath`] does.
+//!
 //! A draw picks uniformly among the bucket's in and undecided tags and draws again while it
 //! hits one that is not powered (rejection sampling): every tag of the field is equally likely,
 //! as when the field is listed in full, and the draw depends only on the attempt's generator
@@ -111,19 +116,18 @@ impl Classified {
 /// Amplitude gain √(boresight × pattern) of a lobe tabulated over the direction cosine, for
 /// bounds: it never decreases with the cosine.
 #[derive(Clone, Debug)]
-pub(super) struct GainTable(Vec<f64>);
+pub(super) struct GainTable(Box<[f64; TABLE_STEPS + 1]>);
 
 impl GainTable {
     /// The table of `lobe`.
     pub(super) fn new(lobe: &Lobe) -> GainTable {
-        GainTable(
-            (0..=TABLE_STEPS)
-                .map(|i| {
-                    lobe.gain_cos(-1.0 + 2.0 * i as f64 / TABLE_STEPS as f64)
-                        .sqrt()
-                })
-                .collect(),
-        )
+        let mut table = Box::new([0.0; TABLE_STEPS + 1]);
+        for (i, g) in table.iter_mut().enumerate() {
+            *g = lobe
+                .gain_cos(-1.0 + 2.0 * i as f64 / TABLE_STEPS as f64)
+                .sqrt();
+        }
+        GainTable(table)
     }
 
     /// Position of cosine `c` in the table, clamped to it (NaN gives 0).
@@ -138,15 +142,17 @@ impl GainTable {
         } else {
             Self::index(c)
         };
-        // x ≥ 0: truncation is floor; step up unless x is whole.
-        let i = x as usize;
+        // 0 ≤ x ≤ TABLE_STEPS: truncation is floor (through i64, a single instruction); step
+        // up unless x is whole.
+        let i = x as i64;
         let i = if (i as f64) < x { i + 1 } else { i };
-        self.0[i.min(TABLE_STEPS)] * (1.0 + SLACK_REL)
+        self.0[(i as usize).min(TABLE_STEPS)] * (1.0 + SLACK_REL)
     }
 
     /// At most the amplitude gain at any direction cosine ≥ `c`.
     fn below(&self, c: f64) -> f64 {
-        let i = Self::index(c) as usize;
+        // 0 ≤ index ≤ TABLE_STEPS (NaN gives 0): truncation through i64 is floor.
+        let i = Self::index(c) as i64 as usize;
         self.0[i.min(TABLE_STEPS)] * (1.0 - SLACK_REL)
     }
 }
@@ -307,6 +313,145 @@ impl Around<'_> {
     }
 }
 
+/// A reflector seen from the antenna at a bucket start, for [`Near`].
+#[derive(Clone, Copy, Debug)]
+struct NearMirror {
+    plane: Plane,
+    /// Signed distance of the antenna from the plane, as `multipath::image_path` computes it.
+    da: f64,
+    /// The antenna's image, as `multipath::image_path` computes it.
+    image: Vec3,
+    /// −2·(b̂·n̂): b̂·(image − antenna) is `f·da`.
+    f: f64,
+    /// 1/da.
+    inv_da: f64,
+}
+
+/// The antenna at a bucket start, prepared for a fast field test: the phasor sum of
+/// [`super::multipath::channel_with`] evaluated with tabulated gains and a short polynomial
+/// for the phase factors, with a certified bound on its error. It decides whenever the sum is
+/// clear of the threshold by more than that bound and leaves the rest to the exact sum.
+#[derive(Clone, Debug, Default)]
+struct Near {
+    /// Antenna position.
+    p: Vec3,
+    /// Unit boresight.
+    b: Vec3,
+    /// Wave number 2π/λ.
+    k: f64,
+    /// Largest coordinate magnitude of the antenna and its images, plus 1 (m): sets the
+    /// rounding error of the exact geometry.
+    scale: f64,
+    mirrors: Vec<NearMirror>,
+}
+
+/// Largest phase (rad) [`cis`] handles.
+const CIS_MAX_RAD: f64 = 1e6;
+
+/// (cos x, sin x) for |x| ≤ [`CIS_MAX_RAD`], each within 1e-6 (degree-8 and degree-7 Taylor
+/// polynomials after reduction by π/2; the remainders are below 4e-7 and the reduction error
+/// below 1e-9 in that range).
+fn cis(x: f64) -> (f64, f64) {
+    let n = (x * std::f64::consts::FRAC_2_PI).round();
+    let r = x - n * std::f64::consts::FRAC_PI_2;
+    let r2 = r * r;
+    let c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40320.0))));
+    let s = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0))));
+    // n is a whole number of magnitude below 1e6: its quadrant is exact (two's complement
+    // keeps n mod 4 in the low bits). A lookup rather than a branch: the quadrant is random.
+    let q = (n as i64 & 3) as usize;
+    ([c, -s, -c, s][q], [s, c, -s, -c][q])
+}
+
+impl Near {
+    /// Prepares for `aim` on `wavelength_m`.
+    fn prepare(&mut self, aim: &Aim, planes: &[Plane], wavelength_m: f64) {
+        let p = aim.position;
+        let bn = aim.boresight_norm;
+        self.p = p;
+        self.b = [
+            aim.boresight[0] / bn,
+            aim.boresight[1] / bn,
+            aim.boresight[2] / bn,
+        ];
+        self.k = std::f64::consts::TAU / wavelength_m;
+        let inf = |v: Vec3| v[0].abs().max(v[1].abs()).max(v[2].abs());
+        let mut scale = 1.0 + inf(p);
+        self.mirrors.clear();
+        for plane in planes {
+            let da = dot(sub(p, plane.point), plane.unit);
+            let image = add_scaled(p, -2.0 * da, plane.unit);
+            scale = scale.max(1.0 + inf(image)).max(1.0 + inf(plane.point));
+            self.mirrors.push(NearMirror {
+                plane: *plane,
+                da,
+                image,
+                f: -2.0 * dot(self.b, plane.unit),
+                inv_da: 1.0 / da,
+            });
+        }
+        self.scale = scale;
+    }
+
+    /// Whether the amplitude √g₀·|1 + Σ Hᵢ|/D at a tag at `q`, `dist` from the antenna (as
+    /// `distance` computes it), reaches `threshold`: `Some` when the error bound decides it.
+    fn decide(&self, gains: &GainTable, q: Vec3, dist: f64, threshold: f64) -> Option<bool> {
+        if !(dist >= MIN_DISTANCE_M && dist.is_finite()) {
+            return None;
+        }
+        let v = sub(q, self.p);
+        let inv_d = 1.0 / dist;
+        // Relative rounding of the exact geometry: coordinates of `scale` metres, lengths of a
+        // centimetre at least.
+        let rel = 1e-14 * (self.scale + q[0].abs().max(q[1].abs()).max(q[2].abs()));
+        let c0 = dot(self.b, v) * inv_d;
+        let eta = 1e-12 + rel * inv_d;
+        let (lo, hi) = (gains.below(c0 - eta), gains.above(c0 + eta));
+        let mut re = (lo + hi) * 0.5 * inv_d;
+        let mut im = 0.0;
+        let mut err = (hi - lo) * 0.5 * inv_d;
+        let mut mag = hi * inv_d;
+        for m in &self.mirrors {
+            let dt = dot(sub(q, m.plane.point), m.plane.unit);
+            // The same test as `image_path`, on the same numbers.
+            if m.da * dt <= 0.0 {
+                continue;
+            }
+            let u = sub(q, m.image);
+            let l = norm(u);
+            // The reflection point is 1/s = (da + dt)/da times nearer the antenna than the
+            // tag's image distance: below a millimetre, the exact sum decides.
+            let w_inv = (m.da + dt) * m.inv_da;
+            if !(l >= MIN_DISTANCE_M && self.k * (l + dist) < CIS_MAX_RAD) {
+                return None;
+            }
+            let inv_l = 1.0 / l;
+            // cos between boresight and reflection point: (f·(da + dt) + b̂·u)/l.
+            let ci = (m.f * (m.da + dt) + dot(self.b, u)) * inv_l;
+            let eta = 1e-12 + rel * w_inv * inv_l * 4.0;
+            let (glo, ghi) = (gains.below(ci - eta), gains.above(ci + eta));
+            let a = m.plane.coefficient.abs() * inv_l;
+            let (c, s) = cis(-self.k * (l - dist));
+            // H carries −Γ (the π flip).
+            let mid = -m.plane.coefficient * (glo + ghi) * 0.5 * inv_l;
+            re += mid * c;
+            im += mid * s;
+            let phase_err = 1e-6 + 1e-14 * self.k * (l + dist);
+            err += (ghi - glo) * 0.5 * a + ghi * a * 2.0 * phase_err;
+            mag += ghi * a;
+        }
+        err += mag * 1e-12;
+        let amplitude = (re * re + im * im).sqrt();
+        if amplitude + err < threshold * (1.0 - SLACK_REL) {
+            Some(false)
+        } else if amplitude - err > threshold * (1.0 + SLACK_REL) {
+            Some(true)
+        } else {
+            None
+        }
+    }
+}
+
 /// Whether a candidate tag is in the bucket's field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Known {
@@ -324,6 +469,8 @@ pub(super) struct Bucket {
     /// The field needs g₀·|1 + Σ Hᵢ|²/D² at least this (the tag sensitivity at this power and
     /// wavelength).
     threshold: f64,
+    /// The same threshold on the amplitude √g₀·|1 + Σ Hᵢ|/D (its square root, up to rounding).
+    amplitude: f64,
     /// Reach of the antenna (m).
     reach: f64,
     /// Candidates in tag order.
@@ -332,6 +479,8 @@ pub(super) struct Bucket {
     out: usize,
     /// The antenna at the bucket start, once an undecided tag needed it.
     aim: Option<Aim>,
+    /// The same, prepared for the fast field test (valid while `aim` is set).
+    near: Near,
     /// The classification when nothing moves any more (its links serve the attempts).
     rest: Option<Arc<Classified>>,
 }
@@ -361,6 +510,7 @@ impl Model {
             bucket.rest = held.clone();
             return;
         }
+        bucket.pool.reserve(c.inside.len() + c.undecided.len());
         let (mut i, mut u) = (0, 0);
         loop {
             match (c.inside.get(i), c.undecided.get(u)) {
@@ -394,7 +544,8 @@ impl Model {
         bucket.antenna = antenna;
         bucket.t_us = t_us;
         bucket.wavelength_m = self.wavelength_m(channel);
-        bucket.threshold = (amplitude_threshold(spec, tx_power_dbm) / bucket.wavelength_m).powi(2);
+        bucket.amplitude = amplitude_threshold(spec, tx_power_dbm) / bucket.wavelength_m;
+        bucket.threshold = bucket.amplitude.powi(2);
         bucket.reach = reach_m(spec);
         bucket.aim = None;
         bucket.pool.clear();
@@ -416,7 +567,7 @@ impl Model {
     ) -> (Channel, f64) {
         let lambda = self.wavelength_m(channel);
         let compute = || {
-            let aim = Aim::new(&self.antenna_pose(antenna, t_us));
+            let aim = self.aim(antenna, t_us);
             let position = self.tag_position(tag, t_us);
             self.margin_with(antenna, &aim, position, lambda, tx_power_dbm)
         };
@@ -454,14 +605,29 @@ impl Model {
     fn in_field(&self, bucket: &mut Bucket, tag: usize) -> bool {
         let antenna = bucket.antenna;
         let t_us = bucket.t_us;
-        let aim = *bucket
-            .aim
-            .get_or_insert_with(|| Aim::new(&self.antenna_pose(antenna, t_us)));
         let a = &self.antennas[usize::from(antenna) - 1];
+        let aim = match bucket.aim {
+            Some(aim) => aim,
+            None => {
+                let aim = self.aim(antenna, t_us);
+                bucket.near.prepare(&aim, &self.planes, bucket.wavelength_m);
+                bucket.aim = Some(aim);
+                aim
+            }
+        };
         let position = self.tag_position(tag, t_us);
-        distance(aim.position, position) <= bucket.reach
-            && power_gain_with(&aim, &a.lobe, position, &self.planes, bucket.wavelength_m)
-                >= bucket.threshold
+        let dist = distance(aim.position, position);
+        if dist > bucket.reach {
+            return false;
+        }
+        if let Some(known) = bucket
+            .near
+            .decide(&a.gains, position, dist, bucket.amplitude)
+        {
+            return known;
+        }
+        power_gain_with(&aim, &a.lobe, position, &self.planes, bucket.wavelength_m)
+            >= bucket.threshold
     }
 
     /// The classification of `antenna` holding at bucket start `t_us`: cached, or made and
@@ -503,7 +669,7 @@ impl Model {
             (t0_us, t0_us.saturating_add(span), motion)
         };
         let spec = &a.spec;
-        let aim = Aim::new(&self.antenna_pose(antenna, t0_us));
+        let aim = self.aim(antenna, t0_us);
         let mirrors = self
             .planes
             .iter()
@@ -678,6 +844,7 @@ mod tests {
             t_us,
             wavelength_m: lambda,
             threshold: (amplitude_threshold(spec, tx) / lambda).powi(2),
+            amplitude: amplitude_threshold(spec, tx) / lambda,
             reach: reach_m(spec),
             ..Default::default()
         };
@@ -876,5 +1043,89 @@ mod tests {
         for tx in [30.0, 22.0] {
             check(&m, tx, (0..120).map(|k| k * 470_000));
         }
+    }
+
+    #[test]
+    fn cis_is_within_its_bound() {
+        for i in -20_000..=20_000 {
+            let x = f64::from(i) * 0.0123 + 0.5e-3 * f64::from(i % 7);
+            let (c, s) = cis(x);
+            assert!(
+                (c - x.cos()).abs() < 1e-6 && (s - x.sin()).abs() < 1e-6,
+                "{x}"
+            );
+        }
+        for x in [1e5 + 0.3, -7.5e5, 9.99e5] {
+            let (c, s) = cis(x);
+            assert!(
+                (c - x.cos()).abs() < 1e-6 && (s - x.sin()).abs() < 1e-6,
+                "{x}"
+            );
+        }
+    }
+
+    #[test]
+    fn fast_field_test_agrees_with_the_phasor_sum() {
+        // Antennas of several lobes at several poses, tags all around them, sloped and
+        // axis-aligned reflectors; thresholds at and around each tag's exact amplitude.
+        let reflectors = [
+            ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.6),
+            ([0.0, 4.0, 0.0], [0.0, -1.0, 0.3], 0.5),
+            ([9.0, 0.0, 0.0], [-1.0, 0.2, 0.0], 0.3),
+        ];
+        let planes: Vec<Plane> = reflectors
+            .iter()
+            .map(|&(point, normal, coefficient)| {
+                let n = norm(normal);
+                Plane {
+                    point,
+                    unit: [normal[0] / n, normal[1] / n, normal[2] / n],
+                    coefficient,
+                }
+            })
+            .collect();
+        let (mut decided, mut total) = (0, 0);
+        for (gain_dbi, bw) in [(6.0, 65.0), (4.77, 70.0), (7.0, 30.0), (3.0, 240.0)] {
+            let lobe = Lobe::new(gain_dbi, bw);
+            let gains = GainTable::new(&lobe);
+            for (k, yaw) in [0.0f64, 1.3, -2.2, 3.0].into_iter().enumerate() {
+                let k = k as f64;
+                let pose = crate::physics::AntennaPose {
+                    position: [1.0 + k, 1.5 + 0.4 * k, 0.3 + 0.5 * k],
+                    yaw_rad: yaw,
+                    pitch_rad: 0.2 * k - 0.3,
+                };
+                let aim = Aim::new(&pose);
+                for lambda in [0.3275, 0.3463] {
+                    let mut near = Near::default();
+                    near.prepare(&aim, &planes, lambda);
+                    for i in 0..400 {
+                        let f = f64::from(i);
+                        let q = [
+                            0.5 + (f * 0.731) % 8.0,
+                            0.2 + (f * 0.377) % 3.7,
+                            0.05 + (f * 0.193) % 2.5,
+                        ];
+                        let dist = distance(aim.position, q);
+                        let power = power_gain_with(&aim, &lobe, q, &planes, lambda);
+                        let amplitude = power.sqrt();
+                        for factor in [0.3, 0.9, 0.99, 0.999, 1.0, 1.001, 1.01, 1.1, 3.0] {
+                            let threshold = amplitude * factor;
+                            total += 1;
+                            if let Some(known) = near.decide(&gains, q, dist, threshold) {
+                                decided += 1;
+                                assert_eq!(
+                                    known,
+                                    power >= threshold * threshold,
+                                    "lobe {bw}, pose {k}, tag {q:?}, factor {factor}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Thresholds a few per cent away from the amplitude are decided without the exact sum.
+        assert!(decided > total / 2, "{decided} of {total}");
     }
 }

@@ -74,8 +74,10 @@ impl Model {
         let mut classified = None;
         let mut bucket_now = u64::MAX;
         let mut bucket = Bucket::default();
-        let mut reads = Vec::new();
-        for slot in schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us) {
+        let slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
+        // At most one read per slot; a long window grows the vector as it goes.
+        let mut reads = Vec::with_capacity(slots.size_hint().1.unwrap_or(0).min(1 << 12));
+        for slot in slots {
             let b = slot.time_us / FIELD_BUCKET_US;
             if bucket_now != b {
                 let start = b * FIELD_BUCKET_US;
@@ -107,7 +109,7 @@ impl Model {
             tx_power_dbm,
             a.spec.cable_loss_db,
             ch.gain_linear,
-            rssi::db_to_linear(rssi::TAG_GAIN_DBI),
+            self.tag_gain_linear,
             lambda,
             ch.distance_m,
             ch.multipath_factor,
@@ -157,7 +159,7 @@ impl Model {
                 tx_power_dbm,
                 spec.cable_loss_db,
                 ch.gain_linear,
-                rssi::db_to_linear(rssi::TAG_GAIN_DBI),
+                self.tag_gain_linear,
                 lambda,
                 ch.distance_m,
                 ch.multipath_factor,

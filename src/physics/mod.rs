@@ -29,12 +29,14 @@ use crate::scenario::tagmem::{default_tid, parse_epc, parse_words};
 use crate::scenario::{
     AntennaSpec, Mount, Pose, PoseSample, Reflector, RobotSpec, Scenario, VerticalAxis,
 };
+use std::sync::Arc;
+
 use antenna::Lobe;
 use field::{FieldCache, GainTable};
 use geometry::wrap_pi;
 use hopping::HopSchedule;
 use motion::PolylineMotion;
-use multipath::Plane;
+use multipath::{Aim, Plane};
 use robot::RobotTrajectory;
 
 /// Position and boresight of an antenna at one instant.
@@ -89,9 +91,21 @@ struct AntennaModel {
     /// The gain pattern's constants.
     lobe: Lobe,
     /// The gain over the direction cosine, for the field bounds.
-    gains: GainTable,
+    /// (Shared by the antennas with the same lobe.)
+    gains: Arc<GainTable>,
     /// From this time (µs) on neither the antenna nor any tag moves (`u64::MAX`: never).
     rest_us: u64,
+    /// For a robot mount: the offset's yaw in radians and the cosine and sine of its pitch,
+    /// as [`Model::antenna_pose`] and [`geometry::boresight`] compute them.
+    mount_aim: Option<MountAim>,
+}
+
+/// The constant part of a robot-mounted antenna's boresight.
+#[derive(Clone, Copy, Debug)]
+struct MountAim {
+    yaw_rad: f64,
+    pitch_cos: f64,
+    pitch_sin: f64,
 }
 
 #[derive(Clone, Debug)]
@@ -116,6 +130,8 @@ pub struct Model {
     reflectors: Vec<Reflector>,
     /// The reflectors with usable normals, prepared for the channel.
     planes: Vec<Plane>,
+    /// The tag antenna's linear gain, [`rssi::db_to_linear`] of [`rssi::TAG_GAIN_DBI`].
+    tag_gain_linear: f64,
     robots: Vec<RobotTrajectory>,
     /// Field classifications per antenna ([`field`]); never changes a result.
     field_cache: FieldCache,
@@ -149,6 +165,7 @@ impl Model {
         let mut robot_ids: Vec<usize> = Vec::new();
         let mut robots = Vec::new();
         let mut antennas = Vec::new();
+        let mut tables = Vec::new();
         for a in spec.map_or(&[][..], |r| &r.antennas) {
             let mover = match &a.mount {
                 Mount::Fixed { pose } => Mover::Fixed(pose_from(pose)),
@@ -187,11 +204,23 @@ impl Model {
                         .map(|r: &RobotTrajectory| r.duration_s() + REST_MARGIN_S),
                 },
             };
+            let mount_aim = match &a.mount {
+                Mount::Robot { offset, .. } => {
+                    let pitch = offset.pitch_deg.to_radians();
+                    Some(MountAim {
+                        yaw_rad: offset.yaw_deg.to_radians(),
+                        pitch_cos: pitch.cos(),
+                        pitch_sin: pitch.sin(),
+                    })
+                }
+                _ => None,
+            };
             antennas.push(AntennaModel {
                 spec: a.clone(),
+                mount_aim,
                 mover,
                 lobe,
-                gains: GainTable::new(&lobe),
+                gains: shared_table(&mut tables, &lobe),
                 rest_us: still_s.map_or(u64::MAX, rest_time_us),
             });
         }
@@ -241,6 +270,7 @@ impl Model {
             tags,
             reflectors: scenario.reflectors.clone(),
             planes: multipath::planes(&scenario.reflectors),
+            tag_gain_linear: rssi::db_to_linear(rssi::TAG_GAIN_DBI),
             robots,
             field_cache,
         }
@@ -373,6 +403,45 @@ impl Model {
         }
     }
 
+    /// The [`Aim`] of the true pose of antenna `antenna` at `t_us`: `Aim::new` of
+    /// [`Model::antenna_pose`], the same numbers, with a robot mount's constant trigonometry
+    /// taken from [`MountAim`].
+    pub(super) fn aim(&self, antenna: u16, t_us: u64) -> Aim {
+        let robot_mount = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))
+            .and_then(|a| match (&a.mover, a.mount_aim) {
+                (
+                    Mover::Robot {
+                        robot,
+                        offset,
+                        vertical,
+                    },
+                    Some(m),
+                ) => Some((self.robots.get(*robot)?, offset, vertical, m)),
+                _ => None,
+            });
+        let Some((trajectory, offset, vertical, m)) = robot_mount else {
+            return Aim::new(&self.antenna_pose(antenna, t_us));
+        };
+        let t = seconds(t_us);
+        let [x, y, theta] = trajectory.true_pose(t);
+        let (s, c) = theta.sin_cos();
+        let [ox, oy, oz] = offset.position;
+        let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
+        let yaw = wrap_pi(theta + m.yaw_rad);
+        let boresight = [
+            m.pitch_cos * yaw.cos(),
+            m.pitch_cos * yaw.sin(),
+            m.pitch_sin,
+        ];
+        Aim {
+            position: [x + c * ox - s * oy, y + s * ox + c * oy, z],
+            boresight,
+            boresight_norm: geometry::norm(boresight),
+        }
+    }
+
     fn pose(&self, antenna: u16, t_us: u64, odometry: bool) -> AntennaPose {
         let origin = AntennaPose {
             position: [0.0; 3],
@@ -420,6 +489,17 @@ impl Model {
             }
         }
     }
+}
+
+/// The gain table of `lobe`: one of `tables` if one has that lobe, otherwise a new one,
+/// added to them.
+fn shared_table(tables: &mut Vec<(Lobe, Arc<GainTable>)>, lobe: &Lobe) -> Arc<GainTable> {
+    if let Some((_, t)) = tables.iter().find(|(l, _)| l == lobe) {
+        return t.clone();
+    }
+    let t = Arc::new(GainTable::new(lobe));
+    tables.push((*lobe, t.clone()));
+    t
 }
 
 /// A scenario pose in radians.

@@ -97,6 +97,11 @@ impl Iterator for SlotIter {
         }
         None
     }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = self.last.saturating_add(1).saturating_sub(self.next);
+        (0, usize::try_from(left).ok())
+    }
 }
 
 /// Midpoint of the success probability, in dB of forward-link margin above the tag's

@@ -358,3 +358,23 @@ fn model_can_be_shared_between_threads() {
     fn shareable<T: Send + Sync + Clone>() {}
     shareable::<Model>();
 }
+
+#[test]
+fn aim_is_that_of_the_true_pose() {
+    // The shortcut for robot mounts gives the very numbers of `Aim::new(antenna_pose)`.
+    for name in ["s1", "s2", "s3"] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures/scenarios")
+            .join(format!("{name}.json"));
+        let m = Model::new(&Scenario::load(&path).expect("fixture loads"), 0);
+        for antenna in 0..=m.antenna_count() + 1 {
+            for t in (0..400).map(|k| k * 612_345) {
+                assert_eq!(
+                    m.aim(antenna, t),
+                    multipath::Aim::new(&m.antenna_pose(antenna, t)),
+                    "{name}: antenna {antenna} at {t} µs"
+                );
+            }
+        }
+    }
+}

@@ -2,6 +2,7 @@
 //! aggregating reads of the same tag between two reports as an LLRP reader does.
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use llrp::params::*;
 
@@ -134,7 +135,65 @@ pub struct Content {
 #[derive(Debug, Default)]
 pub struct ReportBuffer {
     entries: Vec<TagReportData>,
-    index: HashMap<Key, usize>,
+    index: HashMap<Key, usize, BuildHasherDefault<FxHasher>>,
+}
+
+/// A fast non-cryptographic hasher for [`ReportBuffer`]'s index (the multiply-rotate scheme of
+/// rustc's FxHash, written here): the keys are EPCs and a few small fields from the reader's
+/// own scenario, so hash flooding is no concern, and SipHash cost a noticeable share of the
+/// report path. The index only finds entries; the report order never depends on it.
+#[derive(Clone, Copy, Debug, Default)]
+struct FxHasher {
+    hash: u64,
+}
+
+impl FxHasher {
+    /// Folds one word into the hash.
+    fn add(&mut self, word: u64) {
+        const K: u64 = 0x517c_c1b7_2722_0a95;
+        self.hash = (self.hash.rotate_left(5) ^ word).wrapping_mul(K);
+    }
+}
+
+impl Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        let mut chunks = bytes.chunks_exact(8);
+        for c in &mut chunks {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(c);
+            self.add(u64::from_le_bytes(w));
+        }
+        let rest = chunks.remainder();
+        if !rest.is_empty() {
+            let mut w = [0u8; 8];
+            w[..rest.len()].copy_from_slice(rest);
+            self.add(u64::from_le_bytes(w));
+        }
+    }
+
+    fn write_u8(&mut self, i: u8) {
+        self.add(u64::from(i));
+    }
+
+    fn write_u16(&mut self, i: u16) {
+        self.add(u64::from(i));
+    }
+
+    fn write_u32(&mut self, i: u32) {
+        self.add(u64::from(i));
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.add(i);
+    }
+
+    fn write_usize(&mut self, i: usize) {
+        self.add(i as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.hash
+    }
 }
 
 /// What makes two reads the same TagReportData: the EPC and every enabled field that could
