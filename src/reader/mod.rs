@@ -12,8 +12,11 @@
 mod access;
 pub mod caps;
 mod config;
+mod prefetch;
 pub mod report;
 mod rospec;
+#[cfg(test)]
+mod tests;
 
 use std::sync::Arc;
 

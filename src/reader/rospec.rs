@@ -9,12 +9,15 @@ use llrp::StatusCode;
 
 use super::access::AccessSpecs;
 use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
+use super::prefetch::{Prefetch, Slice};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
 use super::{field_error, ReaderProfile, MAX_ROSPECS};
-use crate::physics::Model;
+use crate::physics::{Model, Read};
 
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
 pub const ANTENNA_DWELL_US: u64 = 25_000;
+/// Antenna slices computed ahead at once (in parallel) when the running AISpec needs one.
+const PREFETCH_SLICES: usize = 64;
 /// Earliest restart of an Immediate ROSpec after its previous run began, µs (so a spec that
 /// completes at once cannot spin).
 const MIN_RESTART_US: u64 = 1_000;
@@ -170,6 +173,10 @@ pub struct Specs {
     pub default_trigger: u8,
     /// A halted spec's report trigger asks for its buffered reads to be reported now.
     flush_on_halt: bool,
+    /// Physics of the coming antenna slices, computed ahead in parallel.
+    prefetch: Prefetch,
+    /// Computes every slice on the spot (tests compare both ways).
+    no_prefetch: bool,
 }
 
 fn start_type(s: &RoSpec) -> u8 {
@@ -203,6 +210,12 @@ impl Specs {
                 r
             })
             .collect()
+    }
+
+    /// Computes antenna slices ahead in parallel (the default) or each on the spot.
+    #[cfg(test)]
+    pub fn set_prefetch(&mut self, on: bool) {
+        self.no_prefetch = !on;
     }
 
     /// Reads buffered so far, for GET_REPORT.
@@ -425,6 +438,7 @@ impl Specs {
     }
 
     fn begin(&mut self, i: usize, now: u64, events: &mut Vec<Event>) {
+        self.prefetch.clear();
         let s = &mut self.specs[i];
         s.state = SpecState::Active;
         s.next_start_us = None;
@@ -622,15 +636,7 @@ impl Specs {
         let antenna = antennas[run.antenna_pos % antennas.len().max(1)];
         let ips = ai.inventory_parameter_specs.first();
         let ips_id = ips.map_or(0, |p| p.inventory_parameter_spec_id);
-        let power = ips
-            .and_then(|p| {
-                p.antenna_configuration
-                    .iter()
-                    .find(|c| c.antenna_id == antenna || c.antenna_id == 0)
-                    .and_then(|c| c.rf_transmitter.as_ref())
-                    .and_then(|tx| super::caps::power_dbm(tx.transmit_power))
-            })
-            .or_else(|| ctx.config.tx_power_dbm(antenna));
+        let power = antenna_power(ips, ctx.config, antenna);
         // ImpinjFixedFrequencyList (mode 2, channel list) in the ROSpec's or the reader's
         // antenna configuration restricts the channels, which rotate at the region's dwell.
         let channels = fixed_channel_list(ips, ctx.config, antenna);
@@ -648,7 +654,19 @@ impl Specs {
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
         if end > t {
-            let reads = ctx.model.inventory_on(antenna, t, end, power, channel);
+            let slice = Slice {
+                antenna,
+                power_dbm: power,
+                t0_us: t,
+                t1_us: end,
+            };
+            let reads = match channel {
+                Some(_) => ctx.model.inventory_on(antenna, t, end, power, channel),
+                None => {
+                    let until = [ai_end, ro_end].into_iter().flatten().min();
+                    self.prefetched(ctx, &slice, &run, &antennas, ips, until)
+                }
+            };
             for r in reads {
                 let (op_spec_results, access_spec_id) =
                     ctx.access.apply(ctx.model, r.tag, antenna, ro_id);
@@ -746,6 +764,52 @@ impl Specs {
         reached
     }
 
+    /// The reads of `slice` from the prefetch; on a miss, prefetches the slices the run will
+    /// ask for next (this one first, then the antennas in turn, up to the AISpec's or ROSpec's
+    /// end when known) and takes this one from them.
+    fn prefetched(
+        &mut self,
+        ctx: &RunContext<'_>,
+        slice: &Slice,
+        run: &Run,
+        antennas: &[u16],
+        ips: Option<&InventoryParameterSpec>,
+        until: Option<u64>,
+    ) -> Vec<Read> {
+        if self.no_prefetch {
+            return direct(ctx.model, slice);
+        }
+        if let Some(reads) = self.prefetch.take(slice) {
+            return reads;
+        }
+        let mut plan = vec![Slice {
+            t1_us: run.slice_end_us.max(slice.t1_us),
+            ..*slice
+        }];
+        let mut t0 = plan[0].t1_us;
+        for k in 1..PREFETCH_SLICES {
+            if until.is_some_and(|u| t0 >= u) {
+                break;
+            }
+            let antenna = antennas[(run.antenna_pos + k) % antennas.len().max(1)];
+            // A pinned channel list is computed when asked for.
+            if !fixed_channel_list(ips, ctx.config, antenna).is_empty() {
+                break;
+            }
+            plan.push(Slice {
+                antenna,
+                power_dbm: antenna_power(ips, ctx.config, antenna),
+                t0_us: t0,
+                t1_us: t0 + ANTENNA_DWELL_US,
+            });
+            t0 += ANTENNA_DWELL_US;
+        }
+        self.prefetch.fill(ctx.model, plan);
+        self.prefetch
+            .take(slice)
+            .unwrap_or_else(|| direct(ctx.model, slice))
+    }
+
     fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
         let s = &self.specs[a];
         let idx = s.run.as_ref().map_or(0, |r| r.spec_idx);
@@ -779,6 +843,34 @@ impl Specs {
             },
         }));
     }
+}
+
+/// The reads of `slice` computed on the spot.
+fn direct(model: &Model, slice: &Slice) -> Vec<Read> {
+    model.inventory_on(
+        slice.antenna,
+        slice.t0_us,
+        slice.t1_us,
+        slice.power_dbm,
+        None,
+    )
+}
+
+/// Transmit power of `antenna`: the ROSpec's RFTransmitter for it, else the reader's
+/// configuration (`None`: the scenario's).
+fn antenna_power(
+    ips: Option<&InventoryParameterSpec>,
+    config: &ReaderConfig,
+    antenna: u16,
+) -> Option<f64> {
+    ips.and_then(|p| {
+        p.antenna_configuration
+            .iter()
+            .find(|c| c.antenna_id == antenna || c.antenna_id == 0)
+            .and_then(|c| c.rf_transmitter.as_ref())
+            .and_then(|tx| super::caps::power_dbm(tx.transmit_power))
+    })
+    .or_else(|| config.tx_power_dbm(antenna))
 }
 
 /// The channel list of an ImpinjFixedFrequencyList in mode 2 (Channel_List) configured for

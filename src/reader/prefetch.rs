@@ -1,0 +1,142 @@
+//! Physics computed ahead: the coming antenna slices of a running AISpec, evaluated in
+//! parallel, so that `--speed max` uses every core for the channel model.
+//!
+//! Sound because the physics is a pure function of (antenna, time window, transmit power,
+//! channel) and a window split in two gives the same reads as the whole
+//! ([`Model::inventory_on`]): the reads of any window inside a prefetched one are the
+//! prefetched reads whose time falls in it. A request no prefetched window covers (another
+//! power, a pinned channel, a slice the plan did not foresee) is computed directly, so the
+//! prefetch changes only when the work is done, never what is read.
+
+use std::collections::VecDeque;
+
+use rayon::prelude::*;
+
+use crate::physics::{Model, Read};
+
+/// One antenna's share of simulated time, as the running AISpec will ask for it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Slice {
+    /// Antenna port, 1-based.
+    pub antenna: u16,
+    /// Transmit power the AISpec uses on it (`None`: the scenario's).
+    pub power_dbm: Option<f64>,
+    /// Start of the window, simulated µs.
+    pub t0_us: u64,
+    /// End of the window (exclusive), simulated µs.
+    pub t1_us: u64,
+}
+
+#[derive(Debug)]
+struct Window {
+    slice: Slice,
+    reads: Vec<Read>,
+}
+
+/// Prefetched windows in time order.
+#[derive(Debug, Default)]
+pub struct Prefetch {
+    windows: VecDeque<Window>,
+}
+
+fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
+    a.map(f64::to_bits) == b.map(f64::to_bits)
+}
+
+impl Prefetch {
+    /// Forgets every prefetched window (a new run begins).
+    pub fn clear(&mut self) {
+        self.windows.clear();
+    }
+
+    /// The reads of `slice` if a prefetched window covers it; windows wholly before it are
+    /// dropped.
+    pub fn take(&mut self, slice: &Slice) -> Option<Vec<Read>> {
+        while self
+            .windows
+            .front()
+            .is_some_and(|w| w.slice.t1_us <= slice.t0_us)
+        {
+            self.windows.pop_front();
+        }
+        let w = self.windows.iter().find(|w| {
+            w.slice.antenna == slice.antenna
+                && same_power(w.slice.power_dbm, slice.power_dbm)
+                && w.slice.t0_us <= slice.t0_us
+                && slice.t1_us <= w.slice.t1_us
+        })?;
+        let lo = w.reads.partition_point(|r| r.time_us < slice.t0_us);
+        let hi = w.reads.partition_point(|r| r.time_us < slice.t1_us);
+        Some(w.reads[lo..hi].to_vec())
+    }
+
+    /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
+    /// what was prefetched before.
+    pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
+        let windows: Vec<Window> = plan
+            .into_par_iter()
+            .map(|slice| Window {
+                reads: model.inventory_on(
+                    slice.antenna,
+                    slice.t0_us,
+                    slice.t1_us,
+                    slice.power_dbm,
+                    None,
+                ),
+                slice,
+            })
+            .collect();
+        self.windows = windows.into();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    #[test]
+    fn sub_windows_of_a_prefetch_equal_direct_computation() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+        let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
+        let m = Model::new(&s, 0);
+        let plan: Vec<Slice> = (0..32u64)
+            .map(|k| Slice {
+                antenna: (k % 8) as u16 + 1,
+                power_dbm: None,
+                t0_us: 60_000_000 + k * 25_000,
+                t1_us: 60_000_000 + (k + 1) * 25_000,
+            })
+            .collect();
+        let mut p = Prefetch::default();
+        p.fill(&m, plan.clone());
+        let mut total = 0;
+        for s in &plan {
+            // Each slice asked for in two pieces, as a step cut short by `to` would.
+            let mid = s.t0_us + 10_001;
+            for (t0, t1) in [(s.t0_us, mid), (mid, s.t1_us)] {
+                let piece = Slice {
+                    t0_us: t0,
+                    t1_us: t1,
+                    ..*s
+                };
+                let got = p.take(&piece).expect("covered by the prefetch");
+                let direct = m.inventory_on(s.antenna, t0, t1, None, None);
+                assert_eq!(got, direct);
+                total += got.len();
+            }
+        }
+        assert!(
+            total > 100,
+            "the robot passes the banners then: {total} reads"
+        );
+        let other_power = Slice {
+            power_dbm: Some(20.0),
+            ..plan[31]
+        };
+        assert!(
+            p.take(&other_power).is_none(),
+            "another power is not covered"
+        );
+    }
+}

@@ -1,0 +1,131 @@
+//! Reader-level checks that need the whole state machine.
+
+use std::sync::Arc;
+
+use llrp::message::*;
+use llrp::params::*;
+use llrp::Message;
+
+use super::{Output, Reader, ReaderProfile};
+use crate::physics::Model;
+use crate::scenario::Scenario;
+
+fn s2_reader() -> Reader {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+    let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
+    let model = Arc::new(Model::new(&s, 0));
+    let profile = ReaderProfile::from_scenario(&s, 0, &model);
+    Reader::new(profile, model, 1_700_000_000_000_000)
+}
+
+fn add_rospec(antennas: Vec<u16>, power_index: u16, trigger: u8, n: u16) -> Message {
+    let spec = RoSpec {
+        ro_spec_id: 1,
+        ro_boundary_spec: RoBoundarySpec {
+            ro_spec_start_trigger: RoSpecStartTrigger {
+                ro_spec_start_trigger_type: 1,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        specs: vec![SpecParameter::AiSpec(AiSpec {
+            antenna_ids: antennas,
+            inventory_parameter_specs: vec![InventoryParameterSpec {
+                inventory_parameter_spec_id: 1,
+                protocol_id: 1,
+                antenna_configuration: vec![AntennaConfiguration {
+                    antenna_id: 3,
+                    rf_transmitter: Some(RfTransmitter {
+                        hop_table_id: 1,
+                        channel_index: 1,
+                        transmit_power: power_index,
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                }],
+                ..Default::default()
+            }],
+            ..Default::default()
+        })],
+        ro_report_spec: Some(RoReportSpec {
+            ro_report_trigger: trigger,
+            n,
+            tag_report_content_selector: TagReportContentSelector {
+                enable_antenna_id: true,
+                enable_channel_index: true,
+                enable_peak_rssi: true,
+                enable_first_seen_timestamp: true,
+                enable_last_seen_timestamp: true,
+                enable_tag_seen_count: true,
+                ..Default::default()
+            },
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    Message {
+        version: 1,
+        id: 10,
+        body: MessageBody::AddRospec(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
+    }
+}
+
+/// Everything a reader sends over `until_us` of simulated time, advanced in uneven steps.
+fn session(prefetch: bool, spec: Message, until_us: u64) -> Vec<Output> {
+    let mut r = s2_reader();
+    r.specs.set_prefetch(prefetch);
+    let mut out = r.connect(0, 0);
+    out.extend(r.handle(spec, 0, 0));
+    let enable = Message {
+        version: 1,
+        id: 11,
+        body: MessageBody::EnableRospec(EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        }),
+    };
+    out.extend(r.handle(enable, 0, 0));
+    let steps = [37_000, 100_000, 3_000, 250_000, 24_999, 1_000_000];
+    let mut t = 0;
+    let mut k = 0;
+    while t < until_us {
+        t += steps[k % steps.len()];
+        k += 1;
+        out.extend(r.advance(t, 0));
+    }
+    out
+}
+
+fn reads(out: &[Output]) -> usize {
+    out.iter()
+        .map(|o| match o {
+            Output::Send(Message {
+                body: MessageBody::RoAccessReport(r),
+                ..
+            }) => r.tag_report_data.len(),
+            _ => 0,
+        })
+        .sum()
+}
+
+#[test]
+fn prefetched_physics_sends_exactly_what_direct_physics_sends() {
+    // All antennas with a per-antenna power (antenna 3 at index 1, the lowest), one report per
+    // read; then N = 100 on two antennas. The robot drives past the banners meanwhile.
+    for spec in [
+        add_rospec(vec![0], 1, 2, 1),
+        add_rospec(vec![2, 3], 1, 1, 100),
+    ] {
+        let direct = session(false, spec.clone(), 120_000_000);
+        let prefetched = session(true, spec, 120_000_000);
+        assert!(reads(&direct) > 1_000, "{} reads", reads(&direct));
+        assert_eq!(direct.len(), prefetched.len());
+        assert!(
+            direct == prefetched,
+            "the prefetch changed what the reader sends"
+        );
+    }
+}
