@@ -16,7 +16,7 @@
 //! field of each channel is evaluated once.
 //!
 //! An undecided tag drawn in a bucket is first tested with the antenna's exact position then:
-//! the phasor sum with tabulated gains and polynomial phase factors, whose error is bounded,
+//! the phasor sum with tabulated gain bounds, whose error is bounded,
 //! decides unless the amplitude lies within that bound of the threshold, when the exact sum of
 //! [`super::multipath`] does.
 //!
@@ -34,7 +34,7 @@ use rand::Rng;
 use super::antenna::Lobe;
 use super::geometry::{add_scaled, distance, dot, norm, sub, Vec3};
 use super::multipath::{power_gain_with, Aim, Channel, Plane, MIN_DISTANCE_M};
-use super::{rssi, Model, Mover};
+use super::{fastmath, rssi, Model, Mover};
 
 /// Longest interval one classification covers, µs: a power-of-two number of buckets, so the
 /// halves of an interval are whole buckets down to one.
@@ -328,8 +328,8 @@ struct NearMirror {
 }
 
 /// The antenna at a bucket start, prepared for a fast field test: the phasor sum of
-/// [`super::multipath::channel_with`] evaluated with tabulated gains and a short polynomial
-/// for the phase factors, with a certified bound on its error. It decides whenever the sum is
+/// [`super::multipath::channel_with`] evaluated with the gain table's bounds (the phase
+/// factors of [`fastmath::cis`], as there), with a certified bound on its error. It decides whenever the sum is
 /// clear of the threshold by more than that bound and leaves the rest to the exact sum.
 #[derive(Clone, Debug, Default)]
 struct Near {
@@ -345,23 +345,8 @@ struct Near {
     mirrors: Vec<NearMirror>,
 }
 
-/// Largest phase (rad) [`cis`] handles.
-const CIS_MAX_RAD: f64 = 1e6;
-
-/// (cos x, sin x) for |x| ≤ [`CIS_MAX_RAD`], each within 1e-6 (degree-8 and degree-7 Taylor
-/// polynomials after reduction by π/2; the remainders are below 4e-7 and the reduction error
-/// below 1e-9 in that range).
-fn cis(x: f64) -> (f64, f64) {
-    let n = (x * std::f64::consts::FRAC_2_PI).round();
-    let r = x - n * std::f64::consts::FRAC_PI_2;
-    let r2 = r * r;
-    let c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40320.0))));
-    let s = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0))));
-    // n is a whole number of magnitude below 1e6: its quadrant is exact (two's complement
-    // keeps n mod 4 in the low bits). A lookup rather than a branch: the quadrant is random.
-    let q = (n as i64 & 3) as usize;
-    ([c, -s, -c, s][q], [s, c, -s, -c][q])
-}
+/// Largest phase (rad) the fast test handles (within [`fastmath::cis`]'s reduced range).
+const CIS_MAX_RAD: f64 = 1e4;
 
 impl Near {
     /// Prepares for `aim` on `wavelength_m`.
@@ -431,12 +416,14 @@ impl Near {
             let eta = 1e-12 + rel * w_inv * inv_l * 4.0;
             let (glo, ghi) = (gains.below(ci - eta), gains.above(ci + eta));
             let a = m.plane.coefficient.abs() * inv_l;
-            let (c, s) = cis(-self.k * (l - dist));
+            let (c, s) = fastmath::cis(-self.k * (l - dist));
             // H carries −Γ (the π flip).
             let mid = -m.plane.coefficient * (glo + ghi) * 0.5 * inv_l;
             re += mid * c;
             im += mid * s;
-            let phase_err = 1e-6 + 1e-14 * self.k * (l + dist);
+            // Both sums take their phase factors from `fastmath::cis` (within 1e-15 of sin
+            // and cos), of arguments that differ by rounding.
+            let phase_err = 1e-12 + 1e-14 * self.k * (l + dist);
             err += (ghi - glo) * 0.5 * a + ghi * a * 2.0 * phase_err;
             mag += ghi * a;
         }
@@ -626,8 +613,13 @@ impl Model {
         {
             return known;
         }
-        power_gain_with(&aim, &a.lobe, position, &self.planes, bucket.wavelength_m)
-            >= bucket.threshold
+        power_gain_with(
+            &aim,
+            &a.pattern,
+            position,
+            &self.planes,
+            bucket.wavelength_m,
+        ) >= bucket.threshold
     }
 
     /// The classification of `antenna` holding at bucket start `t_us`: cached, or made and
@@ -830,6 +822,7 @@ pub(super) fn reach_m(spec: &crate::scenario::AntennaSpec) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::physics::antenna::Pattern;
     use crate::scenario::Scenario;
 
     /// Exact membership of `tag` at `t_us` on a wavelength, as listing the field in full does.
@@ -1046,25 +1039,6 @@ mod tests {
     }
 
     #[test]
-    fn cis_is_within_its_bound() {
-        for i in -20_000..=20_000 {
-            let x = f64::from(i) * 0.0123 + 0.5e-3 * f64::from(i % 7);
-            let (c, s) = cis(x);
-            assert!(
-                (c - x.cos()).abs() < 1e-6 && (s - x.sin()).abs() < 1e-6,
-                "{x}"
-            );
-        }
-        for x in [1e5 + 0.3, -7.5e5, 9.99e5] {
-            let (c, s) = cis(x);
-            assert!(
-                (c - x.cos()).abs() < 1e-6 && (s - x.sin()).abs() < 1e-6,
-                "{x}"
-            );
-        }
-    }
-
-    #[test]
     fn fast_field_test_agrees_with_the_phasor_sum() {
         // Antennas of several lobes at several poses, tags all around them, sloped and
         // axis-aligned reflectors; thresholds at and around each tag's exact amplitude.
@@ -1088,6 +1062,7 @@ mod tests {
         for (gain_dbi, bw) in [(6.0, 65.0), (4.77, 70.0), (7.0, 30.0), (3.0, 240.0)] {
             let lobe = Lobe::new(gain_dbi, bw);
             let gains = GainTable::new(&lobe);
+            let pattern = Pattern::new(&lobe);
             for (k, yaw) in [0.0f64, 1.3, -2.2, 3.0].into_iter().enumerate() {
                 let k = k as f64;
                 let pose = crate::physics::AntennaPose {
@@ -1107,7 +1082,7 @@ mod tests {
                             0.05 + (f * 0.193) % 2.5,
                         ];
                         let dist = distance(aim.position, q);
-                        let power = power_gain_with(&aim, &lobe, q, &planes, lambda);
+                        let power = power_gain_with(&aim, &pattern, q, &planes, lambda);
                         let amplitude = power.sqrt();
                         for factor in [0.3, 0.9, 0.99, 0.999, 1.0, 1.001, 1.01, 1.1, 3.0] {
                             let threshold = amplitude * factor;

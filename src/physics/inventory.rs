@@ -104,7 +104,7 @@ impl Model {
         tx_power_dbm: f64,
     ) -> (Channel, f64) {
         let a = &self.antennas[usize::from(antenna) - 1];
-        let ch = multipath::channel_with(aim, &a.lobe, position, &self.planes, lambda);
+        let ch = multipath::channel_with(aim, &a.pattern, position, &self.planes, lambda);
         let p_tag = rssi::tag_power_dbm(
             tx_power_dbm,
             a.spec.cable_loss_db,

@@ -2,7 +2,8 @@
 //! antenna's mirror image to the tag, with the plane's reflection coefficient and a π phase
 //! flip; the paths are summed as complex phasors (\[G\] eq. 1's 1 + Σ H_i).
 
-use super::antenna::Lobe;
+use super::antenna::{Lobe, Pattern};
+use super::fastmath;
 use super::geometry::{add_scaled, boresight, distance, dot, norm, sub, Vec3};
 use super::AntennaPose;
 use crate::scenario::Reflector;
@@ -148,7 +149,7 @@ pub fn channel(
 ) -> Channel {
     channel_with(
         &Aim::new(pose),
-        &Lobe::new(gain_dbi, beamwidth_deg),
+        &Pattern::new(&Lobe::new(gain_dbi, beamwidth_deg)),
         tag,
         &planes(reflectors),
         wavelength_m,
@@ -189,19 +190,25 @@ impl Aim {
 }
 
 /// [`channel`] with the pose, lobe and reflectors prepared.
+///
+/// Evaluated with cheap forms of the exact functions: the lobe through [`Pattern`] (relative
+/// error ≤ 1e-12 of the amplitude gain), the phase factors through [`fastmath::cis`] (≤ 1e-15
+/// on each component) and the argument of the sum through [`fastmath::atan2`] (≤ 2e-15 rad),
+/// so the gain, the multipath factor and the delay are those of `powf`, `sin_cos` and `atan2`
+/// to within about 1e-12 (relative) and 1e-14 rad.
 pub fn channel_with(
     aim: &Aim,
-    lobe: &Lobe,
+    pattern: &Pattern,
     tag: Vec3,
     planes: &[Plane],
     wavelength_m: f64,
 ) -> Channel {
-    let (d, g0, sum, k) = phasors(aim, lobe, tag, planes, wavelength_m);
+    let (d, a0, sum, k) = phasors(aim, pattern, tag, planes, wavelength_m);
     Channel {
         distance_m: d,
-        gain_linear: g0,
+        gain_linear: a0 * a0,
         multipath_factor: (sum.re * sum.re + sum.im * sum.im).sqrt(),
-        delay_rad: 2.0 * k * d - 2.0 * sum.arg(),
+        delay_rad: 2.0 * k * d - 2.0 * fastmath::atan2(sum.im, sum.re),
     }
 }
 
@@ -209,41 +216,72 @@ pub fn channel_with(
 /// constants), without the phase.
 pub fn power_gain_with(
     aim: &Aim,
-    lobe: &Lobe,
+    pattern: &Pattern,
     tag: Vec3,
     planes: &[Plane],
     wavelength_m: f64,
 ) -> f64 {
-    let (d, g0, sum, _) = phasors(aim, lobe, tag, planes, wavelength_m);
-    g0 * (sum.re * sum.re + sum.im * sum.im) / (d * d)
+    let (d, a0, sum, _) = phasors(aim, pattern, tag, planes, wavelength_m);
+    let a = a0 / d;
+    a * a * (sum.re * sum.re + sum.im * sum.im)
 }
 
-/// Distance D (clamped), direct gain g₀, the sum 1 + Σ Hᵢ and the wave number.
+/// Distance D (clamped), the direct amplitude gain √g₀, the sum 1 + Σ Hᵢ and the wave number.
+///
+/// The geometry of [`image_path`] without working out the reflection point: with
+/// u = tag − image, l = |u| and s = da/(da + dt), the reflection point seen from the antenna
+/// is w = −2·da·n̂ + s·u, of length s·l (it is as far from the antenna as from its image), so
+/// the cosine of its off-axis angle is (−2·(b·n̂)·(da + dt) + b·u)/(|b|·l): the same numbers
+/// up to rounding.
 fn phasors(
     aim: &Aim,
-    lobe: &Lobe,
+    pattern: &Pattern,
     tag: Vec3,
     planes: &[Plane],
     wavelength_m: f64,
 ) -> (f64, f64, Complex, f64) {
-    let v = sub(tag, aim.position);
+    let p = aim.position;
+    let b = aim.boresight;
+    let v = sub(tag, p);
     let dist = norm(v);
     let d = dist.max(MIN_DISTANCE_M);
-    let g0 = lobe.gain_cos(aim.cos_of(v, dist));
+    let a0 = pattern.amplitude_cos(aim.cos_of(v, dist));
     let k = std::f64::consts::TAU / wavelength_m;
     let mut sum = Complex { re: 1.0, im: 0.0 };
-    for plane in planes {
-        let Some(p) = image_path(aim.position, tag, plane) else {
-            continue;
-        };
-        let w = sub(p.reflection_point, aim.position);
-        let gi = lobe.gain_cos(aim.cos_of(w, norm(w)));
-        let amplitude = p.coefficient * (gi / g0).sqrt() * d / p.length_m.max(MIN_DISTANCE_M);
-        let h = Complex::from_polar(amplitude, -k * (p.length_m - d));
-        sum.re += h.re;
-        sum.im += h.im;
+    if planes.is_empty() {
+        return (d, a0, sum, k);
     }
-    (d, g0, sum, k)
+    let inv_bn = 1.0 / aim.boresight_norm;
+    // Each path's amplitude relative to the direct one: Γ·(aᵢ/a₀)·(D/dᵢ).
+    let scale = d / a0;
+    for plane in planes {
+        let n = plane.unit;
+        let da = dot(sub(p, plane.point), n);
+        let dt = dot(sub(tag, plane.point), n);
+        // The same test as `image_path`.
+        if da * dt <= 0.0 {
+            continue;
+        }
+        let image = add_scaled(p, -2.0 * da, n);
+        let u = sub(tag, image);
+        let l = norm(u);
+        let inv_l = 1.0 / l;
+        let c = (-2.0 * dot(b, n) * (da + dt) + dot(b, u)) * inv_l * inv_bn;
+        // A non-finite cosine counts as boresight, as in `Aim::cos_of`.
+        let c = if c.is_finite() { c } else { 1.0 };
+        let ai = pattern.amplitude_cos(c);
+        // H carries −Γ (the π flip).
+        let inv_length = if l >= MIN_DISTANCE_M {
+            inv_l
+        } else {
+            1.0 / MIN_DISTANCE_M
+        };
+        let amplitude = -plane.coefficient * ai * scale * inv_length;
+        let (cos, sin) = fastmath::cis(-k * (l - d));
+        sum.re += amplitude * cos;
+        sum.im += amplitude * sin;
+    }
+    (d, a0, sum, k)
 }
 
 #[cfg(test)]

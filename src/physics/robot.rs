@@ -184,7 +184,8 @@ fn interpolate_raw(samples: &[[f64; 3]], dt: f64, t_s: f64) -> [f64; 3] {
     } else {
         0.0
     };
-    let i = x.floor() as usize;
+    // x ≥ 0: truncation is floor (without the library call of `f64::floor`).
+    let i = x as usize;
     if i >= last {
         samples[last]
     } else {

@@ -80,9 +80,9 @@ pub fn tag_power_dbm(
     multipath_factor: f64,
 ) -> f64 {
     let a = free_space_amplitude(wavelength_m, distance_m) * multipath_factor;
+    // One logarithm: 10·log10(G_R·G_T) + 20·log10(a) = 10·log10(G_R·G_T·a²).
     let p = tx_power_dbm - cable_loss_db
-        + 10.0 * (reader_gain_linear * tag_gain_linear).log10()
-        + 20.0 * a.log10();
+        + 10.0 * (reader_gain_linear * tag_gain_linear * a * a).log10();
     if p.is_nan() {
         f64::NEG_INFINITY
     } else {
