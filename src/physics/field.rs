@@ -16,9 +16,9 @@
 //! field of each channel is evaluated once.
 //!
 //! An undecided tag drawn in a bucket is first tested with the antenna's exact position then:
-//! the phasor sum with tabulated gain bounds, whose error is bounded,
-//! decides unless the amplitude lies within that bound of the threshold, when the exact sum of
-//! [`super::multipath`] does.
+//! the phasor sum with the gain table's bounds (and the exact sum's phase factors), whose
+//! error is bounded, decides unless the amplitude lies within that bound of the threshold,
+//! when the exact sum of [`super::multipath`] does.
 //!
 //! A draw picks uniformly among the bucket's in and undecided tags and draws again while it
 //! hits one that is not powered (rejection sampling): every tag of the field is equally likely,
@@ -142,11 +142,11 @@ impl GainTable {
         } else {
             Self::index(c)
         };
-        // 0 ≤ x ≤ TABLE_STEPS: truncation is floor (through i64, a single instruction); step
-        // up unless x is whole.
-        let i = x as i64;
-        let i = if (i as f64) < x { i + 1 } else { i };
-        self.0[(i as usize).min(TABLE_STEPS)] * (1.0 + SLACK_REL)
+        // 0 ≤ x ≤ TABLE_STEPS: truncation is floor (through i64, a single instruction); the
+        // next entry is at least the one at ⌈x⌉ (the table never decreases), without testing
+        // whether x is whole.
+        let i = x as i64 as usize + 1;
+        self.0[i.min(TABLE_STEPS)] * (1.0 + SLACK_REL)
     }
 
     /// At most the amplitude gain at any direction cosine ≥ `c`.
@@ -470,6 +470,9 @@ pub(super) struct Bucket {
     near: Near,
     /// The classification when nothing moves any more (its links serve the attempts).
     rest: Option<Arc<Classified>>,
+    /// The antenna, power bits and [`amplitude_threshold`] of the last bucket prepared (its
+    /// `powf` once per antenna and power rather than once per bucket).
+    base: Option<(u16, u64, f64)>,
 }
 
 impl Model {
@@ -531,7 +534,16 @@ impl Model {
         bucket.antenna = antenna;
         bucket.t_us = t_us;
         bucket.wavelength_m = self.wavelength_m(channel);
-        bucket.amplitude = amplitude_threshold(spec, tx_power_dbm) / bucket.wavelength_m;
+        let key = (antenna, tx_power_dbm.to_bits());
+        let base = match bucket.base {
+            Some((a, tx, base)) if (a, tx) == key => base,
+            _ => {
+                let base = amplitude_threshold(spec, tx_power_dbm);
+                bucket.base = Some((key.0, key.1, base));
+                base
+            }
+        };
+        bucket.amplitude = base / bucket.wavelength_m;
         bucket.threshold = bucket.amplitude.powi(2);
         bucket.reach = reach_m(spec);
         bucket.aim = None;

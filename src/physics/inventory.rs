@@ -77,15 +77,32 @@ impl Model {
         let slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
         // At most one read per slot; a long window grows the vector as it goes.
         let mut reads = Vec::with_capacity(slots.size_hint().1.unwrap_or(0).min(1 << 12));
+        // The dwell [start, end) of the last channel looked up, and that channel: a new one
+        // (a 64-bit division) only when the time leaves it.
+        let mut dwell = (1, 0, 1);
+        let mut channel_at = |t: u64| {
+            if let Some(c) = pinned {
+                return c;
+            }
+            if !(dwell.0 <= t && t < dwell.1) {
+                let start = self.hops.dwell_start(t);
+                dwell = (
+                    start,
+                    start.saturating_add(self.hops.dwell_us),
+                    self.channel_at(t),
+                );
+            }
+            dwell.2
+        };
         for slot in slots {
             let b = slot.time_us / FIELD_BUCKET_US;
             if bucket_now != b {
                 let start = b * FIELD_BUCKET_US;
-                let ch = pinned.unwrap_or_else(|| self.channel_at(start));
+                let ch = channel_at(start);
                 self.open_bucket(antenna, tx, start, ch, &mut classified, &mut bucket);
                 bucket_now = b;
             }
-            let ch = pinned.unwrap_or_else(|| self.channel_at(slot.time_us));
+            let ch = channel_at(slot.time_us);
             if let Some(read) = self.attempt(antenna, tx, ch, slot, &mut bucket) {
                 reads.push(read);
             }
