@@ -138,6 +138,8 @@ pub struct Model {
     robots: Vec<RobotTrajectory>,
     /// Field classifications per antenna ([`field`]); never changes a result.
     field_cache: FieldCache,
+    /// `seed::mix(&[seed, PHASE_OFFSET, reader])`: the phase offsets' common prefix.
+    phase_prefix: u64,
 }
 
 /// Every distinct robot of the scenario, in order of first appearance over all readers, so
@@ -279,6 +281,7 @@ impl Model {
             tag_gain_linear: rssi::db_to_linear(rssi::TAG_GAIN_DBI),
             robots,
             field_cache,
+            phase_prefix: seed::mix(&[scenario.seed, seed::domain::PHASE_OFFSET, reader as u64]),
         }
     }
 
@@ -367,14 +370,12 @@ impl Model {
         match given {
             Some(&phi0) => phi0,
             None => {
-                let h = seed::mix(&[
-                    self.seed,
-                    seed::domain::PHASE_OFFSET,
-                    self.reader as u64,
-                    u64::from(antenna),
-                    tag as u64,
-                    u64::from(channel),
-                ]);
+                // seed::mix(&[seed, PHASE_OFFSET, reader, antenna, tag, channel]), its
+                // prefix mixed once.
+                let h = seed::mix_on(
+                    self.phase_prefix,
+                    &[u64::from(antenna), tag as u64, u64::from(channel)],
+                );
                 std::f64::consts::TAU * seed::unit(h)
             }
         }

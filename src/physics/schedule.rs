@@ -49,7 +49,7 @@ pub fn slot_iter(key: [u64; 3], reads_per_second: f64, t0_us: u64, t1_us: u64) -
         (1, 0)
     };
     SlotIter {
-        key,
+        prefix: seed::mix(&[key[0], seed::domain::SLOT, key[1], key[2]]),
         period,
         t0_us,
         t1_us,
@@ -61,7 +61,8 @@ pub fn slot_iter(key: [u64; 3], reads_per_second: f64, t0_us: u64, t1_us: u64) -
 /// Iterator over the attempt slots of a window; see [`slot_iter`].
 #[derive(Clone, Debug)]
 pub struct SlotIter {
-    key: [u64; 3],
+    /// The slot streams' seed words before the slot number, mixed once.
+    prefix: u64,
     period: f64,
     t0_us: u64,
     t1_us: u64,
@@ -77,8 +78,8 @@ impl Iterator for SlotIter {
         while self.next <= self.last {
             let k = self.next;
             self.next += 1;
-            let key = self.key;
-            let mut rng = seed::stream(&[key[0], seed::domain::SLOT, key[1], key[2], k]);
+            // seed::stream(&[key[0], SLOT, key[1], key[2], k]), its prefix mixed once.
+            let mut rng = seed::stream_on(self.prefix, &[k]);
             let jitter: f64 = rng.gen();
             let t = (k as f64 + jitter) * self.period;
             if !(t.is_finite() && t >= 0.0) {

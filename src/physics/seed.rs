@@ -19,6 +19,14 @@ pub fn mix(words: &[u64]) -> u64 {
         .fold(0x6C6C_7270_2D73_696D, |h, &w| splitmix64(h ^ splitmix64(w)))
 }
 
+/// Continues [`mix`]: `mix_on(mix(a), b)` is `mix` of `a` followed by `b`, so a prefix of
+/// words common to many draws is mixed once.
+pub fn mix_on(prefix: u64, words: &[u64]) -> u64 {
+    words
+        .iter()
+        .fold(prefix, |h, &w| splitmix64(h ^ splitmix64(w)))
+}
+
 /// A uniform number in `[0, 1)` from a hash.
 pub fn unit(hash: u64) -> f64 {
     (hash >> 11) as f64 / (1u64 << 53) as f64
@@ -33,6 +41,13 @@ pub fn rng(words: &[u64]) -> ChaCha8Rng {
 /// draws a handful of numbers (ChaCha8 would spend most of its time setting up).
 pub fn stream(words: &[u64]) -> Stream {
     Stream { state: mix(words) }
+}
+
+/// [`stream`] of a prefix already mixed ([`mix_on`]) followed by `words`.
+pub fn stream_on(prefix: u64, words: &[u64]) -> Stream {
+    Stream {
+        state: mix_on(prefix, words),
+    }
 }
 
 /// The SplitMix64 sequence from a 64-bit state ([`stream`]).
@@ -96,6 +111,16 @@ mod tests {
         stream(&[1, 2, 3]).fill_bytes(&mut bytes);
         assert_eq!(bytes[..8], xs[0].to_le_bytes());
         assert_eq!(bytes[8..], xs[1].to_le_bytes()[..3]);
+    }
+
+    #[test]
+    fn mixing_on_a_prefix_is_mixing_the_whole() {
+        let words = [7, 1, 0, 3, 123_456_789];
+        for split in 0..=words.len() {
+            let (a, b) = words.split_at(split);
+            assert_eq!(mix_on(mix(a), b), mix(&words));
+            assert_eq!(stream_on(mix(a), b), stream(&words));
+        }
     }
 
     #[test]
