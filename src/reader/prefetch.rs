@@ -9,10 +9,19 @@
 //! prefetch changes only when the work is done, never what is read.
 
 use std::collections::VecDeque;
-
-use rayon::prelude::*;
+use std::sync::OnceLock;
 
 use crate::physics::{Model, Read};
+
+/// Threads one prefetch uses: the machine's cores, at most 8.
+fn workers() -> usize {
+    static WORKERS: OnceLock<usize> = OnceLock::new();
+    *WORKERS.get_or_init(|| {
+        std::thread::available_parallelism()
+            .map_or(1, usize::from)
+            .clamp(1, 8)
+    })
+}
 
 /// One antenna's share of simulated time, as the running AISpec will ask for it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -73,20 +82,53 @@ impl Prefetch {
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
     /// what was prefetched before.
     pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
-        let windows: Vec<Window> = plan
-            .into_par_iter()
-            .map(|slice| Window {
-                reads: model.inventory_on(
-                    slice.antenna,
-                    slice.t0_us,
-                    slice.t1_us,
-                    slice.power_dbm,
-                    None,
-                ),
+        // Each worker takes whole antennas, in time order: the physics caches one field
+        // classification per antenna, which two workers on one antenna would keep evicting.
+        let mut antennas: Vec<u16> = Vec::new();
+        for s in &plan {
+            if !antennas.contains(&s.antenna) {
+                antennas.push(s.antenna);
+            }
+        }
+        let n = workers().min(antennas.len()).max(1);
+        let worker_of = |antenna: u16| antennas.iter().position(|&a| a == antenna).unwrap_or(0) % n;
+        let share = |w: usize| -> Vec<(usize, Vec<Read>)> {
+            plan.iter()
+                .enumerate()
+                .filter(|(_, s)| worker_of(s.antenna) == w)
+                .map(|(i, s)| {
+                    let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
+                    (i, reads)
+                })
+                .collect()
+        };
+        // Scoped threads rather than a pool: a pool's idle workers spin (sched_yield) between
+        // batches and take the core the client needs; one batch is milliseconds of work, so
+        // starting a thread per worker costs little.
+        let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
+        std::thread::scope(|scope| {
+            let others: Vec<_> = (1..n).map(|w| scope.spawn(move || share(w))).collect();
+            let mut parts = vec![share(0)];
+            for h in others {
+                match h.join() {
+                    Ok(p) => parts.push(p),
+                    // The physics does not panic on any input; should it, re-raise it here.
+                    Err(e) => std::panic::resume_unwind(e),
+                }
+            }
+            for (i, reads) in parts.into_iter().flatten() {
+                results[i] = Some(reads);
+            }
+        });
+        self.windows = plan
+            .into_iter()
+            .zip(results)
+            .map(|(slice, reads)| Window {
                 slice,
+                // Every index was computed by exactly one worker.
+                reads: reads.unwrap_or_default(),
             })
             .collect();
-        self.windows = windows.into();
     }
 }
 

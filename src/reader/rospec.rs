@@ -17,7 +17,7 @@ use crate::physics::{Model, Read};
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
 pub const ANTENNA_DWELL_US: u64 = 25_000;
 /// Antenna slices computed ahead at once (in parallel) when the running AISpec needs one.
-const PREFETCH_SLICES: usize = 64;
+const PREFETCH_SLICES: usize = 256;
 /// Earliest restart of an Immediate ROSpec after its previous run began, µs (so a spec that
 /// completes at once cannot spin).
 const MIN_RESTART_US: u64 = 1_000;
