@@ -42,10 +42,17 @@ struct Window {
     reads: Vec<Read>,
 }
 
-/// Prefetched windows in time order.
+/// Most slices one prefetch computes.
+pub const MAX_BATCH: usize = 256;
+
+/// Prefetched windows in time order, and how many slices the next miss should plan.
 #[derive(Debug, Default)]
 pub struct Prefetch {
     windows: VecDeque<Window>,
+    /// Slices to plan at the next miss (0: not yet adapted, start at 8).
+    batch: usize,
+    /// Slices the last plan had.
+    planned: usize,
 }
 
 fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
@@ -53,9 +60,23 @@ fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
 }
 
 impl Prefetch {
-    /// Forgets every prefetched window (a new run begins).
-    pub fn clear(&mut self) {
-        self.windows.clear();
+    /// How many slices to plan after a miss at `t_us`: doubled (up to [`MAX_BATCH`]) while
+    /// the plans are used, quartered when most of the last one went unused (e.g. an AISpec
+    /// that ends at its first tag and restarts), so prefetching never costs much more than it
+    /// saves.
+    pub fn batch_after_miss(&mut self, t_us: u64) -> usize {
+        let unused = self
+            .windows
+            .iter()
+            .filter(|w| w.slice.t0_us >= t_us)
+            .count();
+        let planned = self.planned.max(1);
+        self.batch = match self.batch {
+            0 => 8,
+            b if 2 * unused > planned => (b / 4).max(1),
+            b => (b * 2).min(MAX_BATCH),
+        };
+        self.batch
     }
 
     /// The reads of `slice` if a prefetched window covers it; windows wholly before it are
@@ -82,6 +103,24 @@ impl Prefetch {
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
     /// what was prefetched before.
     pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
+        self.planned = plan.len();
+        if plan.len() < 2 {
+            // Not worth a thread.
+            self.windows = plan
+                .into_iter()
+                .map(|slice| Window {
+                    reads: model.inventory_on(
+                        slice.antenna,
+                        slice.t0_us,
+                        slice.t1_us,
+                        slice.power_dbm,
+                        None,
+                    ),
+                    slice,
+                })
+                .collect();
+            return;
+        }
         // Each worker takes whole antennas, in time order: the physics caches one field
         // classification per antenna, which two workers on one antenna would keep evicting.
         let mut antennas: Vec<u16> = Vec::new();

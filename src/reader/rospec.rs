@@ -16,8 +16,6 @@ use crate::physics::{Model, Read};
 
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
 pub const ANTENNA_DWELL_US: u64 = 25_000;
-/// Antenna slices computed ahead at once (in parallel) when the running AISpec needs one.
-const PREFETCH_SLICES: usize = 256;
 /// Earliest restart of an Immediate ROSpec after its previous run began, µs (so a spec that
 /// completes at once cannot spin).
 const MIN_RESTART_US: u64 = 1_000;
@@ -438,7 +436,6 @@ impl Specs {
     }
 
     fn begin(&mut self, i: usize, now: u64, events: &mut Vec<Event>) {
-        self.prefetch.clear();
         let s = &mut self.specs[i];
         s.state = SpecState::Active;
         s.next_start_us = None;
@@ -787,7 +784,7 @@ impl Specs {
             ..*slice
         }];
         let mut t0 = plan[0].t1_us;
-        for k in 1..PREFETCH_SLICES {
+        for k in 1..self.prefetch.batch_after_miss(slice.t0_us) {
             if until.is_some_and(|u| t0 >= u) {
                 break;
             }

@@ -18,7 +18,13 @@ fn s2_reader() -> Reader {
     Reader::new(profile, model, 1_700_000_000_000_000)
 }
 
-fn add_rospec(antennas: Vec<u16>, power_index: u16, trigger: u8, n: u16) -> Message {
+fn add_rospec(
+    antennas: Vec<u16>,
+    ai_stop: AiSpecStopTrigger,
+    power_index: u16,
+    trigger: u8,
+    n: u16,
+) -> Message {
     let spec = RoSpec {
         ro_spec_id: 1,
         ro_boundary_spec: RoBoundarySpec {
@@ -30,6 +36,7 @@ fn add_rospec(antennas: Vec<u16>, power_index: u16, trigger: u8, n: u16) -> Mess
         },
         specs: vec![SpecParameter::AiSpec(AiSpec {
             antenna_ids: antennas,
+            ai_spec_stop_trigger: ai_stop,
             inventory_parameter_specs: vec![InventoryParameterSpec {
                 inventory_parameter_spec_id: 1,
                 protocol_id: 1,
@@ -114,10 +121,21 @@ fn reads(out: &[Output]) -> usize {
 #[test]
 fn prefetched_physics_sends_exactly_what_direct_physics_sends() {
     // All antennas with a per-antenna power (antenna 3 at index 1, the lowest), one report per
-    // read; then N = 100 on two antennas. The robot drives past the banners meanwhile.
+    // read; N = 100 on two antennas; an AISpec that ends at its first tag and restarts (what
+    // sllurp's -n 1 asks for). The robot drives past the banners meanwhile.
+    let first_tag = AiSpecStopTrigger {
+        ai_spec_stop_trigger_type: 3,
+        tag_observation_trigger: Some(TagObservationTrigger {
+            trigger_type: 0,
+            number_of_tags: 1,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
     for spec in [
-        add_rospec(vec![0], 1, 2, 1),
-        add_rospec(vec![2, 3], 1, 1, 100),
+        add_rospec(vec![0], AiSpecStopTrigger::default(), 1, 2, 1),
+        add_rospec(vec![2, 3], AiSpecStopTrigger::default(), 1, 1, 100),
+        add_rospec(vec![0], first_tag, 1, 2, 1),
     ] {
         let direct = session(false, spec.clone(), 120_000_000);
         let prefetched = session(true, spec, 120_000_000);
