@@ -146,8 +146,16 @@ impl Prefetch {
         // starting a thread per worker costs little.
         let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
         std::thread::scope(|scope| {
-            let others: Vec<_> = (1..n).map(|w| scope.spawn(move || share(w))).collect();
-            let mut parts = vec![share(0)];
+            let mut parts = Vec::with_capacity(n);
+            let mut others = Vec::with_capacity(n);
+            for w in 1..n {
+                // A worker the OS will not start is done here instead.
+                match std::thread::Builder::new().spawn_scoped(scope, move || share(w)) {
+                    Ok(h) => others.push(h),
+                    Err(_) => parts.push(share(w)),
+                }
+            }
+            parts.push(share(0));
             for h in others {
                 match h.join() {
                     Ok(p) => parts.push(p),
