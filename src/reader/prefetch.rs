@@ -1,5 +1,6 @@
 //! Physics computed ahead: the coming antenna slices of a running AISpec, evaluated in
-//! parallel, so that `--speed max` uses every core for the channel model.
+//! parallel, and the batch after them in the background while the reader reports the current
+//! one, so that `--speed max` uses every core for the channel model.
 //!
 //! Sound because the physics is a pure function of (antenna, time window, transmit power,
 //! channel) and a window split in two gives the same reads as the whole
@@ -9,7 +10,8 @@
 //! prefetch changes only when the work is done, never what is read.
 
 use std::collections::VecDeque;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
+use std::thread::JoinHandle;
 
 use crate::physics::{Model, Read};
 
@@ -53,6 +55,8 @@ pub struct Prefetch {
     batch: usize,
     /// Slices the last plan had.
     planned: usize,
+    /// The following slices, being computed in the background.
+    ahead: Option<Ahead>,
 }
 
 fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
@@ -104,58 +108,25 @@ impl Prefetch {
     /// what was prefetched before.
     pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
         self.planned = plan.len();
-        if plan.len() < 2 {
-            // Not worth a thread.
-            self.windows = plan
-                .into_iter()
-                .map(|slice| Window {
-                    reads: model.inventory_on(
-                        slice.antenna,
-                        slice.t0_us,
-                        slice.t1_us,
-                        slice.power_dbm,
-                        None,
-                    ),
-                    slice,
-                })
-                .collect();
-            return;
-        }
-        // Each worker takes whole antennas, in time order: the physics caches one field
-        // classification per antenna, which two workers on one antenna would keep evicting.
-        let mut antennas: Vec<u16> = Vec::new();
-        for s in &plan {
-            if !antennas.contains(&s.antenna) {
-                antennas.push(s.antenna);
-            }
-        }
-        let n = workers().min(antennas.len()).max(1);
-        let worker_of = |antenna: u16| antennas.iter().position(|&a| a == antenna).unwrap_or(0) % n;
-        let share = |w: usize| -> Vec<(usize, Vec<Read>)> {
-            plan.iter()
-                .enumerate()
-                .filter(|(_, s)| worker_of(s.antenna) == w)
-                .map(|(i, s)| {
-                    let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
-                    (i, reads)
-                })
-                .collect()
-        };
+        let assign = assignment(&plan);
+        let n = assign.iter().max().map_or(1, |m| m + 1);
+        let mut parts = Vec::with_capacity(n);
         // Scoped threads rather than a pool: a pool's idle workers spin (sched_yield) between
         // batches and take the core the client needs; one batch is milliseconds of work, so
         // starting a thread per worker costs little.
-        let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
         std::thread::scope(|scope| {
-            let mut parts = Vec::with_capacity(n);
             let mut others = Vec::with_capacity(n);
             for w in 1..n {
+                let (plan, assign) = (&plan, &assign);
                 // A worker the OS will not start is done here instead.
-                match std::thread::Builder::new().spawn_scoped(scope, move || share(w)) {
+                match std::thread::Builder::new()
+                    .spawn_scoped(scope, move || share(model, plan, assign, w))
+                {
                     Ok(h) => others.push(h),
-                    Err(_) => parts.push(share(w)),
+                    Err(_) => parts.push(share(model, plan, assign, w)),
                 }
             }
-            parts.push(share(0));
+            parts.push(share(model, &plan, &assign, 0));
             for h in others {
                 match h.join() {
                     Ok(p) => parts.push(p),
@@ -163,20 +134,119 @@ impl Prefetch {
                     Err(e) => std::panic::resume_unwind(e),
                 }
             }
-            for (i, reads) in parts.into_iter().flatten() {
-                results[i] = Some(reads);
-            }
         });
-        self.windows = plan
-            .into_iter()
-            .zip(results)
-            .map(|(slice, reads)| Window {
-                slice,
-                // Every index was computed by exactly one worker.
-                reads: reads.unwrap_or_default(),
-            })
-            .collect();
+        self.windows = assemble(plan, parts).into();
     }
+
+    /// Starts computing `plan` in the background (the slices after the ones already
+    /// prefetched); [`Self::finish_ahead`] adds them once needed.
+    pub fn start_ahead(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
+        if plan.is_empty() {
+            return;
+        }
+        let assign = Arc::new(assignment(&plan));
+        let plan = Arc::new(plan);
+        let n = assign.iter().max().map_or(1, |m| m + 1);
+        let mut ahead = Ahead {
+            plan: Arc::clone(&plan),
+            workers: Vec::with_capacity(n),
+            parts: Vec::new(),
+        };
+        for w in 0..n {
+            let job = {
+                let (model, plan, assign) =
+                    (Arc::clone(model), Arc::clone(&plan), Arc::clone(&assign));
+                move || share(&model, &plan, &assign, w)
+            };
+            match std::thread::Builder::new().spawn(job) {
+                Ok(h) => ahead.workers.push(h),
+                // A worker the OS will not start is done here instead.
+                Err(_) => ahead.parts.push(share(model, &plan, &assign, w)),
+            }
+        }
+        self.ahead = Some(ahead);
+    }
+
+    /// Waits for the background plan, if any, and keeps its windows; whether there was one.
+    pub fn finish_ahead(&mut self) -> bool {
+        let Some(Ahead {
+            plan,
+            workers,
+            mut parts,
+        }) = self.ahead.take()
+        else {
+            return false;
+        };
+        for h in workers {
+            match h.join() {
+                Ok(p) => parts.push(p),
+                // The physics does not panic on any input; should it, re-raise it here.
+                Err(e) => std::panic::resume_unwind(e),
+            }
+        }
+        let plan = Arc::unwrap_or_clone(plan);
+        self.planned = plan.len();
+        self.windows.extend(assemble(plan, parts));
+        true
+    }
+}
+
+/// A worker's reads: (index in the plan, reads of that slice).
+type Share = Vec<(usize, Vec<Read>)>;
+
+/// Slices being computed in the background.
+#[derive(Debug)]
+struct Ahead {
+    plan: Arc<Vec<Slice>>,
+    workers: Vec<JoinHandle<Share>>,
+    /// Shares computed on the calling thread (a worker could not start).
+    parts: Vec<Share>,
+}
+
+/// The worker of each slice of `plan`: each worker takes whole antennas, in time order, as the
+/// physics caches one field classification per antenna, which two workers on one antenna
+/// would keep evicting.
+fn assignment(plan: &[Slice]) -> Vec<usize> {
+    let mut antennas: Vec<u16> = Vec::new();
+    for s in plan {
+        if !antennas.contains(&s.antenna) {
+            antennas.push(s.antenna);
+        }
+    }
+    // Not worth a thread for a slice or two.
+    let n = if plan.len() < 2 {
+        1
+    } else {
+        workers().min(antennas.len()).max(1)
+    };
+    plan.iter()
+        .map(|s| antennas.iter().position(|&a| a == s.antenna).unwrap_or(0) % n)
+        .collect()
+}
+
+/// The reads of the slices of `plan` assigned to worker `w`, with their indices.
+fn share(model: &Model, plan: &[Slice], assign: &[usize], w: usize) -> Share {
+    plan.iter()
+        .zip(assign)
+        .enumerate()
+        .filter(|(_, (_, &a))| a == w)
+        .map(|(i, (s, _))| {
+            let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
+            (i, reads)
+        })
+        .collect()
+}
+
+/// The windows of `plan` from the workers' shares.
+fn assemble(plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
+    let mut results: Vec<Vec<Read>> = vec![Vec::new(); plan.len()];
+    for (i, reads) in parts.into_iter().flatten() {
+        results[i] = reads;
+    }
+    plan.into_iter()
+        .zip(results)
+        .map(|(slice, reads)| Window { slice, reads })
+        .collect()
 }
 
 #[cfg(test)]
@@ -188,8 +258,8 @@ mod tests {
     fn sub_windows_of_a_prefetch_equal_direct_computation() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
         let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
-        let m = Model::new(&s, 0);
-        let plan: Vec<Slice> = (0..32u64)
+        let m = Arc::new(Model::new(&s, 0));
+        let slices: Vec<Slice> = (0..64u64)
             .map(|k| Slice {
                 antenna: (k % 8) as u16 + 1,
                 power_dbm: None,
@@ -197,8 +267,13 @@ mod tests {
                 t1_us: 60_000_000 + (k + 1) * 25_000,
             })
             .collect();
+        // The first half computed at once, the second in the background.
         let mut p = Prefetch::default();
-        p.fill(&m, plan.clone());
+        p.fill(&m, slices[..32].to_vec());
+        p.start_ahead(&m, slices[32..].to_vec());
+        assert!(p.finish_ahead(), "a background plan was running");
+        assert!(!p.finish_ahead(), "and it is taken once");
+        let plan = slices;
         let mut total = 0;
         for s in &plan {
             // Each slice asked for in two pieces, as a step cut short by `to` would.

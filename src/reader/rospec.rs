@@ -93,7 +93,7 @@ pub enum Produced {
 /// Everything a run needs from the rest of the reader.
 pub struct RunContext<'a> {
     /// Physics of this reader.
-    pub model: &'a Model,
+    pub model: &'a Arc<Model>,
     /// The reader's description.
     pub profile: &'a ReaderProfile,
     /// Current configuration (antenna power, default report spec).
@@ -175,6 +175,8 @@ pub struct Specs {
     prefetch: Prefetch,
     /// Computes every slice on the spot (tests compare both ways).
     no_prefetch: bool,
+    /// Rotation position and start of the slice after the last one prefetched.
+    ahead_from: (usize, u64),
 }
 
 fn start_type(s: &RoSpec) -> u8 {
@@ -761,9 +763,10 @@ impl Specs {
         reached
     }
 
-    /// The reads of `slice` from the prefetch; on a miss, prefetches the slices the run will
-    /// ask for next (this one first, then the antennas in turn, up to the AISpec's or ROSpec's
-    /// end when known) and takes this one from them.
+    /// The reads of `slice` from the prefetch. On a miss, takes the slices computed in the
+    /// background if they cover it, else computes the slices the run will ask for next (this
+    /// one first, then the antennas in turn, up to the AISpec's or ROSpec's end when known) on
+    /// every core; either way starts computing the batch after them in the background.
     fn prefetched(
         &mut self,
         ctx: &RunContext<'_>,
@@ -779,32 +782,63 @@ impl Specs {
         if let Some(reads) = self.prefetch.take(slice) {
             return reads;
         }
-        let mut plan = vec![Slice {
-            t1_us: run.slice_end_us.max(slice.t1_us),
-            ..*slice
-        }];
-        let mut t0 = plan[0].t1_us;
-        for k in 1..self.prefetch.batch_after_miss(slice.t0_us) {
-            if until.is_some_and(|u| t0 >= u) {
-                break;
+        let plan = |pos: usize, t0: u64, count: usize| -> Vec<Slice> {
+            let mut out = Vec::with_capacity(count);
+            let mut t0 = t0;
+            for k in 0..count {
+                if until.is_some_and(|u| t0 >= u) {
+                    break;
+                }
+                let antenna = antennas[(pos + k) % antennas.len().max(1)];
+                // A pinned channel list is computed when asked for.
+                if !fixed_channel_list(ips, ctx.config, antenna).is_empty() {
+                    break;
+                }
+                out.push(Slice {
+                    antenna,
+                    power_dbm: antenna_power(ips, ctx.config, antenna),
+                    t0_us: t0,
+                    t1_us: t0 + ANTENNA_DWELL_US,
+                });
+                t0 += ANTENNA_DWELL_US;
             }
-            let antenna = antennas[(run.antenna_pos + k) % antennas.len().max(1)];
-            // A pinned channel list is computed when asked for.
-            if !fixed_channel_list(ips, ctx.config, antenna).is_empty() {
-                break;
+            out
+        };
+        let batch = self.prefetch.batch_after_miss(slice.t0_us);
+        let reads = if self.prefetch.finish_ahead() {
+            self.prefetch.take(slice)
+        } else {
+            None
+        };
+        let (reads, next) = match reads {
+            Some(reads) => (reads, self.ahead_from),
+            None => {
+                let first = Slice {
+                    t1_us: run.slice_end_us.max(slice.t1_us),
+                    ..*slice
+                };
+                let mut p = vec![first];
+                p.extend(plan(run.antenna_pos + 1, first.t1_us, batch - 1));
+                let next = (
+                    run.antenna_pos + p.len(),
+                    first.t1_us + (p.len() as u64 - 1) * ANTENNA_DWELL_US,
+                );
+                self.prefetch.fill(ctx.model, p);
+                let reads = self
+                    .prefetch
+                    .take(slice)
+                    .unwrap_or_else(|| direct(ctx.model, slice));
+                (reads, next)
             }
-            plan.push(Slice {
-                antenna,
-                power_dbm: antenna_power(ips, ctx.config, antenna),
-                t0_us: t0,
-                t1_us: t0 + ANTENNA_DWELL_US,
-            });
-            t0 += ANTENNA_DWELL_US;
-        }
-        self.prefetch.fill(ctx.model, plan);
-        self.prefetch
-            .take(slice)
-            .unwrap_or_else(|| direct(ctx.model, slice))
+        };
+        // The batch after: computed while this one's reads are reported.
+        let ahead = plan(next.0, next.1, batch);
+        self.ahead_from = (
+            next.0 + ahead.len(),
+            next.1 + ahead.len() as u64 * ANTENNA_DWELL_US,
+        );
+        self.prefetch.start_ahead(ctx.model, ahead);
+        reads
     }
 
     fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
