@@ -45,6 +45,15 @@ fn rospec_event(m: &Message) -> Option<(u8, u32, u32, u64)> {
     ))
 }
 
+/// ENABLE_ROSPEC `id`, which must succeed.
+async fn enable(c: &mut Client, id: u32) {
+    let enable = EnableRospec {
+        ro_spec_id: id,
+        ..Default::default()
+    };
+    assert_eq!(request_status(c, enable).await, 0);
+}
+
 async fn add(c: &mut Client, spec: RoSpec) {
     let code = request_status(
         c,
@@ -73,11 +82,7 @@ async fn periodic_start_with_duration_stop() {
         ..Default::default()
     };
     add(&mut c, spec).await;
-    let enable = EnableRospec {
-        ro_spec_id: 5,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    enable(&mut c, 5).await;
     let mut starts = Vec::new();
     let mut ends = Vec::new();
     while starts.len() < 4 {
@@ -113,11 +118,7 @@ async fn higher_priority_preempts_and_immediate_resumes() {
     high.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger::default();
     add(&mut c, high).await;
     for id in [1, 2] {
-        let enable = EnableRospec {
-            ro_spec_id: id,
-            ..Default::default()
-        };
-        assert_eq!(request_status(&mut c, enable).await, 0);
+        enable(&mut c, id).await;
     }
     c.wait_for(|m| rospec_event(m).is_some_and(|e| e.0 == 0 && e.1 == 1), T)
         .await
@@ -186,11 +187,7 @@ async fn ground_truth_is_written_as_jsonl() {
         rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 100)),
     )
     .await;
-    let enable = EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    enable(&mut c, 1).await;
     let _ = collect_reports(&mut c, Duration::from_secs(3), |t| t.len() >= 200).await;
     c.close().await.expect("close");
     sim.shutdown().await;
@@ -235,11 +232,7 @@ async fn reports_are_held_after_a_reconnect_until_enabled() {
         rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 1)),
     )
     .await;
-    let enable = EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    enable(&mut c, 1).await;
     let (first, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
     assert!(!first.is_empty(), "reports flow on the first connection");
     c.close().await.expect("close");
@@ -319,11 +312,7 @@ async fn an_aispec_without_end_reports_at_the_reader_interval() {
         rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
     )
     .await;
-    let enable = EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    enable(&mut c, 1).await;
     let reports = reports_by_message(&mut c, T, 6).await;
     assert_eq!(
         reports.len(),
@@ -363,11 +352,7 @@ async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
         rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
     )
     .await;
-    let enable = EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    enable(&mut c, 1).await;
     // 0.6 s at 20× is 12 s of simulated inventory.
     let held = reports_by_message(&mut c, Duration::from_millis(600), 1).await;
     assert!(held.is_empty(), "reads must wait for the end of the ROSpec");
