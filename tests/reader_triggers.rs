@@ -374,3 +374,30 @@ async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
     );
     sim.shutdown().await;
 }
+
+#[tokio::test]
+async fn a_rospec_duration_keeps_reads_until_its_end() {
+    // The interval applies only when nothing can end the inventory: with a 3 s ROSpec the
+    // reads of trigger 1, N = 0 wait for its end, as LLRP says.
+    let sim = start(&s1(), Speed::Max).await;
+    let mut c = connect(&sim).await;
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_duration(3000), ai_null(), full_report(1, 0)),
+    )
+    .await;
+    enable(&mut c, 1).await;
+    let reports = reports_by_message(&mut c, T, 1).await;
+    assert_eq!(reports.len(), 1, "one report when the ROSpec ends");
+    let first = reports[0]
+        .iter()
+        .filter_map(|t| t.first_seen_timestamp_utc.map(|s| s.0))
+        .min()
+        .expect("FirstSeenTimestampUTC");
+    let span = last_seen(&reports[0]) - first;
+    assert!(
+        span > 2_000_000,
+        "the report spans the whole run, not one interval ({span} µs)"
+    );
+    sim.shutdown().await;
+}

@@ -614,14 +614,17 @@ impl Specs {
         if let Some(n) = self.next_start_after(t) {
             end = end.min(n.max(t + 1));
         }
-        // An Impinj-class reader does not hold the reads of an AISpec that cannot end by itself
-        // forever when ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
+        // An Impinj-class reader does not hold the reads of an inventory that nothing ends
+        // (neither its AISpec nor its ROSpec has a stop condition that can fire) forever when
+        // ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
         let interval = ctx.profile.report_interval_us;
         let periodic = interval > 0
             && report_spec.ro_report_trigger == 1
             && report_spec.n == 0
             && ai_end.is_none()
-            && matches!(trig.ai_spec_stop_trigger_type, 0 | 2);
+            && ro_end.is_none()
+            && matches!(trig.ai_spec_stop_trigger_type, 0 | 2)
+            && matches!(stop.ro_spec_stop_trigger_type, 0 | 2);
         if periodic {
             end = end.min(run.last_report_us + interval);
         }

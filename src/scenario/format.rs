@@ -106,9 +106,9 @@ pub struct ReaderSpec {
     /// The reader's total read-attempt budget per second, shared by its antennas in time.
     #[serde(default = "default_reads_per_second")]
     pub reads_per_second: f64,
-    /// With ROReportTrigger 1 (N tags or end of AISpec) and N = 0, an AISpec that cannot end
-    /// by itself (Null stop trigger) sends what it has read every this many ms, as Impinj
-    /// readers do; 0 holds the reads until the ROSpec ends, the letter of LLRP.
+    /// With ROReportTrigger 1 (N tags or end of AISpec) and N = 0, an inventory nothing can
+    /// end (Null stop triggers on AISpec and ROSpec) sends what it has read every this many ms,
+    /// as Impinj readers do; 0 holds the reads until the ROSpec ends, the letter of LLRP.
     #[serde(default = "default_report_interval_ms")]
     pub report_interval_ms: u32,
     /// Antennas; antenna port `i + 1` is `antennas[i]`.
