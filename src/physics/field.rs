@@ -18,14 +18,18 @@
 //! An undecided tag drawn in a bucket is first tested with the antenna's exact position then:
 //! the phasor sum with the gain table's bounds (and the exact sum's phase factors), whose
 //! error is bounded, decides unless the amplitude lies within that bound of the threshold,
-//! when the exact sum of [`super::multipath`] does.
+//! when the exact sum of [`super::multipath`] does. A decision so made is kept for the
+//! antenna's later buckets on the same channel for as long as a bound on how fast the
+//! amplitude can change (from the antenna's and the tag's top speeds and the boresight's turn
+//! rate) proves that it still holds ([`Near::steady`]).
 //!
 //! A draw picks uniformly among the bucket's in and undecided tags and draws again while it
 //! hits one that is not powered (rejection sampling): every tag of the field is equally likely,
 //! as when the field is listed in full, and the draw depends only on the attempt's generator
-//! and the field, never on earlier draws. The bounds keep margins far above rounding errors,
-//! so they never change which tags are in the field (unit tests check every decision against
-//! the exact evaluation on the fixtures and on a scenario where everything moves).
+//! and the bucket's candidates (fixed by its interval of the grid), never on earlier draws. The bounds keep margins far above rounding errors,
+//! so they never change which tags are in the field (unit tests check every decision, and
+//! every kept decision up to its expiry, against the exact evaluation on the fixtures and on a
+//! scenario where everything moves).
 
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
@@ -82,25 +86,48 @@ pub(super) struct Classified {
 /// Per-antenna classifications of a model (a cache: the field never depends on it). The lock
 /// is held only to look one up or to store one, so several threads share it freely.
 #[derive(Debug, Default)]
-pub(super) struct FieldCache(Vec<Mutex<Option<Arc<Classified>>>>);
+pub(super) struct FieldCache {
+    classified: Vec<Mutex<Option<Arc<Classified>>>>,
+    /// Per antenna, the decisions kept from earlier buckets.
+    memos: Vec<Mutex<Memo>>,
+}
 
 impl Clone for FieldCache {
     fn clone(&self) -> Self {
-        FieldCache::new(self.0.len())
+        FieldCache::new(self.classified.len())
     }
 }
 
 impl FieldCache {
     /// An empty cache for `antennas` antennas.
     pub(super) fn new(antennas: usize) -> FieldCache {
-        FieldCache((0..antennas).map(|_| Mutex::new(None)).collect())
+        FieldCache {
+            classified: (0..antennas).map(|_| Mutex::new(None)).collect(),
+            memos: (0..antennas).map(|_| Mutex::new(Memo::default())).collect(),
+        }
+    }
+
+    /// The kept decisions of antenna index `i` (0-based), taken out of the cache for one
+    /// inventory (empty when another thread holds them, or for no such antenna).
+    pub(super) fn take_memo(&self, i: usize) -> Memo {
+        self.memos.get(i).map_or_else(Memo::default, |m| {
+            // A panic while holding the lock leaves at worst an entry of the same kind.
+            std::mem::take(&mut *m.lock().unwrap_or_else(|e| e.into_inner()))
+        })
+    }
+
+    /// Gives the kept decisions of antenna index `i` back to the cache.
+    pub(super) fn put_memo(&self, i: usize, memo: Memo) {
+        if let Some(m) = self.memos.get(i) {
+            *m.lock().unwrap_or_else(|e| e.into_inner()) = memo;
+        }
     }
 
     /// The classification slot of antenna index `i` (0-based), if there is such an antenna.
     fn slot(&self, i: usize) -> Option<MutexGuard<'_, Option<Arc<Classified>>>> {
         // A panic while holding the lock leaves at worst a stale entry, which is checked for
         // validity before use; the cache can always be rebuilt.
-        self.0
+        self.classified
             .get(i)
             .map(|m| m.lock().unwrap_or_else(|e| e.into_inner()))
     }
@@ -343,7 +370,39 @@ struct Near {
     /// rounding error of the exact geometry.
     scale: f64,
     mirrors: Vec<NearMirror>,
+    /// What the last [`Near::decide`] saw, for [`Near::steady`].
+    seen: Seen,
 }
+
+/// The paths of the last decision, the direct one first.
+#[derive(Clone, Debug, Default)]
+struct Seen {
+    paths: [Path; 1 + MAX_KEPT_MIRRORS],
+    /// Number of paths recorded (0: none, the decision cannot be kept).
+    count: usize,
+    /// The nearest either end came to a reflector's plane (m).
+    side: f64,
+    /// Largest magnitude of the reflected terms, summed.
+    reflected: f64,
+}
+
+/// One path of a decision, for [`Near::steady`].
+#[derive(Clone, Copy, Debug, Default)]
+struct Path {
+    /// |Γ| (1 for the direct path).
+    gamma: f64,
+    /// Cosine between the boresight and the path's first leg.
+    cos: f64,
+    /// Length (m).
+    length: f64,
+    /// |û₀ − ûᵢ|: the chord between the unit vectors from the antenna toward the tag and
+    /// toward the tag's image (0 for the direct path); the antenna moving at w changes
+    /// lᵢ − D at the rate w·(û₀ − ûᵢ).
+    chord: f64,
+}
+
+/// Most reflectors a kept decision may involve.
+const MAX_KEPT_MIRRORS: usize = 8;
 
 /// Largest phase (rad) the fast test handles (within [`fastmath::cis`]'s reduced range).
 const CIS_MAX_RAD: f64 = 1e4;
@@ -379,8 +438,16 @@ impl Near {
     }
 
     /// Whether the amplitude √g₀·|1 + Σ Hᵢ|/D at a tag at `q`, `dist` from the antenna (as
-    /// `distance` computes it), reaches `threshold`: `Some` when the error bound decides it.
-    fn decide(&self, gains: &GainTable, q: Vec3, dist: f64, threshold: f64) -> Option<bool> {
+    /// `distance` computes it), reaches `threshold`: `Some` when the error bound decides it,
+    /// with how far (beyond every error and rounding bound) the exact amplitude is from the
+    /// threshold.
+    fn decide(
+        &mut self,
+        gains: &GainTable,
+        q: Vec3,
+        dist: f64,
+        threshold: f64,
+    ) -> Option<(bool, f64)> {
         if !(dist >= MIN_DISTANCE_M && dist.is_finite()) {
             return None;
         }
@@ -396,8 +463,22 @@ impl Near {
         let mut im = 0.0;
         let mut err = (hi - lo) * 0.5 * inv_d;
         let mut mag = hi * inv_d;
+        let seen = &mut self.seen;
+        seen.count = 0;
+        seen.side = f64::INFINITY;
+        let keep = self.mirrors.len() <= MAX_KEPT_MIRRORS;
+        if keep {
+            seen.paths[0] = Path {
+                gamma: 1.0,
+                cos: c0,
+                length: dist,
+                chord: 0.0,
+            };
+            seen.count = 1;
+        }
         for m in &self.mirrors {
             let dt = dot(sub(q, m.plane.point), m.plane.unit);
+            seen.side = seen.side.min(m.da.abs()).min(dt.abs());
             // The same test as `image_path`, on the same numbers.
             if m.da * dt <= 0.0 {
                 continue;
@@ -413,6 +494,25 @@ impl Near {
             let inv_l = 1.0 / l;
             // cos between boresight and reflection point: (f·(da + dt) + b̂·u)/l.
             let ci = (m.f * (m.da + dt) + dot(self.b, u)) * inv_l;
+            if keep {
+                // The tag's image seen from the antenna: v − 2·dt·n̂, of length l.
+                let image_dir = add_scaled(v, -2.0 * dt, m.plane.unit);
+                let chord = norm(sub(
+                    [v[0] * inv_d, v[1] * inv_d, v[2] * inv_d],
+                    [
+                        image_dir[0] * inv_l,
+                        image_dir[1] * inv_l,
+                        image_dir[2] * inv_l,
+                    ],
+                ));
+                seen.paths[seen.count] = Path {
+                    gamma: m.plane.coefficient.abs(),
+                    cos: ci,
+                    length: l,
+                    chord,
+                };
+                seen.count += 1;
+            }
             let eta = 1e-12 + rel * w_inv * inv_l * 4.0;
             let (glo, ghi) = (gains.below(ci - eta), gains.above(ci + eta));
             let a = m.plane.coefficient.abs() * inv_l;
@@ -428,13 +528,152 @@ impl Near {
             mag += ghi * a;
         }
         err += mag * 1e-12;
+        seen.reflected = mag - hi * inv_d;
         let amplitude = (re * re + im * im).sqrt();
+        // What a later exact evaluation rounds differently, far above its rounding.
+        let slack = threshold * SLACK_REL + mag * 1e-12;
         if amplitude + err < threshold * (1.0 - SLACK_REL) {
-            Some(false)
+            Some((
+                false,
+                threshold * (1.0 - SLACK_REL) - amplitude - err - slack,
+            ))
         } else if amplitude - err > threshold * (1.0 + SLACK_REL) {
-            Some(true)
+            Some((
+                true,
+                amplitude - err - threshold * (1.0 + SLACK_REL) - slack,
+            ))
         } else {
             None
+        }
+    }
+
+    /// The longest of [`HOLD_US`] during which the amplitude at the tag of the last
+    /// [`Near::decide`] that decided cannot change by `margin` or more, when the antenna moves
+    /// at most `antenna` m/s, the tag at most `tag` m/s and the boresight turns at most `turn`
+    /// rad/s; 0 if not even the shortest. With `room` (m) set, the tag must also stay within
+    /// that much more distance (a tag in the field must stay within reach).
+    ///
+    /// Each path's term cᵢ = Γᵢ·√gᵢ/lᵢ·e^{−jk(lᵢ − D)} (the direct one: √g₀/D) changes by at
+    /// most its magnitude's range plus its largest magnitude times its phase change. With each
+    /// end moving at most δ, lᵢ changes by at most δ and the direction toward the tag (or its
+    /// image) by at most asin(δ/lᵢ) ≤ (π/2)·δ/lᵢ, plus the boresight's turn for the gain (the
+    /// gain table bounds √g over the cosines within that angle). The relative phase changes
+    /// at most k·2δ, and by the antenna's motion at most k·|w|·|û₀ − ûᵢ| per second, the
+    /// chord growing by at most those angles. No path appears or vanishes while neither end
+    /// comes within δ of its plane.
+    fn steady(
+        &self,
+        gains: &GainTable,
+        margin: f64,
+        (antenna, tag, turn): (f64, f64, f64),
+        room: Option<f64>,
+    ) -> u64 {
+        let seen = &self.seen;
+        let finite = antenna.is_finite() && tag.is_finite() && turn.is_finite();
+        if !(margin > 0.0 && finite && seen.count > 0) {
+            return 0;
+        }
+        let paths = &seen.paths[..seen.count];
+        let side = seen.side.min(room.unwrap_or(f64::INFINITY));
+        let d0 = paths[0].length;
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        // The largest change over `hold_us`, or infinity when unbounded.
+        let change = |hold_us: u64| {
+            let s = hold_us as f64 * 1e-6;
+            let delta = (antenna + tag) * s + SLACK_M;
+            let tau = turn * s + SLACK_COS;
+            if !(delta < side && delta < 0.5 * d0) {
+                return f64::INFINITY;
+            }
+            let mut v = 0.0;
+            for (i, p) in paths.iter().enumerate() {
+                let l = p.length;
+                if l.is_nan() || l - delta < MIN_DISTANCE_M {
+                    return f64::INFINITY;
+                }
+                let x = delta / l;
+                // Rounding of the cosine itself is below 1e-9 (see `decide`'s eta).
+                let dc = if x < 1.0 { x * half_pi } else { 2.0 } + tau + 1e-9;
+                let hi = gains.above(p.cos + dc) / (l - delta);
+                let lo = gains.below(p.cos - dc) / (l + delta);
+                v += p.gamma * (hi - lo);
+                if i > 0 {
+                    let chord = p.chord + 1e-9 + half_pi * (delta / d0 + x);
+                    let moved = (antenna * s * chord + 2.0 * tag * s).min(2.0 * delta);
+                    v += p.gamma * hi * self.k * (moved + SLACK_M);
+                }
+            }
+            v * (1.0 + SLACK_REL)
+        };
+        // The relative phases dominate the change: guess from them the longest hold worth
+        // proving (the change only grows with the hold), then prove it, or the ones before.
+        let rate: f64 = paths[1..]
+            .iter()
+            .map(|p| p.gamma / p.length * (antenna * p.chord + 2.0 * tag))
+            .sum::<f64>()
+            * gains.0[TABLE_STEPS]
+            * self.k;
+        let guess = margin / (rate + f64::MIN_POSITIVE) * 1e6;
+        let mut j = HOLD_US
+            .iter()
+            .rposition(|&h| h as f64 <= guess)
+            .unwrap_or(0);
+        for _ in 0..3 {
+            if change(HOLD_US[j]) < margin {
+                return HOLD_US[j];
+            }
+            if j == 0 {
+                break;
+            }
+            j -= 1;
+        }
+        0
+    }
+}
+
+/// How long (µs after the bucket start where it was made) a field decision may be kept, when
+/// [`Near::steady`] proves it holds that long.
+const HOLD_US: [u64; 8] = [
+    10_000, 20_000, 40_000, 80_000, 160_000, 320_000, 640_000, 1_280_000,
+];
+
+/// Upper bounds, at any time, on how fast an antenna moves (m/s) and its boresight turns
+/// (rad/s), when they are known.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Rates {
+    /// m/s.
+    pub(super) speed: f64,
+    /// rad/s.
+    pub(super) turn: f64,
+}
+
+/// A field decision kept for later bucket starts.
+#[derive(Clone, Copy, Debug, Default)]
+struct Kept {
+    /// Valid for bucket starts in `[from_us, until_us]`.
+    from_us: u64,
+    until_us: u64,
+    /// On this channel (0: nothing kept).
+    channel: u16,
+    inside: bool,
+}
+
+/// The field decisions of one antenna kept from earlier buckets, per tag (a cache: a decision
+/// is kept only as long as [`Near::steady`] proves it holds, so it never changes a result).
+#[derive(Clone, Debug, Default)]
+pub(super) struct Memo {
+    tx_bits: u64,
+    kept: Vec<Kept>,
+}
+
+impl Memo {
+    /// Makes the memo one for `tags` tags at `tx_power_dbm` (emptied if it was not).
+    pub(super) fn fit(&mut self, tags: usize, tx_power_dbm: f64) {
+        let bits = tx_power_dbm.to_bits();
+        if self.tx_bits != bits || self.kept.len() != tags {
+            self.tx_bits = bits;
+            self.kept.clear();
+            self.kept.resize(tags, Kept::default());
         }
     }
 }
@@ -473,6 +712,10 @@ pub(super) struct Bucket {
     /// The antenna, power bits and [`amplitude_threshold`] of the last bucket prepared (its
     /// `powf` once per antenna and power rather than once per bucket).
     base: Option<(u16, u64, f64)>,
+    /// The bucket's channel.
+    channel: u16,
+    /// The antenna's decisions kept from earlier buckets (see [`Memo`]).
+    pub(super) memo: Memo,
 }
 
 impl Model {
@@ -533,6 +776,7 @@ impl Model {
         let spec = &self.antennas[usize::from(antenna) - 1].spec;
         bucket.antenna = antenna;
         bucket.t_us = t_us;
+        bucket.channel = channel;
         bucket.wavelength_m = self.wavelength_m(channel);
         let key = (antenna, tx_power_dbm.to_bits());
         let base = match bucket.base {
@@ -604,6 +848,11 @@ impl Model {
     fn in_field(&self, bucket: &mut Bucket, tag: usize) -> bool {
         let antenna = bucket.antenna;
         let t_us = bucket.t_us;
+        if let Some(k) = bucket.memo.kept.get(tag) {
+            if k.channel == bucket.channel && k.from_us <= t_us && t_us <= k.until_us {
+                return k.inside;
+            }
+        }
         let a = &self.antennas[usize::from(antenna) - 1];
         let aim = match bucket.aim {
             Some(aim) => aim,
@@ -619,10 +868,29 @@ impl Model {
         if dist > bucket.reach {
             return false;
         }
-        if let Some(known) = bucket
-            .near
-            .decide(&a.gains, position, dist, bucket.amplitude)
+        if let Some((known, margin)) =
+            bucket
+                .near
+                .decide(&a.gains, position, dist, bucket.amplitude)
         {
+            if let (Some(rates), Some(k)) = (a.rates, bucket.memo.kept.get_mut(tag)) {
+                let tag_speed = self.tags[tag].motion.speed();
+                let room = known.then_some(bucket.reach - dist);
+                let hold = bucket.near.steady(
+                    &a.gains,
+                    margin,
+                    (rates.speed, tag_speed, rates.turn),
+                    room,
+                );
+                if hold > 0 {
+                    *k = Kept {
+                        from_us: t_us,
+                        until_us: t_us.saturating_add(hold),
+                        channel: bucket.channel,
+                        inside: known,
+                    };
+                }
+            }
             return known;
         }
         power_gain_with(
@@ -996,10 +1264,9 @@ mod tests {
         assert!(m.classify(1, 30.0, 900_000_000).t1_us < u64::MAX);
     }
 
-    #[test]
-    fn classification_agrees_with_exact_evaluation_when_everything_moves() {
-        // A turning robot on a lift with a tilted, wide antenna; moving tags; a sloped and a
-        // vertical reflector close to the path.
+    /// A turning robot on a lift with a tilted, wide antenna; moving tags; a sloped and a
+    /// vertical reflector close to the path.
+    fn everything_moves() -> Scenario {
         let mut tags = Vec::new();
         for i in 0..40 {
             let x = 0.5 + 0.25 * f64::from(i);
@@ -1043,10 +1310,73 @@ mod tests {
                 antenna(90.0, 0.0, 65.0), antenna(45.0, 20.0, 240.0), antenna(-30.0, -15.0, 30.0)
             ] } ]
         });
-        let s = Scenario::from_json(&v.to_string()).expect("valid scenario");
-        let m = Model::new(&s, 0);
+        Scenario::from_json(&v.to_string()).expect("valid scenario")
+    }
+
+    #[test]
+    fn classification_agrees_with_exact_evaluation_when_everything_moves() {
+        let m = Model::new(&everything_moves(), 0);
         for tx in [30.0, 22.0] {
             check(&m, tx, (0..120).map(|k| k * 470_000));
+        }
+    }
+
+    /// Every decision a bucket keeps agrees with the exact evaluation at bucket starts up to
+    /// its expiry (the first, second and last, and every 7th); returns how many were kept,
+    /// and how many decisions were made.
+    fn check_kept(m: &Model, tx: f64, starts: impl Iterator<Item = u64>) -> (usize, usize) {
+        let bucket_us = crate::physics::inventory::FIELD_BUCKET_US;
+        let table = m.frequencies_khz().len().max(1) as u16;
+        let (mut kept, mut made) = (0, 0);
+        for t in starts {
+            for antenna in 1..=m.antenna_count() {
+                for ch in [1, table / 2 + 1, table] {
+                    let mut b = Bucket::default();
+                    b.memo.fit(m.tag_count(), tx);
+                    m.prepare(&mut b, antenna, tx, t, ch);
+                    for tag in 0..m.tag_count() {
+                        m.in_field(&mut b, tag);
+                    }
+                    let lambda = m.wavelength_m(ch);
+                    for (tag, k) in b.memo.kept.iter().enumerate() {
+                        made += 1;
+                        if k.channel == 0 {
+                            continue;
+                        }
+                        kept += 1;
+                        assert_eq!((k.channel, k.from_us), (ch, t));
+                        let steps = (k.until_us - k.from_us) / bucket_us;
+                        let probes = (0..=steps)
+                            .filter(|j| *j < 2 || j % 7 == 0)
+                            .map(|j| t + j * bucket_us)
+                            .chain([k.until_us]);
+                        for probe in probes {
+                            assert_eq!(
+                                exact(m, antenna, tx, probe, lambda, tag),
+                                k.inside,
+                                "antenna {antenna}, tag {tag}, kept from {t} to {} µs, \
+                                 probe {probe}, channel {ch}",
+                                k.until_us
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        (kept, made)
+    }
+
+    #[test]
+    fn kept_decisions_hold_until_they_expire() {
+        let s2 = fixture("s2");
+        let m = Model::new(&s2, 0);
+        let (kept, made) = check_kept(&m, 27.0, (0..40).map(|k| k * 5_010_000));
+        // Most decisions on a slow robot are kept, or keeping saves nothing.
+        assert!(2 * kept > made, "S2: {kept} of {made}");
+        let m = Model::new(&everything_moves(), 0);
+        for tx in [30.0, 22.0] {
+            let (kept, _) = check_kept(&m, tx, (0..60).map(|k| k * 930_000));
+            assert!(kept > 0, "the fast robot keeps some decisions too");
         }
     }
 
@@ -1099,7 +1429,7 @@ mod tests {
                         for factor in [0.3, 0.9, 0.99, 0.999, 1.0, 1.001, 1.01, 1.1, 3.0] {
                             let threshold = amplitude * factor;
                             total += 1;
-                            if let Some(known) = near.decide(&gains, q, dist, threshold) {
+                            if let Some((known, _)) = near.decide(&gains, q, dist, threshold) {
                                 decided += 1;
                                 assert_eq!(
                                     known,

@@ -74,6 +74,9 @@ impl Model {
         let mut classified = None;
         let mut bucket_now = u64::MAX;
         let mut bucket = Bucket::default();
+        let index = usize::from(antenna) - 1;
+        bucket.memo = self.field_cache.take_memo(index);
+        bucket.memo.fit(self.tags.len(), tx);
         let slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
         // At most one read per slot; a long window grows the vector as it goes.
         let mut reads = Vec::with_capacity(slots.size_hint().1.unwrap_or(0).min(1 << 12));
@@ -107,6 +110,8 @@ impl Model {
                 reads.push(read);
             }
         }
+        self.field_cache
+            .put_memo(index, std::mem::take(&mut bucket.memo));
         reads
     }
 

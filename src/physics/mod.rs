@@ -99,6 +99,8 @@ struct AntennaModel {
     rest_us: u64,
     /// For a robot mount: the cosine and sine of the offset's yaw and pitch.
     mount_aim: Option<MountAim>,
+    /// Bounds on how fast the antenna moves and turns, when known (fixed and robot mounts).
+    rates: Option<field::Rates>,
 }
 
 /// The constant part of a robot-mounted antenna's boresight.
@@ -223,8 +225,31 @@ impl Model {
                 }
                 _ => None,
             };
+            let rates = match &mover {
+                Mover::Fixed(_) => Some(field::Rates::default()),
+                Mover::Recorded(_) => None,
+                Mover::Robot {
+                    robot,
+                    offset,
+                    vertical,
+                } => robots.get(*robot).map(|r: &RobotTrajectory| {
+                    let [v, w] = r.max_rates();
+                    let arm = offset.position[0].hypot(offset.position[1]);
+                    let lift = vertical
+                        .as_ref()
+                        .filter(|v| v.speed.is_finite() && v.speed > 0.0)
+                        .map_or(0.0, |v| v.speed);
+                    // The antenna moves with the robot, swings on its arm as the robot turns
+                    // and rides the lift; a relative margin covers rounding.
+                    field::Rates {
+                        speed: (v + arm * w + lift) * (1.0 + 1e-9),
+                        turn: w * (1.0 + 1e-9),
+                    }
+                }),
+            };
             antennas.push(AntennaModel {
                 spec: a.clone(),
+                rates,
                 mount_aim,
                 mover,
                 pattern: shared_pattern(&mut patterns, &lobe),

@@ -144,6 +144,19 @@ impl RobotTrajectory {
         interpolate(&self.odometry, self.sample_dt_s, t_s)
     }
 
+    /// The largest speed (m/s) and turn rate (rad/s) of the true pose at any time: between
+    /// samples the pose is linear in time, so the largest over consecutive samples.
+    pub fn max_rates(&self) -> [f64; 2] {
+        let dt = self.sample_dt_s;
+        self.truth.windows(2).fold([0.0f64; 2], |[v, w], p| {
+            let (a, b) = (p[0], p[1]);
+            [
+                v.max((b[0] - a[0]).hypot(b[1] - a[1]) / dt),
+                w.max((b[2] - a[2]).abs() / dt),
+            ]
+        })
+    }
+
     /// How far the true pose strays from its value at `t0_s` during `[t0_s, t1_s]`: the
     /// largest change of x and of y (m) and of the heading (rad, unwrapped).
     pub fn excursion(&self, t0_s: f64, t1_s: f64) -> [f64; 3] {
