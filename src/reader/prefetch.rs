@@ -10,6 +10,7 @@
 //! prefetch changes only when the work is done, never what is read.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::thread::JoinHandle;
 
@@ -108,25 +109,24 @@ impl Prefetch {
     /// what was prefetched before.
     pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
         self.planned = plan.len();
-        let assign = assignment(&plan);
-        let n = assign.iter().max().map_or(1, |m| m + 1);
-        let mut parts = Vec::with_capacity(n);
+        let next = AtomicUsize::new(0);
+        let n = helpers(plan.len());
+        let mut parts = Vec::with_capacity(n + 1);
         // Scoped threads rather than a pool: a pool's idle workers spin (sched_yield) between
         // batches and take the core the client needs; one batch is milliseconds of work, so
         // starting a thread per worker costs little.
         std::thread::scope(|scope| {
             let mut others = Vec::with_capacity(n);
-            for w in 1..n {
-                let (plan, assign) = (&plan, &assign);
-                // A worker the OS will not start is done here instead.
-                match std::thread::Builder::new()
-                    .spawn_scoped(scope, move || share(model, plan, assign, w))
+            for _ in 0..n {
+                let (plan, next) = (&plan, &next);
+                // A worker the OS will not start leaves its share to the others.
+                if let Ok(h) = std::thread::Builder::new()
+                    .spawn_scoped(scope, move || share(model, plan, next))
                 {
-                    Ok(h) => others.push(h),
-                    Err(_) => parts.push(share(model, plan, assign, w)),
+                    others.push(h);
                 }
             }
-            parts.push(share(model, &plan, &assign, 0));
+            parts.push(share(model, &plan, &next));
             for h in others {
                 match h.join() {
                     Ok(p) => parts.push(p),
@@ -144,39 +144,42 @@ impl Prefetch {
         if plan.is_empty() {
             return;
         }
-        let assign = Arc::new(assignment(&plan));
         let plan = Arc::new(plan);
-        let n = assign.iter().max().map_or(1, |m| m + 1);
+        let next = Arc::new(AtomicUsize::new(0));
+        // As many as there are cores: the calling thread is busy reporting meanwhile.
+        let n = if plan.len() < 2 { 1 } else { workers() };
         let mut ahead = Ahead {
+            model: Arc::clone(model),
             plan: Arc::clone(&plan),
+            next: Arc::clone(&next),
             workers: Vec::with_capacity(n),
-            parts: Vec::new(),
         };
-        for w in 0..n {
+        for _ in 0..n {
             let job = {
-                let (model, plan, assign) =
-                    (Arc::clone(model), Arc::clone(&plan), Arc::clone(&assign));
-                move || share(&model, &plan, &assign, w)
+                let (model, plan, next) = (Arc::clone(model), Arc::clone(&plan), Arc::clone(&next));
+                move || share(&model, &plan, &next)
             };
-            match std::thread::Builder::new().spawn(job) {
-                Ok(h) => ahead.workers.push(h),
-                // A worker the OS will not start is done here instead.
-                Err(_) => ahead.parts.push(share(model, &plan, &assign, w)),
+            // A worker the OS will not start leaves its share to `finish_ahead`.
+            if let Ok(h) = std::thread::Builder::new().spawn(job) {
+                ahead.workers.push(h);
             }
         }
         self.ahead = Some(ahead);
     }
 
-    /// Waits for the background plan, if any, and keeps its windows; whether there was one.
+    /// Computes what is left of the background plan, if any, on the calling thread alongside
+    /// its workers, waits for them and keeps its windows; whether there was one.
     pub fn finish_ahead(&mut self) -> bool {
         let Some(Ahead {
+            model,
             plan,
+            next,
             workers,
-            mut parts,
         }) = self.ahead.take()
         else {
             return false;
         };
+        let mut parts = vec![share(&model, &plan, &next)];
         for h in workers {
             match h.join() {
                 Ok(p) => parts.push(p),
@@ -197,44 +200,37 @@ type Share = Vec<(usize, Vec<Read>)>;
 /// Slices being computed in the background.
 #[derive(Debug)]
 struct Ahead {
+    model: Arc<Model>,
     plan: Arc<Vec<Slice>>,
+    /// Index in the plan of the next slice nobody has taken.
+    next: Arc<AtomicUsize>,
     workers: Vec<JoinHandle<Share>>,
-    /// Shares computed on the calling thread (a worker could not start).
-    parts: Vec<Share>,
 }
 
-/// The worker of each slice of `plan`: each worker takes whole antennas, in time order, as the
-/// physics caches one field classification per antenna, which two workers on one antenna
-/// would keep evicting.
-fn assignment(plan: &[Slice]) -> Vec<usize> {
-    let mut antennas: Vec<u16> = Vec::new();
-    for s in plan {
-        if !antennas.contains(&s.antenna) {
-            antennas.push(s.antenna);
-        }
-    }
-    // Not worth a thread for a slice or two.
-    let n = if plan.len() < 2 {
-        1
+/// Threads to start besides the calling one for a plan of `len` slices: none for a slice or
+/// two (not worth a thread), else one fewer than the workers.
+fn helpers(len: usize) -> usize {
+    if len < 2 {
+        0
     } else {
-        workers().min(antennas.len()).max(1)
-    };
-    plan.iter()
-        .map(|s| antennas.iter().position(|&a| a == s.antenna).unwrap_or(0) % n)
-        .collect()
+        workers() - 1
+    }
 }
 
-/// The reads of the slices of `plan` assigned to worker `w`, with their indices.
-fn share(model: &Model, plan: &[Slice], assign: &[usize], w: usize) -> Share {
-    plan.iter()
-        .zip(assign)
-        .enumerate()
-        .filter(|(_, (_, &a))| a == w)
-        .map(|(i, (s, _))| {
-            let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
-            (i, reads)
-        })
-        .collect()
+/// The reads of the slices of `plan` a worker takes, with their indices: each worker takes
+/// the next slice nobody has taken until none is left, so the workers finish together. Slices
+/// come in time order, so an antenna's slices (a rotation apart) rarely run at once, and the
+/// physics' per-antenna caches stay warm.
+fn share(model: &Model, plan: &[Slice], next: &AtomicUsize) -> Share {
+    let mut out = Vec::new();
+    loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        let Some(s) = plan.get(i) else {
+            return out;
+        };
+        let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
+        out.push((i, reads));
+    }
 }
 
 /// The windows of `plan` from the workers' shares.
