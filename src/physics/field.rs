@@ -395,6 +395,10 @@ struct Path {
     cos: f64,
     /// Length (m).
     length: f64,
+    /// 1/length.
+    inv_l: f64,
+    /// At least the term's magnitude |Γ|·√g/l.
+    mag: f64,
     /// |û₀ − ûᵢ|: the chord between the unit vectors from the antenna toward the tag and
     /// toward the tag's image (0 for the direct path); the antenna moving at w changes
     /// lᵢ − D at the rate w·(û₀ − ûᵢ).
@@ -472,6 +476,8 @@ impl Near {
                 gamma: 1.0,
                 cos: c0,
                 length: dist,
+                inv_l: inv_d,
+                mag: hi * inv_d,
                 chord: 0.0,
             };
             seen.count = 1;
@@ -509,13 +515,18 @@ impl Near {
                     gamma: m.plane.coefficient.abs(),
                     cos: ci,
                     length: l,
+                    inv_l,
+                    mag: 0.0,
                     chord,
                 };
-                seen.count += 1;
             }
             let eta = 1e-12 + rel * w_inv * inv_l * 4.0;
             let (glo, ghi) = (gains.below(ci - eta), gains.above(ci + eta));
             let a = m.plane.coefficient.abs() * inv_l;
+            if keep {
+                seen.paths[seen.count].mag = ghi * a;
+                seen.count += 1;
+            }
             let (c, s) = fastmath::cis(-self.k * (l - dist));
             // H carries −Γ (the π flip).
             let mid = -m.plane.coefficient * (glo + ghi) * 0.5 * inv_l;
@@ -556,7 +567,7 @@ impl Near {
     /// Each path's term cᵢ = Γᵢ·√gᵢ/lᵢ·e^{−jk(lᵢ − D)} (the direct one: √g₀/D) changes by at
     /// most its magnitude's range plus its largest magnitude times its phase change. With each
     /// end moving at most δ, lᵢ changes by at most δ and the direction toward the tag (or its
-    /// image) by at most asin(δ/lᵢ) ≤ (π/2)·δ/lᵢ, plus the boresight's turn for the gain (the
+    /// image) by at most asin(δ/lᵢ) ≤ (π/3)·δ/lᵢ (δ ≤ lᵢ/2), plus the boresight's turn for the gain (the
     /// gain table bounds √g over the cosines within that angle). The relative phase changes
     /// at most k·2δ, and by the antenna's motion at most k·|w|·|û₀ − ûᵢ| per second, the
     /// chord growing by at most those angles. No path appears or vanishes while neither end
@@ -575,30 +586,30 @@ impl Near {
         }
         let paths = &seen.paths[..seen.count];
         let side = seen.side.min(room.unwrap_or(f64::INFINITY));
-        let d0 = paths[0].length;
-        let half_pi = std::f64::consts::FRAC_PI_2;
-        // The largest change over `hold_us`, or infinity when unbounded.
+        let inv_d0 = paths[0].inv_l;
+        // The largest change over `hold_us`, or infinity when unbounded. With x = δ/l ≤ ½,
+        // 1/(l − δ) ≤ (1 + 2x)/l and 1/(l + δ) ≥ (1 − x)/l.
         let change = |hold_us: u64| {
             let s = hold_us as f64 * 1e-6;
             let delta = (antenna + tag) * s + SLACK_M;
             let tau = turn * s + SLACK_COS;
-            if !(delta < side && delta < 0.5 * d0) {
+            if delta >= side {
                 return f64::INFINITY;
             }
             let mut v = 0.0;
             for (i, p) in paths.iter().enumerate() {
-                let l = p.length;
-                if l.is_nan() || l - delta < MIN_DISTANCE_M {
+                let x = delta * p.inv_l;
+                if !(x <= 0.5 && p.length >= 2.0 * MIN_DISTANCE_M) {
                     return f64::INFINITY;
                 }
-                let x = delta / l;
-                // Rounding of the cosine itself is below 1e-9 (see `decide`'s eta).
-                let dc = if x < 1.0 { x * half_pi } else { 2.0 } + tau + 1e-9;
-                let hi = gains.above(p.cos + dc) / (l - delta);
-                let lo = gains.below(p.cos - dc) / (l + delta);
+                // asin is convex: asin(x) ≤ 2·asin(½)·x for x ≤ ½. Rounding of the cosine
+                // itself is below 1e-9 (see `decide`'s eta).
+                let dc = x * ASIN_SLOPE + tau + 1e-9;
+                let hi = gains.above(p.cos + dc) * p.inv_l * (1.0 + 2.0 * x);
+                let lo = gains.below(p.cos - dc) * p.inv_l * (1.0 - x);
                 v += p.gamma * (hi - lo);
                 if i > 0 {
-                    let chord = p.chord + 1e-9 + half_pi * (delta / d0 + x);
+                    let chord = p.chord + 1e-9 + ASIN_SLOPE * (delta * inv_d0 + x);
                     let moved = (antenna * s * chord + 2.0 * tag * s).min(2.0 * delta);
                     v += p.gamma * hi * self.k * (moved + SLACK_M);
                 }
@@ -606,19 +617,23 @@ impl Near {
             v * (1.0 + SLACK_REL)
         };
         // The relative phases dominate the change: guess from them the longest hold worth
-        // proving (the change only grows with the hold), then prove it, or the ones before.
+        // proving (the change only grows with the hold), then prove it, or the one before.
         let rate: f64 = paths[1..]
             .iter()
-            .map(|p| p.gamma / p.length * (antenna * p.chord + 2.0 * tag))
+            .map(|p| p.mag * (antenna * p.chord + 2.0 * tag))
             .sum::<f64>()
-            * gains.0[TABLE_STEPS]
             * self.k;
-        let guess = margin / (rate + f64::MIN_POSITIVE) * 1e6;
+        // So does the direct path's gain off the boresight: its change per second of the
+        // view turning (a guess only: `change` proves the hold).
+        let p0 = &paths[0];
+        let swing = (antenna + tag) * p0.inv_l * ASIN_SLOPE + turn;
+        let slope = (gains.above(p0.cos + swing) - gains.below(p0.cos - swing)) * p0.inv_l;
+        let guess = 0.9e6 * margin / (rate + slope + f64::MIN_POSITIVE);
         let mut j = HOLD_US
             .iter()
             .rposition(|&h| h as f64 <= guess)
             .unwrap_or(0);
-        for _ in 0..3 {
+        for _ in 0..2 {
             if change(HOLD_US[j]) < margin {
                 return HOLD_US[j];
             }
@@ -630,6 +645,9 @@ impl Near {
         0
     }
 }
+
+/// asin(x)/x at x = ½ (π/3), above asin(x)/x for every x in (0, ½].
+const ASIN_SLOPE: f64 = std::f64::consts::FRAC_PI_3;
 
 /// How long (µs after the bucket start where it was made) a field decision may be kept, when
 /// [`Near::steady`] proves it holds that long.
