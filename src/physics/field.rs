@@ -246,9 +246,8 @@ struct Mirror {
     da_moves: f64,
     /// The antenna's image.
     image: Vec3,
-    /// Largest boresight · (image − antenna) over the interval: (image − antenna) is
-    /// −2·da·n̂, with da within `da_moves` of its start value and boresight · n̂ within `turn`.
-    e1: f64,
+    /// boresight · n̂ (the boresight as [`Aim`] holds it, not a unit vector).
+    beta: f64,
 }
 
 /// An antenna at the start of an interval, with how far it may move during it.
@@ -300,33 +299,11 @@ impl Around<'_> {
             }
             let length = distance(m.image, q);
             let l_min = (length - r).max(MIN_DISTANCE_M);
-            let (ad, at) = (m.da.abs(), dt.abs());
-            let c_up = if m.da * dt > 0.0 && ad > mn && at > mt {
-                // Both stay on their side. The reflection point seen from the antenna is
-                // w = (image − antenna) + s·(tag − image) with s = |da|/(|da| + |dt|):
-                // image − antenna = −2·da·n̂ changes by at most 2·Δda, s by at most `ds`,
-                // tag − image by at most both displacements.
-                let s = ad / (ad + at);
-                let ds = ((at + mt) * mn + (ad + mn) * mt) / ((ad - mn) + (at - mt)).powi(2);
-                let rp = add_scaled(m.image, s, sub(q, m.image));
-                let w = sub(rp, p);
-                let ell = norm(w);
-                let rho = 2.0 * mn + (s + ds).min(1.0) * (mt + moved) + ds * length + SLACK_M;
-                widen(dot(b, w) / (bn * ell), rho / ell, self.turn).0
-            } else {
-                // The reflection point lies on the segment image → tag and on the plane: the
-                // boresight component toward it is at most that toward either end, and it
-                // is at least |da| away from the antenna.
-                let e = m.e1.max(bv + self.turn.rad * (d0 + r) + r);
-                let h = ad - mn;
-                if e <= 0.0 {
-                    SLACK_COS
-                } else if h <= 0.0 {
-                    1.0
-                } else {
-                    (e / (bn * h)).min(1.0) + SLACK_COS
-                }
-            };
+            // While the path exists, its first leg points from the antenna toward the tag's
+            // image q' = q − 2·dt·n̂, which is `length` away and, like the antenna, moves at most
+            // r (a mirrored tag moves as far as the tag).
+            let c0 = (bv - 2.0 * dt * m.beta) / (bn * length);
+            let c_up = widen(c0, r / length, self.turn).0;
             reflected += m.plane.coefficient.abs() * self.gains.above(c_up) / l_min;
         }
         let (a_hi, a_lo) = (direct_hi + reflected, direct_lo - reflected);
@@ -967,20 +944,12 @@ impl Model {
                 let da = dot(sub(aim.position, plane.point), plane.unit);
                 let da_moves = motion.along(plane.unit) + SLACK_M;
                 let image = add_scaled(aim.position, -2.0 * da, plane.unit);
-                let beta = dot(aim.boresight, plane.unit);
-                let turn = motion.turn + SLACK_COS;
-                let mut e1 = f64::NEG_INFINITY;
-                for d in [da - da_moves, da + da_moves] {
-                    for b in [beta - turn, beta + turn] {
-                        e1 = e1.max(-2.0 * d * b);
-                    }
-                }
                 Mirror {
                     plane: *plane,
                     da,
                     da_moves,
                     image,
-                    e1,
+                    beta: dot(aim.boresight, plane.unit),
                 }
             })
             .collect();
