@@ -75,6 +75,8 @@ pub(super) struct Classified {
     inside: Vec<usize>,
     /// Tags to evaluate bucket by bucket, ascending.
     undecided: Vec<usize>,
+    /// Both, merged in tag order, as a bucket's candidates start.
+    pool: Vec<(usize, Known)>,
     /// Once nothing moves any more (the interval never ends), the field on each channel of
     /// the table (index channel − 1), evaluated once; empty otherwise.
     at_rest: Vec<Vec<usize>>,
@@ -88,8 +90,9 @@ pub(super) struct Classified {
 #[derive(Debug, Default)]
 pub(super) struct FieldCache {
     classified: Vec<Mutex<Option<Arc<Classified>>>>,
-    /// Per antenna, the decisions kept from earlier buckets.
-    memos: Vec<Mutex<Memo>>,
+    /// Per antenna, the draw state of its last inventory: the decisions kept from earlier
+    /// buckets, and buffers to reuse.
+    buckets: Vec<Mutex<Bucket>>,
 }
 
 impl Clone for FieldCache {
@@ -103,23 +106,26 @@ impl FieldCache {
     pub(super) fn new(antennas: usize) -> FieldCache {
         FieldCache {
             classified: (0..antennas).map(|_| Mutex::new(None)).collect(),
-            memos: (0..antennas).map(|_| Mutex::new(Memo::default())).collect(),
+            buckets: (0..antennas)
+                .map(|_| Mutex::new(Bucket::default()))
+                .collect(),
         }
     }
 
-    /// The kept decisions of antenna index `i` (0-based), taken out of the cache for one
-    /// inventory (empty when another thread holds them, or for no such antenna).
-    pub(super) fn take_memo(&self, i: usize) -> Memo {
-        self.memos.get(i).map_or_else(Memo::default, |m| {
-            // A panic while holding the lock leaves at worst an entry of the same kind.
+    /// The draw state of antenna index `i` (0-based), taken out of the cache for one
+    /// inventory (a fresh one when another thread holds it, or for no such antenna).
+    pub(super) fn take_bucket(&self, i: usize) -> Bucket {
+        self.buckets.get(i).map_or_else(Bucket::default, |m| {
+            // A panic while holding the lock leaves at worst a state of the same kind, which
+            // every use checks or resets.
             std::mem::take(&mut *m.lock().unwrap_or_else(|e| e.into_inner()))
         })
     }
 
-    /// Gives the kept decisions of antenna index `i` back to the cache.
-    pub(super) fn put_memo(&self, i: usize, memo: Memo) {
-        if let Some(m) = self.memos.get(i) {
-            *m.lock().unwrap_or_else(|e| e.into_inner()) = memo;
+    /// Gives the draw state of antenna index `i` back to the cache.
+    pub(super) fn put_bucket(&self, i: usize, bucket: Bucket) {
+        if let Some(m) = self.buckets.get(i) {
+            *m.lock().unwrap_or_else(|e| e.into_inner()) = bucket;
         }
     }
 
@@ -738,25 +744,7 @@ impl Model {
             bucket.rest = held.clone();
             return;
         }
-        bucket.pool.reserve(c.inside.len() + c.undecided.len());
-        let (mut i, mut u) = (0, 0);
-        loop {
-            match (c.inside.get(i), c.undecided.get(u)) {
-                (Some(&x), Some(&y)) if x < y => {
-                    bucket.pool.push((x, Known::In));
-                    i += 1;
-                }
-                (Some(&x), None) => {
-                    bucket.pool.push((x, Known::In));
-                    i += 1;
-                }
-                (_, Some(&y)) => {
-                    bucket.pool.push((y, Known::Unknown));
-                    u += 1;
-                }
-                (None, None) => break,
-            }
-        }
+        bucket.pool.extend_from_slice(&c.pool);
     }
 
     /// Empties `bucket` for the field of `antenna` at `t_us` on `channel`.
@@ -991,6 +979,7 @@ impl Model {
                 Status::Out => {}
             }
         }
+        c.pool = merge(&c.inside, &c.undecided);
         if t1_us == u64::MAX {
             c.at_rest = self.fields_at_rest(antenna, tx_power_dbm, t0_us, &c);
             c.links = (0..c.at_rest.len() * self.tags.len())
@@ -1062,6 +1051,29 @@ impl Model {
                     turn: dtheta,
                 }
             }
+        }
+    }
+}
+
+/// The tags of `inside` (known in) and `undecided` (unknown), both ascending, in tag order.
+fn merge(inside: &[usize], undecided: &[usize]) -> Vec<(usize, Known)> {
+    let mut pool = Vec::with_capacity(inside.len() + undecided.len());
+    let (mut i, mut u) = (0, 0);
+    loop {
+        match (inside.get(i), undecided.get(u)) {
+            (Some(&x), Some(&y)) if x < y => {
+                pool.push((x, Known::In));
+                i += 1;
+            }
+            (Some(&x), None) => {
+                pool.push((x, Known::In));
+                i += 1;
+            }
+            (_, Some(&y)) => {
+                pool.push((y, Known::Unknown));
+                u += 1;
+            }
+            (None, None) => return pool,
         }
     }
 }

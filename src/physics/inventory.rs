@@ -73,9 +73,9 @@ impl Model {
         let key = [self.seed, self.reader as u64, u64::from(antenna)];
         let mut classified = None;
         let mut bucket_now = u64::MAX;
-        let mut bucket = Bucket::default();
+        // The antenna's draw state from its last window: its kept decisions and buffers.
         let index = usize::from(antenna) - 1;
-        bucket.memo = self.field_cache.take_memo(index);
+        let mut bucket = self.field_cache.take_bucket(index);
         bucket.memo.fit(self.tags.len(), tx);
         let slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
         // At most one read per slot; a long window grows the vector as it goes.
@@ -110,8 +110,7 @@ impl Model {
                 reads.push(read);
             }
         }
-        self.field_cache
-            .put_memo(index, std::mem::take(&mut bucket.memo));
+        self.field_cache.put_bucket(index, bucket);
         reads
     }
 
