@@ -20,7 +20,7 @@ use super::field::Bucket;
 use super::geometry::{distance, Vec3};
 use super::multipath::{self, Aim, Channel};
 use super::schedule::{self, Slot};
-use super::{noise, phase, rssi, Model, Read};
+use super::{noise, phase, rssi, Model, Read, Want};
 
 /// Half-interval (µs) of the central difference giving the radial velocity.
 const DOPPLER_STEP_US: u64 = 10_000;
@@ -59,6 +59,20 @@ impl Model {
         t1_us: u64,
         tx_power_dbm: Option<f64>,
         channel: Option<u16>,
+    ) -> Vec<Read> {
+        self.inventory_with(antenna, t0_us, t1_us, tx_power_dbm, channel, Want::ALL)
+    }
+
+    /// As [`Model::inventory_on`], working out only the optional values `want` asks for (the
+    /// same reads, with the others 0).
+    pub fn inventory_with(
+        &self,
+        antenna: u16,
+        t0_us: u64,
+        t1_us: u64,
+        tx_power_dbm: Option<f64>,
+        channel: Option<u16>,
+        want: Want,
     ) -> Vec<Read> {
         let Some(a) = usize::from(antenna)
             .checked_sub(1)
@@ -106,7 +120,7 @@ impl Model {
                 bucket_now = b;
             }
             let ch = channel_at(slot.time_us);
-            if let Some(read) = self.attempt(antenna, tx, ch, slot, &mut bucket) {
+            if let Some(read) = self.attempt(antenna, tx, ch, slot, &mut bucket, want) {
                 reads.push(read);
             }
         }
@@ -147,6 +161,7 @@ impl Model {
         channel_index: u16,
         slot: Slot,
         bucket: &mut Bucket,
+        want: Want,
     ) -> Option<Read> {
         let Slot {
             time_us, mut rng, ..
@@ -190,12 +205,23 @@ impl Model {
         if rssi_dbm < rssi::READER_SENSITIVITY_DBM {
             return None;
         }
-        let mut n_phi = noise::gaussian(&mut rng, spec.phase_noise_rad);
-        if let Some(dist) = &spec.extra_phase_noise {
-            n_phi += noise::extra(&mut rng, dist);
-        }
-        let phi0 = self.phase_offset(antenna, tag, channel_index);
-        let phase_rad = phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi);
+        // The phase noise comes last from the attempt's generator: leaving it undrawn
+        // changes nothing else.
+        let phase_rad = if want.phase {
+            let mut n_phi = noise::gaussian(&mut rng, spec.phase_noise_rad);
+            if let Some(dist) = &spec.extra_phase_noise {
+                n_phi += noise::extra(&mut rng, dist);
+            }
+            let phi0 = self.phase_offset(antenna, tag, channel_index);
+            phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi)
+        } else {
+            0.0
+        };
+        let doppler_hz = if want.doppler {
+            self.doppler_hz(antenna, tag, time_us, lambda)
+        } else {
+            0.0
+        };
         Some(Read {
             tag,
             antenna,
@@ -204,7 +230,7 @@ impl Model {
             frequency_khz,
             rssi_dbm,
             phase_rad,
-            doppler_hz: self.doppler_hz(antenna, tag, time_us, lambda),
+            doppler_hz,
         })
     }
 

@@ -66,10 +66,34 @@ pub struct Read {
     pub frequency_khz: u32,
     /// Received backscatter power in dBm, unrounded.
     pub rssi_dbm: f64,
-    /// Reported phase in `[0, 2π)`.
+    /// Reported phase in `[0, 2π)` (0 when not asked for, see [`Want`]).
     pub phase_rad: f64,
-    /// Doppler shift in Hz (positive when the tag approaches the antenna).
+    /// Doppler shift in Hz, positive when the tag approaches the antenna (0 when not asked
+    /// for).
     pub doppler_hz: f64,
+}
+
+/// Which optional values of a [`Read`] to work out; the others (tag, antenna, time, channel,
+/// RSSI) always are, and asking for fewer never changes them or which reads happen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Want {
+    /// The reported phase.
+    pub phase: bool,
+    /// The Doppler shift.
+    pub doppler: bool,
+}
+
+impl Want {
+    /// Every value.
+    pub const ALL: Want = Want {
+        phase: true,
+        doppler: true,
+    };
+
+    /// Whether reads made with `self` carry everything `other` asks for.
+    pub fn covers(self, other: Want) -> bool {
+        (self.phase || !other.phase) && (self.doppler || !other.doppler)
+    }
 }
 
 /// How an antenna moves.

@@ -386,3 +386,55 @@ fn aim_is_that_of_the_true_pose() {
         }
     }
 }
+
+#[test]
+fn leaving_out_phase_and_doppler_changes_nothing_else() {
+    // S2 while the robot passes the first banner: extra phase noise from the scenario too.
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+    let mut s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
+    s.readers[0].antennas[0].extra_phase_noise = Some(crate::scenario::NoiseDist::Gamma {
+        shape: 2.0,
+        scale: 0.05,
+    });
+    let m = Model::new(&s, 0);
+    let mut compared = 0;
+    for antenna in [1, 2, 5] {
+        let all = m.inventory(antenna, 60_000_000, 70_000_000, None);
+        for want in [
+            Want {
+                phase: false,
+                doppler: false,
+            },
+            Want {
+                phase: true,
+                doppler: false,
+            },
+            Want {
+                phase: false,
+                doppler: true,
+            },
+        ] {
+            let some = m.inventory_with(antenna, 60_000_000, 70_000_000, None, None, want);
+            assert_eq!(some.len(), all.len(), "antenna {antenna}, {want:?}");
+            for (a, b) in all.iter().zip(&some) {
+                let expect = Read {
+                    phase_rad: if want.phase { a.phase_rad } else { 0.0 },
+                    doppler_hz: if want.doppler { a.doppler_hz } else { 0.0 },
+                    ..*a
+                };
+                assert_eq!(*b, expect);
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared} reads compared");
+    assert!(Want::ALL.covers(Want {
+        phase: true,
+        doppler: false
+    }));
+    assert!(!Want {
+        phase: true,
+        doppler: false
+    }
+    .covers(Want::ALL));
+}

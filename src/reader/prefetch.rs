@@ -4,7 +4,7 @@
 //!
 //! Sound because the physics is a pure function of (antenna, time window, transmit power,
 //! channel) and a window split in two gives the same reads as the whole
-//! ([`Model::inventory_on`]): the reads of any window inside a prefetched one are the
+//! ([`Model::inventory_with`]): the reads of any window inside a prefetched one are the
 //! prefetched reads whose time falls in it. A request no prefetched window covers (another
 //! power, a pinned channel, a slice the plan did not foresee) is computed directly, so the
 //! prefetch changes only when the work is done, never what is read.
@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::thread::JoinHandle;
 
-use crate::physics::{Model, Read};
+use crate::physics::{Model, Read, Want};
 
 /// Threads one prefetch uses: the machine's cores, at most 8.
 fn workers() -> usize {
@@ -37,6 +37,8 @@ pub struct Slice {
     pub t0_us: u64,
     /// End of the window (exclusive), simulated µs.
     pub t1_us: u64,
+    /// The optional values of the reads the AISpec reports.
+    pub want: Want,
 }
 
 #[derive(Debug)]
@@ -97,6 +99,7 @@ impl Prefetch {
         let w = self.windows.iter().find(|w| {
             w.slice.antenna == slice.antenna
                 && same_power(w.slice.power_dbm, slice.power_dbm)
+                && w.slice.want.covers(slice.want)
                 && w.slice.t0_us <= slice.t0_us
                 && slice.t1_us <= w.slice.t1_us
         })?;
@@ -228,7 +231,7 @@ fn share(model: &Model, plan: &[Slice], next: &AtomicUsize) -> Share {
         let Some(s) = plan.get(i) else {
             return out;
         };
-        let reads = model.inventory_on(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None);
+        let reads = model.inventory_with(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None, s.want);
         out.push((i, reads));
     }
 }
@@ -261,6 +264,7 @@ mod tests {
                 power_dbm: None,
                 t0_us: 60_000_000 + k * 25_000,
                 t1_us: 60_000_000 + (k + 1) * 25_000,
+                want: Want::ALL,
             })
             .collect();
         // The first half computed at once, the second in the background.

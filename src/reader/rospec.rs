@@ -12,7 +12,7 @@ use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
 use super::prefetch::{Prefetch, Slice};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
 use super::{field_error, ReaderProfile, MAX_ROSPECS};
-use crate::physics::{Model, Read};
+use crate::physics::{Model, Read, Want};
 
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
 pub const ANTENNA_DWELL_US: u64 = 25_000;
@@ -656,14 +656,22 @@ impl Specs {
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
         if end > t {
+            // Phase and Doppler are worked out only when reported.
+            let want = Want {
+                phase: content.impinj.phase,
+                doppler: content.impinj.doppler,
+            };
             let slice = Slice {
                 antenna,
                 power_dbm: power,
                 t0_us: t,
                 t1_us: end,
+                want,
             };
             let reads = match channel {
-                Some(_) => ctx.model.inventory_on(antenna, t, end, power, channel),
+                Some(_) => ctx
+                    .model
+                    .inventory_with(antenna, t, end, power, channel, want),
                 None => {
                     let until = [ai_end, ro_end].into_iter().flatten().min();
                     self.prefetched(ctx, &slice, &run, &antennas, ips, until)
@@ -800,6 +808,7 @@ impl Specs {
                 out.push(Slice {
                     antenna,
                     power_dbm: antenna_power(ips, ctx.config, antenna),
+                    want: slice.want,
                     t0_us: t0,
                     t1_us: t0 + ANTENNA_DWELL_US,
                 });
@@ -881,12 +890,13 @@ impl Specs {
 
 /// The reads of `slice` computed on the spot.
 fn direct(model: &Model, slice: &Slice) -> Vec<Read> {
-    model.inventory_on(
+    model.inventory_with(
         slice.antenna,
         slice.t0_us,
         slice.t1_us,
         slice.power_dbm,
         None,
+        slice.want,
     )
 }
 
