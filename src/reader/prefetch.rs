@@ -11,8 +11,7 @@
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, OnceLock};
-use std::thread::JoinHandle;
+use std::sync::{mpsc, Arc, OnceLock};
 
 use crate::physics::{Model, Read, Want};
 
@@ -60,6 +59,41 @@ pub struct Prefetch {
     planned: usize,
     /// The following slices, being computed in the background.
     ahead: Option<Ahead>,
+    /// Threads that compute slices, parked between batches (started at the first batch).
+    pool: Vec<Worker>,
+}
+
+/// A batch for a worker: take slices of `plan` from `next` until none is left, and send the
+/// reads back.
+struct Job {
+    model: Arc<Model>,
+    plan: Arc<Vec<Slice>>,
+    next: Arc<AtomicUsize>,
+    reply: mpsc::Sender<Share>,
+}
+
+/// A parked thread of the pool: it waits for jobs and ends once its sender is dropped.
+#[derive(Debug)]
+struct Worker {
+    jobs: mpsc::Sender<Job>,
+}
+
+impl Worker {
+    /// Starts a worker; `None` if the OS will not start a thread.
+    fn start() -> Option<Worker> {
+        let (jobs, inbox) = mpsc::channel::<Job>();
+        std::thread::Builder::new()
+            .name("llrp-physics".into())
+            .spawn(move || {
+                while let Ok(job) = inbox.recv() {
+                    let reads = share(&job.model, &job.plan, &job.next);
+                    // The batch's owner may have gone; nothing else waits for these reads.
+                    let _ = job.reply.send(reads);
+                }
+            })
+            .ok()?;
+        Some(Worker { jobs })
+    }
 }
 
 fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
@@ -108,37 +142,53 @@ impl Prefetch {
         Some(w.reads[lo..hi].to_vec())
     }
 
+    /// Hands `plan` to up to `n` workers of the pool (started as needed): the receiver of
+    /// their reads and how many will answer.
+    fn dispatch(
+        &mut self,
+        model: &Arc<Model>,
+        plan: &Arc<Vec<Slice>>,
+        next: &Arc<AtomicUsize>,
+        n: usize,
+    ) -> (mpsc::Receiver<Share>, usize) {
+        while self.pool.len() < n {
+            match Worker::start() {
+                Some(w) => self.pool.push(w),
+                None => break,
+            }
+        }
+        let (reply, replies) = mpsc::channel();
+        let mut sent = 0;
+        // A worker whose thread has ended (it cannot, short of a panic in the physics) is
+        // dropped; its share falls to the others.
+        self.pool.retain(|w| {
+            if sent == n {
+                return true;
+            }
+            let job = Job {
+                model: Arc::clone(model),
+                plan: Arc::clone(plan),
+                next: Arc::clone(next),
+                reply: reply.clone(),
+            };
+            let ok = w.jobs.send(job).is_ok();
+            sent += usize::from(ok);
+            ok
+        });
+        (replies, sent)
+    }
+
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
     /// what was prefetched before.
-    pub fn fill(&mut self, model: &Model, plan: Vec<Slice>) {
+    pub fn fill(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
         self.planned = plan.len();
-        let next = AtomicUsize::new(0);
-        let n = helpers(plan.len());
-        let mut parts = Vec::with_capacity(n + 1);
-        // Scoped threads rather than a pool: a pool's idle workers spin (sched_yield) between
-        // batches and take the core the client needs; one batch is milliseconds of work, so
-        // starting a thread per worker costs little.
-        std::thread::scope(|scope| {
-            let mut others = Vec::with_capacity(n);
-            for _ in 0..n {
-                let (plan, next) = (&plan, &next);
-                // A worker the OS will not start leaves its share to the others.
-                if let Ok(h) = std::thread::Builder::new()
-                    .spawn_scoped(scope, move || share(model, plan, next))
-                {
-                    others.push(h);
-                }
-            }
-            parts.push(share(model, &plan, &next));
-            for h in others {
-                match h.join() {
-                    Ok(p) => parts.push(p),
-                    // The physics does not panic on any input; should it, re-raise it here.
-                    Err(e) => std::panic::resume_unwind(e),
-                }
-            }
-        });
-        self.windows = assemble(plan, parts).into();
+        let plan = Arc::new(plan);
+        let next = Arc::new(AtomicUsize::new(0));
+        let helpers = if plan.len() < 2 { 0 } else { workers() - 1 };
+        let (replies, sent) = self.dispatch(model, &plan, &next, helpers);
+        let mut parts = vec![share(model, &plan, &next)];
+        parts.extend(replies.iter().take(sent));
+        self.windows = assemble(model, Arc::unwrap_or_clone(plan), parts).into();
     }
 
     /// Starts computing `plan` in the background (the slices after the ones already
@@ -151,48 +201,34 @@ impl Prefetch {
         let next = Arc::new(AtomicUsize::new(0));
         // As many as there are cores: the calling thread is busy reporting meanwhile.
         let n = if plan.len() < 2 { 1 } else { workers() };
-        let mut ahead = Ahead {
+        let (replies, sent) = self.dispatch(model, &plan, &next, n);
+        self.ahead = Some(Ahead {
             model: Arc::clone(model),
-            plan: Arc::clone(&plan),
-            next: Arc::clone(&next),
-            workers: Vec::with_capacity(n),
-        };
-        for _ in 0..n {
-            let job = {
-                let (model, plan, next) = (Arc::clone(model), Arc::clone(&plan), Arc::clone(&next));
-                move || share(&model, &plan, &next)
-            };
-            // A worker the OS will not start leaves its share to `finish_ahead`.
-            if let Ok(h) = std::thread::Builder::new().spawn(job) {
-                ahead.workers.push(h);
-            }
-        }
-        self.ahead = Some(ahead);
+            plan,
+            next,
+            replies,
+            sent,
+        });
     }
 
     /// Computes what is left of the background plan, if any, on the calling thread alongside
-    /// its workers, waits for them and keeps its windows; whether there was one.
+    /// the workers, waits for them and keeps its windows; whether there was one.
     pub fn finish_ahead(&mut self) -> bool {
         let Some(Ahead {
             model,
             plan,
             next,
-            workers,
+            replies,
+            sent,
         }) = self.ahead.take()
         else {
             return false;
         };
         let mut parts = vec![share(&model, &plan, &next)];
-        for h in workers {
-            match h.join() {
-                Ok(p) => parts.push(p),
-                // The physics does not panic on any input; should it, re-raise it here.
-                Err(e) => std::panic::resume_unwind(e),
-            }
-        }
+        parts.extend(replies.iter().take(sent));
         let plan = Arc::unwrap_or_clone(plan);
         self.planned = plan.len();
-        self.windows.extend(assemble(plan, parts));
+        self.windows.extend(assemble(&model, plan, parts));
         true
     }
 }
@@ -207,17 +243,9 @@ struct Ahead {
     plan: Arc<Vec<Slice>>,
     /// Index in the plan of the next slice nobody has taken.
     next: Arc<AtomicUsize>,
-    workers: Vec<JoinHandle<Share>>,
-}
-
-/// Threads to start besides the calling one for a plan of `len` slices: none for a slice or
-/// two (not worth a thread), else one fewer than the workers.
-fn helpers(len: usize) -> usize {
-    if len < 2 {
-        0
-    } else {
-        workers() - 1
-    }
+    /// The workers' reads, `sent` of them.
+    replies: mpsc::Receiver<Share>,
+    sent: usize,
 }
 
 /// The reads of the slices of `plan` a worker takes, with their indices: each worker takes
@@ -236,15 +264,28 @@ fn share(model: &Model, plan: &[Slice], next: &AtomicUsize) -> Share {
     }
 }
 
-/// The windows of `plan` from the workers' shares.
-fn assemble(plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
-    let mut results: Vec<Vec<Read>> = vec![Vec::new(); plan.len()];
+/// The windows of `plan` from the workers' shares; a slice no share holds (its worker
+/// ended with it) is computed here.
+fn assemble(model: &Model, plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
+    let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
     for (i, reads) in parts.into_iter().flatten() {
-        results[i] = reads;
+        results[i] = Some(reads);
     }
     plan.into_iter()
         .zip(results)
-        .map(|(slice, reads)| Window { slice, reads })
+        .map(|(slice, reads)| Window {
+            reads: reads.unwrap_or_else(|| {
+                model.inventory_with(
+                    slice.antenna,
+                    slice.t0_us,
+                    slice.t1_us,
+                    slice.power_dbm,
+                    None,
+                    slice.want,
+                )
+            }),
+            slice,
+        })
         .collect()
 }
 
