@@ -285,18 +285,35 @@ pub struct UnknownMessage {
     pub payload: Vec<u8>,
 }
 
+/// The type a [`MessageBody`] variant holds for message `$t`: the message itself, or a box
+/// for the few that are much larger than the rest (so that every message, reports above
+/// all, stays small to move).
+macro_rules! body_type {
+    (GetReaderCapabilitiesResponse) => { Box<GetReaderCapabilitiesResponse> };
+    (GetReaderConfigResponse) => { Box<GetReaderConfigResponse> };
+    (ReaderEventNotification) => { Box<ReaderEventNotification> };
+    (AddRospec) => { Box<AddRospec> };
+    (SetReaderConfig) => { Box<SetReaderConfig> };
+    (ClientRequestOp) => { Box<ClientRequestOp> };
+    (AddAccessspec) => { Box<AddAccessspec> };
+    (GetRospecsResponse) => { Box<GetRospecsResponse> };
+    ($t:ident) => { $t };
+}
+
 macro_rules! message_body {
     (
         standard { $($std:ident),* $(,)? }
         custom { $($cus:ident),* $(,)? }
     ) => {
-        /// The body of any LLRP message.
+        /// The body of any LLRP message. The eight messages much larger than the rest
+        /// (capabilities, configuration, ROSpec and AccessSpec definitions, reader events) are
+        /// held in a `Box`, so that a message, a report above all, is cheap to move.
         #[derive(Clone, Debug, PartialEq, Eq)]
         #[cfg_attr(feature = "serde", derive(serde::Serialize))]
         #[cfg_attr(feature = "serde", serde(untagged))]
         #[allow(missing_docs, clippy::large_enum_variant)]
         pub enum MessageBody {
-            $($std($std),)*
+            $($std(body_type!($std)),)*
             $($cus($cus),)*
             /// A CUSTOM_MESSAGE of a vendor or subtype the codec does not type.
             Custom(RawCustomMessage),
@@ -306,8 +323,9 @@ macro_rules! message_body {
 
         $(
             impl From<$std> for MessageBody {
+                #[allow(clippy::useless_conversion)] // boxes the large messages only
                 fn from(m: $std) -> Self {
-                    MessageBody::$std(m)
+                    MessageBody::$std(m.into())
                 }
             }
         )*
@@ -349,7 +367,7 @@ macro_rules! message_body {
             fn decode_body(ty: u16, body: &[u8]) -> Result<Self, DecodeError> {
                 $(
                     if ty == <$std as MessageDef>::TYPE {
-                        return <$std as Body>::decode_body(body).map(MessageBody::$std);
+                        return <$std as Body>::decode_body(body).map(MessageBody::from);
                     }
                 )*
                 if ty == CUSTOM_MESSAGE_TYPE {
@@ -392,7 +410,7 @@ macro_rules! message_body {
             #[cfg(feature = "arbitrary")]
             pub fn sample_typed(k: usize, g: &mut crate::sample::Gen) -> Self {
                 let makers: Vec<fn(&mut crate::sample::Gen) -> MessageBody> = vec![
-                    $( |g| MessageBody::$std(<$std as crate::sample::Sample>::sample(g)), )*
+                    $( |g| MessageBody::from(<$std as crate::sample::Sample>::sample(g)), )*
                     $( |g| MessageBody::$cus(<$cus as crate::sample::Sample>::sample(g)), )*
                 ];
                 makers[k % makers.len()](g)

@@ -333,7 +333,7 @@ impl Reader {
                 out.push(reply(body.into()));
             }
             MessageBody::SetReaderConfig(m) => {
-                let status = self.config.set(&self.profile, m);
+                let status = self.config.set(&self.profile, *m);
                 if status.is_success() {
                     self.keepalive_due_ms = self.config.keepalive_period_ms().map(|p| wall_ms + p);
                 }

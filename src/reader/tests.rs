@@ -73,10 +73,11 @@ fn add_rospec(
     Message {
         version: 1,
         id: 10,
-        body: MessageBody::AddRospec(AddRospec {
+        body: AddRospec {
             ro_spec: spec,
             ..Default::default()
-        }),
+        }
+        .into(),
     }
 }
 
