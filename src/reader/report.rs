@@ -242,6 +242,11 @@ impl ReportBuffer {
             }
             self.index.insert(key, self.entries.len());
         }
+        if self.entries.capacity() == 0 {
+            // A report of one tag (N = 1, the usual trigger) holds exactly one: the default
+            // first growth would allocate four.
+            self.entries.reserve_exact(1);
+        }
         self.entries.push(build(o, c));
     }
 
