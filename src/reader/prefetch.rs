@@ -63,13 +63,55 @@ pub struct Prefetch {
     pool: Vec<Worker>,
 }
 
-/// A batch for a worker: take slices of `plan` from `next` until none is left, and send the
-/// reads back.
+/// A batch for a worker: take slices of `plan` from `queue` (its own lane first) until none
+/// is left, and send the reads back.
 struct Job {
     model: Arc<Model>,
     plan: Arc<Vec<Slice>>,
-    next: Arc<AtomicUsize>,
+    queue: Arc<Queue>,
+    lane: usize,
     reply: mpsc::Sender<Share>,
+}
+
+/// The slices of a plan in lanes, one per worker, each antenna always in the same lane (so
+/// its physics caches stay on one core), with a cursor each: a worker takes from its own
+/// lane, then from the others' once it is empty, so all finish together.
+#[derive(Debug)]
+struct Queue {
+    lanes: Vec<Vec<usize>>,
+    cursors: Vec<AtomicUsize>,
+}
+
+impl Queue {
+    /// The slices of `plan` in `lanes` lanes, in plan (time) order within each.
+    fn new(plan: &[Slice], lanes: usize) -> Queue {
+        let lanes = lanes.max(1);
+        let mut lists = vec![Vec::new(); lanes];
+        for (i, s) in plan.iter().enumerate() {
+            lists[usize::from(s.antenna.saturating_sub(1)) % lanes].push(i);
+        }
+        Queue {
+            cursors: lists.iter().map(|_| AtomicUsize::new(0)).collect(),
+            lanes: lists,
+        }
+    }
+
+    /// The next slice nobody has taken: from lane `own` first (none: any), then from the
+    /// others; `None` once every slice is taken.
+    fn take(&self, own: Option<usize>) -> Option<usize> {
+        let first = own.into_iter();
+        let rest = (0..self.lanes.len()).filter(|&l| Some(l) != own);
+        for l in first.chain(rest) {
+            if let (Some(list), Some(cursor)) = (self.lanes.get(l), self.cursors.get(l)) {
+                if cursor.load(Ordering::Relaxed) < list.len() {
+                    if let Some(&i) = list.get(cursor.fetch_add(1, Ordering::Relaxed)) {
+                        return Some(i);
+                    }
+                }
+            }
+        }
+        None
+    }
 }
 
 /// A parked thread of the pool: it waits for jobs and ends once its sender is dropped.
@@ -86,7 +128,7 @@ impl Worker {
             .name("llrp-physics".into())
             .spawn(move || {
                 while let Ok(job) = inbox.recv() {
-                    let reads = share(&job.model, &job.plan, &job.next);
+                    let reads = share(&job.model, &job.plan, &job.queue, Some(job.lane));
                     // The batch's owner may have gone; nothing else waits for these reads.
                     let _ = job.reply.send(reads);
                 }
@@ -148,7 +190,7 @@ impl Prefetch {
         &mut self,
         model: &Arc<Model>,
         plan: &Arc<Vec<Slice>>,
-        next: &Arc<AtomicUsize>,
+        queue: &Arc<Queue>,
         n: usize,
     ) -> (mpsc::Receiver<Share>, usize) {
         while self.pool.len() < n {
@@ -168,7 +210,9 @@ impl Prefetch {
             let job = Job {
                 model: Arc::clone(model),
                 plan: Arc::clone(plan),
-                next: Arc::clone(next),
+                queue: Arc::clone(queue),
+                // Worker k of the pool always has lane k: its antennas stay with it.
+                lane: sent,
                 reply: reply.clone(),
             };
             let ok = w.jobs.send(job).is_ok();
@@ -183,10 +227,11 @@ impl Prefetch {
     pub fn fill(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
         self.planned = plan.len();
         let plan = Arc::new(plan);
-        let next = Arc::new(AtomicUsize::new(0));
         let helpers = if plan.len() < 2 { 0 } else { workers() - 1 };
-        let (replies, sent) = self.dispatch(model, &plan, &next, helpers);
-        let mut parts = vec![share(model, &plan, &next)];
+        // The calling thread works the last lane.
+        let queue = Arc::new(Queue::new(&plan, helpers + 1));
+        let (replies, sent) = self.dispatch(model, &plan, &queue, helpers);
+        let mut parts = vec![share(model, &plan, &queue, Some(helpers))];
         parts.extend(replies.iter().take(sent));
         self.windows = assemble(model, Arc::unwrap_or_clone(plan), parts).into();
     }
@@ -198,14 +243,14 @@ impl Prefetch {
             return;
         }
         let plan = Arc::new(plan);
-        let next = Arc::new(AtomicUsize::new(0));
         // As many as there are cores: the calling thread is busy reporting meanwhile.
         let n = if plan.len() < 2 { 1 } else { workers() };
-        let (replies, sent) = self.dispatch(model, &plan, &next, n);
+        let queue = Arc::new(Queue::new(&plan, n));
+        let (replies, sent) = self.dispatch(model, &plan, &queue, n);
         self.ahead = Some(Ahead {
             model: Arc::clone(model),
             plan,
-            next,
+            queue,
             replies,
             sent,
         });
@@ -217,14 +262,15 @@ impl Prefetch {
         let Some(Ahead {
             model,
             plan,
-            next,
+            queue,
             replies,
             sent,
         }) = self.ahead.take()
         else {
             return false;
         };
-        let mut parts = vec![share(&model, &plan, &next)];
+        // The calling thread has no lane: it takes what the workers have not.
+        let mut parts = vec![share(&model, &plan, &queue, None)];
         parts.extend(replies.iter().take(sent));
         let plan = Arc::unwrap_or_clone(plan);
         self.planned = plan.len();
@@ -241,27 +287,25 @@ type Share = Vec<(usize, Vec<Read>)>;
 struct Ahead {
     model: Arc<Model>,
     plan: Arc<Vec<Slice>>,
-    /// Index in the plan of the next slice nobody has taken.
-    next: Arc<AtomicUsize>,
+    /// The slices nobody has taken yet.
+    queue: Arc<Queue>,
     /// The workers' reads, `sent` of them.
     replies: mpsc::Receiver<Share>,
     sent: usize,
 }
 
-/// The reads of the slices of `plan` a worker takes, with their indices: each worker takes
-/// the next slice nobody has taken until none is left, so the workers finish together. Slices
-/// come in time order, so an antenna's slices (a rotation apart) rarely run at once, and the
-/// physics' per-antenna caches stay warm.
-fn share(model: &Model, plan: &[Slice], next: &AtomicUsize) -> Share {
+/// The reads of the slices of `plan` a worker takes from `queue` (lane `lane` first), with
+/// their indices.
+fn share(model: &Model, plan: &[Slice], queue: &Queue, lane: Option<usize>) -> Share {
     let mut out = Vec::new();
-    loop {
-        let i = next.fetch_add(1, Ordering::Relaxed);
-        let Some(s) = plan.get(i) else {
-            return out;
-        };
-        let reads = model.inventory_with(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None, s.want);
-        out.push((i, reads));
+    while let Some(i) = queue.take(lane) {
+        if let Some(s) = plan.get(i) {
+            let reads =
+                model.inventory_with(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None, s.want);
+            out.push((i, reads));
+        }
     }
+    out
 }
 
 /// The windows of `plan` from the workers' shares; a slice no share holds (its worker
@@ -293,6 +337,43 @@ fn assemble(model: &Model, plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
+
+    #[test]
+    fn every_slice_is_taken_once_own_lane_first() {
+        let plan: Vec<Slice> = (0..50u64)
+            .map(|k| Slice {
+                antenna: (k % 8) as u16 + 1,
+                power_dbm: None,
+                t0_us: k * 25_000,
+                t1_us: (k + 1) * 25_000,
+                want: Want::ALL,
+            })
+            .collect();
+        let q = Queue::new(&plan, 3);
+        // Lane 1 holds antennas 2, 5 and 8, in time order.
+        let mine: Vec<usize> = std::iter::from_fn(|| q.take(Some(1)))
+            .take(q.lanes[1].len())
+            .collect();
+        assert!(mine.windows(2).all(|w| w[0] < w[1]));
+        assert!(mine.iter().all(|&i| [2, 5, 8].contains(&plan[i].antenna)));
+        // Then three takers share the rest, each slice once.
+        let mut taken: Vec<usize> = std::thread::scope(|s| {
+            let q = &q;
+            let hs: Vec<_> = [Some(0), Some(2), None]
+                .into_iter()
+                .map(|lane| {
+                    s.spawn(move || std::iter::from_fn(|| q.take(lane)).collect::<Vec<_>>())
+                })
+                .collect();
+            hs.into_iter()
+                .flat_map(|h| h.join().expect("taker"))
+                .collect()
+        });
+        taken.extend(mine);
+        taken.sort_unstable();
+        assert_eq!(taken, (0..plan.len()).collect::<Vec<_>>());
+        assert_eq!(q.take(None), None);
+    }
 
     #[test]
     fn sub_windows_of_a_prefetch_equal_direct_computation() {
