@@ -91,9 +91,10 @@ impl Model {
         let index = usize::from(antenna) - 1;
         let mut bucket = self.field_cache.take_bucket(index);
         bucket.memo.fit(self.tags.len(), tx);
-        let slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
-        // At most one read per slot; a long window grows the vector as it goes.
-        let mut reads = Vec::with_capacity(slots.size_hint().1.unwrap_or(0).min(1 << 12));
+        let mut slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
+        // At most one read per slot: room for the rest of them at the first read (a window
+        // without reads allocates nothing; a long one grows the vector as it goes).
+        let mut reads = Vec::new();
         // The dwell [start, end) of the last channel looked up, and that channel: a new one
         // (a 64-bit division) only when the time leaves it.
         let mut dwell = (1, 0, 1);
@@ -111,7 +112,7 @@ impl Model {
             }
             dwell.2
         };
-        for slot in slots {
+        while let Some(slot) = slots.next() {
             let b = slot.time_us / FIELD_BUCKET_US;
             if bucket_now != b {
                 let start = b * FIELD_BUCKET_US;
@@ -121,6 +122,9 @@ impl Model {
             }
             let ch = channel_at(slot.time_us);
             if let Some(read) = self.attempt(antenna, tx, ch, slot, &mut bucket, want) {
+                if reads.capacity() == 0 {
+                    reads.reserve(slots.size_hint().1.unwrap_or(0).min(1 << 12) + 1);
+                }
                 reads.push(read);
             }
         }
