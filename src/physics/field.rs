@@ -365,8 +365,6 @@ struct Seen {
     count: usize,
     /// The nearest either end came to a reflector's plane (m).
     side: f64,
-    /// Largest magnitude of the reflected terms, summed.
-    reflected: f64,
 }
 
 /// One path of a decision, for [`Near::steady`].
@@ -522,7 +520,6 @@ impl Near {
             mag += ghi * a;
         }
         err += mag * 1e-12;
-        seen.reflected = mag - hi * inv_d;
         let amplitude = (re * re + im * im).sqrt();
         // What a later exact evaluation rounds differently, far above its rounding.
         let slack = threshold * SLACK_REL + mag * 1e-12;
