@@ -542,7 +542,8 @@ impl Near {
     /// [`Near::decide`] that decided cannot change by `margin` or more, when the antenna moves
     /// at most `antenna` m/s, the tag at most `tag` m/s and the boresight turns at most `turn`
     /// rad/s; 0 if not even the shortest. With `room` (m) set, the tag must also stay within
-    /// that much more distance (a tag in the field must stay within reach).
+    /// that much more distance (a tag in the field must stay within reach). `exhaustive`
+    /// proves holds from the longest down rather than from a guess at it.
     ///
     /// Each path's term cᵢ = Γᵢ·√gᵢ/lᵢ·e^{−jk(lᵢ − D)} (the direct one: √g₀/D) changes by at
     /// most its magnitude's range plus its largest magnitude times its phase change. With each
@@ -558,6 +559,7 @@ impl Near {
         margin: f64,
         (antenna, tag, turn): (f64, f64, f64),
         room: Option<f64>,
+        exhaustive: bool,
     ) -> u64 {
         let seen = &self.seen;
         let finite = antenna.is_finite() && tag.is_finite() && turn.is_finite();
@@ -609,11 +611,16 @@ impl Near {
         let swing = (antenna + tag) * p0.inv_l * ASIN_SLOPE + turn;
         let slope = (gains.above(p0.cos + swing) - gains.below(p0.cos - swing)) * p0.inv_l;
         let guess = 0.9e6 * margin / (rate + slope + f64::MIN_POSITIVE);
-        let mut j = HOLD_US
-            .iter()
-            .rposition(|&h| h as f64 <= guess)
-            .unwrap_or(0);
-        for _ in 0..2 {
+        let (mut j, tries) = if exhaustive {
+            (HOLD_US.len() - 1, HOLD_US.len())
+        } else {
+            let j = HOLD_US
+                .iter()
+                .rposition(|&h| h as f64 <= guess)
+                .unwrap_or(0);
+            (j, 2)
+        };
+        for _ in 0..tries {
             if change(HOLD_US[j]) < margin {
                 return HOLD_US[j];
             }
@@ -662,6 +669,9 @@ struct Kept {
 pub(super) struct Memo {
     tx_bits: u64,
     kept: Vec<Kept>,
+    /// Prove holds from the longest down instead of from a guess (tests: every hold is then
+    /// as long as the proof alone allows).
+    exhaustive: bool,
 }
 
 impl Memo {
@@ -861,6 +871,7 @@ impl Model {
                     margin,
                     (rates.speed, tag_speed, rates.turn),
                     room,
+                    bucket.memo.exhaustive,
                 );
                 if hold > 0 {
                     *k = Kept {
@@ -1329,6 +1340,7 @@ mod tests {
                 for ch in [1, table / 2 + 1, table] {
                     let mut b = Bucket::default();
                     b.memo.fit(m.tag_count(), tx);
+                    b.memo.exhaustive = true;
                     m.prepare(&mut b, antenna, tx, t, ch);
                     for tag in 0..m.tag_count() {
                         m.in_field(&mut b, tag);
