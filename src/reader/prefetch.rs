@@ -40,6 +40,20 @@ pub struct Slice {
     pub want: Want,
 }
 
+impl Slice {
+    /// The reads of this slice, computed on the spot.
+    pub fn compute(&self, model: &Model) -> Vec<Read> {
+        model.inventory_with(
+            self.antenna,
+            self.t0_us,
+            self.t1_us,
+            self.power_dbm,
+            None,
+            self.want,
+        )
+    }
+}
+
 #[derive(Debug)]
 struct Window {
     slice: Slice,
@@ -300,9 +314,7 @@ fn share(model: &Model, plan: &[Slice], queue: &Queue, lane: Option<usize>) -> S
     let mut out = Vec::new();
     while let Some(i) = queue.take(lane) {
         if let Some(s) = plan.get(i) {
-            let reads =
-                model.inventory_with(s.antenna, s.t0_us, s.t1_us, s.power_dbm, None, s.want);
-            out.push((i, reads));
+            out.push((i, s.compute(model)));
         }
     }
     out
@@ -318,16 +330,7 @@ fn assemble(model: &Model, plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
     plan.into_iter()
         .zip(results)
         .map(|(slice, reads)| Window {
-            reads: reads.unwrap_or_else(|| {
-                model.inventory_with(
-                    slice.antenna,
-                    slice.t0_us,
-                    slice.t1_us,
-                    slice.power_dbm,
-                    None,
-                    slice.want,
-                )
-            }),
+            reads: reads.unwrap_or_else(|| slice.compute(model)),
             slice,
         })
         .collect()

@@ -788,7 +788,7 @@ impl Specs {
         until: Option<u64>,
     ) -> Vec<Read> {
         if self.no_prefetch {
-            return direct(ctx.model, slice);
+            return slice.compute(ctx.model);
         }
         if let Some(reads) = self.prefetch.take(slice) {
             return reads;
@@ -839,7 +839,7 @@ impl Specs {
                 let reads = self
                     .prefetch
                     .take(slice)
-                    .unwrap_or_else(|| direct(ctx.model, slice));
+                    .unwrap_or_else(|| slice.compute(ctx.model));
                 (reads, next)
             }
         };
@@ -886,18 +886,6 @@ impl Specs {
             },
         }));
     }
-}
-
-/// The reads of `slice` computed on the spot.
-fn direct(model: &Model, slice: &Slice) -> Vec<Read> {
-    model.inventory_with(
-        slice.antenna,
-        slice.t0_us,
-        slice.t1_us,
-        slice.power_dbm,
-        None,
-        slice.want,
-    )
 }
 
 /// Transmit power of `antenna`: the ROSpec's RFTransmitter for it, else the reader's
