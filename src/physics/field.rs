@@ -787,8 +787,9 @@ impl Model {
     }
 
     /// The channel and forward-link margin of `tag` from `antenna` at `t_us` on channel
-    /// `channel`: those of [`Model::margin_with`] at the antenna's pose then, taken from
-    /// `bucket`'s classification once nothing moves any more.
+    /// `channel`: those of [`Model::margin_with`] at the antenna's pose then (the delay only
+    /// if `delay`), taken from `bucket`'s classification once nothing moves any more.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn link(
         &self,
         bucket: &Bucket,
@@ -797,20 +798,22 @@ impl Model {
         t_us: u64,
         channel: u16,
         tx_power_dbm: f64,
+        delay: bool,
     ) -> (Channel, f64) {
         let lambda = self.wavelength_m(channel);
-        let compute = || {
+        let compute = |delay| {
             let aim = self.aim(antenna, t_us);
             let position = self.tag_position(tag, t_us);
-            self.margin_with(antenna, &aim, position, lambda, tx_power_dbm)
+            self.margin_with(antenna, &aim, position, lambda, tx_power_dbm, delay)
         };
+        // A kept link serves every later request, so it has its delay.
         let cached = bucket.rest.as_ref().and_then(|c| {
             let i = usize::from(channel).checked_sub(1)? * self.tags.len() + tag;
             let slot = c.links.get(i)?;
             (t_us >= c.t0_us && c.tx_bits == tx_power_dbm.to_bits())
-                .then(|| *slot.get_or_init(compute))
+                .then(|| *slot.get_or_init(|| compute(true)))
         });
-        cached.unwrap_or_else(compute)
+        cached.unwrap_or_else(|| compute(delay))
     }
 
     /// A tag drawn uniformly from the field of the bucket, or `None` when it is empty.
@@ -1118,7 +1121,7 @@ mod tests {
         let aim = Aim::new(&m.antenna_pose(antenna, t_us));
         let position = m.tag_position(tag, t_us);
         let by_margin = distance(aim.position, position) <= reach_m(spec)
-            && m.margin_with(antenna, &aim, position, lambda, tx).1 >= 0.0;
+            && m.margin_with(antenna, &aim, position, lambda, tx, true).1 >= 0.0;
         let mut b = Bucket {
             antenna,
             t_us,
@@ -1222,9 +1225,15 @@ mod tests {
                 for tag in 0..m.tag_count() {
                     for t in [late + 1234, 2 * late] {
                         let aim = Aim::new(&m.antenna_pose(antenna, t));
-                        let fresh =
-                            m.margin_with(antenna, &aim, m.tag_position(tag, t), lambda, 27.0);
-                        assert_eq!(m.link(&bucket, antenna, tag, t, 1, 27.0), fresh);
+                        let fresh = m.margin_with(
+                            antenna,
+                            &aim,
+                            m.tag_position(tag, t),
+                            lambda,
+                            27.0,
+                            true,
+                        );
+                        assert_eq!(m.link(&bucket, antenna, tag, t, 1, 27.0, true), fresh);
                     }
                     // The Doppler shortcut gives what the central difference gives.
                     let range =

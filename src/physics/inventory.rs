@@ -132,8 +132,9 @@ impl Model {
         reads
     }
 
-    /// The channel from `antenna` aimed as `aim` to a tag at `position` and its forward-link
-    /// margin over the tag's sensitivity (dB).
+    /// The channel from `antenna` aimed as `aim` to a tag at `position` (its delay only if
+    /// `delay`, see [`multipath::channel_of`]) and its forward-link margin over the tag's
+    /// sensitivity (dB).
     pub(super) fn margin_with(
         &self,
         antenna: u16,
@@ -141,9 +142,10 @@ impl Model {
         position: Vec3,
         lambda: f64,
         tx_power_dbm: f64,
+        delay: bool,
     ) -> (Channel, f64) {
         let a = &self.antennas[usize::from(antenna) - 1];
-        let ch = multipath::channel_with(aim, &a.pattern, position, &self.planes, lambda);
+        let ch = multipath::channel_of(aim, &a.pattern, position, &self.planes, lambda, delay);
         let p_tag = rssi::tag_power_dbm(
             tx_power_dbm,
             a.spec.cable_loss_db,
@@ -174,7 +176,15 @@ impl Model {
         let spec = &self.antennas[usize::from(antenna) - 1].spec;
         let frequency_khz = *self.table.get(usize::from(channel_index) - 1)?;
         let lambda = self.wavelength_m(channel_index);
-        let (ch, margin_db) = self.link(bucket, antenna, tag, time_us, channel_index, tx_power_dbm);
+        let (ch, margin_db) = self.link(
+            bucket,
+            antenna,
+            tag,
+            time_us,
+            channel_index,
+            tx_power_dbm,
+            want.phase,
+        );
 
         let perturbed_range =
             spec.range_m * (1.0 + noise::gaussian(&mut rng, spec.range_sigma)).abs();

@@ -203,12 +203,29 @@ pub fn channel_with(
     planes: &[Plane],
     wavelength_m: f64,
 ) -> Channel {
+    channel_of(aim, pattern, tag, planes, wavelength_m, true)
+}
+
+/// [`channel_with`], its delay worked out only if `delay` (0 otherwise): the argument of the
+/// sum is the costliest step, and only a reported phase needs it.
+pub fn channel_of(
+    aim: &Aim,
+    pattern: &Pattern,
+    tag: Vec3,
+    planes: &[Plane],
+    wavelength_m: f64,
+    delay: bool,
+) -> Channel {
     let (d, a0, sum, k) = phasors(aim, pattern, tag, planes, wavelength_m);
     Channel {
         distance_m: d,
         gain_linear: a0 * a0,
         multipath_factor: (sum.re * sum.re + sum.im * sum.im).sqrt(),
-        delay_rad: 2.0 * k * d - 2.0 * fastmath::atan2(sum.im, sum.re),
+        delay_rad: if delay {
+            2.0 * k * d - 2.0 * fastmath::atan2(sum.im, sum.re)
+        } else {
+            0.0
+        },
     }
 }
 
@@ -359,5 +376,28 @@ mod tests {
         assert_eq!(ch.multipath_factor, 1.0);
         assert!((ch.delay_rad - 4.0 * std::f64::consts::PI * 3.0 / 0.33).abs() < 1e-9);
         assert!((ch.gain_linear - 10f64.powf(0.6)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_channel_without_its_delay_is_otherwise_the_same() {
+        let aim = Aim::new(&AntennaPose {
+            position: [1.0, 4.25, 0.9],
+            yaw_rad: 1.2,
+            pitch_rad: 0.1,
+        });
+        let pattern = Pattern::new(&Lobe::new(6.0, 65.0));
+        let walls = planes(&[floor(0.4), floor(0.3)]);
+        for tag in [[4.0, 5.2, 0.4], [2.5, 6.0, 1.6], [1.2, 4.3, 2.0]] {
+            let full = channel_with(&aim, &pattern, tag, &walls, 0.3463);
+            let bare = channel_of(&aim, &pattern, tag, &walls, 0.3463, false);
+            assert_ne!(full.delay_rad, 0.0);
+            assert_eq!(
+                Channel {
+                    delay_rad: full.delay_rad,
+                    ..bare
+                },
+                full
+            );
+        }
     }
 }
