@@ -1194,7 +1194,7 @@ mod tests {
 
     #[test]
     fn classification_agrees_with_exact_evaluation_on_the_fixtures() {
-        for (name, horizon_s, tx) in [("s1", 50, 30.0), ("s2", 210, 27.0), ("s2", 120, 20.0)] {
+        for (name, horizon_s, tx) in [("s1", 50, 30.0), ("s2", 250, 27.0), ("s2", 120, 20.0)] {
             let s = fixture(name);
             let m = Model::new(&s, 0);
             let (decided, undecided) = check(&m, tx, (0..horizon_s).map(|k| k * 1_000_000));
@@ -1208,8 +1208,8 @@ mod tests {
 
     #[test]
     fn fields_at_rest_are_exact() {
-        // S2's robot stops after 200 s; S1's after 44 s.
-        for (name, from_s) in [("s2", 200), ("s1", 40)] {
+        // S2's robot stops after 240 s; S1's after 44 s.
+        for (name, from_s) in [("s2", 245), ("s1", 40)] {
             let m = Model::new(&fixture(name), 0);
             check(&m, 27.0, (from_s..from_s + 20).map(|k| k * 1_000_000));
             let late = 10_000_000_000;
