@@ -1,8 +1,8 @@
 //! Tag reports: turning physics reads into TagReportData as the content selectors ask, and
 //! aggregating reads of the same tag between two reports as an LLRP reader does.
 
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::collections::hash_map::{Entry, HashMap};
+use std::hash::{BuildHasherDefault, Hash, Hasher};
 
 use llrp::params::*;
 
@@ -197,16 +197,43 @@ impl Hasher for FxHasher {
 }
 
 /// What makes two reads the same TagReportData: the EPC and every enabled field that could
-/// differ between them.
-#[derive(Clone, Debug, PartialEq, Eq, Hash)]
-struct Key {
-    epc: [u8; 12],
-    ro_spec_id: Option<u32>,
-    spec_index: Option<u16>,
-    ips_id: Option<u16>,
-    antenna_id: Option<u16>,
-    channel_index: Option<u16>,
-    access_spec_id: Option<u32>,
+/// differ between them, packed into four words (a field left out is 0 and its flag clear), so
+/// that hashing and comparing it are a few word operations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Key([u64; 4]);
+
+impl Key {
+    /// The key of observation `o` under selector `s`.
+    fn new(o: &Observation, s: &TagReportContentSelector) -> Key {
+        let [e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11] = o.epc;
+        let head = u64::from_le_bytes([e0, e1, e2, e3, e4, e5, e6, e7]);
+        let tail = u64::from(u32::from_le_bytes([e8, e9, e10, e11]));
+        let field = |on: bool, bit: u32, v: u64| (u64::from(on) << bit, if on { v } else { 0 });
+        let (f0, ro) = field(s.enable_ro_spec_id, 32, u64::from(o.ro_spec_id));
+        let (f1, si) = field(s.enable_spec_index, 33, u64::from(o.spec_index));
+        let (f2, ips) = field(
+            s.enable_inventory_parameter_spec_id,
+            34,
+            u64::from(o.inventory_parameter_spec_id),
+        );
+        let (f3, ant) = field(s.enable_antenna_id, 35, u64::from(o.antenna_id));
+        let (f4, ch) = field(s.enable_channel_index, 36, u64::from(o.channel_index));
+        let (f5, acc) = field(s.enable_access_spec_id, 37, u64::from(o.access_spec_id));
+        Key([
+            head,
+            tail | f0 | f1 | f2 | f3 | f4 | f5,
+            ro | si << 32 | ips << 48,
+            ant | ch << 16 | acc << 32,
+        ])
+    }
+}
+
+impl Hash for Key {
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        for w in self.0 {
+            state.write_u64(w);
+        }
+    }
 }
 
 impl ReportBuffer {
@@ -223,24 +250,16 @@ impl ReportBuffer {
     /// Adds a read: a new TagReportData, or folded into the one for the same tag.
     /// `aggregate` false (report every read) keeps each read separate.
     pub fn add(&mut self, o: &Observation, c: &Content, aggregate: bool) {
-        let s = &c.selector;
-        let key = Key {
-            epc: o.epc,
-            ro_spec_id: s.enable_ro_spec_id.then_some(o.ro_spec_id),
-            spec_index: s.enable_spec_index.then_some(o.spec_index),
-            ips_id: s
-                .enable_inventory_parameter_spec_id
-                .then_some(o.inventory_parameter_spec_id),
-            antenna_id: s.enable_antenna_id.then_some(o.antenna_id),
-            channel_index: s.enable_channel_index.then_some(o.channel_index),
-            access_spec_id: s.enable_access_spec_id.then_some(o.access_spec_id),
-        };
         if aggregate && o.op_spec_results.is_empty() {
-            if let Some(&i) = self.index.get(&key) {
-                merge(&mut self.entries[i], o, c);
-                return;
+            match self.index.entry(Key::new(o, &c.selector)) {
+                Entry::Occupied(e) => {
+                    merge(&mut self.entries[*e.get()], o, c);
+                    return;
+                }
+                Entry::Vacant(e) => {
+                    e.insert(self.entries.len());
+                }
             }
-            self.index.insert(key, self.entries.len());
         }
         if self.entries.capacity() == 0 {
             // A report of one tag (N = 1, the usual trigger) holds exactly one: the default
