@@ -1,5 +1,5 @@
 //! Which tags are in an antenna's field — within reach and powered by the forward link — at
-//! the start of a 10 ms bucket ([`super::inventory`]), and a uniform draw among them, without
+//! the start of a 25 ms bucket ([`super::inventory`]), and a uniform draw among them, without
 //! evaluating the full channel of every tag in every bucket.
 //!
 //! Time is cut into intervals on a fixed grid ([`MAX_SPAN_US`] long, halved while the antenna
@@ -42,7 +42,7 @@ use super::{fastmath, rssi, Model, Mover};
 
 /// Longest interval one classification covers, µs: a power-of-two number of buckets, so the
 /// halves of an interval are whole buckets down to one.
-pub const MAX_SPAN_US: u64 = 256 * super::inventory::FIELD_BUCKET_US;
+pub const MAX_SPAN_US: u64 = 128 * super::inventory::FIELD_BUCKET_US;
 /// Largest antenna displacement (m) one classification allows: the interval is halved until
 /// the antenna stays within it (or is one bucket long).
 const MAX_EXCURSION_M: f64 = 0.2;
@@ -639,7 +639,7 @@ const ASIN_SLOPE: f64 = std::f64::consts::FRAC_PI_3;
 /// How long (µs after the bucket start where it was made) a field decision may be kept, when
 /// [`Near::steady`] proves it holds that long.
 const HOLD_US: [u64; 8] = [
-    10_000, 20_000, 40_000, 80_000, 160_000, 320_000, 640_000, 1_280_000,
+    25_000, 50_000, 100_000, 200_000, 400_000, 800_000, 1_600_000, 3_200_000,
 ];
 
 /// Upper bounds, at any time, on how fast an antenna moves (m/s) and its boresight turns

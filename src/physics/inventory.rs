@@ -3,7 +3,7 @@
 //! Each attempt slot (see [`super::schedule`]) happens at one instant on the channel of that
 //! instant. The tags in the field are those within r·(1 + 4σ_r) whose forward link powers the
 //! chip (P_tag ≥ tag sensitivity, with multipath when the scenario has reflectors), evaluated
-//! every 10 ms of absolute time; the attempt picks one of them uniformly at random (drawn as
+//! every 25 ms of absolute time (the reader's antenna dwell); the attempt picks one of them uniformly at random (drawn as
 //! [`super::field`] describes, without evaluating every tag), computes its channel at the
 //! attempt's instant, and becomes a read only if
 //! 1. D ≤ r̃ = r·|1 + n_r|, n_r ~ N(0, σ_r²) drawn for this attempt (\[G\]);
@@ -29,8 +29,11 @@ const DOPPLER_STEP_US: u64 = 10_000;
 pub(super) const RANGE_SIGMAS: f64 = 4.0;
 
 /// The field (which tags an attempt may pick) is recomputed every this many µs of absolute
-/// time; the picked tag's channel is then computed at the attempt's exact instant.
-pub(super) const FIELD_BUCKET_US: u64 = 10_000;
+/// time; the picked tag's channel is then computed at the attempt's exact instant. One antenna
+/// dwell of the reader's rotation (`reader::rospec::ANTENNA_DWELL_US`), so a slice that starts
+/// on the grid sees one field, as the tags energised at the start of an inventory round take
+/// part in it.
+pub(super) const FIELD_BUCKET_US: u64 = 25_000;
 
 impl Model {
     /// Reads made on antenna `antenna` (1-based) during simulated time `[t0_us, t1_us)`, in
