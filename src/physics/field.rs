@@ -786,7 +786,7 @@ impl Model {
         bucket.rest = None;
     }
 
-    /// The channel and forward-link margin of `tag` from `antenna` at `t_us` on channel
+    /// The channel and forward-link margin (a power ratio) of `tag` from `antenna` at `t_us` on channel
     /// `channel`: those of [`Model::margin_with`] at the antenna's pose then (the delay only
     /// if `delay`), taken from `bucket`'s classification once nothing moves any more.
     #[allow(clippy::too_many_arguments)]
@@ -801,10 +801,15 @@ impl Model {
         delay: bool,
     ) -> (Channel, f64) {
         let lambda = self.wavelength_m(channel);
+        // The bucket holds the threshold of its antenna at this power.
+        let base = match bucket.base {
+            Some((a, tx, base)) if (a, tx) == (antenna, tx_power_dbm.to_bits()) => base,
+            _ => amplitude_threshold(&self.antennas[usize::from(antenna) - 1].spec, tx_power_dbm),
+        };
         let compute = |delay| {
             let aim = self.aim(antenna, t_us);
             let position = self.tag_position(tag, t_us);
-            self.margin_with(antenna, &aim, position, lambda, tx_power_dbm, delay)
+            self.margin_with(antenna, &aim, position, lambda, base, delay)
         };
         // A kept link serves every later request, so it has its delay.
         let cached = bucket.rest.as_ref().and_then(|c| {
@@ -1121,7 +1126,15 @@ mod tests {
         let aim = Aim::new(&m.antenna_pose(antenna, t_us));
         let position = m.tag_position(tag, t_us);
         let by_margin = distance(aim.position, position) <= reach_m(spec)
-            && m.margin_with(antenna, &aim, position, lambda, tx, true).1 >= 0.0;
+            && m.margin_with(
+                antenna,
+                &aim,
+                position,
+                lambda,
+                amplitude_threshold(spec, tx),
+                true,
+            )
+            .1 >= 1.0;
         let mut b = Bucket {
             antenna,
             t_us,
@@ -1131,7 +1144,7 @@ mod tests {
             reach: reach_m(spec),
             ..Default::default()
         };
-        // The linear test agrees with the margin in dB.
+        // The field test agrees with the link's margin ratio.
         assert_eq!(m.in_field(&mut b, tag), by_margin, "tag {tag} at {t_us} µs");
         by_margin
     }
@@ -1225,12 +1238,13 @@ mod tests {
                 for tag in 0..m.tag_count() {
                     for t in [late + 1234, 2 * late] {
                         let aim = Aim::new(&m.antenna_pose(antenna, t));
+                        let spec = &m.antennas[usize::from(antenna) - 1].spec;
                         let fresh = m.margin_with(
                             antenna,
                             &aim,
                             m.tag_position(tag, t),
                             lambda,
-                            27.0,
+                            amplitude_threshold(spec, 27.0),
                             true,
                         );
                         assert_eq!(m.link(&bucket, antenna, tag, t, 1, 27.0, true), fresh);
