@@ -245,11 +245,11 @@ pub fn power_gain_with(
 
 /// Distance D (clamped), the direct amplitude gain √g₀, the sum 1 + Σ Hᵢ and the wave number.
 ///
-/// The geometry of [`image_path`] without working out the reflection point: with
-/// u = tag − image, l = |u| and s = da/(da + dt), the reflection point seen from the antenna
-/// is w = −2·da·n̂ + s·u, of length s·l (it is as far from the antenna as from its image), so
-/// the cosine of its off-axis angle is (−2·(b·n̂)·(da + dt) + b·u)/(|b|·l): the same numbers
-/// up to rounding.
+/// The geometry of [`image_path`] without working out the image or the reflection point:
+/// with v = tag − antenna and u = tag − image = v + 2·da·n̂, l² = |u|² = |v|² + 4·da·dt (both
+/// terms ≥ 0 where the path exists), and the first leg points along the mirror of u, so the
+/// cosine of its off-axis angle is (b·u − 2·(b·n̂)·(u·n̂))/(|b|·l) = (b·v − 2·(b·n̂)·dt)/(|b|·l):
+/// the same numbers up to rounding.
 fn phasors(
     aim: &Aim,
     pattern: &Pattern,
@@ -271,6 +271,7 @@ fn phasors(
     let inv_bn = 1.0 / aim.boresight_norm;
     // Each path's amplitude relative to the direct one: Γ·(aᵢ/a₀)·(D/dᵢ).
     let scale = d / a0;
+    let (vv, bv) = (dot(v, v), dot(b, v));
     for plane in planes {
         let n = plane.unit;
         let da = dot(sub(p, plane.point), n);
@@ -279,11 +280,9 @@ fn phasors(
         if da * dt <= 0.0 {
             continue;
         }
-        let image = add_scaled(p, -2.0 * da, n);
-        let u = sub(tag, image);
-        let l = norm(u);
+        let l = (vv + 4.0 * da * dt).sqrt();
         let inv_l = 1.0 / l;
-        let c = (-2.0 * dot(b, n) * (da + dt) + dot(b, u)) * inv_l * inv_bn;
+        let c = (bv - 2.0 * dot(b, n) * dt) * inv_l * inv_bn;
         // A non-finite cosine counts as boresight, as in `Aim::cos_of`.
         let c = if c.is_finite() { c } else { 1.0 };
         let ai = pattern.amplitude_cos(c);
