@@ -786,9 +786,10 @@ impl Model {
         bucket.rest = None;
     }
 
-    /// The channel and forward-link margin (a power ratio) of `tag` from `antenna` at `t_us` on channel
-    /// `channel`: those of [`Model::margin_with`] at the antenna's pose then (the delay only
-    /// if `delay`), taken from `bucket`'s classification once nothing moves any more.
+    /// The channel and forward-link margin (a power ratio) of `tag` from `antenna` at `t_us`
+    /// on channel `channel`: those of [`Model::margin_with`] at the antenna's pose then (the
+    /// delay only if `delay`), taken from `bucket`'s classification once nothing moves any
+    /// more.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn link(
         &self,
@@ -1409,6 +1410,41 @@ mod tests {
             let (kept, _) = check_kept(&m, tx, (0..60).map(|k| k * 930_000));
             assert!(kept > 0, "the fast robot keeps some decisions too");
         }
+    }
+
+    #[test]
+    fn link_margin_ratio_is_the_link_budget_in_decibels() {
+        // S2 while the robot passes the banners, at two powers and on every channel.
+        let m = Model::new(&fixture("s2"), 0);
+        let mut compared = 0;
+        for tx in [27.0, 18.0] {
+            for antenna in [1, 4, 6] {
+                let spec = &m.antennas[usize::from(antenna) - 1].spec;
+                for channel in 1..=m.frequencies_khz().len() as u16 {
+                    let lambda = m.wavelength_m(channel);
+                    for (tag, t) in [(3, 80_000_000), (57, 130_000_000), (90, 150_000_000)] {
+                        let aim = m.aim(antenna, t);
+                        let q = m.tag_position(tag, t);
+                        let base = amplitude_threshold(spec, tx);
+                        let (ch, ratio) = m.margin_with(antenna, &aim, q, lambda, base, false);
+                        let p_tag = rssi::tag_power_dbm(
+                            tx,
+                            spec.cable_loss_db,
+                            ch.gain_linear,
+                            m.tag_gain_linear,
+                            lambda,
+                            ch.distance_m,
+                            ch.multipath_factor,
+                        );
+                        let db = 10.0 * ratio.log10();
+                        let expected = p_tag - spec.tag_sensitivity_dbm;
+                        assert!((db - expected).abs() < 1e-9, "{db} dB against {expected}");
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(compared, 2 * 3 * 4 * 3);
     }
 
     #[test]

@@ -3,9 +3,9 @@
 //! Each attempt slot (see [`super::schedule`]) happens at one instant on the channel of that
 //! instant. The tags in the field are those within r·(1 + 4σ_r) whose forward link powers the
 //! chip (P_tag ≥ tag sensitivity, with multipath when the scenario has reflectors), evaluated
-//! every 25 ms of absolute time (the reader's antenna dwell); the attempt picks one of them uniformly at random (drawn as
-//! [`super::field`] describes, without evaluating every tag), computes its channel at the
-//! attempt's instant, and becomes a read only if
+//! every 25 ms of absolute time (the reader's antenna dwell); the attempt picks one of them
+//! uniformly at random (drawn as [`super::field`] describes, without evaluating every tag),
+//! computes its channel at the attempt's instant, and becomes a read only if
 //! 1. D ≤ r̃ = r·|1 + n_r|, n_r ~ N(0, σ_r²) drawn for this attempt (\[G\]);
 //! 2. a uniform draw falls below the edge probability of the forward-link margin (0 when the
 //!    tag is not powered);
@@ -139,7 +139,6 @@ impl Model {
     /// `delay`, see [`multipath::channel_of`]) and its forward-link margin as a power ratio
     /// P_tag / P_sensitivity (≥ 1: the tag is powered). `base` is the antenna's
     /// amplitude threshold at this power (`field::amplitude_threshold`).
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn margin_with(
         &self,
         antenna: u16,
