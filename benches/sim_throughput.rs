@@ -22,10 +22,19 @@
 //!
 //! Output: one JSON line `{"reports": n, "seconds": s, "reports_per_sec": r, ...}` on stdout;
 //! `ended` says whether the deadline or the idle rule ended the window.
+//!
+//! Two diagnostic modes time the same work without sockets, on S2 (`fixtures/scenarios/s2.json`)
+//! until its robot has long stopped (250 s of simulated time), best and median of PASSES:
+//! * `sim_throughput physics [PASSES]`: the channel model alone on one thread, the antennas in
+//!   turn for 25 ms each, without phase and Doppler (as the ROSpec below asks);
+//! * `sim_throughput inproc N [PASSES]`: the simulated reader driven in-process with the ROSpec
+//!   below and report trigger N, its physics computed ahead on every core as under `sim`, every
+//!   output encoded into a buffer.
 
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
@@ -38,6 +47,9 @@ use llrp::params::{
     RoSpec, RoSpecStartTrigger, RoSpecStopTrigger, SpecParameter, TagReportContentSelector,
 };
 use llrp::{FrameSplitter, Message, Split};
+use llrp_gateway::physics::{Model, Want};
+use llrp_gateway::reader::{Output, Reader, ReaderProfile};
+use llrp_gateway::scenario::Scenario;
 
 /// How long the handshake may take before the client gives up.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -54,13 +66,24 @@ fn main() -> ExitCode {
         .skip(1)
         .filter(|a| !a.starts_with('-'))
         .collect();
+    match args.first().map(String::as_str) {
+        Some("physics") => return physics(args.get(1).map(String::as_str)),
+        Some("inproc") => {
+            return inproc(
+                args.get(1).map(String::as_str),
+                args.get(2).map(String::as_str),
+            )
+        }
+        _ => {}
+    }
     let (addr, n, seconds, idle_ms) = match args.as_slice() {
         [a, n, s] => (a, n, s, "0"),
         [a, n, s, i] => (a, n, s, i.as_str()),
         _ => {
             eprintln!(
                 "usage: sim_throughput ADDR N SECONDS [IDLE_MS]  (run by scripts/bench-sim; \
-                 nothing to do without a reader address)"
+                 nothing to do without a reader address)\n       sim_throughput physics [PASSES]\n       \
+                 sim_throughput inproc N [PASSES]"
             );
             return ExitCode::SUCCESS;
         }
@@ -100,6 +123,137 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Simulated time the in-process modes run S2 for, µs: past the end of its drive.
+const S2_END_US: u64 = 250_000_000;
+
+/// S2 as shipped.
+fn s2() -> Result<Scenario, String> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+    Scenario::load(std::path::Path::new(path)).map_err(|e| e.to_string())
+}
+
+/// PASSES as given (default 10, at least 1).
+fn passes(arg: Option<&str>) -> Result<usize, String> {
+    arg.map_or(Ok(10), |a| {
+        a.parse::<usize>().map_err(|e| format!("PASSES: {e}"))
+    })
+    .map(|p| p.max(1))
+}
+
+/// Best and median of the timed passes, ms.
+fn best_and_median(mut ms: Vec<f64>) -> (f64, f64) {
+    ms.sort_by(f64::total_cmp);
+    (ms[0], ms[ms.len() / 2])
+}
+
+/// `physics [PASSES]`: the channel model of an S2 pass on one thread.
+fn physics(arg: Option<&str>) -> ExitCode {
+    let (scenario, k) = match s2().and_then(|s| Ok((s, passes(arg)?))) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("sim_throughput physics: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let want = Want {
+        phase: false,
+        doppler: false,
+    };
+    let (mut times, mut reads) = (Vec::new(), 0);
+    for _ in 0..k {
+        // A fresh model each pass: nothing cached from the last one.
+        let model = Model::new(&scenario, 0);
+        let antennas = u64::from(model.antenna_count().max(1));
+        let start = Instant::now();
+        reads = 0;
+        let (mut t, mut slot) = (0, 0u64);
+        while t < S2_END_US {
+            let antenna = (slot % antennas) as u16 + 1;
+            reads += model
+                .inventory_with(antenna, t, t + 25_000, None, None, want)
+                .len();
+            t += 25_000;
+            slot += 1;
+        }
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let (best, median) = best_and_median(times);
+    println!(
+        "{{\"mode\": \"physics\", \"reads\": {reads}, \"passes\": {k}, \"best_ms\": {best:.2}, \
+         \"median_ms\": {median:.2}}}"
+    );
+    ExitCode::SUCCESS
+}
+
+/// `inproc N [PASSES]`: the simulated reader over an S2 pass without sockets.
+fn inproc(n: Option<&str>, arg: Option<&str>) -> ExitCode {
+    let parsed = n
+        .ok_or_else(|| "N is missing".to_string())
+        .and_then(|n| n.parse::<u16>().map_err(|e| format!("N: {e}")))
+        .and_then(|n| Ok((n, s2()?, passes(arg)?)));
+    let (n, scenario, k) = match parsed {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("sim_throughput inproc: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let (mut times, mut reports) = (Vec::new(), 0);
+    for _ in 0..k {
+        let model = Arc::new(Model::new(&scenario, 0));
+        let profile = ReaderProfile::from_scenario(&scenario, 0, &model);
+        let mut reader = Reader::new(profile, model, 1_700_000_000_000_000);
+        let mut requests = vec![
+            Message::new(
+                1,
+                AddRospec {
+                    ro_spec: rospec(n),
+                    ..Default::default()
+                },
+            ),
+            Message::new(
+                2,
+                EnableRospec {
+                    ro_spec_id: 1,
+                    ..Default::default()
+                },
+            ),
+        ];
+        let _ = reader.connect(0, 0);
+        for m in requests.drain(..) {
+            let _ = reader.handle(m, 0, 0);
+        }
+        let mut out = BytesMut::with_capacity(128 * 1024);
+        reports = 0;
+        let start = Instant::now();
+        let mut now = 0;
+        while now < S2_END_US {
+            // The steps `sim --speed max` takes.
+            now += 100_000;
+            for o in reader.advance(now, 0) {
+                if let Output::Send(m) = o {
+                    if let MessageBody::RoAccessReport(r) = &m.body {
+                        reports += r.tag_report_data.len();
+                    }
+                    m.encode(&mut out);
+                    if out.len() >= 64 * 1024 {
+                        std::hint::black_box(&out);
+                        out.clear();
+                    }
+                }
+            }
+        }
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let (best, median) = best_and_median(times);
+    println!(
+        "{{\"mode\": \"inproc\", \"n\": {n}, \"reports\": {reports}, \"passes\": {k}, \
+         \"best_ms\": {best:.2}, \"median_ms\": {median:.2}, \"reports_per_sec_at_best\": {:.0}}}",
+        reports as f64 / best * 1e3
+    );
+    ExitCode::SUCCESS
 }
 
 /// What one measurement saw.
