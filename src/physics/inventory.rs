@@ -136,24 +136,29 @@ impl Model {
     }
 
     /// The channel from `antenna` aimed as `aim` to a tag at `position` (its delay only if
-    /// `delay`, see [`multipath::channel_of`]) and its forward-link margin as a power ratio
-    /// P_tag / P_sensitivity (≥ 1: the tag is powered). `base` is the antenna's
-    /// amplitude threshold at this power (`field::amplitude_threshold`).
+    /// `delay`, see [`multipath::channel_of`]) and its forward-link margin over the tag's
+    /// sensitivity (dB).
     pub(super) fn margin_with(
         &self,
         antenna: u16,
         aim: &Aim,
         position: Vec3,
         lambda: f64,
-        base: f64,
+        tx_power_dbm: f64,
         delay: bool,
     ) -> (Channel, f64) {
         let a = &self.antennas[usize::from(antenna) - 1];
         let ch = multipath::channel_of(aim, &a.pattern, position, &self.planes, lambda, delay);
-        // P_tag / P_sensitivity = (A·λ/base)² with A = √g₀·|1 + Σ Hᵢ|/D, the amplitude the
-        // field test compares with base/λ (see `field::amplitude_threshold`).
-        let amplitude = ch.multipath_factor * lambda / (ch.distance_m * base);
-        (ch, ch.gain_linear * amplitude * amplitude)
+        let p_tag = rssi::tag_power_dbm(
+            tx_power_dbm,
+            a.spec.cable_loss_db,
+            ch.gain_linear,
+            self.tag_gain_linear,
+            lambda,
+            ch.distance_m,
+            ch.multipath_factor,
+        );
+        (ch, p_tag - a.spec.tag_sensitivity_dbm)
     }
 
     /// One read attempt on `antenna` on `channel_index` at the slot's instant, on one tag of
@@ -174,7 +179,7 @@ impl Model {
         let spec = &self.antennas[usize::from(antenna) - 1].spec;
         let frequency_khz = *self.table.get(usize::from(channel_index) - 1)?;
         let lambda = self.wavelength_m(channel_index);
-        let (ch, margin) = self.link(
+        let (ch, margin_db) = self.link(
             bucket,
             antenna,
             tag,
@@ -189,7 +194,7 @@ impl Model {
         if ch.distance_m > perturbed_range {
             return None;
         }
-        if rng.gen::<f64>() >= schedule::read_probability_of_ratio(margin) {
+        if rng.gen::<f64>() >= schedule::read_probability(margin_db) {
             return None;
         }
         let n_rssi = noise::gaussian(&mut rng, spec.rssi_noise);

@@ -125,25 +125,6 @@ pub fn read_probability(margin_db: f64) -> f64 {
     }
 }
 
-/// [`EDGE_MARGIN_DB`] as a power ratio, 10^(1/10).
-const EDGE_RATIO: f64 = 1.258_925_411_794_167_2;
-/// The logistic's slope in powers of the ratio: 10/(width·ln 10).
-const EDGE_EXPONENT: f64 = 10.0 / (EDGE_WIDTH_DB * std::f64::consts::LN_10);
-
-/// [`read_probability`] of a margin given as the power ratio P_tag / P_sensitivity: the same
-/// logistic, 1/(1 + (ratio/ratio_½)^−k), one power instead of a logarithm and an exponential.
-pub fn read_probability_of_ratio(ratio: f64) -> f64 {
-    if ratio.is_nan() || ratio < 1.0 {
-        return 0.0;
-    }
-    let p = 1.0 / (1.0 + (ratio / EDGE_RATIO).powf(-EDGE_EXPONENT));
-    if p.is_finite() {
-        p
-    } else {
-        0.0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -179,20 +160,6 @@ mod tests {
         assert_eq!(n, 3000);
         assert!(slots([9, 0, 1], 0.0, 0, 1000).is_empty());
         assert!(slots([9, 0, 1], 1000.0, 50, 50).is_empty());
-    }
-
-    #[test]
-    fn edge_probability_of_a_ratio_is_that_of_its_decibels() {
-        assert!((EDGE_RATIO - 10f64.powf(EDGE_MARGIN_DB / 10.0)).abs() < 1e-15);
-        for db in [0.0, 0.01, 0.5, 1.0, 1.7, 3.0, 6.0, 20.0, 60.0] {
-            let ratio = 10f64.powf(db / 10.0);
-            let (a, b) = (read_probability(db), read_probability_of_ratio(ratio));
-            assert!((a - b).abs() < 1e-12, "{db} dB: {a} against {b}");
-        }
-        for ratio in [0.999_999, 0.5, 0.0, -1.0, f64::NAN, f64::NEG_INFINITY] {
-            assert_eq!(read_probability_of_ratio(ratio), 0.0, "{ratio}");
-        }
-        assert_eq!(read_probability_of_ratio(f64::INFINITY), 1.0);
     }
 
     #[test]
