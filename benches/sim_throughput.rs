@@ -26,7 +26,8 @@
 //! Two diagnostic modes time the same work without sockets, on S2 (`fixtures/scenarios/s2.json`)
 //! until its robot has long stopped (250 s of simulated time), best and median of PASSES:
 //! * `sim_throughput physics [PASSES]`: the channel model alone on one thread, the antennas in
-//!   turn for 25 ms each, without phase and Doppler (as the ROSpec below asks);
+//!   turn for the reader's dwell (25 ms) each, without phase and Doppler (as the ROSpec below
+//!   asks);
 //! * `sim_throughput inproc N [PASSES]`: the simulated reader driven in-process with the ROSpec
 //!   below and report trigger N, its physics computed ahead on every core as under `sim`, every
 //!   output encoded into a buffer.
@@ -48,7 +49,7 @@ use llrp::params::{
 };
 use llrp::{FrameSplitter, Message, Split};
 use llrp_gateway::physics::{Model, Want};
-use llrp_gateway::reader::{Output, Reader, ReaderProfile};
+use llrp_gateway::reader::{Output, Reader, ReaderProfile, ANTENNA_DWELL_US};
 use llrp_gateway::scenario::Scenario;
 
 /// How long the handshake may take before the client gives up.
@@ -172,9 +173,9 @@ fn physics(arg: Option<&str>) -> ExitCode {
         while t < S2_END_US {
             let antenna = (slot % antennas) as u16 + 1;
             reads += model
-                .inventory_with(antenna, t, t + 25_000, None, None, want)
+                .inventory_with(antenna, t, t + ANTENNA_DWELL_US, None, None, want)
                 .len();
-            t += 25_000;
+            t += ANTENNA_DWELL_US;
             slot += 1;
         }
         times.push(start.elapsed().as_secs_f64() * 1e3);
@@ -205,7 +206,7 @@ fn inproc(n: Option<&str>, arg: Option<&str>) -> ExitCode {
         let model = Arc::new(Model::new(&scenario, 0));
         let profile = ReaderProfile::from_scenario(&scenario, 0, &model);
         let mut reader = Reader::new(profile, model, 1_700_000_000_000_000);
-        let mut requests = vec![
+        let requests = [
             Message::new(
                 1,
                 AddRospec {
@@ -222,7 +223,7 @@ fn inproc(n: Option<&str>, arg: Option<&str>) -> ExitCode {
             ),
         ];
         let _ = reader.connect(0, 0);
-        for m in requests.drain(..) {
+        for m in requests {
             let _ = reader.handle(m, 0, 0);
         }
         let mut out = BytesMut::with_capacity(128 * 1024);

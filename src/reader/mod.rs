@@ -29,6 +29,7 @@ use crate::scenario::Scenario;
 
 pub use config::ReaderConfig;
 pub use rospec::SpecState;
+pub use rospec::ANTENNA_DWELL_US;
 
 /// Most ROSpecs the reader holds at once.
 pub const MAX_ROSPECS: u32 = 32;
