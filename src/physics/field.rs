@@ -543,7 +543,8 @@ impl Near {
     /// at most `antenna` m/s, the tag at most `tag` m/s and the boresight turns at most `turn`
     /// rad/s; 0 if not even the shortest. With `room` (m) set, the tag must also stay within
     /// that much more distance (a tag in the field must stay within reach). `exhaustive`
-    /// proves holds from the longest down rather than from a guess at it.
+    /// proves holds from the longest down rather than from a guess at it; otherwise holds
+    /// shorter than `at_least` µs are not tried.
     ///
     /// Each path's term cᵢ = Γᵢ·√gᵢ/lᵢ·e^{−jk(lᵢ − D)} (the direct one: √g₀/D) changes by at
     /// most its magnitude's range plus its largest magnitude times its phase change. With each
@@ -560,6 +561,7 @@ impl Near {
         (antenna, tag, turn): (f64, f64, f64),
         room: Option<f64>,
         exhaustive: bool,
+        at_least: u64,
     ) -> u64 {
         let seen = &self.seen;
         let finite = antenna.is_finite() && tag.is_finite() && turn.is_finite();
@@ -621,6 +623,10 @@ impl Near {
             (j, 2)
         };
         for _ in 0..tries {
+            if !exhaustive && HOLD_US[j] < at_least {
+                // Shorter holds would expire before the decision is asked for again.
+                break;
+            }
             if change(HOLD_US[j]) < margin {
                 return HOLD_US[j];
             }
@@ -699,6 +705,9 @@ enum Known {
 pub(super) struct Bucket {
     antenna: u16,
     t_us: u64,
+    /// Time since this antenna's previous bucket (0 when unknown): a kept decision shorter
+    /// than that is never asked for again, so it is not worth proving.
+    revisit_us: u64,
     wavelength_m: f64,
     /// The field needs g₀·|1 + Σ Hᵢ|²/D² at least this (the tag sensitivity at this power and
     /// wavelength).
@@ -764,6 +773,11 @@ impl Model {
         channel: u16,
     ) {
         let spec = &self.antennas[usize::from(antenna) - 1].spec;
+        bucket.revisit_us = if bucket.antenna == antenna && bucket.t_us < t_us {
+            t_us - bucket.t_us
+        } else {
+            0
+        };
         bucket.antenna = antenna;
         bucket.t_us = t_us;
         bucket.channel = channel;
@@ -875,6 +889,7 @@ impl Model {
                     (rates.speed, tag_speed, rates.turn),
                     room,
                     bucket.memo.exhaustive,
+                    bucket.revisit_us,
                 );
                 if hold > 0 {
                     *k = Kept {

@@ -1,6 +1,6 @@
 //! Physics computed ahead: the coming antenna slices of a running AISpec, evaluated in
-//! parallel, and the batch after them in the background while the reader reports the current
-//! one, so that `--speed max` uses every core for the channel model.
+//! parallel, and the batches after them in the background while the reader reports the
+//! current one, so that `--speed max` keeps every core busy with the channel model.
 //!
 //! Sound because the physics is a pure function of (antenna, time window, transmit power,
 //! channel) and a window split in two gives the same reads as the whole
@@ -63,6 +63,10 @@ struct Window {
 /// Most slices one prefetch computes.
 pub const MAX_BATCH: usize = 256;
 
+/// Batches computed in the background at once: while the reader reports one, the workers
+/// work on the next ones, so they never wait for it to ask.
+pub const AHEAD_DEPTH: usize = 2;
+
 /// Prefetched windows in time order, and how many slices the next miss should plan.
 #[derive(Debug, Default)]
 pub struct Prefetch {
@@ -71,8 +75,8 @@ pub struct Prefetch {
     batch: usize,
     /// Slices the last plan had.
     planned: usize,
-    /// The following slices, being computed in the background.
-    ahead: Option<Ahead>,
+    /// The following batches, being computed in the background, oldest first.
+    ahead: VecDeque<Ahead>,
     /// Threads that compute slices, parked between batches (started at the first batch).
     pool: Vec<Worker>,
 }
@@ -97,6 +101,14 @@ struct Queue {
 }
 
 impl Queue {
+    /// Makes every slice not yet taken untakeable (a worker on this queue stops at its next
+    /// slice).
+    fn cancel(&self) {
+        for (list, cursor) in self.lanes.iter().zip(&self.cursors) {
+            cursor.fetch_max(list.len(), Ordering::Relaxed);
+        }
+    }
+
     /// The slices of `plan` in `lanes` lanes, in plan (time) order within each.
     fn new(plan: &[Slice], lanes: usize) -> Queue {
         let lanes = lanes.max(1);
@@ -237,8 +249,9 @@ impl Prefetch {
     }
 
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
-    /// what was prefetched before.
+    /// what was prefetched before (batches still computed in the background are dropped).
     pub fn fill(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
+        self.cancel_ahead();
         self.planned = plan.len();
         let plan = Arc::new(plan);
         let helpers = if plan.len() < 2 { 0 } else { workers() - 1 };
@@ -261,7 +274,7 @@ impl Prefetch {
         let n = if plan.len() < 2 { 1 } else { workers() };
         let queue = Arc::new(Queue::new(&plan, n));
         let (replies, sent) = self.dispatch(model, &plan, &queue, n);
-        self.ahead = Some(Ahead {
+        self.ahead.push_back(Ahead {
             model: Arc::clone(model),
             plan,
             queue,
@@ -270,8 +283,21 @@ impl Prefetch {
         });
     }
 
-    /// Computes what is left of the background plan, if any, on the calling thread alongside
-    /// the workers, waits for them and keeps its windows; whether there was one.
+    /// How many batches are being computed in the background.
+    pub fn ahead_count(&self) -> usize {
+        self.ahead.len()
+    }
+
+    /// Drops the batches being computed in the background: their workers skip the slices
+    /// they have not started.
+    pub fn cancel_ahead(&mut self) {
+        for a in self.ahead.drain(..) {
+            a.queue.cancel();
+        }
+    }
+
+    /// Computes what is left of the oldest background batch, if any, on the calling thread
+    /// alongside the workers, waits for them and keeps its windows; whether there was one.
     pub fn finish_ahead(&mut self) -> bool {
         let Some(Ahead {
             model,
@@ -279,7 +305,7 @@ impl Prefetch {
             queue,
             replies,
             sent,
-        }) = self.ahead.take()
+        }) = self.ahead.pop_front()
         else {
             return false;
         };
@@ -376,6 +402,74 @@ mod tests {
         taken.sort_unstable();
         assert_eq!(taken, (0..plan.len()).collect::<Vec<_>>());
         assert_eq!(q.take(None), None);
+    }
+
+    #[test]
+    fn a_cancelled_queue_gives_nothing_more() {
+        let plan: Vec<Slice> = (0..20u64)
+            .map(|k| Slice {
+                antenna: (k % 4) as u16 + 1,
+                power_dbm: None,
+                t0_us: k * 25_000,
+                t1_us: (k + 1) * 25_000,
+                want: Want::ALL,
+            })
+            .collect();
+        let q = Queue::new(&plan, 2);
+        assert!(q.take(Some(0)).is_some());
+        q.cancel();
+        assert_eq!(q.take(Some(0)), None);
+        assert_eq!(q.take(Some(1)), None);
+        assert_eq!(q.take(None), None);
+    }
+
+    #[test]
+    fn background_batches_finish_in_order_and_cancel() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+        let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
+        let m = Arc::new(Model::new(&s, 0));
+        let slices: Vec<Slice> = (0..48u64)
+            .map(|k| Slice {
+                antenna: (k % 8) as u16 + 1,
+                power_dbm: None,
+                t0_us: 60_000_000 + k * 25_000,
+                t1_us: 60_000_000 + (k + 1) * 25_000,
+                want: Want::ALL,
+            })
+            .collect();
+        let mut p = Prefetch::default();
+        p.start_ahead(&m, slices[..16].to_vec());
+        p.start_ahead(&m, slices[16..32].to_vec());
+        assert_eq!(p.ahead_count(), 2);
+        // The oldest first: after it, the first half is covered and the second is not yet.
+        assert!(p.finish_ahead());
+        assert!(p.take(&slices[15]).is_some());
+        assert!(p.take(&slices[16]).is_none());
+        assert!(p.finish_ahead());
+        assert!(!p.finish_ahead(), "both taken");
+        let mut total = 0;
+        for s in &slices[16..32] {
+            let got = p.take(s).expect("covered by the second batch");
+            assert_eq!(got, s.compute(&m));
+            total += got.len();
+        }
+        assert!(total > 0, "the robot passes the banners then");
+        // A batch dropped before it is finished leaves nothing behind, and a fill replaces it.
+        p.start_ahead(&m, slices[32..].to_vec());
+        p.cancel_ahead();
+        assert_eq!(p.ahead_count(), 0);
+        assert!(!p.finish_ahead());
+        assert!(p.take(&slices[40]).is_none());
+        p.start_ahead(&m, slices[32..40].to_vec());
+        p.fill(&m, slices[40..].to_vec());
+        assert_eq!(
+            p.ahead_count(),
+            0,
+            "a fill drops what was in the background"
+        );
+        for s in &slices[40..] {
+            assert_eq!(p.take(s).expect("filled"), s.compute(&m));
+        }
     }
 
     #[test]

@@ -136,7 +136,12 @@ pub struct Content {
 pub struct ReportBuffer {
     entries: Vec<TagReportData>,
     index: HashMap<Key, usize, BuildHasherDefault<FxHasher>>,
+    /// How many entries a report is expected to hold (see [`ReportBuffer::expect`]).
+    expect: usize,
 }
+
+/// Most entries reserved at once for an expected report size.
+const MAX_EXPECTED_ENTRIES: usize = 1024;
 
 /// A fast non-cryptographic hasher for [`ReportBuffer`]'s index (the multiply-rotate scheme of
 /// rustc's FxHash, written here): the keys are EPCs and a few small fields from the reader's
@@ -247,6 +252,12 @@ impl ReportBuffer {
         self.entries.is_empty()
     }
 
+    /// Sets how many TagReportData a report is expected to hold (the N of its trigger; 0 when
+    /// unknown), so that a report's entries are allocated once.
+    pub fn expect(&mut self, n: usize) {
+        self.expect = n;
+    }
+
     /// Adds a read: a new TagReportData, or folded into the one for the same tag.
     /// `aggregate` false (report every read) keeps each read separate.
     pub fn add(&mut self, o: &Observation, c: &Content, aggregate: bool) {
@@ -262,9 +273,11 @@ impl ReportBuffer {
             }
         }
         if self.entries.capacity() == 0 {
-            // A report of one tag (N = 1, the usual trigger) holds exactly one: the default
-            // first growth would allocate four.
-            self.entries.reserve_exact(1);
+            // Room for the report's expected size at once: growing one TagReportData at a
+            // time copies them over and over (with N = 1, the usual trigger, the default
+            // first growth would allocate four).
+            self.entries
+                .reserve_exact(self.expect.clamp(1, MAX_EXPECTED_ENTRIES));
         }
         self.entries.push(build(o, c));
     }

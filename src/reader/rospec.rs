@@ -9,7 +9,7 @@ use llrp::StatusCode;
 
 use super::access::AccessSpecs;
 use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
-use super::prefetch::{Prefetch, Slice};
+use super::prefetch::{Prefetch, Slice, AHEAD_DEPTH};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
 use super::{field_error, ReaderProfile, MAX_ROSPECS};
 use crate::physics::{Model, Read, Want};
@@ -650,6 +650,11 @@ impl Specs {
         }
         let aggregate = !(report_spec.ro_report_trigger != 0 && report_spec.n == 1);
         let n_trigger = usize::from(report_spec.n);
+        self.buffer.expect(if report_spec.ro_report_trigger != 0 {
+            n_trigger
+        } else {
+            0
+        });
 
         let mut reached = end;
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
@@ -774,10 +779,11 @@ impl Specs {
         reached
     }
 
-    /// The reads of `slice` from the prefetch. On a miss, takes the slices computed in the
-    /// background if they cover it, else computes the slices the run will ask for next (this
-    /// one first, then the antennas in turn, up to the AISpec's or ROSpec's end when known) on
-    /// every core; either way starts computing the batch after them in the background.
+    /// The reads of `slice` from the prefetch. On a miss, takes the oldest batch computed in
+    /// the background if it covers it, else computes the slices the run will ask for next
+    /// (this one first, then the antennas in turn, up to the AISpec's or ROSpec's end when
+    /// known) on every core; either way keeps [`AHEAD_DEPTH`] batches after them computing in
+    /// the background.
     fn prefetched(
         &mut self,
         ctx: &RunContext<'_>,
@@ -822,7 +828,7 @@ impl Specs {
         } else {
             None
         };
-        let (reads, next) = match reads {
+        let (reads, mut next) = match reads {
             Some(reads) => (reads, self.ahead_from),
             None => {
                 let first = Slice {
@@ -843,13 +849,19 @@ impl Specs {
                 (reads, next)
             }
         };
-        // The batch after: computed while this one's reads are reported.
-        let ahead = plan(next.0, next.1, batch);
-        self.ahead_from = (
-            next.0 + ahead.len(),
-            next.1 + ahead.len() as u64 * ANTENNA_DWELL_US,
-        );
-        self.prefetch.start_ahead(ctx.model, ahead);
+        // The batches after: computed while this one's reads are reported.
+        while self.prefetch.ahead_count() < AHEAD_DEPTH {
+            let ahead = plan(next.0, next.1, batch);
+            if ahead.is_empty() {
+                break;
+            }
+            next = (
+                next.0 + ahead.len(),
+                next.1 + ahead.len() as u64 * ANTENNA_DWELL_US,
+            );
+            self.prefetch.start_ahead(ctx.model, ahead);
+        }
+        self.ahead_from = next;
         reads
     }
 
