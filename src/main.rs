@@ -121,7 +121,17 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
         },
         None => Scenario::default_s1(),
     };
-    let runtime = match tokio::runtime::Runtime::new() {
+    // One async worker per simulated reader (each serves one client at a time), at most one
+    // per core: the physics runs on its own threads, and a spare worker would only take a
+    // busy connection's task over now and then (which costs its caches, and grows that
+    // thread's malloc arena by the connection's working set) and spin while idle.
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let workers = scenario.readers.len().clamp(1, cores.max(1));
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(workers)
+        .enable_all()
+        .build()
+    {
         Ok(r) => r,
         Err(e) => {
             eprintln!("llrp-gateway sim: cannot start the async runtime: {e}");
