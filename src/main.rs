@@ -126,7 +126,7 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
     // busy connection's task over now and then (which costs its caches, and grows that
     // thread's malloc arena by the connection's working set) and spin while idle.
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
-    let workers = scenario.readers.len().clamp(1, cores.max(1));
+    let workers = scenario.readers.len().clamp(1, cores);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(workers)
         .enable_all()

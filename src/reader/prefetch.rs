@@ -367,17 +367,29 @@ mod tests {
     use super::*;
     use crate::scenario::Scenario;
 
-    #[test]
-    fn every_slice_is_taken_once_own_lane_first() {
-        let plan: Vec<Slice> = (0..50u64)
+    /// `count` consecutive 25 ms slices from `t0_us`, on antennas 1..=`antennas` in turn.
+    fn rotation(count: u64, antennas: u64, t0_us: u64) -> Vec<Slice> {
+        (0..count)
             .map(|k| Slice {
-                antenna: (k % 8) as u16 + 1,
+                antenna: (k % antennas) as u16 + 1,
                 power_dbm: None,
-                t0_us: k * 25_000,
-                t1_us: (k + 1) * 25_000,
+                t0_us: t0_us + k * 25_000,
+                t1_us: t0_us + (k + 1) * 25_000,
                 want: Want::ALL,
             })
-            .collect();
+            .collect()
+    }
+
+    /// The channel model of scenario S2.
+    fn s2() -> Arc<Model> {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+        let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
+        Arc::new(Model::new(&s, 0))
+    }
+
+    #[test]
+    fn every_slice_is_taken_once_own_lane_first() {
+        let plan = rotation(50, 8, 0);
         let q = Queue::new(&plan, 3);
         // Lane 1 holds antennas 2, 5 and 8, in time order.
         let mine: Vec<usize> = std::iter::from_fn(|| q.take(Some(1)))
@@ -406,15 +418,7 @@ mod tests {
 
     #[test]
     fn a_cancelled_queue_gives_nothing_more() {
-        let plan: Vec<Slice> = (0..20u64)
-            .map(|k| Slice {
-                antenna: (k % 4) as u16 + 1,
-                power_dbm: None,
-                t0_us: k * 25_000,
-                t1_us: (k + 1) * 25_000,
-                want: Want::ALL,
-            })
-            .collect();
+        let plan = rotation(20, 4, 0);
         let q = Queue::new(&plan, 2);
         assert!(q.take(Some(0)).is_some());
         q.cancel();
@@ -425,18 +429,8 @@ mod tests {
 
     #[test]
     fn background_batches_finish_in_order_and_cancel() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
-        let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
-        let m = Arc::new(Model::new(&s, 0));
-        let slices: Vec<Slice> = (0..48u64)
-            .map(|k| Slice {
-                antenna: (k % 8) as u16 + 1,
-                power_dbm: None,
-                t0_us: 60_000_000 + k * 25_000,
-                t1_us: 60_000_000 + (k + 1) * 25_000,
-                want: Want::ALL,
-            })
-            .collect();
+        let m = s2();
+        let slices = rotation(48, 8, 60_000_000);
         let mut p = Prefetch::default();
         p.start_ahead(&m, slices[..16].to_vec());
         p.start_ahead(&m, slices[16..32].to_vec());
@@ -474,18 +468,8 @@ mod tests {
 
     #[test]
     fn sub_windows_of_a_prefetch_equal_direct_computation() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
-        let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
-        let m = Arc::new(Model::new(&s, 0));
-        let slices: Vec<Slice> = (0..64u64)
-            .map(|k| Slice {
-                antenna: (k % 8) as u16 + 1,
-                power_dbm: None,
-                t0_us: 60_000_000 + k * 25_000,
-                t1_us: 60_000_000 + (k + 1) * 25_000,
-                want: Want::ALL,
-            })
-            .collect();
+        let m = s2();
+        let slices = rotation(64, 8, 60_000_000);
         // The first half computed at once, the second in the background.
         let mut p = Prefetch::default();
         p.fill(&m, slices[..32].to_vec());
