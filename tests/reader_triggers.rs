@@ -401,3 +401,44 @@ async fn a_rospec_duration_keeps_reads_until_its_end() {
     );
     sim.shutdown().await;
 }
+
+/// An ROSpec without its own ROReportSpec reports as the reader's default one (set with
+/// SET_READER_CONFIG) says: its trigger and its content selector.
+#[tokio::test]
+async fn a_rospec_without_a_report_spec_follows_the_reader_default() {
+    let sim = start(&s1(), Speed::Max).await;
+    let mut c = connect(&sim).await;
+    let default = RoReportSpec {
+        tag_report_content_selector: TagReportContentSelector {
+            enable_antenna_id: true,
+            ..Default::default()
+        },
+        ..full_report(2, 1)
+    };
+    let set = SetReaderConfig {
+        ro_report_spec: Some(default),
+        ..Default::default()
+    };
+    assert_eq!(request_status(&mut c, set).await, 0);
+    let mut spec = rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 100));
+    spec.ro_report_spec = None;
+    add(&mut c, spec).await;
+    enable(&mut c, 1).await;
+    let (tags, _) = collect_reports(&mut c, T, |t| t.len() >= 20).await;
+    assert!(tags.len() >= 20, "only {} tag reports", tags.len());
+    for t in &tags {
+        assert!(
+            t.antenna_id.is_some(),
+            "the default selector enables AntennaID"
+        );
+        assert!(
+            t.peak_rssi.is_none()
+                && t.channel_index.is_none()
+                && t.ro_spec_id.is_none()
+                && t.first_seen_timestamp_utc.is_none()
+                && t.tag_seen_count.is_none(),
+            "fields the default selector leaves out: {t:?}"
+        );
+    }
+    sim.shutdown().await;
+}
