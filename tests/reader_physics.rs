@@ -433,10 +433,10 @@ async fn triggers_events_and_get_report() {
     sim.shutdown().await;
 }
 
-#[tokio::test]
-async fn access_spec_reads_tid_memory() {
-    let s = line_scenario(&[1.0]);
-    let sim = start(&s, Speed::Max).await;
+/// The first TagReportData of an inventory of `s` on antenna 1 with an AccessSpec (ID 9)
+/// reading `word_count` words of memory bank `mb` (OpSpec ID 5) from every tag.
+async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReportData {
+    let sim = start(s, Speed::Max).await;
     let mut c = connect(&sim).await;
     let access = AccessSpec {
         access_spec_id: 9,
@@ -457,9 +457,9 @@ async fn access_spec_reads_tid_memory() {
             },
             op_specs: vec![OpSpec::C1g2Read(C1g2Read {
                 op_spec_id: 5,
-                mb: 2,
+                mb,
                 word_pointer: 0,
-                word_count: 2,
+                word_count,
                 ..Default::default()
             })],
             ..Default::default()
@@ -512,7 +512,14 @@ async fn access_spec_reads_tid_memory() {
         0
     );
     let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
-    let t = &tags[0];
+    sim.shutdown().await;
+    tags.into_iter().next().expect("a tag report")
+}
+
+#[tokio::test]
+async fn access_spec_reads_tid_memory() {
+    let s = line_scenario(&[1.0]);
+    let t = read_by_access_spec(&s, 2, 2).await;
     assert_eq!(t.access_spec_id.map(|a| a.0), Some(9));
     let Some(OpSpecResult::C1g2Read(r)) = t.op_spec_results.first() else {
         panic!("no read result in {t:?}")
@@ -520,7 +527,19 @@ async fn access_spec_reads_tid_memory() {
     assert_eq!((r.result, r.op_spec_id), (0, 5));
     // The default TID of a scenario tag starts with Impinj's class and vendor words E280 1160.
     assert_eq!(r.read_data, vec![0xE280, 0x1160]);
-    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn access_spec_reads_user_memory_from_the_scenario() {
+    let mut s = line_scenario(&[1.0]);
+    s.tags[0].user = Some("CAFEF00D1234".into());
+    let t = read_by_access_spec(&s, 3, 3).await;
+    assert_eq!(t.access_spec_id.map(|a| a.0), Some(9));
+    let Some(OpSpecResult::C1g2Read(r)) = t.op_spec_results.first() else {
+        panic!("no read result in {t:?}")
+    };
+    assert_eq!((r.result, r.op_spec_id), (0, 5));
+    assert_eq!(r.read_data, vec![0xCAFE, 0xF00D, 0x1234]);
 }
 
 #[tokio::test]
