@@ -1,6 +1,7 @@
 //! Unmodified `sllurp inventory` (sllurp 2.0.1 from the test venv) against the simulated
 //! reader over loopback: the whole client sequence must succeed and the tags it prints must be
-//! the scenario's, with channel indices from the region's table and Impinj values in range.
+//! the scenario's, with channel indices from the region's table, Impinj values in range, and
+//! peak RSSI falling 40 dB per decade of distance along an antenna's boresight.
 //! Needs the venv; `./scripts/test` creates it and sets `LLRP_VENV`.
 
 mod common;
@@ -130,7 +131,15 @@ async fn with_sim(
     args: &'static [&'static str],
     seconds: f64,
 ) -> (Scenario, Vec<Vec<Value>>, String) {
-    let s = s1();
+    with_scenario(s1(), args, seconds).await
+}
+
+/// As [`with_sim`], on scenario `s`.
+async fn with_scenario(
+    s: Scenario,
+    args: &'static [&'static str],
+    seconds: f64,
+) -> (Scenario, Vec<Vec<Value>>, String) {
     let sim = start(&s, Speed::Factor(1.0)).await;
     let port = sim.addrs[0].port();
     let (reports, log) = tokio::task::spawn_blocking(move || run_sllurp(port, args, seconds))
@@ -216,4 +225,81 @@ async fn the_readme_command_shows_live_reads() {
         "reads aggregate per tag between reports"
     );
     assert!(check_tags(&s, &reports, true) >= 2);
+}
+
+/// Tags at 1, 2 and 4 m on the boresight of one fixed antenna, in free space, on one channel,
+/// without noise.
+fn boresight_line() -> Scenario {
+    let tags: Vec<String> = [1.0, 2.0, 4.0]
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            format!(
+                r#"{{"epc": "E200000000000000000000{:02X}", "position": [{d}, 0, 1]}}"#,
+                i + 1
+            )
+        })
+        .collect();
+    let json = format!(
+        r#"{{
+  "name": "boresight line",
+  "seed": 3,
+  "world": {{ "min": [-5, -5, 0], "max": [10, 5, 3] }},
+  "tags": [{tags}],
+  "readers": [{{
+    "name": "r",
+    "listen": "127.0.0.1:0",
+    "region": "etsi",
+    "fixed_channel": 1,
+    "reads_per_second": 300,
+    "antennas": [{{
+      "mount": {{ "type": "fixed", "pose": {{ "position": [0, 0, 1], "yaw_deg": 0, "pitch_deg": 0 }} }},
+      "gain_dbi": 6,
+      "beamwidth_deg": 70,
+      "tx_power_dbm": 30,
+      "cable_loss_db": 1,
+      "phase_noise_rad": 0,
+      "rssi_noise": 0,
+      "range_m": 7,
+      "range_sigma": 0
+    }}]
+  }}]
+}}"#,
+        tags = tags.join(",")
+    );
+    Scenario::from_json(&json).expect("test scenario is valid")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn sllurp_sees_rssi_fall_40_db_per_decade() {
+    let (s, reports, log) = with_scenario(
+        boresight_line(),
+        &["--impinj-reports", "-a", "1", "-n", "1"],
+        3.0,
+    )
+    .await;
+    assert!(check_tags(&s, &reports, true) >= 3, "{log}");
+    // ImpinjPeakRSSI (hundredths of dBm) of each tag as sllurp printed it.
+    let mut by_epc: std::collections::BTreeMap<String, Vec<i64>> = Default::default();
+    for tag in reports.iter().flatten() {
+        let epc = tag["EPC-96"].as_str().expect("EPC-96").to_string();
+        let rssi = tag["ImpinjPeakRSSI"].as_i64().expect("ImpinjPeakRSSI");
+        by_epc.entry(epc).or_default().push(rssi);
+    }
+    let mean = |n: u8| {
+        let v = &by_epc[&format!("e200000000000000000000{n:02x}")];
+        v.iter().sum::<i64>() as f64 / v.len() as f64 / 100.0
+    };
+    assert_eq!(by_epc.len(), 3, "every tag read: {:?}", by_epc.keys());
+    let (at1, at2, at4) = (mean(1), mean(2), mean(3));
+    // No noise and the same gain on the boresight: −40 dB per decade of distance, to the
+    // hundredth of a dB the reader reports.
+    for (near, far, ratio) in [(at1, at2, 2.0f64), (at2, at4, 2.0), (at1, at4, 4.0)] {
+        let slope = near - far;
+        assert!(
+            (slope - 40.0 * ratio.log10()).abs() < 0.05,
+            "{near:.2} dBm then {far:.2} dBm: {slope:.2} dB over a factor {ratio}"
+        );
+    }
 }
