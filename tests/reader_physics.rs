@@ -17,51 +17,6 @@ use llrp_gateway::scenario::Scenario;
 
 const LAMBDA_CH1: f64 = 299_792_458.0 / 865_700_000.0;
 
-/// One fixed antenna at the origin looking along +x, noise-free, on ETSI channel 1, and tags
-/// on the boresight at the given distances (plus one far outside the range).
-fn line_scenario(distances: &[f64]) -> Scenario {
-    let tags: Vec<String> = distances
-        .iter()
-        .enumerate()
-        .map(|(i, d)| {
-            format!(
-                r#"{{"epc": "E200000000000000000000{:02X}", "position": [{d}, 0, 1]}}"#,
-                i + 1
-            )
-        })
-        .collect();
-    let json = format!(
-        r#"{{
-  "name": "line",
-  "seed": 5,
-  "world": {{ "min": [-5, -5, 0], "max": [60, 5, 3] }},
-  "tags": [{tags}],
-  "readers": [{{
-    "name": "r",
-    "listen": "127.0.0.1:0",
-    "region": "etsi",
-    "fixed_channel": 1,
-    "reads_per_second": 600,
-    "antennas": [{{
-      "mount": {{ "type": "fixed", "pose": {{ "position": [0, 0, 1], "yaw_deg": 0, "pitch_deg": 0 }} }},
-      "gain_dbi": 6,
-      "beamwidth_deg": 70,
-      "tx_power_dbm": 30,
-      "cable_loss_db": 1,
-      "phase_offset_rad": [0, 0, 0, 0],
-      "phase_sign": 1,
-      "phase_noise_rad": 0,
-      "rssi_noise": 0,
-      "range_m": 7,
-      "range_sigma": 0
-    }}]
-  }}]
-}}"#,
-        tags = tags.join(",")
-    );
-    Scenario::from_json(&json).expect("test scenario is valid")
-}
-
 /// Per EPC (last byte), the reads collected.
 fn by_tag(tags: &[TagReportData]) -> HashMap<u8, Vec<&TagReportData>> {
     let mut m: HashMap<u8, Vec<&TagReportData>> = HashMap::new();

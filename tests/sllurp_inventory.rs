@@ -227,54 +227,11 @@ async fn the_readme_command_shows_live_reads() {
     assert!(check_tags(&s, &reports, true) >= 2);
 }
 
-/// Tags at 1, 2 and 4 m on the boresight of one fixed antenna, in free space, on one channel,
-/// without noise.
-fn boresight_line() -> Scenario {
-    let tags: Vec<String> = [1.0, 2.0, 4.0]
-        .iter()
-        .enumerate()
-        .map(|(i, d)| {
-            format!(
-                r#"{{"epc": "E200000000000000000000{:02X}", "position": [{d}, 0, 1]}}"#,
-                i + 1
-            )
-        })
-        .collect();
-    let json = format!(
-        r#"{{
-  "name": "boresight line",
-  "seed": 3,
-  "world": {{ "min": [-5, -5, 0], "max": [10, 5, 3] }},
-  "tags": [{tags}],
-  "readers": [{{
-    "name": "r",
-    "listen": "127.0.0.1:0",
-    "region": "etsi",
-    "fixed_channel": 1,
-    "reads_per_second": 300,
-    "antennas": [{{
-      "mount": {{ "type": "fixed", "pose": {{ "position": [0, 0, 1], "yaw_deg": 0, "pitch_deg": 0 }} }},
-      "gain_dbi": 6,
-      "beamwidth_deg": 70,
-      "tx_power_dbm": 30,
-      "cable_loss_db": 1,
-      "phase_noise_rad": 0,
-      "rssi_noise": 0,
-      "range_m": 7,
-      "range_sigma": 0
-    }}]
-  }}]
-}}"#,
-        tags = tags.join(",")
-    );
-    Scenario::from_json(&json).expect("test scenario is valid")
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn sllurp_sees_rssi_fall_40_db_per_decade() {
     let (s, reports, log) = with_scenario(
-        boresight_line(),
+        line_scenario(&[1.0, 2.0, 4.0]),
         &["--impinj-reports", "-a", "1", "-n", "1"],
         3.0,
     )
@@ -293,8 +250,9 @@ async fn sllurp_sees_rssi_fall_40_db_per_decade() {
     };
     assert_eq!(by_epc.len(), 3, "every tag read: {:?}", by_epc.keys());
     let (at1, at2, at4) = (mean(1), mean(2), mean(3));
-    // No noise and the same gain on the boresight: −40 dB per decade of distance, to the
-    // hundredth of a dB the reader reports.
+    // Tags at 1, 2 and 4 m on the boresight of one fixed antenna, in free space, on one
+    // channel, without noise: −40 dB per decade of distance, to the hundredth of a dB the reader
+    // reports.
     for (near, far, ratio) in [(at1, at2, 2.0f64), (at2, at4, 2.0), (at1, at4, 4.0)] {
         let slope = near - far;
         assert!(
