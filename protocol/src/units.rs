@@ -1,6 +1,39 @@
 //! Unit conversions for report fields: phase angle, RSSI, Doppler and channel frequency.
+//!
+//! The one place that converts between physical values and the numbers on the wire; the
+//! simulated reader reports through these functions and clients read through them.
+//!
+//! ```
+//! use llrp::units::{dbm_to_centi_dbm, dbm_to_peak_rssi, HopTable};
+//!
+//! // PeakRSSI is the reported ImpinjPeakRSSI truncated toward zero (an R420 reports
+//! // ImpinjPeakRSSI -6850 with PeakRSSI -68).
+//! assert_eq!(dbm_to_centi_dbm(-68.5), -6850);
+//! assert_eq!(dbm_to_peak_rssi(-68.5), -68);
+//! // ChannelIndex is 1-based into the table the reader advertises.
+//! let etsi = HopTable::etsi();
+//! assert_eq!(etsi.frequency_khz(1), Some(865_700));
+//! ```
 
 use std::f64::consts::TAU;
+
+use crate::params::RegulatoryCapabilities;
+
+/// The ETSI EN 302 208 four-channel plan, kHz (ChannelIndex 1..4).
+pub const ETSI_CHANNELS_KHZ: [u32; 4] = [865_700, 866_300, 866_900, 867_500];
+
+/// The FCC Part 15 plan (902.75 + 0.5·k MHz, k = 0..49) in the hop order llrp-gateway's
+/// simulated reader advertises and hops through: a fixed pseudo-random order (a Fisher–Yates
+/// shuffle drawn once with SplitMix64), since a real reader also lists its table in hop order,
+/// not ascending. Another reader's order is its own: read it with
+/// [`HopTable::from_capabilities`].
+pub const FCC_HOP_TABLE_KHZ: [u32; 50] = [
+    920_250, 904_750, 903_750, 912_750, 904_250, 922_750, 919_250, 918_250, 922_250, 913_750,
+    923_250, 914_250, 909_750, 903_250, 924_250, 905_750, 925_250, 907_250, 902_750, 924_750,
+    915_750, 915_250, 917_250, 912_250, 916_750, 921_750, 927_250, 907_750, 910_750, 917_750,
+    918_750, 911_750, 921_250, 909_250, 925_750, 908_750, 906_250, 926_750, 910_250, 920_750,
+    919_750, 913_250, 906_750, 911_250, 914_750, 916_250, 908_250, 926_250, 905_250, 923_750,
+];
 
 /// Raw Impinj phase (0..4095 over one turn) to radians in [0, 2π).
 pub fn phase_to_radians(raw: u16) -> f64 {
@@ -25,9 +58,12 @@ pub fn dbm_to_centi_dbm(dbm: f64) -> i16 {
         .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
 }
 
-/// dBm to the whole-dBm PeakRSSI field, truncated toward zero as Impinj readers do.
+/// dBm to the whole-dBm PeakRSSI field as Impinj readers report it: the ImpinjPeakRSSI value
+/// ([`dbm_to_centi_dbm`]) truncated toward zero, so the two fields of one read never disagree
+/// (an R420 reports ImpinjPeakRSSI −6850 with PeakRSSI −68).
 pub fn dbm_to_peak_rssi(dbm: f64) -> i8 {
-    dbm.trunc().clamp(f64::from(i8::MIN), f64::from(i8::MAX)) as i8
+    let whole = i32::from(dbm_to_centi_dbm(dbm)) / 100; // integer division truncates toward 0
+    whole.clamp(i32::from(i8::MIN), i32::from(i8::MAX)) as i8
 }
 
 /// Raw ImpinjRFDopplerFrequency (Hz × 16) to Hz.
@@ -52,11 +88,12 @@ pub struct HopTable {
 }
 
 impl HopTable {
-    /// FCC Part 15: 50 channels 902.75..927.25 MHz, 500 kHz apart (ascending order).
+    /// FCC Part 15: 50 channels 902.75..927.25 MHz, 500 kHz apart, in the hop order
+    /// llrp-gateway's simulated reader advertises ([`FCC_HOP_TABLE_KHZ`]).
     pub fn fcc() -> Self {
         HopTable {
             id: 1,
-            frequencies_khz: (0..50).map(|i| 902_750 + 500 * i).collect(),
+            frequencies_khz: FCC_HOP_TABLE_KHZ.to_vec(),
         }
     }
 
@@ -64,7 +101,30 @@ impl HopTable {
     pub fn etsi() -> Self {
         HopTable {
             id: 1,
-            frequencies_khz: vec![865_700, 866_300, 866_900, 867_500],
+            frequencies_khz: ETSI_CHANNELS_KHZ.to_vec(),
+        }
+    }
+
+    /// The table a reader advertises in its RegulatoryCapabilities: the FrequencyHopTable
+    /// with `hop_table_id` in a hopping region, the FixedFrequencyTable otherwise (whose ID
+    /// is reported as 0); `None` if the capabilities carry no such table.
+    pub fn from_capabilities(caps: &RegulatoryCapabilities, hop_table_id: u8) -> Option<Self> {
+        let info = &caps.uhf_band_capabilities.as_ref()?.frequency_information;
+        if info.hopping {
+            let t = info
+                .frequency_hop_table
+                .iter()
+                .find(|t| t.hop_table_id == hop_table_id)?;
+            Some(HopTable {
+                id: t.hop_table_id,
+                frequencies_khz: t.frequencies.clone(),
+            })
+        } else {
+            let t = info.fixed_frequency_table.as_ref()?;
+            Some(HopTable {
+                id: 0,
+                frequencies_khz: t.frequencies.clone(),
+            })
         }
     }
 
@@ -107,6 +167,9 @@ mod tests {
         assert_eq!(centi_dbm_to_dbm(-6850), -68.5);
         assert_eq!(dbm_to_centi_dbm(-68.504), -6850);
         assert_eq!(dbm_to_peak_rssi(-68.5), -68);
+        // The hundredths are rounded first: -68.996 dBm is reported as -6900, so -69.
+        assert_eq!(dbm_to_peak_rssi(-68.996), -69);
+        assert_eq!(dbm_to_peak_rssi(-68.994), -68);
         assert_eq!(dbm_to_peak_rssi(-300.0), -128);
         assert_eq!(doppler_to_hz(-320), -20.0);
         assert_eq!(hz_to_doppler(2.5), 40);
@@ -115,11 +178,15 @@ mod tests {
     #[test]
     fn channel_index_is_one_based() {
         let fcc = HopTable::fcc();
-        assert_eq!(fcc.frequency_khz(1), Some(902_750));
-        assert_eq!(fcc.frequency_khz(50), Some(927_250));
+        assert_eq!(fcc.frequency_khz(1), Some(920_250));
+        assert_eq!(fcc.frequency_khz(50), Some(923_750));
         assert_eq!(fcc.frequency_khz(0), None);
         assert_eq!(fcc.frequency_khz(51), None);
-        assert_eq!(fcc.channel_index(903_250), Some(2));
+        assert_eq!(fcc.channel_index(902_750), Some(19));
+        let mut sorted = fcc.frequencies_khz.clone();
+        sorted.sort_unstable();
+        let ascending: Vec<u32> = (0..50).map(|i| 902_750 + 500 * i).collect();
+        assert_eq!(sorted, ascending, "every FCC channel once");
         let etsi = HopTable::etsi();
         assert_eq!(etsi.frequency_khz(4), Some(867_500));
         let l = etsi.wavelength_m(1).unwrap();

@@ -26,10 +26,11 @@ pub mod seed;
 #[cfg(test)]
 mod tests;
 
-use crate::scenario::tagmem::{default_tid, parse_epc, parse_words};
+use crate::scenario::tagmem::{parse_epc, parse_words};
 use crate::scenario::{
     AntennaSpec, Mount, Pose, PoseSample, Reflector, RobotSpec, Scenario, VerticalAxis,
 };
+use seed::default_tid;
 use std::sync::Arc;
 
 use antenna::{Lobe, Pattern};

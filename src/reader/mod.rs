@@ -22,7 +22,7 @@ use std::sync::Arc;
 
 use llrp::message::*;
 use llrp::params::*;
-use llrp::{DecodeError, FrameHeader, Message, StatusCode};
+use llrp::{DecodeError, FrameHeader, Message, MessageKind, Response, StatusCode};
 
 use crate::physics::Model;
 use crate::scenario::Scenario;
@@ -260,9 +260,9 @@ impl Reader {
     /// response type carrying the error status, or ERROR_MESSAGE.
     pub fn reject(&mut self, header: &FrameHeader, frame: &[u8], err: &DecodeError) -> Message {
         let status = err.to_status();
-        let ty = header.msg_type;
-        let (vendor, subtype) = custom_ids(ty, frame);
-        let body = response_for(ty, vendor, subtype, status.clone())
+        let kind = MessageKind::of_frame(frame).unwrap_or(MessageKind::standard(header.msg_type));
+        let body = kind
+            .error_response(status.clone())
             .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)));
         Message {
             version: header.version.clamp(1, 2),
@@ -299,7 +299,10 @@ impl Reader {
                 StatusCode::M_UnsupportedVersion,
                 format!("session uses LLRP version {}", self.version),
             );
-            let body = response_for(msg.msg_type(), 0, 0, status.clone())
+            let body = msg
+                .body
+                .kind()
+                .error_response(status.clone())
                 .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)));
             out.push(Output::Send(Message { version, id, body }));
             return out;
@@ -358,42 +361,42 @@ impl Reader {
             }
             MessageBody::AddRospec(m) => {
                 let status = self.specs.add(&self.profile, m.ro_spec, self.version);
-                out.push(reply(AddRospecResponse::with(status).into()));
+                out.push(reply(AddRospecResponse::with_status(status).into()));
             }
             MessageBody::DeleteRospec(m) => {
                 let (status, events) = self.specs.delete(m.ro_spec_id, self.now_us);
                 let reports = self.specs.take_halt_reports();
                 self.send_reports(reports, &mut out, false);
                 self.emit(events, &mut out);
-                out.push(reply(DeleteRospecResponse::with(status).into()));
+                out.push(reply(DeleteRospecResponse::with_status(status).into()));
             }
             MessageBody::StartRospec(m) => {
                 let (status, events) = self.specs.start(m.ro_spec_id, self.now_us);
                 let reports = self.specs.take_halt_reports();
                 self.send_reports(reports, &mut out, false);
                 self.emit(events, &mut out);
-                out.push(reply(StartRospecResponse::with(status).into()));
+                out.push(reply(StartRospecResponse::with_status(status).into()));
             }
             MessageBody::StopRospec(m) => {
                 let (status, events) = self.specs.stop(m.ro_spec_id, self.now_us);
                 let reports = self.specs.take_halt_reports();
                 self.send_reports(reports, &mut out, false);
                 self.emit(events, &mut out);
-                out.push(reply(StopRospecResponse::with(status).into()));
+                out.push(reply(StopRospecResponse::with_status(status).into()));
             }
             MessageBody::EnableRospec(m) => {
                 let (status, events) = self.specs.enable(m.ro_spec_id, self.now_us);
                 let reports = self.specs.take_halt_reports();
                 self.send_reports(reports, &mut out, false);
                 self.emit(events, &mut out);
-                out.push(reply(EnableRospecResponse::with(status).into()));
+                out.push(reply(EnableRospecResponse::with_status(status).into()));
             }
             MessageBody::DisableRospec(m) => {
                 let (status, events) = self.specs.disable(m.ro_spec_id, self.now_us);
                 let reports = self.specs.take_halt_reports();
                 self.send_reports(reports, &mut out, false);
                 self.emit(events, &mut out);
-                out.push(reply(DisableRospecResponse::with(status).into()));
+                out.push(reply(DisableRospecResponse::with_status(status).into()));
             }
             MessageBody::GetRospecs(_) => {
                 out.push(reply(
@@ -407,19 +410,19 @@ impl Reader {
             }
             MessageBody::AddAccessspec(m) => {
                 let status = self.access.add(&self.profile, m.access_spec);
-                out.push(reply(AddAccessspecResponse::with(status).into()));
+                out.push(reply(AddAccessspecResponse::with_status(status).into()));
             }
             MessageBody::DeleteAccessspec(m) => {
                 let status = self.access.delete(m.access_spec_id);
-                out.push(reply(DeleteAccessspecResponse::with(status).into()));
+                out.push(reply(DeleteAccessspecResponse::with_status(status).into()));
             }
             MessageBody::EnableAccessspec(m) => {
                 let status = self.access.set_enabled(m.access_spec_id, true);
-                out.push(reply(EnableAccessspecResponse::with(status).into()));
+                out.push(reply(EnableAccessspecResponse::with_status(status).into()));
             }
             MessageBody::DisableAccessspec(m) => {
                 let status = self.access.set_enabled(m.access_spec_id, false);
-                out.push(reply(DisableAccessspecResponse::with(status).into()));
+                out.push(reply(DisableAccessspecResponse::with_status(status).into()));
             }
             MessageBody::GetAccessspecs(_) => {
                 out.push(reply(
@@ -451,7 +454,9 @@ impl Reader {
                 } else {
                     field_error(0, StatusCode::A_OutOfRange, "ProtocolVersion")
                 };
-                out.push(reply(SetProtocolVersionResponse::with(status).into()));
+                out.push(reply(
+                    SetProtocolVersionResponse::with_status(status).into(),
+                ));
             }
             MessageBody::GetReport(_) => {
                 // No response message: the buffered reports are the answer.
@@ -488,7 +493,7 @@ impl Reader {
             other => {
                 // Reader-to-client messages, CLIENT_REQUEST_OP answers without a request, other
                 // vendors' CUSTOM_MESSAGEs and unknown types.
-                let code = if version >= 2 && is_reader_message(other.msg_type()) {
+                let code = if version >= 2 && other.kind().is_from_reader() {
                     StatusCode::M_UnexpectedMessage
                 } else {
                     StatusCode::M_UnsupportedMessage
@@ -650,44 +655,6 @@ impl Reader {
     }
 }
 
-/// Builds `X_RESPONSE { llrp_status }` for the status-only responses.
-trait WithStatus: Default {
-    fn with(status: LlrpStatus) -> Self;
-}
-
-macro_rules! with_status {
-    ($($t:ty),*) => {$(
-        impl WithStatus for $t {
-            fn with(status: LlrpStatus) -> Self {
-                Self { llrp_status: status, ..Default::default() }
-            }
-        }
-    )*};
-}
-
-with_status!(
-    AddRospecResponse,
-    DeleteRospecResponse,
-    StartRospecResponse,
-    StopRospecResponse,
-    EnableRospecResponse,
-    DisableRospecResponse,
-    AddAccessspecResponse,
-    DeleteAccessspecResponse,
-    EnableAccessspecResponse,
-    DisableAccessspecResponse,
-    SetProtocolVersionResponse,
-    SetReaderConfigResponse,
-    CloseConnectionResponse,
-    GetReaderCapabilitiesResponse,
-    GetReaderConfigResponse,
-    GetRospecsResponse,
-    GetAccessspecsResponse,
-    GetSupportedVersionResponse,
-    ImpinjEnableExtensionsResponse,
-    ImpinjSaveSettingsResponse
-);
-
 /// The ImpinjRequestedData values among a request's Custom parameters.
 fn impinj_requested(custom: &[Custom]) -> Vec<u32> {
     custom
@@ -716,57 +683,4 @@ pub(crate) fn field_error(field: u16, code: StatusCode, what: &str) -> LlrpStatu
         ..Default::default()
     });
     s
-}
-
-/// Vendor and subtype of a CUSTOM_MESSAGE frame (zeros otherwise).
-fn custom_ids(ty: u16, frame: &[u8]) -> (u32, u8) {
-    if ty == CUSTOM_MESSAGE_TYPE && frame.len() >= 15 {
-        (
-            u32::from_be_bytes([frame[10], frame[11], frame[12], frame[13]]),
-            frame[14],
-        )
-    } else {
-        (0, 0)
-    }
-}
-
-/// Whether `ty` is a message only a reader sends.
-fn is_reader_message(ty: u16) -> bool {
-    matches!(
-        ty,
-        4 | 11..=13 | 30..=36 | 45 | 50..=57 | 61..=63 | 100
-    )
-}
-
-/// The response a reader sends to request type `ty` (vendor/subtype for CUSTOM_MESSAGE),
-/// carrying `status`; `None` when the request has no response (ERROR_MESSAGE then).
-fn response_for(ty: u16, vendor: u32, subtype: u8, status: LlrpStatus) -> Option<MessageBody> {
-    use llrp::message::*;
-    Some(match ty {
-        t if t == GetReaderCapabilities::TYPE => GetReaderCapabilitiesResponse::with(status).into(),
-        t if t == GetReaderConfig::TYPE => GetReaderConfigResponse::with(status).into(),
-        t if t == SetReaderConfig::TYPE => SetReaderConfigResponse::with(status).into(),
-        t if t == CloseConnection::TYPE => CloseConnectionResponse::with(status).into(),
-        t if t == AddRospec::TYPE => AddRospecResponse::with(status).into(),
-        t if t == DeleteRospec::TYPE => DeleteRospecResponse::with(status).into(),
-        t if t == StartRospec::TYPE => StartRospecResponse::with(status).into(),
-        t if t == StopRospec::TYPE => StopRospecResponse::with(status).into(),
-        t if t == EnableRospec::TYPE => EnableRospecResponse::with(status).into(),
-        t if t == DisableRospec::TYPE => DisableRospecResponse::with(status).into(),
-        t if t == GetRospecs::TYPE => GetRospecsResponse::with(status).into(),
-        t if t == AddAccessspec::TYPE => AddAccessspecResponse::with(status).into(),
-        t if t == DeleteAccessspec::TYPE => DeleteAccessspecResponse::with(status).into(),
-        t if t == EnableAccessspec::TYPE => EnableAccessspecResponse::with(status).into(),
-        t if t == DisableAccessspec::TYPE => DisableAccessspecResponse::with(status).into(),
-        t if t == GetAccessspecs::TYPE => GetAccessspecsResponse::with(status).into(),
-        t if t == GetSupportedVersion::TYPE => GetSupportedVersionResponse::with(status).into(),
-        t if t == SetProtocolVersion::TYPE => SetProtocolVersionResponse::with(status).into(),
-        CUSTOM_MESSAGE_TYPE if vendor == caps::IMPINJ_VENDOR && subtype == 21 => {
-            ImpinjEnableExtensionsResponse::with(status).into()
-        }
-        CUSTOM_MESSAGE_TYPE if vendor == caps::IMPINJ_VENDOR && subtype == 23 => {
-            ImpinjSaveSettingsResponse::with(status).into()
-        }
-        _ => return None,
-    })
 }

@@ -5,6 +5,7 @@ use std::collections::hash_map::{Entry, HashMap};
 use std::hash::{BuildHasherDefault, Hash, Hasher};
 
 use llrp::params::*;
+use llrp::units;
 
 /// One tag read as the reader saw it (the physics read plus LLRP context).
 #[derive(Clone, Debug, PartialEq)]
@@ -78,28 +79,6 @@ impl ImpinjContent {
         }
         c
     }
-}
-
-/// Impinj phase units (0..4095 for 0..2π) of a phase in radians.
-pub fn phase_units(rad: f64) -> u16 {
-    let u = (rad.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * 4096.0).round();
-    (u as u32 % 4096) as u16
-}
-
-/// Whole-dBm PeakRSSI as an Impinj reader reports it (hundredths truncated toward zero).
-pub fn whole_dbm(dbm: f64) -> i8 {
-    let cdbm = (dbm * 100.0).round();
-    (cdbm / 100.0).trunc().clamp(-128.0, 127.0) as i8
-}
-
-/// Hundredths of dBm (ImpinjPeakRSSI).
-pub fn centi_dbm(dbm: f64) -> i16 {
-    (dbm * 100.0).round().clamp(-32768.0, 32767.0) as i16
-}
-
-/// Impinj Doppler units (Hz × 16).
-pub fn doppler_units(hz: f64) -> i16 {
-    (hz * 16.0).round().clamp(-32768.0, 32767.0) as i16
 }
 
 /// Gen2 CRC-16 (ISO/IEC 18000-63: polynomial 0x1021, preset 0xFFFF, ones' complement) of
@@ -310,7 +289,7 @@ pub fn build(o: &Observation, c: &Content) -> TagReportData {
         t.antenna_id = Some(AntennaId(o.antenna_id));
     }
     if s.enable_peak_rssi {
-        t.peak_rssi = Some(PeakRssi(whole_dbm(o.rssi_dbm)));
+        t.peak_rssi = Some(PeakRssi(units::dbm_to_peak_rssi(o.rssi_dbm)));
     }
     if s.enable_channel_index {
         t.channel_index = Some(ChannelIndex(o.channel_index));
@@ -351,20 +330,20 @@ pub fn build(o: &Observation, c: &Content) -> TagReportData {
     if i.phase {
         t.custom
             .push(Custom::ImpinjRfPhaseAngle(ImpinjRfPhaseAngle {
-                phase_angle: phase_units(o.phase_rad),
+                phase_angle: units::radians_to_phase(o.phase_rad),
                 ..Default::default()
             }));
     }
     if i.peak_rssi {
         t.custom.push(Custom::ImpinjPeakRssi(ImpinjPeakRssi {
-            rssi: centi_dbm(o.rssi_dbm),
+            rssi: units::dbm_to_centi_dbm(o.rssi_dbm),
             ..Default::default()
         }));
     }
     if i.doppler {
         t.custom
             .push(Custom::ImpinjRfDopplerFrequency(ImpinjRfDopplerFrequency {
-                doppler_frequency: doppler_units(o.doppler_hz),
+                doppler_frequency: units::hz_to_doppler(o.doppler_hz),
                 ..Default::default()
             }));
     }
@@ -375,7 +354,7 @@ pub fn build(o: &Observation, c: &Content) -> TagReportData {
 /// last-seen time and the count advance, the Impinj phase and Doppler are the latest.
 fn merge(t: &mut TagReportData, o: &Observation, c: &Content) {
     if let Some(p) = &mut t.peak_rssi {
-        p.0 = p.0.max(whole_dbm(o.rssi_dbm));
+        p.0 = p.0.max(units::dbm_to_peak_rssi(o.rssi_dbm));
     }
     if let Some(l) = &mut t.last_seen_timestamp_utc {
         l.0 = l.0.max(o.utc_us);
@@ -386,13 +365,13 @@ fn merge(t: &mut TagReportData, o: &Observation, c: &Content) {
     for p in &mut t.custom {
         match p {
             Custom::ImpinjRfPhaseAngle(a) if c.impinj.phase => {
-                a.phase_angle = phase_units(o.phase_rad)
+                a.phase_angle = units::radians_to_phase(o.phase_rad)
             }
             Custom::ImpinjPeakRssi(r) if c.impinj.peak_rssi => {
-                r.rssi = r.rssi.max(centi_dbm(o.rssi_dbm))
+                r.rssi = r.rssi.max(units::dbm_to_centi_dbm(o.rssi_dbm))
             }
             Custom::ImpinjRfDopplerFrequency(d) if c.impinj.doppler => {
-                d.doppler_frequency = doppler_units(o.doppler_hz)
+                d.doppler_frequency = units::hz_to_doppler(o.doppler_hz)
             }
             _ => {}
         }
@@ -422,16 +401,6 @@ mod tests {
             access_spec_id: 0,
             tid: vec![],
         }
-    }
-
-    #[test]
-    fn units_follow_impinj_scales() {
-        assert_eq!(phase_units(0.0), 0);
-        assert_eq!(phase_units(std::f64::consts::PI), 2048);
-        assert_eq!(phase_units(std::f64::consts::TAU - 1e-9), 0);
-        assert_eq!(centi_dbm(-68.504), -6850);
-        assert_eq!(whole_dbm(-68.5), -68);
-        assert_eq!(doppler_units(-2.5), -40);
     }
 
     #[test]
@@ -500,7 +469,7 @@ mod tests {
         c.impinj.phase = true;
         c.impinj.peak_rssi = true;
         let t = build(&obs(1, 1, -61.23, 5), &c);
-        assert_eq!(t.impinj_phase_angle(), Some(phase_units(1.0)));
+        assert_eq!(t.impinj_phase_angle(), Some(units::radians_to_phase(1.0)));
         assert_eq!(t.impinj_peak_rssi(), Some(-6123));
         assert_eq!(t.impinj_doppler(), None);
     }

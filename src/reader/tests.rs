@@ -148,3 +148,55 @@ fn prefetched_physics_sends_exactly_what_direct_physics_sends() {
         );
     }
 }
+
+/// For every region, `llrp::units::HopTable` (the crate's helper) and the table the reader
+/// advertises in its RegulatoryCapabilities give the same frequency for every ChannelIndex,
+/// and so does the table the physics reports reads in.
+#[test]
+fn units_helper_and_advertised_hop_table_agree_in_every_region() {
+    use crate::scenario::Region;
+    use llrp::units::HopTable;
+
+    let custom = vec![915_250, 902_750, 927_250];
+    let cases = [
+        (Region::Fcc, Some(HopTable::fcc())),
+        (Region::Etsi, Some(HopTable::etsi())),
+        (
+            Region::Custom {
+                hop_table_khz: custom.clone(),
+            },
+            None,
+        ),
+    ];
+    for (region, helper) in cases {
+        let mut s = Scenario::default_s1();
+        s.readers[0].region = region.clone();
+        let model = Arc::new(Model::new(&s, 0));
+        let profile = ReaderProfile::from_scenario(&s, 0, &model);
+        let caps = super::caps::capabilities(&profile, 3).expect("RequestedData 3 is valid");
+        let regulatory = caps
+            .regulatory_capabilities
+            .expect("regulatory capabilities requested");
+        let advertised =
+            HopTable::from_capabilities(&regulatory, 1).expect("the reader advertises a table");
+        let expected = helper.unwrap_or(HopTable {
+            id: 1,
+            frequencies_khz: custom.clone(),
+        });
+        assert!(!expected.frequencies_khz.is_empty());
+        for k in 1..=expected.frequencies_khz.len() as u16 {
+            let f = expected.frequency_khz(k);
+            assert_eq!(
+                advertised.frequency_khz(k),
+                f,
+                "{region:?}: ChannelIndex {k}"
+            );
+            let physics = model.frequencies_khz().get(usize::from(k) - 1).copied();
+            assert_eq!(physics, f, "{region:?}: physics, ChannelIndex {k}");
+        }
+        assert_eq!(
+            advertised.frequency_khz(expected.frequencies_khz.len() as u16 + 1),
+            None
+        );
+    }
+}

@@ -6,19 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::format::Region;
 
-/// The ETSI EN 302 208 four-channel plan in kHz (ChannelIndex 1..4).
-pub const ETSI_CHANNELS_KHZ: [u32; 4] = [865_700, 866_300, 866_900, 867_500];
-
-/// The FCC part 15 plan (902.75 + 0.5·k MHz, k = 0..49) in the fixed pseudo-random order a
-/// reader advertises and hops through (a Fisher–Yates shuffle drawn once with SplitMix64; a
-/// real reader also lists its table in hop order, not ascending).
-pub const FCC_HOP_TABLE_KHZ: [u32; 50] = [
-    920_250, 904_750, 903_750, 912_750, 904_250, 922_750, 919_250, 918_250, 922_250, 913_750,
-    923_250, 914_250, 909_750, 903_250, 924_250, 905_750, 925_250, 907_250, 902_750, 924_750,
-    915_750, 915_250, 917_250, 912_250, 916_750, 921_750, 927_250, 907_750, 910_750, 917_750,
-    918_750, 911_750, 921_250, 909_250, 925_750, 908_750, 906_250, 926_750, 910_250, 920_750,
-    919_750, 913_250, 906_750, 911_250, 914_750, 916_250, 908_250, 926_250, 905_250, 923_750,
-];
+pub use llrp::units::{ETSI_CHANNELS_KHZ, FCC_HOP_TABLE_KHZ};
 
 /// Default dwell per channel for hopping tables (FCC part 15's 0.4 s maximum), in ms.
 pub const DEFAULT_HOP_DWELL_MS: f64 = 400.0;
@@ -120,15 +108,6 @@ impl<'de> Deserialize<'de> for Region {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fcc_table_is_a_permutation_of_the_50_channels_not_ascending() {
-        let mut sorted = FCC_HOP_TABLE_KHZ.to_vec();
-        sorted.sort_unstable();
-        let expected: Vec<u32> = (0..50).map(|i| 902_750 + 500 * i).collect();
-        assert_eq!(sorted, expected);
-        assert_ne!(FCC_HOP_TABLE_KHZ.to_vec(), expected);
-    }
 
     #[test]
     fn region_codes() {

@@ -36,19 +36,6 @@ pub fn parse_words(hex: &str) -> Result<Vec<u16>, String> {
         .collect()
 }
 
-/// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)
-/// followed by a 64-bit serial derived from the EPC.
-pub fn default_tid(epc: &[u8; 12]) -> Vec<u16> {
-    let mut h = crate::physics::seed::domain::TID;
-    for chunk in epc.chunks(4) {
-        let word = chunk.iter().fold(0u64, |a, &b| (a << 8) | u64::from(b));
-        h = crate::physics::seed::mix(&[h, word]);
-    }
-    let mut tid = vec![0xE280, 0x1160];
-    tid.extend((0..4).map(|i| (h >> (48 - 16 * i)) as u16));
-    tid
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,16 +55,5 @@ mod tests {
         assert_eq!(parse_words(""), Ok(vec![]));
         assert!(parse_words("E28").is_err());
         assert!(parse_words("E28X").is_err());
-    }
-
-    #[test]
-    fn default_tid_is_stable_and_distinct() {
-        let a = parse_epc("300833B2DDD9014000000001").expect("valid EPC");
-        let b = parse_epc("300833B2DDD9014000000002").expect("valid EPC");
-        let ta = default_tid(&a);
-        assert_eq!(ta.len(), 6);
-        assert_eq!(&ta[..2], &[0xE280, 0x1160]);
-        assert_eq!(ta, default_tid(&a));
-        assert_ne!(ta, default_tid(&b));
     }
 }

@@ -234,3 +234,23 @@ fn trailing_garbage_and_bad_json_are_errors() {
     let err = Scenario::from_json("{").unwrap_err().to_string();
     assert!(err.contains("EOF"), "{err}");
 }
+
+#[test]
+fn bad_noise_parameters_are_refused() {
+    use super::validate::check_noise;
+    assert!(check_noise(&NoiseDist::Gamma {
+        shape: -1.0,
+        scale: 1.0
+    })
+    .is_err());
+    assert!(check_noise(&NoiseDist::Uniform {
+        low: 1.0,
+        high: 1.0
+    })
+    .is_err());
+    assert!(check_noise(&NoiseDist::Normal {
+        mean: 0.0,
+        std: 0.1
+    })
+    .is_ok());
+}

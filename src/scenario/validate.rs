@@ -4,8 +4,9 @@
 use std::collections::HashSet;
 
 use super::tagmem::{parse_epc, parse_words};
-use super::{AntennaSpec, Mount, Pose, ReaderSpec, Region, RobotSpec, Scenario, ScenarioError};
-use crate::physics::noise;
+use super::{
+    AntennaSpec, Mount, NoiseDist, Pose, ReaderSpec, Region, RobotSpec, Scenario, ScenarioError,
+};
 
 /// Highest robot speed allowed (\[M\]: v ≤ 2 m/s).
 pub const MAX_ROBOT_SPEED: f64 = 2.0;
@@ -316,7 +317,7 @@ fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> 
     )?;
     in_range(&format!("{p}.rssi_noise"), a.rssi_noise, 0.0, 10.0)?;
     if let Some(d) = &a.extra_phase_noise {
-        noise::check(d).map_err(|e| invalid(format!("{p}.extra_phase_noise"), e))?;
+        check_noise(d).map_err(|e| invalid(format!("{p}.extra_phase_noise"), e))?;
     }
     positive(&format!("{p}.range_m"), a.range_m, 1000.0)?;
     in_range(&format!("{p}.range_sigma"), a.range_sigma, 0.0, 1.0)?;
@@ -393,4 +394,63 @@ pub(super) fn load_recorded(s: &mut Scenario, dir: &std::path::Path) -> Check {
         }
     }
     Ok(())
+}
+
+/// Validates a distribution's parameters; the reason names the bad parameter.
+pub fn check_noise(dist: &NoiseDist) -> Result<(), String> {
+    fn finite(name: &str, v: f64) -> Result<(), String> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(format!("{name} must be finite, got {v}"))
+        }
+    }
+    fn positive(name: &str, v: f64) -> Result<(), String> {
+        if v > 0.0 && v.is_finite() {
+            Ok(())
+        } else {
+            Err(format!("{name} must be > 0, got {v}"))
+        }
+    }
+    match *dist {
+        NoiseDist::Uniform { low, high } => {
+            finite("low", low)?;
+            finite("high", high)?;
+            if high > low {
+                Ok(())
+            } else {
+                Err(format!("high must be > low, got low {low}, high {high}"))
+            }
+        }
+        NoiseDist::Exponential { lambda } => positive("lambda", lambda),
+        NoiseDist::Gamma { shape, scale } => {
+            positive("shape", shape)?;
+            positive("scale", scale)
+        }
+        NoiseDist::Weibull { scale, shape } => {
+            positive("scale", scale)?;
+            positive("shape", shape)
+        }
+        NoiseDist::Normal { mean, std } => {
+            finite("mean", mean)?;
+            if std >= 0.0 && std.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("std must be >= 0, got {std}"))
+            }
+        }
+        NoiseDist::Lognormal { mu, sigma } => {
+            finite("mu", mu)?;
+            if sigma >= 0.0 && sigma.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("sigma must be >= 0, got {sigma}"))
+            }
+        }
+        NoiseDist::ChiSquared { k } => positive("k", k),
+        NoiseDist::Cauchy { median, scale } => {
+            finite("median", median)?;
+            positive("scale", scale)
+        }
+    }
 }
