@@ -1,5 +1,5 @@
-//! llrp-gateway: a simulated LLRP reader, a transparent gateway to real readers and a tag
-//! localizer. The LLRP codec lives in the `llrp` crate (`protocol/`).
+//! llrp-gateway: a simulated LLRP reader backed by a physics model of a scenario, and an LLRP
+//! client and frame decoder. The LLRP codec lives in the `llrp` crate (`protocol/`).
 
 pub mod decode;
 pub mod net;

@@ -14,7 +14,7 @@ use llrp_gateway::sim::{self, SimOptions};
 #[command(
     name = "llrp-gateway",
     version,
-    about = "Simulated LLRP reader, LLRP gateway and tag localizer"
+    about = "Simulated LLRP RFID reader and LLRP frame decoder"
 )]
 struct Cli {
     #[command(subcommand)]
