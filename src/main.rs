@@ -102,7 +102,26 @@ fn main() -> ExitCode {
     }
 }
 
-/// Runs the simulated readers until Ctrl-C.
+/// Resolves at Ctrl-C (SIGINT) or, on Unix, SIGTERM.
+async fn stop_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+                return;
+            }
+            Err(e) => eprintln!("llrp-gateway sim: cannot watch SIGTERM ({e}); Ctrl-C stops"),
+        }
+    }
+    let _ = tokio::signal::ctrl_c().await;
+}
+
+/// Runs the simulated readers until Ctrl-C or SIGTERM.
 fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -152,8 +171,11 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
                 scenario.name
             );
         }
-        let _ = tokio::signal::ctrl_c().await;
+        stop_signal().await;
+        // Each client gets its ConnectionCloseEvent and the ground truth is flushed, within
+        // a second: a client that does not take its last bytes does not hold the exit up.
         running.shutdown().await;
+        eprintln!("llrp-gateway sim: stopped");
         ExitCode::SUCCESS
     })
 }

@@ -15,8 +15,13 @@ use tokio::task::JoinHandle;
 use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve, Observer, SimReader};
 use crate::physics::Model;
+use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::scenario::Scenario;
+
+/// Longest a shutdown waits for the readers' tasks (each gives its client at most half a
+/// second to take the ConnectionCloseEvent).
+pub const SHUTDOWN_WAIT: std::time::Duration = std::time::Duration::from_millis(800);
 
 /// Simulated time between two ground-truth lines, µs.
 pub const TRUTH_INTERVAL_US: u64 = 100_000;
@@ -80,11 +85,18 @@ pub struct RunningSim {
 }
 
 impl RunningSim {
-    /// Stops accepting clients, waits for the listeners to end and flushes the ground truth.
+    /// Stops accepting clients, sends each connected client the ConnectionCloseEvent and closes
+    /// it, waits for every reader's task to end (at most [`SHUTDOWN_WAIT`]) and flushes the
+    /// ground truth.
     pub async fn shutdown(self) {
         let _ = self.shutdown.send(true);
-        for t in self.tasks {
-            let _ = t.await;
+        let all = async {
+            for t in self.tasks {
+                let _ = t.await;
+            }
+        };
+        if tokio::time::timeout(SHUTDOWN_WAIT, all).await.is_err() {
+            tracing::warn!("a reader did not stop within {SHUTDOWN_WAIT:?}");
         }
         if let Some(t) = &self.truth {
             t.flush();
@@ -119,12 +131,11 @@ fn hex(epc: &[u8]) -> String {
 /// The observer that writes reader `name`'s antenna poses (true and odometry) and the
 /// tags' positions every [`TRUTH_INTERVAL_US`] of simulated time.
 fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64) -> Observer {
-    let next = Mutex::new(0u64);
+    let mut next = 0u64;
     Box::new(move |r: &Reader| {
-        let mut next = next.lock().unwrap_or_else(|e| e.into_inner());
         let m = r.model();
-        while *next <= r.now_us() {
-            let t = *next;
+        while next <= r.now_us() {
+            let t = next;
             let antennas: Vec<_> = (1..=m.antenna_count())
                 .map(|a| {
                     serde_json::json!({
@@ -150,7 +161,7 @@ fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64
                 "antennas": antennas,
                 "tags": tags,
             }));
-            *next += TRUTH_INTERVAL_US;
+            next += TRUTH_INTERVAL_US;
         }
     })
 }
@@ -211,7 +222,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         let observer = truth
             .as_ref()
             .map(|t| truth_observer(t.clone(), spec.name.clone(), moving.clone(), utc0));
-        let sim = SimReader::new(reader, clock.clone(), observer);
+        let sim = SimReader::new(Session::new(reader), clock.clone(), observer);
         tracing::info!(reader = %spec.name, %bound, "simulated reader listening");
         tasks.push(tokio::spawn(serve(listener, sim, rx.clone())));
         addrs.push(bound);

@@ -50,17 +50,22 @@ fn an_unusable_listen_address_is_reported() {
     assert!(err.contains("cannot listen on 256.0.0.1:5084"), "{err}");
 }
 
-/// A client's malformed requests get LLRP answers, the connection carries on, and nothing is
-/// logged at error level for them (the log is the binary's stderr at its default level).
-#[test]
-fn a_clients_mistakes_are_answered_and_not_logged_as_errors() {
-    use std::io::{BufRead, BufReader, Read, Write};
-    use std::net::TcpStream;
+/// A running `llrp-gateway sim` child: its address and the thread collecting its stderr.
+struct Running {
+    child: std::process::Child,
+    addr: String,
+    log: std::thread::JoinHandle<String>,
+}
+
+/// Starts `llrp-gateway sim` with `args` on a free loopback port and waits for its
+/// "listening on" line.
+fn spawn_sim(args: &[&str]) -> Running {
+    use std::io::{BufRead, BufReader};
     use std::process::Stdio;
-    use std::time::Duration;
 
     let mut child = bin()
-        .args(["sim", "--listen", "127.0.0.1:0", "--speed", "max"])
+        .args(["sim", "--listen", "127.0.0.1:0"])
+        .args(args)
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
@@ -80,9 +85,117 @@ fn a_clients_mistakes_are_answered_and_not_logged_as_errors() {
         all
     });
     let addr = addr_rx
-        .recv_timeout(Duration::from_secs(20))
+        .recv_timeout(std::time::Duration::from_secs(20))
         .expect("the simulator listens");
-    let mut s = TcpStream::connect(&addr).expect("connects");
+    Running { child, addr, log }
+}
+
+impl Running {
+    /// Sends SIGTERM and waits (at most 20 s, a hang guard) for the process to exit; returns
+    /// whether it exited successfully and its log.
+    fn terminate(mut self) -> (bool, String) {
+        let pid = self.child.id().to_string();
+        let sent = Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success(), "SIGTERM delivered");
+        let guard = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        let status = loop {
+            if let Some(s) = self.child.try_wait().expect("wait") {
+                break s;
+            }
+            if std::time::Instant::now() > guard {
+                let _ = self.child.kill();
+                panic!("the simulator did not exit after SIGTERM");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        (status.success(), self.log.join().expect("log reader"))
+    }
+}
+
+/// Reads one LLRP message from a blocking stream.
+fn read_message(s: &mut std::net::TcpStream) -> std::io::Result<llrp::Message> {
+    use std::io::Read;
+    let mut h = [0u8; 10];
+    s.read_exact(&mut h)?;
+    let len = u32::from_be_bytes([h[2], h[3], h[4], h[5]]) as usize;
+    let mut frame = h.to_vec();
+    frame.resize(len.max(10), 0);
+    s.read_exact(&mut frame[10..])?;
+    llrp::Message::decode(&frame)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e.to_string()))
+}
+
+/// SIGTERM: the connected client gets the ConnectionCloseEvent a reader sends before it closes,
+/// then end-of-stream; the ground truth written so far is on disk; the process exits 0.
+#[test]
+fn sigterm_tells_the_client_flushes_the_truth_and_exits() {
+    use llrp::message::{GetReaderCapabilities, MessageBody};
+    use std::io::Write;
+    use std::time::Duration;
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truth = dir.path().join("truth.jsonl");
+    let truth_arg = truth.to_str().expect("utf-8 path");
+    let sim = spawn_sim(&["--truth", truth_arg]);
+    let mut s = std::net::TcpStream::connect(&sim.addr).expect("connects");
+    s.set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    let hello = read_message(&mut s).expect("greeting");
+    assert_eq!(hello.name(), "READER_EVENT_NOTIFICATION");
+    // A request makes the reader run (and write the first ground-truth line); its answer
+    // proves the reader is serving.
+    let req = llrp::Message::new(9, GetReaderCapabilities::default());
+    s.write_all(&req.to_bytes()).expect("send");
+    let caps = read_message(&mut s).expect("answer");
+    assert_eq!(
+        (caps.name(), caps.id),
+        ("GET_READER_CAPABILITIES_RESPONSE", 9)
+    );
+
+    let pid = sim.child.id();
+    let (ok, log) = sim.terminate();
+    assert!(ok, "exit status 0 after SIGTERM (pid {pid}):\n{log}");
+    let last = read_message(&mut s).expect("the reader says why it closes");
+    match &last.body {
+        MessageBody::ReaderEventNotification(n) => assert!(
+            n.reader_event_notification_data
+                .connection_close_event
+                .is_some(),
+            "{last:?}"
+        ),
+        other => panic!("expected ConnectionCloseEvent, got {}", other.name()),
+    }
+    let mut rest = [0u8; 1];
+    match std::io::Read::read(&mut s, &mut rest) {
+        Ok(0) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
+        other => panic!("expected end-of-stream after the close event, got {other:?}"),
+    }
+    let text = std::fs::read_to_string(&truth).expect("truth file exists");
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(
+        !lines.is_empty(),
+        "buffered ground truth flushed at shutdown"
+    );
+    for l in lines {
+        let v: serde_json::Value = serde_json::from_str(l).expect("each line is JSON");
+        assert!(v["t_us"].is_u64(), "{l}");
+    }
+}
+
+/// A client's malformed requests get LLRP answers, the connection carries on, and nothing is
+/// logged at error level for them (the log is the binary's stderr at its default level).
+#[test]
+fn a_clients_mistakes_are_answered_and_not_logged_as_errors() {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::time::Duration;
+
+    let sim = spawn_sim(&["--speed", "max"]);
+    let mut s = TcpStream::connect(&sim.addr).expect("connects");
     s.set_read_timeout(Some(Duration::from_secs(10)))
         .expect("timeout");
     // Header: version 1 (or `ver`), type, length, message ID.
@@ -121,10 +234,9 @@ fn a_clients_mistakes_are_answered_and_not_logged_as_errors() {
         assert!(answered.contains(&want), "{want:?} not in {answered:?}");
     }
     drop(s);
-    std::thread::sleep(Duration::from_millis(200));
-    let _ = child.kill();
-    let _ = child.wait();
-    let log = log.join().expect("log reader");
+    // The log is complete once the process has exited.
+    let (ok, log) = sim.terminate();
+    assert!(ok, "{log}");
     assert!(log.contains("listening on"), "{log}");
     assert!(
         !log.contains("ERROR"),

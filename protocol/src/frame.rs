@@ -1,6 +1,6 @@
 //! Message framing: the 10-byte header and splitting a byte stream into whole messages.
 
-use bytes::BufMut;
+use bytes::{BufMut, Bytes, BytesMut};
 
 use crate::error::FrameError;
 
@@ -114,6 +114,77 @@ impl FrameSplitter {
     }
 }
 
+/// What a [`Deframer`] found in a byte stream.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Inbound {
+    /// One whole frame, header included, byte for byte as received (any header version:
+    /// whether the version is spoken is the receiver's decision, the length is sane).
+    Frame(Bytes),
+    /// A header whose length field cannot be right (below 10 or above the limit): the stream
+    /// cannot be resynchronised, and the deframer yields this from now on.
+    Unsynced(FrameError),
+}
+
+/// Turns a byte stream into whole frames: bytes are appended to its buffer as they arrive,
+/// frames come out. The buffer holds at most one frame beyond what has been taken, so the
+/// splitter's limit bounds it.
+#[derive(Clone, Debug, Default)]
+pub struct Deframer {
+    buf: BytesMut,
+    splitter: FrameSplitter,
+    unsynced: Option<FrameError>,
+}
+
+impl Deframer {
+    /// A deframer with the given limits.
+    pub fn new(splitter: FrameSplitter) -> Self {
+        Deframer {
+            buf: BytesMut::new(),
+            splitter,
+            unsynced: None,
+        }
+    }
+
+    /// The buffer to append received bytes to.
+    pub fn buffer_mut(&mut self) -> &mut BytesMut {
+        &mut self.buf
+    }
+
+    /// Bytes received but not yet returned as a frame.
+    pub fn buffered(&self) -> usize {
+        self.buf.len()
+    }
+
+    /// The next whole frame, or the error that ended the stream; `None` while more bytes are
+    /// needed (the buffer then has room reserved for them).
+    pub fn next_frame(&mut self) -> Option<Inbound> {
+        if let Some(e) = &self.unsynced {
+            return Some(Inbound::Unsynced(e.clone()));
+        }
+        let len = match self.splitter.split(&self.buf) {
+            Ok(Split::Frame(h)) => h.length as usize,
+            Ok(Split::Incomplete(more)) => {
+                self.buf.reserve(more);
+                return None;
+            }
+            Err(FrameError::UnsupportedVersion(h)) => {
+                let len = h.length as usize;
+                if self.buf.len() < len {
+                    self.buf.reserve(len - self.buf.len());
+                    return None;
+                }
+                len
+            }
+            Err(e) => {
+                self.unsynced = Some(e.clone());
+                self.buf.clear();
+                return Some(Inbound::Unsynced(e));
+            }
+        };
+        Some(Inbound::Frame(self.buf.split_to(len).freeze()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,5 +244,33 @@ mod tests {
             s.split(&keepalive(0, 10)),
             Err(FrameError::UnsupportedVersion(_))
         ));
+    }
+
+    #[test]
+    fn deframer_yields_whole_frames_of_any_version_then_stays_unsynced() {
+        let mut d = Deframer::default();
+        let a = keepalive(1, 10);
+        let b = keepalive(5, 10);
+        d.buffer_mut().extend_from_slice(&a[..4]);
+        assert_eq!(d.next_frame(), None);
+        d.buffer_mut().extend_from_slice(&a[4..]);
+        d.buffer_mut().extend_from_slice(&b[..9]);
+        assert_eq!(d.next_frame(), Some(Inbound::Frame(Bytes::from(a.clone()))));
+        assert_eq!(d.next_frame(), None);
+        d.buffer_mut().extend_from_slice(&b[9..]);
+        assert_eq!(d.next_frame(), Some(Inbound::Frame(Bytes::from(b))));
+        assert_eq!(d.buffered(), 0);
+        d.buffer_mut().extend_from_slice(&keepalive(1, 4));
+        d.buffer_mut().extend_from_slice(&a);
+        for _ in 0..2 {
+            assert!(matches!(
+                d.next_frame(),
+                Some(Inbound::Unsynced(FrameError::TooShort {
+                    len: 4,
+                    id: 7,
+                    ..
+                }))
+            ));
+        }
     }
 }

@@ -1,7 +1,8 @@
 //! `llrp`: a sans-IO codec for the EPCglobal Low Level Reader Protocol (LLRP 1.0.1 and 1.1)
 //! with Impinj extensions.
 //!
-//! * [`FrameSplitter`] finds whole messages in a byte stream.
+//! * [`FrameSplitter`] finds whole messages in a byte stream; [`Deframer`] buffers a stream
+//!   and yields them.
 //! * [`Message::decode`] turns one message into typed structs (nom underneath);
 //!   [`Message::encode`] writes it back (`bytes::BufMut`).
 //! * Parameters the codec does not type, and vendor parameters, are kept byte for byte in
@@ -83,5 +84,5 @@ pub mod sample;
 pub mod units;
 
 pub use error::{DecodeError, DecodeErrorDetail, ErrorKind, FrameError, PathSeg, StatusCode};
-pub use frame::{FrameHeader, FrameSplitter, Split};
+pub use frame::{Deframer, FrameHeader, FrameSplitter, Inbound, Split};
 pub use message::{Message, MessageBody, MessageKind, Request, Response};

@@ -1,16 +1,16 @@
-//! A small async LLRP client: connect, send typed messages, receive and match responses by
-//! message ID. Used by the tests and the gateway; unsolicited messages (reports, events,
-//! keepalives) are queued for the caller.
+//! A small async LLRP client over a [`Connection`]: connect, send typed messages, receive and
+//! match responses by message ID. Used by the tests and benchmarks; unsolicited messages
+//! (reports, events, keepalives) are queued for the caller.
 
 use std::collections::VecDeque;
 use std::io;
 use std::time::Duration;
 
-use bytes::BytesMut;
 use llrp::message::MessageBody;
-use llrp::{FrameSplitter, Message, Split};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpStream, ToSocketAddrs};
+use llrp::{Inbound, Message, Request};
+use tokio::net::ToSocketAddrs;
+
+use super::connection::Connection;
 
 /// Errors of the client.
 #[derive(Debug, thiserror::Error)]
@@ -30,13 +30,14 @@ pub enum ClientError {
     /// The peer closed the connection.
     #[error("connection closed by peer")]
     Closed,
+    /// The peer answered a request with another message (e.g. ERROR_MESSAGE).
+    #[error("unexpected answer {0}")]
+    Unexpected(&'static str),
 }
 
 /// An LLRP client connection.
 pub struct Client {
-    stream: TcpStream,
-    buf: BytesMut,
-    splitter: FrameSplitter,
+    conn: Connection,
     next_id: u32,
     version: u8,
     /// Messages received but not yet taken.
@@ -46,12 +47,8 @@ pub struct Client {
 impl Client {
     /// Connects to a reader.
     pub async fn connect(addr: impl ToSocketAddrs) -> Result<Client, ClientError> {
-        let stream = TcpStream::connect(addr).await?;
-        stream.set_nodelay(true)?;
         Ok(Client {
-            stream,
-            buf: BytesMut::with_capacity(64 * 1024),
-            splitter: FrameSplitter::default(),
+            conn: Connection::connect(addr).await?,
             next_id: 1000,
             version: 1,
             pending: VecDeque::new(),
@@ -72,13 +69,13 @@ impl Client {
             id,
             body: body.into(),
         };
-        self.stream.write_all(&m.to_bytes()).await?;
+        self.conn.write_message(&m).await?;
         Ok(id)
     }
 
     /// Sends raw bytes (for malformed-input tests).
     pub async fn send_raw(&mut self, bytes: &[u8]) -> Result<(), ClientError> {
-        self.stream.write_all(bytes).await?;
+        self.conn.write_bytes(bytes).await?;
         Ok(())
     }
 
@@ -91,39 +88,40 @@ impl Client {
     }
 
     async fn read_one(&mut self, timeout: Duration) -> Result<Message, ClientError> {
-        let deadline = tokio::time::Instant::now() + timeout;
-        loop {
-            if let Split::Frame(h) = self.splitter.split(&self.buf)? {
-                let frame = self.buf.split_to(h.length as usize);
-                return Ok(Message::decode(&frame)?);
-            }
-            let n = tokio::time::timeout_at(deadline, self.stream.read_buf(&mut self.buf))
-                .await
-                .map_err(|_| ClientError::Timeout("a message"))??;
-            if n == 0 {
-                return Err(ClientError::Closed);
-            }
+        let frame = self.read_frame(timeout, "a message").await?;
+        Ok(Message::decode(&frame)?)
+    }
+
+    async fn read_frame(
+        &mut self,
+        timeout: Duration,
+        what: &'static str,
+    ) -> Result<bytes::Bytes, ClientError> {
+        match tokio::time::timeout(timeout, self.conn.read_frame())
+            .await
+            .map_err(|_| ClientError::Timeout(what))??
+        {
+            Some(Inbound::Frame(f)) => Ok(f),
+            Some(Inbound::Unsynced(e)) => Err(ClientError::Frame(e)),
+            None => Err(ClientError::Closed),
         }
     }
 
     /// The next frame as raw bytes, whatever its version (for checking what a peer sends to
     /// a version it does not speak).
     pub async fn recv_raw(&mut self, timeout: Duration) -> Result<Vec<u8>, ClientError> {
-        let deadline = tokio::time::Instant::now() + timeout;
-        loop {
-            if let Some(h) = llrp::FrameHeader::peek(&self.buf) {
-                let len = (h.length as usize).max(llrp::frame::HEADER_LEN);
-                if self.buf.len() >= len {
-                    return Ok(self.buf.split_to(len).to_vec());
-                }
-            }
-            let n = tokio::time::timeout_at(deadline, self.stream.read_buf(&mut self.buf))
-                .await
-                .map_err(|_| ClientError::Timeout("a frame"))??;
-            if n == 0 {
-                return Err(ClientError::Closed);
-            }
-        }
+        Ok(self.read_frame(timeout, "a frame").await?.to_vec())
+    }
+
+    /// Sends a request and waits for its response, typed.
+    pub async fn transact<R: Request>(
+        &mut self,
+        request: R,
+        timeout: Duration,
+    ) -> Result<R::Response, ClientError> {
+        let m = self.request(request, timeout).await?;
+        let name = m.name();
+        R::Response::try_from(m.body).map_err(|_| ClientError::Unexpected(name))
     }
 
     /// Sends a request and waits for the message answering it (same ID); other messages
@@ -166,7 +164,7 @@ impl Client {
 
     /// Closes the connection.
     pub async fn close(mut self) -> Result<(), ClientError> {
-        self.stream.shutdown().await?;
+        self.conn.shutdown().await?;
         Ok(())
     }
 }

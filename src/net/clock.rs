@@ -2,7 +2,9 @@
 
 use std::str::FromStr;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
+
+use crate::reader::session::Deadline;
 
 /// How fast simulated time runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,6 +69,24 @@ impl Clock {
         match self.speed {
             Speed::Factor(f) => (self.start.elapsed().as_secs_f64() * 1e6 * f) as u64,
             Speed::Max => self.stepped_us.load(Ordering::Relaxed),
+        }
+    }
+
+    /// The instant a session's deadline falls due: its keepalive on the wall clock and, in
+    /// real-time modes, its simulated deadline (just past it, so that the simulated time read
+    /// then has reached it). `--speed max` steps simulated time itself, so only the keepalive
+    /// counts there.
+    pub fn wake_at(&self, d: Deadline) -> Option<Instant> {
+        let wall = d.wall_ms.map(|ms| self.start + Duration::from_millis(ms));
+        let sim = match self.speed {
+            Speed::Factor(f) => d
+                .sim_us
+                .map(|us| self.start + Duration::from_secs_f64((us + 1) as f64 / 1e6 / f)),
+            Speed::Max => None,
+        };
+        match (wall, sim) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
         }
     }
 

@@ -1,5 +1,7 @@
-//! Sockets: the simulated reader's LLRP server, an LLRP client, and the simulated clock.
+//! Sockets: one framed [`connection::Connection`] for every LLRP socket, the simulated
+//! reader's server, an LLRP client, and the simulated clock.
 
 pub mod client;
 pub mod clock;
+pub mod connection;
 pub mod server;

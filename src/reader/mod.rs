@@ -1,6 +1,6 @@
 //! The simulated reader's LLRP state machine, sans IO: requests in, responses, reports and
 //! events out, driven by a simulated clock. `net::server` feeds it bytes and time; tests can
-//! drive it directly.
+//! drive it directly; [`session::Session`] adds the connections and the framing around it.
 //!
 //! It behaves like an Impinj-class reader: the ROSpec and AccessSpec lifecycles, start/stop
 //! triggers, report triggers, event notifications, keepalives and the Impinj extensions.
@@ -15,6 +15,7 @@ mod config;
 mod prefetch;
 pub mod report;
 mod rospec;
+pub mod session;
 #[cfg(test)]
 mod tests;
 
@@ -222,6 +223,20 @@ impl Reader {
                 status,
                 ..Default::default()
             }),
+            ..Default::default()
+        };
+        self.message(ReaderEventNotification {
+            reader_event_notification_data: data,
+            ..Default::default()
+        })
+    }
+
+    /// A READER_EVENT_NOTIFICATION with a ConnectionCloseEvent: what a reader sends before it
+    /// closes a connection itself.
+    pub fn close_event(&mut self) -> Message {
+        let data = ReaderEventNotificationData {
+            timestamp: self.timestamp(),
+            connection_close_event: Some(ConnectionCloseEvent::default()),
             ..Default::default()
         };
         self.message(ReaderEventNotification {
@@ -537,16 +552,7 @@ impl Reader {
             if wall_ms >= due {
                 if self.keepalive_unanswered >= KEEPALIVE_MISSES {
                     // The client stopped answering: say why, then close.
-                    let data = ReaderEventNotificationData {
-                        timestamp: self.timestamp(),
-                        connection_close_event: Some(ConnectionCloseEvent::default()),
-                        ..Default::default()
-                    };
-                    let m = self.message(ReaderEventNotification {
-                        reader_event_notification_data: data,
-                        ..Default::default()
-                    });
-                    out.push(Output::Send(m));
+                    out.push(Output::Send(self.close_event()));
                     out.push(Output::Close);
                     self.keepalive_due_ms = None;
                 } else {
