@@ -39,14 +39,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
+use llrp::enums::{ConnectionAttemptStatus, RoReportTriggerType};
 use llrp::message::{
     AddRospec, AddRospecResponse, EnableRospec, EnableRospecResponse, MessageBody, MessageDef,
     RoAccessReport, StartRospec, StartRospecResponse,
 };
-use llrp::params::{
-    AiSpec, AiSpecStopTrigger, InventoryParameterSpec, LlrpStatus, RoBoundarySpec, RoReportSpec,
-    RoSpec, RoSpecStartTrigger, RoSpecStopTrigger, SpecParameter, TagReportContentSelector,
-};
+use llrp::params::{LlrpStatus, RoReportSpec, RoSpec, TagReportContentSelector};
 use llrp::{FrameSplitter, Message, Split};
 use llrp_gateway::physics::{Model, Want};
 use llrp_gateway::reader::{Output, Reader, ReaderProfile, ANTENNA_DWELL_US};
@@ -380,40 +378,12 @@ impl Conn {
     }
 }
 
-/// The ROSpec the benchmark adds.
+/// The ROSpec the benchmark adds: all antennas, Immediate, no stop triggers, reports upon N
+/// tags with antenna, channel, RSSI, timestamps and count.
 fn rospec(n: u16) -> RoSpec {
-    RoSpec {
-        ro_spec_id: 1,
-        priority: 0,
-        current_state: 0,
-        ro_boundary_spec: RoBoundarySpec {
-            ro_spec_start_trigger: RoSpecStartTrigger {
-                ro_spec_start_trigger_type: 1,
-                ..Default::default()
-            },
-            ro_spec_stop_trigger: RoSpecStopTrigger {
-                ro_spec_stop_trigger_type: 0,
-                ..Default::default()
-            },
-            ..Default::default()
-        },
-        specs: vec![SpecParameter::AiSpec(AiSpec {
-            antenna_ids: vec![0],
-            ai_spec_stop_trigger: AiSpecStopTrigger {
-                ai_spec_stop_trigger_type: 0,
-                ..Default::default()
-            },
-            inventory_parameter_specs: vec![InventoryParameterSpec {
-                inventory_parameter_spec_id: 1,
-                protocol_id: 1,
-                ..Default::default()
-            }],
-            ..Default::default()
-        })],
-        ro_report_spec: Some(RoReportSpec {
-            ro_report_trigger: 2,
-            n,
-            tag_report_content_selector: TagReportContentSelector {
+    RoSpec::immediate(1, vec![0]).with_report(
+        RoReportSpec::new(RoReportTriggerType::UponNTagsOrEndOfRoSpec, n).with_content(
+            TagReportContentSelector {
                 enable_antenna_id: true,
                 enable_channel_index: true,
                 enable_peak_rssi: true,
@@ -422,19 +392,12 @@ fn rospec(n: u16) -> RoSpec {
                 enable_tag_seen_count: true,
                 ..Default::default()
             },
-            ..Default::default()
-        }),
-        ..Default::default()
-    }
+        ),
+    )
 }
 
 fn status_of(m: &Message) -> Option<&LlrpStatus> {
-    match &m.body {
-        MessageBody::AddRospecResponse(r) => Some(&r.llrp_status),
-        MessageBody::EnableRospecResponse(r) => Some(&r.llrp_status),
-        MessageBody::StartRospecResponse(r) => Some(&r.llrp_status),
-        _ => None,
-    }
+    m.body.status()
 }
 
 fn require_success(m: &Message, what: &str) -> io::Result<()> {
@@ -468,8 +431,8 @@ fn run(addr: &str, n: u16, duration: Duration, idle: Option<Duration>) -> io::Re
     let greeting = c.wait_for(63, "READER_EVENT_NOTIFICATION")?;
     if let MessageBody::ReaderEventNotification(r) = &greeting.body {
         match &r.reader_event_notification_data.connection_attempt_event {
-            Some(e) if e.status == 0 => {}
-            Some(e) => return Err(other(format!("connection refused (status {})", e.status))),
+            Some(e) if e.status == ConnectionAttemptStatus::Success => {}
+            Some(e) => return Err(other(format!("connection refused (status {:?})", e.status))),
             None => return Err(other("greeting without ConnectionAttemptEvent".into())),
         }
     }

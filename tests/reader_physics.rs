@@ -43,7 +43,13 @@ async fn rssi_and_phase_follow_the_closed_forms() {
     c.request(ImpinjEnableExtensions::default(), T)
         .await
         .expect("impinj");
-    let spec = rospec(1, vec![1], ro_null(), ai_null(), full_report(1, 1));
+    let spec = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -53,7 +59,7 @@ async fn rssi_and_phase_follow_the_closed_forms() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -64,7 +70,7 @@ async fn rssi_and_phase_follow_the_closed_forms() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 600).await;
     assert!(tags.len() >= 300, "only {} reads", tags.len());
@@ -132,8 +138,14 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
         }],
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, 0);
-    let spec = rospec(1, vec![1], ro_duration(5_000), ai_null(), full_report(2, 0));
+    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
+    let spec = rospec(
+        1,
+        vec![1],
+        ro_duration(5_000),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -143,7 +155,7 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -154,7 +166,7 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| !t.is_empty()).await;
     sim.shutdown().await;
@@ -194,7 +206,7 @@ async fn content_selector_is_honoured_field_by_field() {
     let sim = start(&s, Speed::Max).await;
     let mut c = connect(&sim).await;
     let report = RoReportSpec {
-        ro_report_trigger: 1,
+        ro_report_trigger: RoReportTriggerType::UponNTagsOrEndOfAiSpec,
         n: 1,
         tag_report_content_selector: TagReportContentSelector {
             enable_antenna_id: true,
@@ -218,7 +230,7 @@ async fn content_selector_is_honoured_field_by_field() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -229,7 +241,7 @@ async fn content_selector_is_honoured_field_by_field() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(10), |t| t.len() >= 5).await;
     assert!(tags.len() >= 5);
@@ -259,12 +271,12 @@ async fn triggers_events_and_get_report() {
         reader_event_notification_spec: Some(ReaderEventNotificationSpec {
             event_notification_state: vec![
                 EventNotificationState {
-                    event_type: 2,
+                    event_type: NotificationEventType::RoSpecEvent,
                     notification_state: true,
                     ..Default::default()
                 },
                 EventNotificationState {
-                    event_type: 6,
+                    event_type: NotificationEventType::AiSpecEvent,
                     notification_state: true,
                     ..Default::default()
                 },
@@ -273,19 +285,25 @@ async fn triggers_events_and_get_report() {
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, events).await, 0);
+    assert_eq!(request_status(&mut c, events).await, StatusCode::M_Success);
     // AISpec ends after seeing 2 distinct tags; reports at the end of the AISpec; the
     // Immediate ROSpec then runs again.
     let ai = AiSpecStopTrigger {
-        ai_spec_stop_trigger_type: 3,
+        ai_spec_stop_trigger_type: AiSpecStopTriggerType::TagObservation,
         tag_observation_trigger: Some(TagObservationTrigger {
-            trigger_type: 0,
+            trigger_type: TagObservationTriggerType::UponSeeingNTagsOrTimeout,
             number_of_tags: 2,
             ..Default::default()
         }),
         ..Default::default()
     };
-    let spec = rospec(3, vec![1], ro_null(), ai, full_report(1, 0));
+    let spec = rospec(
+        3,
+        vec![1],
+        ro_null(),
+        ai,
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -295,7 +313,7 @@ async fn triggers_events_and_get_report() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -306,7 +324,7 @@ async fn triggers_events_and_get_report() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let mut reports = Vec::new();
     let mut starts = 0;
@@ -317,10 +335,9 @@ async fn triggers_events_and_get_report() {
             MessageBody::RoAccessReport(r) => reports.push(r.tag_report_data),
             MessageBody::ReaderEventNotification(n) => {
                 let d = n.reader_event_notification_data;
-                if d.ro_spec_event
-                    .as_ref()
-                    .is_some_and(|e| e.event_type == 0 && e.ro_spec_id == 3)
-                {
+                if d.ro_spec_event.as_ref().is_some_and(|e| {
+                    e.event_type == RoSpecEventType::StartOfRoSpec && e.ro_spec_id == 3
+                }) {
                     starts += 1;
                 }
                 if d.ai_spec_event.is_some() {
@@ -352,12 +369,18 @@ async fn triggers_events_and_get_report() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     c.drain_pending();
 
     // Trigger None: nothing arrives until GET_REPORT.
-    let spec = rospec(4, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    let spec = rospec(
+        4,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -367,7 +390,7 @@ async fn triggers_events_and_get_report() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -378,7 +401,7 @@ async fn triggers_events_and_get_report() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let (early, _) = collect_reports(&mut c, Duration::from_millis(500), |_| false).await;
     assert!(early.is_empty(), "no report before GET_REPORT");
@@ -396,7 +419,7 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
     let access = AccessSpec {
         access_spec_id: 9,
         antenna_id: 0,
-        protocol_id: 1,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
         current_state: false,
         ro_spec_id: 0,
         access_spec_stop_trigger: AccessSpecStopTrigger::default(),
@@ -430,7 +453,7 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -441,9 +464,15 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
-    let spec = rospec(1, vec![1], ro_null(), ai_null(), full_report(1, 1));
+    let spec = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -453,7 +482,7 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -464,7 +493,7 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
     sim.shutdown().await;
@@ -502,7 +531,13 @@ async fn impinj_fixed_frequency_list_pins_the_channels() {
     let s = line_scenario(&[1.0, 2.0]);
     let sim = start(&s, Speed::Max).await;
     let mut c = connect(&sim).await;
-    let mut spec = rospec(1, vec![1], ro_null(), ai_null(), full_report(1, 1));
+    let mut spec = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
     let list = |channels: Vec<u16>| {
         vec![AntennaConfiguration {
             antenna_id: 1,
@@ -528,7 +563,7 @@ async fn impinj_fixed_frequency_list_pins_the_channels() {
     };
     assert_eq!(
         request_status(&mut c, add).await,
-        llrp::StatusCode::M_ParameterError.code()
+        llrp::StatusCode::M_ParameterError
     );
     if let SpecParameter::AiSpec(ai) = &mut spec.specs[0] {
         ai.inventory_parameter_specs[0].antenna_configuration = list(vec![3]);
@@ -537,12 +572,12 @@ async fn impinj_fixed_frequency_list_pins_the_channels() {
         ro_spec: spec,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, add).await, 0);
+    assert_eq!(request_status(&mut c, add).await, StatusCode::M_Success);
     let enable = EnableRospec {
         ro_spec_id: 1,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, enable).await, 0);
+    assert_eq!(request_status(&mut c, enable).await, StatusCode::M_Success);
     let (tags, _) = collect_reports(&mut c, T, |t| t.len() >= 50).await;
     assert!(tags.len() >= 50);
     assert!(tags.iter().all(|t| t.channel_index.map(|c| c.0) == Some(3)));

@@ -18,13 +18,21 @@ async fn second_client_is_refused_and_first_is_told() {
     let mut first = connect(&sim).await;
     let mut second = Client::connect(sim.addrs[0]).await.expect("tcp connects");
     let m = second.recv(T).await.expect("refusal");
-    assert_eq!(connection_status(&m), Some(2), "{m:?}");
+    assert_eq!(
+        connection_status(&m),
+        Some(ConnectionAttemptStatus::FailedClientInitiatedConnectionExists),
+        "{m:?}"
+    );
     assert!(second.recv(T).await.is_err(), "refused client is closed");
     let told = first.recv(T).await.expect("notice");
-    assert_eq!(connection_status(&told), Some(4), "{told:?}");
+    assert_eq!(
+        connection_status(&told),
+        Some(ConnectionAttemptStatus::AnotherConnectionAttempted),
+        "{told:?}"
+    );
     // The first client is undisturbed.
     let code = request_status(&mut first, GetReaderCapabilities::default()).await;
-    assert_eq!(code, 0);
+    assert_eq!(code, StatusCode::M_Success);
     // Once it leaves, a new client is accepted.
     first.close().await.expect("close");
     tokio::time::sleep(Duration::from_millis(200)).await;
@@ -75,14 +83,14 @@ async fn capabilities_follow_the_scenario() {
     let bad = c
         .request(
             GetReaderCapabilities {
-                requested_data: 9,
+                requested_data: CapabilitiesRequest::Unknown(9),
                 ..Default::default()
             },
             T,
         )
         .await
         .expect("response");
-    assert_eq!(status(&bad).status_code, StatusCode::M_FieldError.code());
+    assert_eq!(status(&bad).status_code, StatusCode::M_FieldError);
     sim.shutdown().await;
 }
 
@@ -92,7 +100,7 @@ async fn configuration_round_trips_and_resets() {
     let mut c = connect(&sim).await;
     let set = SetReaderConfig {
         keepalive_spec: Some(KeepaliveSpec {
-            keepalive_trigger_type: 1,
+            keepalive_trigger_type: KeepaliveTriggerType::Periodic,
             periodic_trigger_value: 60_000,
             ..Default::default()
         }),
@@ -108,7 +116,7 @@ async fn configuration_round_trips_and_resets() {
         }],
         reader_event_notification_spec: Some(ReaderEventNotificationSpec {
             event_notification_state: vec![EventNotificationState {
-                event_type: 2,
+                event_type: NotificationEventType::RoSpecEvent,
                 notification_state: true,
                 ..Default::default()
             }],
@@ -116,7 +124,7 @@ async fn configuration_round_trips_and_resets() {
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, 0);
+    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
     let r = c
         .request(GetReaderConfig::default(), T)
         .await
@@ -139,7 +147,7 @@ async fn configuration_round_trips_and_resets() {
     assert!(ev
         .event_notification_state
         .iter()
-        .any(|s| s.event_type == 2 && s.notification_state));
+        .any(|s| s.event_type == NotificationEventType::RoSpecEvent && s.notification_state));
     // A power index outside the table is refused and changes nothing.
     let bad = SetReaderConfig {
         antenna_configuration: vec![AntennaConfiguration {
@@ -156,7 +164,7 @@ async fn configuration_round_trips_and_resets() {
     };
     let r = c.request(bad, T).await.expect("response");
     let st = status(&r);
-    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(st.status_code, StatusCode::M_ParameterError);
     assert_eq!(
         st.parameter_error.as_ref().map(|p| p.parameter_type),
         Some(222)
@@ -166,7 +174,7 @@ async fn configuration_round_trips_and_resets() {
         reset_to_factory_default: true,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, reset).await, 0);
+    assert_eq!(request_status(&mut c, reset).await, StatusCode::M_Success);
     let r = c
         .request(GetReaderConfig::default(), T)
         .await
@@ -185,7 +193,7 @@ async fn configuration_round_trips_and_resets() {
         cfg.keepalive_spec
             .as_ref()
             .map(|k| k.keepalive_trigger_type),
-        Some(0)
+        Some(KeepaliveTriggerType::Null)
     );
     sim.shutdown().await;
 }
@@ -195,9 +203,21 @@ async fn rospec_lifecycle_and_its_errors() {
     let sim = start(&s1(), Speed::Factor(1.0)).await;
     let mut c = connect(&sim).await;
     // Deleting everything when there is nothing succeeds (sllurp relies on it).
-    assert_eq!(request_status(&mut c, DeleteAccessspec::default()).await, 0);
-    assert_eq!(request_status(&mut c, DeleteRospec::default()).await, 0);
-    let spec = rospec(7, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    assert_eq!(
+        request_status(&mut c, DeleteAccessspec::default()).await,
+        StatusCode::M_Success
+    );
+    assert_eq!(
+        request_status(&mut c, DeleteRospec::default()).await,
+        StatusCode::M_Success
+    );
+    let spec = rospec(
+        7,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -207,7 +227,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     // Same ID twice, and a spec not added Disabled, are refused.
     assert_eq!(
@@ -219,11 +239,11 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        StatusCode::M_ParameterError.code()
+        StatusCode::M_ParameterError
     );
     let mut active = spec.clone();
     active.ro_spec_id = 8;
-    active.current_state = 2;
+    active.current_state = RoSpecState::Active;
     assert_eq!(
         request_status(
             &mut c,
@@ -233,7 +253,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        StatusCode::M_ParameterError.code()
+        StatusCode::M_ParameterError
     );
     // Antenna 99 does not exist.
     let mut far = spec.clone();
@@ -243,7 +263,7 @@ async fn rospec_lifecycle_and_its_errors() {
         ai_spec_stop_trigger: ai_null(),
         inventory_parameter_specs: vec![InventoryParameterSpec {
             inventory_parameter_spec_id: 1,
-            protocol_id: 1,
+            protocol_id: AirProtocol::EpcGlobalClass1Gen2,
             ..Default::default()
         }],
         ..Default::default()
@@ -259,7 +279,7 @@ async fn rospec_lifecycle_and_its_errors() {
         .await
         .expect("response");
     let st = status(&r);
-    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(st.status_code, StatusCode::M_ParameterError);
     let pe = st.parameter_error.expect("detail");
     assert_eq!(pe.parameter_type, 177);
     assert_eq!(pe.parameter_error.map(|p| p.parameter_type), Some(183));
@@ -273,7 +293,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        StatusCode::M_FieldError.code()
+        StatusCode::M_FieldError
     );
     assert_eq!(
         request_status(
@@ -284,7 +304,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        StatusCode::M_FieldError.code()
+        StatusCode::M_FieldError
     );
     assert_eq!(
         request_status(
@@ -295,7 +315,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     // Immediate start: the spec becomes Active without START_ROSPEC.
     tokio::time::sleep(Duration::from_millis(100)).await;
@@ -304,17 +324,10 @@ async fn rospec_lifecycle_and_its_errors() {
         panic!("{r:?}")
     };
     assert_eq!(list.ro_specs.len(), 1);
-    assert_eq!(list.ro_specs[0].current_state, 2, "active");
     assert_eq!(
-        request_status(
-            &mut c,
-            StopRospec {
-                ro_spec_id: 7,
-                ..Default::default()
-            }
-        )
-        .await,
-        0
+        list.ro_specs[0].current_state,
+        RoSpecState::Active,
+        "active"
     );
     assert_eq!(
         request_status(
@@ -325,7 +338,18 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        StatusCode::M_FieldError.code(),
+        StatusCode::M_Success
+    );
+    assert_eq!(
+        request_status(
+            &mut c,
+            StopRospec {
+                ro_spec_id: 7,
+                ..Default::default()
+            }
+        )
+        .await,
+        StatusCode::M_FieldError,
         "stopping an inactive spec"
     );
     assert_eq!(
@@ -337,7 +361,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     assert_eq!(
         request_status(
@@ -348,13 +372,17 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let r = c.request(GetRospecs::default(), T).await.expect("list");
     let MessageBody::GetRospecsResponse(list) = r.body else {
         panic!("{r:?}")
     };
-    assert_eq!(list.ro_specs[0].current_state, 0, "disabled");
+    assert_eq!(
+        list.ro_specs[0].current_state,
+        RoSpecState::Disabled,
+        "disabled"
+    );
     assert_eq!(
         request_status(
             &mut c,
@@ -364,7 +392,7 @@ async fn rospec_lifecycle_and_its_errors() {
             }
         )
         .await,
-        0
+        StatusCode::M_Success
     );
     let r = c.request(GetRospecs::default(), T).await.expect("list");
     let MessageBody::GetRospecsResponse(list) = r.body else {
@@ -385,7 +413,7 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
     let r = c.wait_for(|m| m.id == 7, T).await.expect("answer");
     assert_eq!(r.name(), "ADD_ROSPEC_RESPONSE");
     let st = status(&r);
-    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(st.status_code, StatusCode::M_ParameterError);
     assert_eq!(st.parameter_error.map(|p| p.parameter_type), Some(177));
     // An unknown message type: ERROR_MESSAGE M_UnsupportedMessage with the same ID.
     c.send_raw(&hex("0555 0000000a 00000031"))
@@ -393,10 +421,7 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
         .expect("send");
     let r = c.wait_for(|m| m.id == 0x31, T).await.expect("answer");
     assert_eq!(r.name(), "ERROR_MESSAGE");
-    assert_eq!(
-        status(&r).status_code,
-        StatusCode::M_UnsupportedMessage.code()
-    );
+    assert_eq!(status(&r).status_code, StatusCode::M_UnsupportedMessage);
     // A version-3 header: ERROR_MESSAGE M_UnsupportedVersion echoing version and ID.
     let mut frame = Vec::new();
     FrameHeader {
@@ -413,18 +438,15 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
     assert_eq!((h.version, h.msg_type, h.id), (3, 100, 77));
     raw[0] = (raw[0] & 0x03) | (1 << 2);
     let r = llrp::Message::decode(&raw).expect("ERROR_MESSAGE body");
-    assert_eq!(
-        status(&r).status_code,
-        StatusCode::M_UnsupportedVersion.code()
-    );
+    assert_eq!(status(&r).status_code, StatusCode::M_UnsupportedVersion);
     // A reader-to-client message sent to the reader.
     let code = request_status(&mut c, Keepalive::default()).await;
-    assert_eq!(code, StatusCode::M_UnsupportedMessage.code());
+    assert_eq!(code, StatusCode::M_UnsupportedMessage);
     // Unsupported access operations are refused with the right status.
     let access = AccessSpec {
         access_spec_id: 3,
         antenna_id: 0,
-        protocol_id: 1,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
         current_state: false,
         ro_spec_id: 0,
         access_command: AccessCommand {
@@ -458,19 +480,19 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
         .await
         .expect("answer");
     let st = status(&r);
-    assert_eq!(st.status_code, StatusCode::M_ParameterError.code());
+    assert_eq!(st.status_code, StatusCode::M_ParameterError);
     let inner = st
         .parameter_error
         .and_then(|p| p.parameter_error)
         .and_then(|p| p.parameter_error);
     assert_eq!(
         inner.map(|p| (p.parameter_type, p.error_code)),
-        Some((342, StatusCode::P_UnsupportedParameter.code()))
+        Some((342, StatusCode::P_UnsupportedParameter))
     );
     // The connection survived all of it.
     assert_eq!(
         request_status(&mut c, GetReaderCapabilities::default()).await,
-        0
+        StatusCode::M_Success
     );
     // A length field below 10 cannot be resynchronised: ERROR_MESSAGE, then close.
     c.send_raw(&hex("0401 00000004 00000099"))
@@ -493,13 +515,13 @@ async fn keepalives_flow_and_a_silent_client_is_dropped() {
     let mut c = connect(&sim).await;
     let set = SetReaderConfig {
         keepalive_spec: Some(KeepaliveSpec {
-            keepalive_trigger_type: 1,
+            keepalive_trigger_type: KeepaliveTriggerType::Periodic,
             periodic_trigger_value: 100,
             ..Default::default()
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, 0);
+    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
     let k = c
         .wait_for(|m| m.name() == "KEEPALIVE", T)
         .await
@@ -543,7 +565,7 @@ async fn close_connection_is_answered_then_closed() {
         .request(CloseConnection::default(), T)
         .await
         .expect("answer");
-    assert_eq!(status(&r).status_code, 0);
+    assert_eq!(status(&r).status_code, StatusCode::M_Success);
     assert!(c.recv(T).await.is_err());
     sim.shutdown().await;
 }
@@ -566,32 +588,32 @@ async fn supported_version_and_impinj_extensions() {
         .request(GetReaderConfig::default(), T)
         .await
         .expect("answer");
-    assert_eq!(
-        status(&r).status_code,
-        StatusCode::M_UnsupportedVersion.code()
-    );
+    assert_eq!(status(&r).status_code, StatusCode::M_UnsupportedVersion);
     let set = SetProtocolVersion {
         protocol_version: 2,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, 0);
+    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
     let r = c
         .request(GetReaderConfig::default(), T)
         .await
         .expect("answer");
-    assert_eq!((r.version, status(&r).status_code), (2, 0));
+    assert_eq!(
+        (r.version, status(&r).status_code),
+        (2, StatusCode::M_Success)
+    );
     let back = SetProtocolVersion {
         protocol_version: 1,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, back).await, 0);
+    assert_eq!(request_status(&mut c, back).await, StatusCode::M_Success);
     c.set_version(1);
     let r = c
         .request(ImpinjEnableExtensions::default(), T)
         .await
         .expect("answer");
     assert_eq!(r.name(), "IMPINJ_ENABLE_EXTENSIONS_RESPONSE");
-    assert_eq!(status(&r).status_code, 0);
+    assert_eq!(status(&r).status_code, StatusCode::M_Success);
     // With the extensions on, ImpinjRequestedData adds Impinj's own parameters.
     let ask = |n: u32| {
         vec![Custom::ImpinjRequestedData(ImpinjRequestedData {

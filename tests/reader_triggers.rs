@@ -16,7 +16,7 @@ async fn enable_rospec_events(c: &mut Client) {
     let set = SetReaderConfig {
         reader_event_notification_spec: Some(ReaderEventNotificationSpec {
             event_notification_state: vec![EventNotificationState {
-                event_type: 2,
+                event_type: NotificationEventType::RoSpecEvent,
                 notification_state: true,
                 ..Default::default()
             }],
@@ -24,11 +24,11 @@ async fn enable_rospec_events(c: &mut Client) {
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(c, set).await, 0);
+    assert_eq!(request_status(c, set).await, StatusCode::M_Success);
 }
 
 /// (event type, ROSpec, preempting ROSpec, UTC µs) of a ROSpecEvent.
-fn rospec_event(m: &Message) -> Option<(u8, u32, u32, u64)> {
+fn rospec_event(m: &Message) -> Option<(RoSpecEventType, u32, u32, u64)> {
     let MessageBody::ReaderEventNotification(n) = &m.body else {
         return None;
     };
@@ -51,7 +51,7 @@ async fn enable(c: &mut Client, id: u32) {
         ro_spec_id: id,
         ..Default::default()
     };
-    assert_eq!(request_status(c, enable).await, 0);
+    assert_eq!(request_status(c, enable).await, StatusCode::M_Success);
 }
 
 async fn add(c: &mut Client, spec: RoSpec) {
@@ -63,7 +63,7 @@ async fn add(c: &mut Client, spec: RoSpec) {
         },
     )
     .await;
-    assert_eq!(code, 0);
+    assert_eq!(code, StatusCode::M_Success);
 }
 
 #[tokio::test]
@@ -71,9 +71,15 @@ async fn periodic_start_with_duration_stop() {
     let sim = start(&s1(), Speed::Max).await;
     let mut c = connect(&sim).await;
     enable_rospec_events(&mut c).await;
-    let mut spec = rospec(5, vec![1], ro_duration(200), ai_null(), full_report(2, 0));
+    let mut spec = rospec(
+        5,
+        vec![1],
+        ro_duration(200),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0),
+    );
     spec.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger {
-        ro_spec_start_trigger_type: 2,
+        ro_spec_start_trigger_type: RoSpecStartTriggerType::Periodic,
         periodic_trigger_value: Some(PeriodicTriggerValue {
             offset: 500,
             period: 1000,
@@ -90,9 +96,9 @@ async fn periodic_start_with_duration_stop() {
         if let Some((ty, id, _, t)) = rospec_event(&m) {
             assert_eq!(id, 5);
             match ty {
-                0 => starts.push(t),
-                1 => ends.push(t),
-                _ => panic!("unexpected event {ty}"),
+                RoSpecEventType::StartOfRoSpec => starts.push(t),
+                RoSpecEventType::EndOfRoSpec => ends.push(t),
+                _ => panic!("unexpected event {ty:?}"),
             }
         }
     }
@@ -110,27 +116,45 @@ async fn higher_priority_preempts_and_immediate_resumes() {
     let sim = start(&s1(), Speed::Max).await;
     let mut c = connect(&sim).await;
     enable_rospec_events(&mut c).await;
-    let mut low = rospec(1, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    let mut low = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    );
     low.priority = 3;
     add(&mut c, low).await;
-    let mut high = rospec(2, vec![1], ro_null(), ai_null(), full_report(0, 0));
+    let mut high = rospec(
+        2,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    );
     high.priority = 1;
     high.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger::default();
     add(&mut c, high).await;
     for id in [1, 2] {
         enable(&mut c, id).await;
     }
-    c.wait_for(|m| rospec_event(m).is_some_and(|e| e.0 == 0 && e.1 == 1), T)
-        .await
-        .expect("low-priority spec starts");
+    c.wait_for(
+        |m| rospec_event(m).is_some_and(|e| e.0 == RoSpecEventType::StartOfRoSpec && e.1 == 1),
+        T,
+    )
+    .await
+    .expect("low-priority spec starts");
     let start2 = StartRospec {
         ro_spec_id: 2,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, start2).await, 0);
-    c.wait_for(|m| rospec_event(m).is_some_and(|e| e == (2, 1, 2, e.3)), T)
-        .await
-        .expect("spec 1 preempted by spec 2");
+    assert_eq!(request_status(&mut c, start2).await, StatusCode::M_Success);
+    c.wait_for(
+        |m| rospec_event(m).is_some_and(|e| e == (RoSpecEventType::PreemptionOfRoSpec, 1, 2, e.3)),
+        T,
+    )
+    .await
+    .expect("spec 1 preempted by spec 2");
     let r = c.request(GetRospecs::default(), T).await.expect("list");
     let MessageBody::GetRospecsResponse(list) = r.body else {
         panic!("{r:?}")
@@ -141,32 +165,41 @@ async fn higher_priority_preempts_and_immediate_resumes() {
             .find(|s| s.ro_spec_id == id)
             .map(|s| s.current_state)
     };
-    assert_eq!((state(1), state(2)), (Some(1), Some(2)));
+    assert_eq!(
+        (state(1), state(2)),
+        (Some(RoSpecState::Inactive), Some(RoSpecState::Active))
+    );
     // A lower priority cannot preempt: starting spec 1 by hand leaves it waiting.
     let start1 = StartRospec {
         ro_spec_id: 1,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, start1).await, 0);
+    assert_eq!(request_status(&mut c, start1).await, StatusCode::M_Success);
     tokio::time::sleep(Duration::from_millis(100)).await;
     let r = c.request(GetRospecs::default(), T).await.expect("list");
     let MessageBody::GetRospecsResponse(list) = r.body else {
         panic!("{r:?}")
     };
-    let states: Vec<(u32, u8)> = list
+    let states: Vec<(u32, RoSpecState)> = list
         .ro_specs
         .iter()
         .map(|s| (s.ro_spec_id, s.current_state))
         .collect();
-    assert_eq!(states, vec![(1, 1), (2, 2)]);
+    assert_eq!(
+        states,
+        vec![(1, RoSpecState::Inactive), (2, RoSpecState::Active)]
+    );
     let stop2 = StopRospec {
         ro_spec_id: 2,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, stop2).await, 0);
-    c.wait_for(|m| rospec_event(m).is_some_and(|e| e.0 == 0 && e.1 == 1), T)
-        .await
-        .expect("the Immediate spec resumes once the preempting one stops");
+    assert_eq!(request_status(&mut c, stop2).await, StatusCode::M_Success);
+    c.wait_for(
+        |m| rospec_event(m).is_some_and(|e| e.0 == RoSpecEventType::StartOfRoSpec && e.1 == 1),
+        T,
+    )
+    .await
+    .expect("the Immediate spec resumes once the preempting one stops");
     sim.shutdown().await;
 }
 
@@ -184,7 +217,13 @@ async fn ground_truth_is_written_as_jsonl() {
     let mut c = connect(&sim).await;
     add(
         &mut c,
-        rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 100)),
+        rospec(
+            1,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 100),
+        ),
     )
     .await;
     enable(&mut c, 1).await;
@@ -226,10 +265,16 @@ async fn reports_are_held_after_a_reconnect_until_enabled() {
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, hold).await, 0);
+    assert_eq!(request_status(&mut c, hold).await, StatusCode::M_Success);
     add(
         &mut c,
-        rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 1)),
+        rospec(
+            1,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1),
+        ),
     )
     .await;
     enable(&mut c, 1).await;
@@ -261,7 +306,10 @@ async fn every_reader_of_a_scenario_listens() {
     for addr in &sim.addrs {
         let mut c = Client::connect(*addr).await.expect("connects");
         let m = c.recv(T).await.expect("greeting");
-        assert_eq!(connection_status(&m), Some(0));
+        assert_eq!(
+            connection_status(&m),
+            Some(ConnectionAttemptStatus::Success)
+        );
     }
     sim.shutdown().await;
 }
@@ -309,7 +357,13 @@ async fn an_aispec_without_end_reports_at_the_reader_interval() {
     let mut c = connect(&sim).await;
     add(
         &mut c,
-        rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
+        rospec(
+            1,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
+        ),
     )
     .await;
     enable(&mut c, 1).await;
@@ -349,7 +403,13 @@ async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
     let mut c = connect(&sim).await;
     add(
         &mut c,
-        rospec(1, vec![0], ro_null(), ai_null(), full_report(1, 0)),
+        rospec(
+            1,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
+        ),
     )
     .await;
     enable(&mut c, 1).await;
@@ -383,7 +443,13 @@ async fn a_rospec_duration_keeps_reads_until_its_end() {
     let mut c = connect(&sim).await;
     add(
         &mut c,
-        rospec(1, vec![0], ro_duration(3000), ai_null(), full_report(1, 0)),
+        rospec(
+            1,
+            vec![0],
+            ro_duration(3000),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
+        ),
     )
     .await;
     enable(&mut c, 1).await;
@@ -413,14 +479,20 @@ async fn a_rospec_without_a_report_spec_follows_the_reader_default() {
             enable_antenna_id: true,
             ..Default::default()
         },
-        ..full_report(2, 1)
+        ..full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1)
     };
     let set = SetReaderConfig {
         ro_report_spec: Some(default),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, 0);
-    let mut spec = rospec(1, vec![0], ro_null(), ai_null(), full_report(2, 100));
+    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
+    let mut spec = rospec(
+        1,
+        vec![0],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 100),
+    );
     spec.ro_report_spec = None;
     add(&mut c, spec).await;
     enable(&mut c, 1).await;

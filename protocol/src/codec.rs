@@ -48,6 +48,35 @@ int_field! {
     i16 => be_i16, put_i16;
 }
 
+/// A field with a numeric value that a range check (`; in LO..=HI` in `llrp_struct!`) and
+/// random generation work on: the integers, and the enumerated field types.
+pub trait Ranged: Sized {
+    /// The integer on the wire.
+    type Raw: PartialOrd + Copy;
+    /// The value on the wire.
+    fn raw(&self) -> Self::Raw;
+    /// The field with this wire value.
+    fn from_raw(v: Self::Raw) -> Self;
+}
+
+macro_rules! int_ranged {
+    ($($t:ty),*) => {$(
+        impl Ranged for $t {
+            type Raw = $t;
+            #[inline]
+            fn raw(&self) -> $t {
+                *self
+            }
+            #[inline]
+            fn from_raw(v: $t) -> Self {
+                v
+            }
+        }
+    )*};
+}
+
+int_ranged!(u8, u16, u32);
+
 /// Reads a u16 element count and checks `count * size` bytes follow (no allocation before).
 fn counted(i: &[u8], size: usize) -> FieldResult<'_, usize> {
     let (rest, n) = u16::decode_field(i)?;

@@ -4,80 +4,49 @@ use std::fmt;
 
 use crate::params::{FieldError, LlrpStatus, ParameterError};
 
-/// LLRPStatus status codes (LLRP 1.0.1 §16.2.8.1 plus 1.1's M_UnexpectedMessage).
-#[allow(non_camel_case_types, missing_docs)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u16)]
-pub enum StatusCode {
-    M_Success = 0,
-    M_ParameterError = 100,
-    M_FieldError = 101,
-    M_UnexpectedParameter = 102,
-    M_MissingParameter = 103,
-    M_DuplicateParameter = 104,
-    M_OverflowParameter = 105,
-    M_OverflowField = 106,
-    M_UnknownParameter = 107,
-    M_UnknownField = 108,
-    M_UnsupportedMessage = 109,
-    M_UnsupportedVersion = 110,
-    M_UnsupportedParameter = 111,
-    M_UnexpectedMessage = 112,
-    P_ParameterError = 200,
-    P_FieldError = 201,
-    P_UnexpectedParameter = 202,
-    P_MissingParameter = 203,
-    P_DuplicateParameter = 204,
-    P_OverflowParameter = 205,
-    P_OverflowField = 206,
-    P_UnknownParameter = 207,
-    P_UnknownField = 208,
-    P_UnsupportedParameter = 209,
-    A_Invalid = 300,
-    A_OutOfRange = 301,
-    R_DeviceError = 401,
+llrp_enum! {
+    /// LLRPStatus status codes (LLRP 1.0.1 §16.2.8.1 plus 1.1's M_UnexpectedMessage).
+    #[allow(non_camel_case_types, missing_docs)]
+    pub enum StatusCode: u16 {
+        M_Success = 0,
+        M_ParameterError = 100,
+        M_FieldError = 101,
+        M_UnexpectedParameter = 102,
+        M_MissingParameter = 103,
+        M_DuplicateParameter = 104,
+        M_OverflowParameter = 105,
+        M_OverflowField = 106,
+        M_UnknownParameter = 107,
+        M_UnknownField = 108,
+        M_UnsupportedMessage = 109,
+        M_UnsupportedVersion = 110,
+        M_UnsupportedParameter = 111,
+        M_UnexpectedMessage = 112,
+        P_ParameterError = 200,
+        P_FieldError = 201,
+        P_UnexpectedParameter = 202,
+        P_MissingParameter = 203,
+        P_DuplicateParameter = 204,
+        P_OverflowParameter = 205,
+        P_OverflowField = 206,
+        P_UnknownParameter = 207,
+        P_UnknownField = 208,
+        P_UnsupportedParameter = 209,
+        A_Invalid = 300,
+        A_OutOfRange = 301,
+        R_DeviceError = 401,
+    }
 }
 
 impl StatusCode {
-    /// Every defined code, in numeric order.
-    pub const ALL: [StatusCode; 27] = [
-        Self::M_Success,
-        Self::M_ParameterError,
-        Self::M_FieldError,
-        Self::M_UnexpectedParameter,
-        Self::M_MissingParameter,
-        Self::M_DuplicateParameter,
-        Self::M_OverflowParameter,
-        Self::M_OverflowField,
-        Self::M_UnknownParameter,
-        Self::M_UnknownField,
-        Self::M_UnsupportedMessage,
-        Self::M_UnsupportedVersion,
-        Self::M_UnsupportedParameter,
-        Self::M_UnexpectedMessage,
-        Self::P_ParameterError,
-        Self::P_FieldError,
-        Self::P_UnexpectedParameter,
-        Self::P_MissingParameter,
-        Self::P_DuplicateParameter,
-        Self::P_OverflowParameter,
-        Self::P_OverflowField,
-        Self::P_UnknownParameter,
-        Self::P_UnknownField,
-        Self::P_UnsupportedParameter,
-        Self::A_Invalid,
-        Self::A_OutOfRange,
-        Self::R_DeviceError,
-    ];
-
     /// The code's wire value.
-    pub fn code(self) -> u16 {
-        self as u16
+    pub const fn code(self) -> u16 {
+        self.value()
     }
 
-    /// The code with this wire value, if it is defined.
+    /// The code with this wire value, if the specification defines it.
     pub fn from_code(code: u16) -> Option<Self> {
-        Self::ALL.iter().copied().find(|c| c.code() == code)
+        Some(Self::from_value(code)).filter(|c| c.is_known())
     }
 }
 
@@ -292,7 +261,7 @@ impl DecodeError {
         let mut field_error = match (sub_ty, field) {
             (None, Some(index)) => Some(FieldError {
                 field_num: index,
-                error_code: field_code.code(),
+                error_code: field_code,
                 ..Default::default()
             }),
             _ => None,

@@ -15,6 +15,7 @@
 //!
 //! * [`MessageKind`] names a message type; each [`Request`] knows its [`Response`], and
 //!   [`MessageKind::error_response`] builds the answer a reader gives a refused request.
+//! * [`build`] has constructors for ROSpecs, their triggers and report specs.
 //! * [`units`] converts phase, RSSI, Doppler and channel indices to physical values.
 //!
 //! No I/O, no async runtime, no global state.
@@ -71,7 +72,10 @@
 #[macro_use]
 mod macros;
 
+pub mod build;
 pub mod codec;
+#[macro_use]
+pub mod enums;
 pub mod error;
 pub mod frame;
 pub mod impinj;

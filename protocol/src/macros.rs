@@ -115,8 +115,7 @@ macro_rules! slot_enc {
 #[cfg(feature = "arbitrary")]
 macro_rules! field_sample {
     ($g:ident, $t:ty; $($w:literal)?; $lo:literal, $hi:literal) => {{
-        let v: $t = $g.range($lo, $hi);
-        v
+        <$t as $crate::codec::Ranged>::from_raw($g.range($lo, $hi))
     }};
     ($g:ident, $t:ty; $w:literal; ) => {
         <$t as $crate::codec::BitField>::from_bits($g.bits($w))
@@ -231,7 +230,8 @@ macro_rules! llrp_struct {
                             .map_err($crate::codec::in_field($fspec, idx))?;
                     )?
                     $(
-                        if $fname < $lo || $fname > $hi {
+                        let raw = $crate::codec::Ranged::raw(&$fname);
+                        if raw < $lo || raw > $hi {
                             return Err($crate::codec::out_of_range(start, $fspec, idx));
                         }
                     )?

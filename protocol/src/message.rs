@@ -3,6 +3,7 @@
 use bytes::{BufMut, BytesMut};
 
 use crate::codec::Body;
+use crate::enums::{CapabilitiesRequest, ConfigRequest};
 use crate::error::{DecodeError, ErrorKind, PathSeg};
 use crate::frame::{FrameHeader, HEADER_LEN, VERSION_1_0_1, VERSION_1_1};
 use crate::impinj::*;
@@ -59,7 +60,7 @@ macro_rules! id_message {
 llrp_struct! {
     /// GET_READER_CAPABILITIES: 0 all, 1 general, 2 LLRP, 3 regulatory, 4 air protocol.
     pub struct GetReaderCapabilities: message [1] "GET_READER_CAPABILITIES" {
-        requested_data "RequestedData": u8,
+        requested_data "RequestedData": CapabilitiesRequest,
     } { custom: many Custom }
 }
 
@@ -79,7 +80,7 @@ llrp_struct! {
     /// GET_READER_CONFIG: which configuration to return (0 all) for which antenna and ports.
     pub struct GetReaderConfig: message [2] "GET_READER_CONFIG" {
         antenna_id "AntennaID": u16,
-        requested_data "RequestedData": u8,
+        requested_data "RequestedData": ConfigRequest,
         gpi_port_num "GPIPortNum": u16,
         gpo_port_num "GPOPortNum": u16,
     } { custom: many Custom }
@@ -807,7 +808,7 @@ mod tests {
                 assert_eq!(body.kind(), resp);
                 assert_eq!(
                     body.status().map(|s| s.status_code),
-                    Some(crate::StatusCode::M_ParameterError.code())
+                    Some(crate::StatusCode::M_ParameterError)
                 );
             } else if !name.ends_with("_RESPONSE") {
                 // Messages without a response: reports, events, keepalives and their

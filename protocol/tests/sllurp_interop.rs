@@ -2,6 +2,7 @@
 //! (captured by `scripts/interop/sllurp_encode.py`, path in `LLRP_SLLURP_FRAMES`) must decode
 //! into typed messages and re-encode byte for byte. Run by `./scripts/test`.
 
+use llrp::enums::{AiSpecStopTriggerType, RoReportTriggerType, RoSpecStartTriggerType};
 use llrp::message::MessageBody;
 use llrp::params::{Custom, SpecParameter};
 use llrp::raw::from_hex;
@@ -64,10 +65,13 @@ fn sllurp_frames_decode_typed_and_reencode_identically() {
             .ro_boundary_spec
             .ro_spec_start_trigger
             .ro_spec_start_trigger_type,
-        1
+        RoSpecStartTriggerType::Immediate
     );
     let report = plain.ro_report_spec.as_ref().expect("ROReportSpec");
-    assert_eq!((report.ro_report_trigger, report.n), (1, 0));
+    assert_eq!(
+        (report.ro_report_trigger, report.n),
+        (RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0)
+    );
     let sel = &report.tag_report_content_selector;
     assert!(
         sel.enable_channel_index && sel.enable_last_seen_timestamp && sel.enable_tag_seen_count
@@ -88,7 +92,10 @@ fn sllurp_frames_decode_typed_and_reencode_identically() {
         vec![1, 2]
     );
     let n1 = ai(add_rospec(&decoded, "n1/ADD_ROSPEC"));
-    assert_eq!(n1.ai_spec_stop_trigger.ai_spec_stop_trigger_type, 3);
+    assert_eq!(
+        n1.ai_spec_stop_trigger.ai_spec_stop_trigger_type,
+        AiSpecStopTriggerType::TagObservation
+    );
     assert_eq!(
         n1.ai_spec_stop_trigger
             .tag_observation_trigger

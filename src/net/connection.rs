@@ -133,6 +133,17 @@ impl Connection {
         self.write.extend_from_slice(bytes);
     }
 
+    /// Moves `bytes` to the end of the write buffer, leaving `bytes` empty (without copying
+    /// when nothing else is queued: the two buffers are swapped).
+    pub fn queue_buf(&mut self, bytes: &mut BytesMut) {
+        if self.write.is_empty() {
+            std::mem::swap(&mut self.write, bytes);
+        } else {
+            self.write.extend_from_slice(bytes);
+            bytes.clear();
+        }
+    }
+
     /// Bytes waiting in the write buffer.
     pub fn queued(&self) -> usize {
         self.write.len()

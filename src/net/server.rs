@@ -89,8 +89,7 @@ pub async fn serve(
     loop {
         if let Some(c) = &mut client {
             if let Some(t) = sim.session.transmit() {
-                c.conn.queue_bytes(t.bytes);
-                t.bytes.clear();
+                c.conn.queue_buf(t.bytes);
                 if t.close {
                     // What the session said last goes out, then the connection closes.
                     let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
@@ -117,8 +116,7 @@ pub async fn serve(
                     if let Some(mut c) = client.take() {
                         sim.session.shutdown();
                         if let Some(t) = sim.session.transmit() {
-                            c.conn.queue_bytes(t.bytes);
-                            t.bytes.clear();
+                            c.conn.queue_buf(t.bytes);
                         }
                         let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
                         sim.session.disconnect(c.id);

@@ -2,6 +2,7 @@
 //! AccessSpec's tag spec selects; other access operations are refused as unsupported.
 
 use llrp::codec::BitVec;
+use llrp::enums::*;
 use llrp::params::*;
 use llrp::StatusCode;
 
@@ -43,7 +44,7 @@ impl AccessSpecs {
         if spec.antenna_id > p.antennas {
             return param_field_error(207, 0, 1, StatusCode::A_OutOfRange);
         }
-        if spec.protocol_id != 1 {
+        if spec.protocol_id != AirProtocol::EpcGlobalClass1Gen2 {
             return param_field_error(207, 0, 2, StatusCode::A_OutOfRange);
         }
         if self
@@ -194,7 +195,7 @@ impl AccessSpecs {
         let id = e.spec.access_spec_id;
         e.executed += 1;
         let t = &e.spec.access_spec_stop_trigger;
-        if t.access_spec_stop_trigger_type == 1
+        if t.access_spec_stop_trigger_type == AccessSpecStopTriggerType::OperationCount
             && t.operation_count_value > 0
             && e.executed >= u32::from(t.operation_count_value)
         {

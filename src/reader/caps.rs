@@ -1,6 +1,7 @@
 //! What the simulated reader says about itself: GET_READER_CAPABILITIES content built from the
 //! scenario (antennas, regulatory region with its real channel table, power and mode tables).
 
+use llrp::enums::CapabilitiesRequest;
 use llrp::message::GetReaderCapabilitiesResponse;
 use llrp::params::*;
 
@@ -177,17 +178,24 @@ fn c1g2_caps() -> C1g2LlrpCapabilities {
 
 /// GET_READER_CAPABILITIES_RESPONSE body for RequestedData `requested` (0 all, 1 general,
 /// 2 LLRP, 3 regulatory, 4 air protocol); `None` for an unknown value.
-pub fn capabilities(p: &ReaderProfile, requested: u8) -> Option<GetReaderCapabilitiesResponse> {
-    let all = requested == 0;
-    if requested > 4 {
+pub fn capabilities(
+    p: &ReaderProfile,
+    requested: CapabilitiesRequest,
+) -> Option<GetReaderCapabilitiesResponse> {
+    use CapabilitiesRequest as R;
+    let all = requested == R::All;
+    if !requested.is_known() {
         return None;
     }
     Some(GetReaderCapabilitiesResponse {
         llrp_status: LlrpStatus::success(),
-        general_device_capabilities: (all || requested == 1).then(|| general(p)),
-        llrp_capabilities: (all || requested == 2).then(llrp_caps),
-        regulatory_capabilities: (all || requested == 3).then(|| regulatory(p)),
-        c1g2_llrp_capabilities: (all || requested == 4).then(c1g2_caps),
+        general_device_capabilities: (all || requested == R::GeneralDeviceCapabilities)
+            .then(|| general(p)),
+        llrp_capabilities: (all || requested == R::LlrpCapabilities).then(llrp_caps),
+        regulatory_capabilities: (all || requested == R::RegulatoryCapabilities)
+            .then(|| regulatory(p)),
+        c1g2_llrp_capabilities: (all || requested == R::AirProtocolLlrpCapabilities)
+            .then(c1g2_caps),
         ..Default::default()
     })
 }

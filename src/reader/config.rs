@@ -1,14 +1,16 @@
 //! Reader configuration: what GET_READER_CONFIG reports and SET_READER_CONFIG changes
 //! (antenna settings, default report spec, event notifications, keepalive, event holding).
 
+use llrp::enums::*;
 use llrp::message::{GetReaderConfig, GetReaderConfigResponse, SetReaderConfig};
 use llrp::params::*;
 use llrp::StatusCode;
 
 use super::{caps, field_error, ReaderProfile};
 
-/// Number of reader event types (0 hopping … 8 antenna; 9 SpecLoop is LLRP 1.1).
-pub const EVENT_TYPES: u16 = 10;
+/// The reader event types a client can turn on and off (hopping … antenna, and LLRP 1.1's
+/// SpecLoop).
+pub const EVENT_TYPES: &[NotificationEventType] = NotificationEventType::ALL;
 
 /// The reader's current configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -70,7 +72,7 @@ impl ReaderConfig {
         ReaderConfig {
             antennas,
             ro_report_spec: RoReportSpec {
-                ro_report_trigger: 2,
+                ro_report_trigger: RoReportTriggerType::UponNTagsOrEndOfRoSpec,
                 n: 1,
                 tag_report_content_selector: TagReportContentSelector {
                     enable_ro_spec_id: true,
@@ -84,12 +86,12 @@ impl ReaderConfig {
                 ..Default::default()
             },
             access_report_spec: AccessReportSpec {
-                access_report_trigger: 0,
+                access_report_trigger: AccessReportTriggerType::WheneverRoReportIsGenerated,
                 ..Default::default()
             },
-            events: vec![false; usize::from(EVENT_TYPES)],
+            events: vec![false; EVENT_TYPES.len()],
             keepalive: KeepaliveSpec {
-                keepalive_trigger_type: 0,
+                keepalive_trigger_type: KeepaliveTriggerType::Null,
                 periodic_trigger_value: 0,
                 ..Default::default()
             },
@@ -100,13 +102,17 @@ impl ReaderConfig {
 
     /// Keepalive period in ms, when periodic keepalives are on.
     pub fn keepalive_period_ms(&self) -> Option<u64> {
-        (self.keepalive.keepalive_trigger_type == 1 && self.keepalive.periodic_trigger_value > 0)
+        (self.keepalive.keepalive_trigger_type == KeepaliveTriggerType::Periodic
+            && self.keepalive.periodic_trigger_value > 0)
             .then_some(u64::from(self.keepalive.periodic_trigger_value))
     }
 
     /// Whether notifications of event type `ty` are on.
-    pub fn event_enabled(&self, ty: u16) -> bool {
-        self.events.get(usize::from(ty)).copied().unwrap_or(false)
+    pub fn event_enabled(&self, ty: NotificationEventType) -> bool {
+        self.events
+            .get(usize::from(ty.value()))
+            .copied()
+            .unwrap_or(false)
     }
 
     /// Configured transmit power of `antenna` in dBm.
@@ -126,8 +132,9 @@ impl ReaderConfig {
             llrp_status: LlrpStatus::success(),
             ..Default::default()
         };
-        let want = |k: u8| m.requested_data == 0 || m.requested_data == k;
-        if m.requested_data > 11 {
+        let want =
+            |k: ConfigRequest| m.requested_data == ConfigRequest::All || m.requested_data == k;
+        if !m.requested_data.is_known() {
             r.llrp_status = field_error(1, StatusCode::A_OutOfRange, "RequestedData");
             return r;
         }
@@ -135,19 +142,21 @@ impl ReaderConfig {
             r.llrp_status = field_error(0, StatusCode::A_OutOfRange, "AntennaID");
             return r;
         }
-        if (m.gpi_port_num > 4 || m.gpo_port_num > 4) && (want(9) || want(10)) {
+        if (m.gpi_port_num > 4 || m.gpo_port_num > 4)
+            && (want(ConfigRequest::GpiPortCurrentState) || want(ConfigRequest::GpoWriteData))
+        {
             r.llrp_status = field_error(2, StatusCode::A_OutOfRange, "GPI/GPO port");
             return r;
         }
         let antenna_ok = |id: u16| m.antenna_id == 0 || m.antenna_id == id;
-        if want(1) {
+        if want(ConfigRequest::Identification) {
             r.identification = Some(Identification {
-                id_type: 0,
+                id_type: IdentificationType::MacAddress,
                 reader_id: p.reader_id.clone(),
                 ..Default::default()
             });
         }
-        if want(2) {
+        if want(ConfigRequest::AntennaProperties) {
             r.antenna_properties = (1..=p.antennas)
                 .filter(|&a| antenna_ok(a))
                 .map(|a| AntennaProperties {
@@ -162,7 +171,7 @@ impl ReaderConfig {
                 })
                 .collect();
         }
-        if want(3) {
+        if want(ConfigRequest::AntennaConfiguration) {
             r.antenna_configuration = self
                 .antennas
                 .iter()
@@ -170,13 +179,14 @@ impl ReaderConfig {
                 .cloned()
                 .collect();
         }
-        if want(4) {
+        if want(ConfigRequest::RoReportSpec) {
             r.ro_report_spec = Some(self.ro_report_spec.clone());
         }
-        if want(5) {
+        if want(ConfigRequest::ReaderEventNotificationSpec) {
             r.reader_event_notification_spec = Some(ReaderEventNotificationSpec {
-                event_notification_state: (0..9)
-                    .map(|t| EventNotificationState {
+                event_notification_state: EVENT_TYPES[..9]
+                    .iter()
+                    .map(|&t| EventNotificationState {
                         event_type: t,
                         notification_state: self.event_enabled(t),
                         ..Default::default()
@@ -185,19 +195,19 @@ impl ReaderConfig {
                 ..Default::default()
             });
         }
-        if want(6) {
+        if want(ConfigRequest::AccessReportSpec) {
             r.access_report_spec = Some(self.access_report_spec.clone());
         }
-        if want(7) {
+        if want(ConfigRequest::LlrpConfigurationStateValue) {
             r.llrp_configuration_state_value = Some(LlrpConfigurationStateValue {
                 llrp_configuration_state_value: self.state_value,
                 ..Default::default()
             });
         }
-        if want(8) {
+        if want(ConfigRequest::KeepaliveSpec) {
             r.keepalive_spec = Some(self.keepalive.clone());
         }
-        if want(9) {
+        if want(ConfigRequest::GpiPortCurrentState) {
             r.gpi_port_current_state = (1..=4)
                 .filter(|&g| m.gpi_port_num == 0 || m.gpi_port_num == g)
                 .map(|g| GpiPortCurrentState {
@@ -208,7 +218,7 @@ impl ReaderConfig {
                 })
                 .collect();
         }
-        if want(10) {
+        if want(ConfigRequest::GpoWriteData) {
             r.gpo_write_data = (1..=4)
                 .filter(|&g| m.gpo_port_num == 0 || m.gpo_port_num == g)
                 .map(|g| GpoWriteData {
@@ -218,7 +228,7 @@ impl ReaderConfig {
                 })
                 .collect();
         }
-        if want(11) {
+        if want(ConfigRequest::EventsAndReports) {
             r.events_and_reports = Some(self.events_and_reports.clone());
         }
         let _ = now_us;
@@ -234,10 +244,10 @@ impl ReaderConfig {
         };
         if let Some(spec) = &m.reader_event_notification_spec {
             for s in &spec.event_notification_state {
-                if s.event_type >= EVENT_TYPES {
+                if !s.event_type.is_known() {
                     return param_field_error(244, 245, 0, StatusCode::A_OutOfRange);
                 }
-                next.events[usize::from(s.event_type)] = s.notification_state;
+                next.events[usize::from(s.event_type.value())] = s.notification_state;
             }
         }
         for c in &m.antenna_configuration {
@@ -272,19 +282,19 @@ impl ReaderConfig {
             return s;
         }
         if let Some(r) = &m.ro_report_spec {
-            if r.ro_report_trigger > 2 {
+            if r.ro_report_trigger.value() > 2 {
                 return param_field_error(237, 0, 0, StatusCode::A_OutOfRange);
             }
             next.ro_report_spec = r.clone();
         }
         if let Some(a) = &m.access_report_spec {
-            if a.access_report_trigger > 1 {
+            if !a.access_report_trigger.is_known() {
                 return param_field_error(239, 0, 0, StatusCode::A_OutOfRange);
             }
             next.access_report_spec = a.clone();
         }
         if let Some(k) = &m.keepalive_spec {
-            if k.keepalive_trigger_type > 1 {
+            if !k.keepalive_trigger_type.is_known() {
                 return param_field_error(220, 0, 0, StatusCode::A_OutOfRange);
             }
             next.keepalive = k.clone();
@@ -371,7 +381,7 @@ pub(crate) fn param_field_error(
 ) -> LlrpStatus {
     let fe = FieldError {
         field_num: field,
-        error_code: code.code(),
+        error_code: code,
         ..Default::default()
     };
     let mut pe = ParameterError::new(

@@ -21,6 +21,7 @@ mod tests;
 
 use std::sync::Arc;
 
+use llrp::enums::*;
 use llrp::message::*;
 use llrp::params::*;
 use llrp::{DecodeError, FrameHeader, Message, MessageKind, Response, StatusCode};
@@ -36,13 +37,6 @@ pub use rospec::ANTENNA_DWELL_US;
 pub const MAX_ROSPECS: u32 = 32;
 /// Most AccessSpecs the reader holds at once.
 pub const MAX_ACCESS_SPECS: u32 = 64;
-
-/// ConnectionAttemptEvent status: the connection is accepted.
-pub const CONNECTION_SUCCESS: u16 = 0;
-/// ConnectionAttemptEvent status sent to a refused second client.
-pub const CONNECTION_CLIENT_EXISTS: u16 = 2;
-/// ConnectionAttemptEvent status sent to the connected client when another one tried.
-pub const CONNECTION_ANOTHER_ATTEMPTED: u16 = 4;
 
 /// Most TagReportData in one RO_ACCESS_REPORT (about 40 kB with every field).
 pub const REPORT_CHUNK: usize = 500;
@@ -216,7 +210,7 @@ impl Reader {
     }
 
     /// A READER_EVENT_NOTIFICATION with a ConnectionAttemptEvent of `status`.
-    pub fn connection_event(&mut self, status: u16) -> Message {
+    pub fn connection_event(&mut self, status: ConnectionAttemptStatus) -> Message {
         let data = ReaderEventNotificationData {
             timestamp: self.timestamp(),
             connection_attempt_event: Some(ConnectionAttemptEvent {
@@ -261,7 +255,9 @@ impl Reader {
             .hold_events_and_reports_upon_reconnect;
         self.keepalive_unanswered = 0;
         self.keepalive_due_ms = self.config.keepalive_period_ms().map(|p| wall_ms + p);
-        vec![Output::Send(self.connection_event(CONNECTION_SUCCESS))]
+        vec![Output::Send(
+            self.connection_event(ConnectionAttemptStatus::Success),
+        )]
     }
 
     /// The client went away (closed, or dropped by the reader).
@@ -633,7 +629,7 @@ impl Reader {
                     spec_index,
                 } => {
                     data.ai_spec_event = Some(AiSpecEvent {
-                        event_type: 0,
+                        event_type: AiSpecEventType::EndOfAiSpec,
                         ro_spec_id,
                         spec_index,
                         ..Default::default()
@@ -685,7 +681,7 @@ pub(crate) fn field_error(field: u16, code: StatusCode, what: &str) -> LlrpStatu
     let mut s = LlrpStatus::new(StatusCode::M_FieldError, format!("invalid {what}"));
     s.field_error = Some(FieldError {
         field_num: field,
-        error_code: code.code(),
+        error_code: code,
         ..Default::default()
     });
     s

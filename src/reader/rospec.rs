@@ -4,6 +4,7 @@
 use std::collections::HashSet;
 use std::sync::Arc;
 
+use llrp::enums::*;
 use llrp::params::*;
 use llrp::StatusCode;
 
@@ -20,23 +21,23 @@ pub const ANTENNA_DWELL_US: u64 = 25_000;
 /// completes at once cannot spin).
 const MIN_RESTART_US: u64 = 1_000;
 
-/// ROSpec state (LLRP CurrentState values).
+/// ROSpec state (what GET_ROSPECS reports as CurrentState).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SpecState {
-    /// Added, not enabled (0).
+    /// Added, not enabled.
     Disabled,
-    /// Enabled, waiting for its start trigger (1).
+    /// Enabled, waiting for its start trigger.
     Inactive,
-    /// Executing (2).
+    /// Executing.
     Active,
 }
 
 impl SpecState {
-    fn code(self) -> u8 {
+    fn code(self) -> RoSpecState {
         match self {
-            SpecState::Disabled => 0,
-            SpecState::Inactive => 1,
-            SpecState::Active => 2,
+            SpecState::Disabled => RoSpecState::Disabled,
+            SpecState::Inactive => RoSpecState::Inactive,
+            SpecState::Active => RoSpecState::Active,
         }
     }
 }
@@ -53,10 +54,10 @@ pub struct Event {
 /// The kinds of event the ROSpec machinery raises.
 #[derive(Clone, Debug, PartialEq)]
 pub enum EventKind {
-    /// ROSpecEvent: 0 start, 1 end, 2 preempted.
+    /// ROSpecEvent: start, end, preempted.
     RoSpec {
         /// Event type.
-        event_type: u8,
+        event_type: RoSpecEventType,
         /// The ROSpec.
         ro_spec_id: u32,
         /// The ROSpec that preempted it (type 2), else 0.
@@ -73,10 +74,10 @@ pub enum EventKind {
 
 impl Event {
     /// The ReaderEventNotificationSpec event type that enables this event.
-    pub fn notification_type(&self) -> u16 {
+    pub fn notification_type(&self) -> NotificationEventType {
         match self.kind {
-            EventKind::RoSpec { .. } => 2,
-            EventKind::AiSpecEnd { .. } => 6,
+            EventKind::RoSpec { .. } => NotificationEventType::RoSpecEvent,
+            EventKind::AiSpecEnd { .. } => NotificationEventType::AiSpecEvent,
         }
     }
 }
@@ -168,7 +169,7 @@ pub struct Specs {
     specs: Vec<Spec>,
     buffer: ReportBuffer,
     /// ROReportTrigger of the reader's default ROReportSpec (for specs without their own).
-    pub default_trigger: u8,
+    pub default_trigger: RoReportTriggerType,
     /// A halted spec's report trigger asks for its buffered reads to be reported now.
     flush_on_halt: bool,
     /// Physics of the coming antenna slices, computed ahead in parallel.
@@ -179,7 +180,7 @@ pub struct Specs {
     ahead_from: (usize, u64),
 }
 
-fn start_type(s: &RoSpec) -> u8 {
+fn start_type(s: &RoSpec) -> RoSpecStartTriggerType {
     s.ro_boundary_spec
         .ro_spec_start_trigger
         .ro_spec_start_trigger_type
@@ -385,7 +386,7 @@ impl Specs {
         self.halt(i, now, &mut events);
         // A stopped spec waits for its start trigger again, except Immediate, which only
         // restarts by being enabled again.
-        if start_type(&self.specs[i].spec) == 1 {
+        if start_type(&self.specs[i].spec) == RoSpecStartTriggerType::Immediate {
             self.specs[i].next_start_us = None;
         }
         (LlrpStatus::success(), events)
@@ -403,7 +404,7 @@ impl Specs {
                 .ro_report_spec
                 .as_ref()
                 .map_or(default_trigger, |r| r.ro_report_trigger);
-            if matches!(trigger, 1 | 2) {
+            if ends_report(trigger) {
                 self.flush_on_halt = true;
             }
             s.state = SpecState::Inactive;
@@ -411,7 +412,7 @@ impl Specs {
             events.push(Event {
                 at_us: now,
                 kind: EventKind::RoSpec {
-                    event_type: 1,
+                    event_type: RoSpecEventType::EndOfRoSpec,
                     ro_spec_id: s.spec.ro_spec_id,
                     preempting: 0,
                 },
@@ -423,14 +424,14 @@ impl Specs {
         let s = &mut self.specs[i];
         s.state = SpecState::Inactive;
         s.run = None;
-        if start_type(&s.spec) == 1 {
+        if start_type(&s.spec) == RoSpecStartTriggerType::Immediate {
             // An Immediate spec resumes once the preempting one is done.
             s.next_start_us = Some(now);
         }
         events.push(Event {
             at_us: now,
             kind: EventKind::RoSpec {
-                event_type: 2,
+                event_type: RoSpecEventType::PreemptionOfRoSpec,
                 ro_spec_id: s.spec.ro_spec_id,
                 preempting: by,
             },
@@ -455,7 +456,7 @@ impl Specs {
         events.push(Event {
             at_us: now,
             kind: EventKind::RoSpec {
-                event_type: 0,
+                event_type: RoSpecEventType::StartOfRoSpec,
                 ro_spec_id: s.spec.ro_spec_id,
                 preempting: 0,
             },
@@ -566,8 +567,10 @@ impl Specs {
         };
         let stop = &spec.ro_boundary_spec.ro_spec_stop_trigger;
         let ro_end = match stop.ro_spec_stop_trigger_type {
-            1 => Some(run.started_us + u64::from(stop.duration_trigger_value) * 1000),
-            2 => stop
+            RoSpecStopTriggerType::Duration => {
+                Some(run.started_us + u64::from(stop.duration_trigger_value) * 1000)
+            }
+            RoSpecStopTriggerType::GpiWithTimeout => stop
                 .gpi_trigger_value
                 .as_ref()
                 .filter(|g| g.timeout > 0)
@@ -586,17 +589,20 @@ impl Specs {
         let trig = &ai.ai_spec_stop_trigger;
         let obs = trig.tag_observation_trigger.clone().unwrap_or_default();
         let ai_end = match trig.ai_spec_stop_trigger_type {
-            1 => Some(run.spec_started_us + u64::from(trig.duration_trigger) * 1000),
-            2 => trig
+            AiSpecStopTriggerType::Duration => {
+                Some(run.spec_started_us + u64::from(trig.duration_trigger) * 1000)
+            }
+            AiSpecStopTriggerType::GpiWithTimeout => trig
                 .gpi_trigger_value
                 .as_ref()
                 .filter(|g| g.timeout > 0)
                 .map(|g| run.spec_started_us + u64::from(g.timeout) * 1000),
-            3 => {
+            AiSpecStopTriggerType::TagObservation => {
                 let timeout =
                     (obs.timeout > 0).then(|| run.spec_started_us + u64::from(obs.timeout) * 1000);
-                let quiet =
-                    (obs.trigger_type == 1).then(|| run.last_new_us + u64::from(obs.t) * 1000);
+                let quiet = (obs.trigger_type
+                    == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout)
+                    .then(|| run.last_new_us + u64::from(obs.t) * 1000);
                 match (timeout, quiet) {
                     (Some(x), Some(y)) => Some(x.min(y)),
                     (x, y) => x.or(y),
@@ -619,12 +625,18 @@ impl Specs {
         // ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
         let interval = ctx.profile.report_interval_us;
         let periodic = interval > 0
-            && report_spec.ro_report_trigger == 1
+            && report_spec.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
             && report_spec.n == 0
             && ai_end.is_none()
             && ro_end.is_none()
-            && matches!(trig.ai_spec_stop_trigger_type, 0 | 2)
-            && matches!(stop.ro_spec_stop_trigger_type, 0 | 2);
+            && matches!(
+                trig.ai_spec_stop_trigger_type,
+                AiSpecStopTriggerType::Null | AiSpecStopTriggerType::GpiWithTimeout
+            )
+            && matches!(
+                stop.ro_spec_stop_trigger_type,
+                RoSpecStopTriggerType::Null | RoSpecStopTriggerType::GpiWithTimeout
+            );
         if periodic {
             end = end.min(run.last_report_us + interval);
         }
@@ -648,13 +660,10 @@ impl Specs {
         if channel.is_some() {
             end = end.min(hop.dwell_start(t) + hop.dwell_us).max(t);
         }
-        let aggregate = !(report_spec.ro_report_trigger != 0 && report_spec.n == 1);
+        let reports_on_n = report_spec.ro_report_trigger != RoReportTriggerType::None;
+        let aggregate = !(reports_on_n && report_spec.n == 1);
         let n_trigger = usize::from(report_spec.n);
-        self.buffer.expect(if report_spec.ro_report_trigger != 0 {
-            n_trigger
-        } else {
-            0
-        });
+        self.buffer.expect(if reports_on_n { n_trigger } else { 0 });
 
         let mut reached = end;
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
@@ -709,14 +718,11 @@ impl Specs {
                 if run.seen.insert(r.tag) {
                     run.last_new_us = r.time_us;
                 }
-                if report_spec.ro_report_trigger != 0
-                    && n_trigger > 0
-                    && self.buffer.len() >= n_trigger
-                {
+                if reports_on_n && n_trigger > 0 && self.buffer.len() >= n_trigger {
                     out.push(Produced::Reports(self.buffer.take()));
                 }
-                if trig.ai_spec_stop_trigger_type == 3
-                    && obs.trigger_type == 0
+                if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+                    && obs.trigger_type == TagObservationTriggerType::UponSeeingNTagsOrTimeout
                     && obs.number_of_tags > 0
                     && run.seen.len() >= usize::from(obs.number_of_tags)
                 {
@@ -740,15 +746,15 @@ impl Specs {
             }
             run.slice_end_us = reached + ANTENNA_DWELL_US;
         }
-        if trig.ai_spec_stop_trigger_type == 3
-            && obs.trigger_type == 2
+        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+            && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
             && obs.number_of_attempts > 0
             && run.rounds >= u32::from(obs.number_of_attempts)
         {
             ai_done = true;
         }
-        if trig.ai_spec_stop_trigger_type == 3
-            && obs.trigger_type == 1
+        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+            && obs.trigger_type == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout
             && reached >= run.last_new_us + u64::from(obs.t) * 1000
         {
             ai_done = true;
@@ -868,7 +874,9 @@ impl Specs {
     fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
         let s = &self.specs[a];
         let idx = s.run.as_ref().map_or(0, |r| r.spec_idx);
-        if report.ro_report_trigger == 1 && !self.buffer.is_empty() {
+        if report.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
+            && !self.buffer.is_empty()
+        {
             out.push(Produced::Reports(self.buffer.take()));
         }
         out.push(Produced::Event(Event {
@@ -881,7 +889,7 @@ impl Specs {
     }
 
     fn finish_ro(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
-        if matches!(report.ro_report_trigger, 1 | 2) && !self.buffer.is_empty() {
+        if ends_report(report.ro_report_trigger) && !self.buffer.is_empty() {
             out.push(Produced::Reports(self.buffer.take()));
         }
         let s = &mut self.specs[a];
@@ -892,7 +900,7 @@ impl Specs {
         out.push(Produced::Event(Event {
             at_us: at,
             kind: EventKind::RoSpec {
-                event_type: 1,
+                event_type: RoSpecEventType::EndOfRoSpec,
                 ro_spec_id: s.spec.ro_spec_id,
                 preempting: 0,
             },
@@ -945,13 +953,21 @@ fn fixed_channel_list(
         .unwrap_or_default()
 }
 
+/// Whether a report trigger reports what is buffered when its AISpec or ROSpec ends.
+fn ends_report(t: RoReportTriggerType) -> bool {
+    matches!(
+        t,
+        RoReportTriggerType::UponNTagsOrEndOfAiSpec | RoReportTriggerType::UponNTagsOrEndOfRoSpec
+    )
+}
+
 /// When an enabled spec first starts: Immediate now, Periodic after its offset, else never
 /// (it waits for START_ROSPEC).
 fn first_start(s: &RoSpec, enabled_at: u64) -> Option<u64> {
     let st = &s.ro_boundary_spec.ro_spec_start_trigger;
     match st.ro_spec_start_trigger_type {
-        1 => Some(enabled_at),
-        2 => st
+        RoSpecStartTriggerType::Immediate => Some(enabled_at),
+        RoSpecStartTriggerType::Periodic => st
             .periodic_trigger_value
             .as_ref()
             .map(|p| enabled_at + u64::from(p.offset) * 1000),
@@ -965,8 +981,8 @@ fn first_start(s: &RoSpec, enabled_at: u64) -> Option<u64> {
 fn next_start(s: &RoSpec, started: u64, ended: u64) -> Option<u64> {
     let st = &s.ro_boundary_spec.ro_spec_start_trigger;
     match st.ro_spec_start_trigger_type {
-        1 => Some(ended.max(started + MIN_RESTART_US)),
-        2 => st
+        RoSpecStartTriggerType::Immediate => Some(ended.max(started + MIN_RESTART_US)),
+        RoSpecStartTriggerType::Periodic => st
             .periodic_trigger_value
             .as_ref()
             .filter(|p| p.period > 0)
@@ -987,21 +1003,27 @@ fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(), LlrpStatus
     if s.ro_spec_id == 0 {
         return Err(param_field_error(177, 0, 0, StatusCode::A_Invalid));
     }
-    if s.current_state != 0 {
+    if s.current_state != RoSpecState::Disabled {
         let mut e = param_field_error(177, 0, 2, StatusCode::A_Invalid);
         e.error_description = "a new ROSpec must be Disabled".into();
         return Err(e);
     }
     let b = &s.ro_boundary_spec;
     let st = &b.ro_spec_start_trigger;
-    if st.ro_spec_start_trigger_type == 2 && st.periodic_trigger_value.is_none() {
+    if st.ro_spec_start_trigger_type == RoSpecStartTriggerType::Periodic
+        && st.periodic_trigger_value.is_none()
+    {
         return Err(missing(178, 179, 180));
     }
-    if st.ro_spec_start_trigger_type == 3 && st.gpi_trigger_value.is_none() {
+    if st.ro_spec_start_trigger_type == RoSpecStartTriggerType::Gpi
+        && st.gpi_trigger_value.is_none()
+    {
         return Err(missing(178, 179, 181));
     }
     let sp = &b.ro_spec_stop_trigger;
-    if sp.ro_spec_stop_trigger_type == 2 && sp.gpi_trigger_value.is_none() {
+    if sp.ro_spec_stop_trigger_type == RoSpecStopTriggerType::GpiWithTimeout
+        && sp.gpi_trigger_value.is_none()
+    {
         return Err(missing(178, 182, 181));
     }
     for spec in &s.specs {
@@ -1036,10 +1058,17 @@ fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(), LlrpStatus
     if let Some(r) = &s.ro_report_spec {
         // LLRP 1.1's triggers 3..=6 are not implemented in either version.
         let _ = version;
-        if r.ro_report_trigger > 2 {
+        if !matches!(
+            r.ro_report_trigger,
+            RoReportTriggerType::None
+                | RoReportTriggerType::UponNTagsOrEndOfAiSpec
+                | RoReportTriggerType::UponNTagsOrEndOfRoSpec
+        ) {
             let mut e = param_field_error(177, 237, 0, StatusCode::A_OutOfRange);
-            e.error_description =
-                format!("ROReportTrigger {} is not supported", r.ro_report_trigger);
+            e.error_description = format!(
+                "ROReportTrigger {} is not supported",
+                r.ro_report_trigger.value()
+            );
             return Err(e);
         }
     }
@@ -1059,21 +1088,23 @@ fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
         return Err(e);
     }
     let t = &ai.ai_spec_stop_trigger;
-    if t.ai_spec_stop_trigger_type == 3 {
+    if t.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation {
         match &t.tag_observation_trigger {
             None => return Err(missing(183, 184, 185)),
-            Some(o) if o.trigger_type > 2 => {
+            Some(o) if o.trigger_type.value() > 2 => {
                 let mut e = nested_field_error(&[177, 183, 184, 185], 0, StatusCode::A_OutOfRange);
                 e.error_description = format!(
                     "TagObservationTrigger type {} is not supported",
-                    o.trigger_type
+                    o.trigger_type.value()
                 );
                 return Err(e);
             }
             _ => {}
         }
     }
-    if t.ai_spec_stop_trigger_type == 2 && t.gpi_trigger_value.is_none() {
+    if t.ai_spec_stop_trigger_type == AiSpecStopTriggerType::GpiWithTimeout
+        && t.gpi_trigger_value.is_none()
+    {
         return Err(missing(183, 184, 181));
     }
     if ai.inventory_parameter_specs.len() > 1 {
@@ -1083,7 +1114,7 @@ fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
         ));
     }
     for ips in &ai.inventory_parameter_specs {
-        if ips.protocol_id != 1 {
+        if ips.protocol_id != AirProtocol::EpcGlobalClass1Gen2 {
             let mut e = nested_field_error(&[177, 183, 186], 1, StatusCode::A_OutOfRange);
             e.error_description = "only EPCGlobal Class 1 Gen 2 (ProtocolID 1)".into();
             return Err(e);
@@ -1123,7 +1154,7 @@ fn nested_field_error(path: &[u16], field: u16, code: StatusCode) -> LlrpStatus 
         if last {
             pe.field_error = Some(FieldError {
                 field_num: field,
-                error_code: code.code(),
+                error_code: code,
                 ..Default::default()
             });
         }

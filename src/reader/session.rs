@@ -13,7 +13,9 @@ use bytes::BytesMut;
 use llrp::params::LlrpStatus;
 use llrp::{FrameError, FrameHeader, Inbound, Message, StatusCode};
 
-use super::{Output, Reader, CONNECTION_ANOTHER_ATTEMPTED, CONNECTION_CLIENT_EXISTS};
+use llrp::enums::ConnectionAttemptStatus;
+
+use super::{Output, Reader};
 
 /// While an ROSpec runs, the longest a session lets simulated time pass without running the
 /// reader (reports of the reads in between leave at most this late), µs.
@@ -105,8 +107,12 @@ impl Session {
     /// A connection arrived at `now`.
     pub fn connect(&mut self, now: Now) -> Accepted {
         if self.client.is_some() {
-            let refusal = self.reader.connection_event(CONNECTION_CLIENT_EXISTS);
-            let notice = self.reader.connection_event(CONNECTION_ANOTHER_ATTEMPTED);
+            let refusal = self
+                .reader
+                .connection_event(ConnectionAttemptStatus::FailedClientInitiatedConnectionExists);
+            let notice = self
+                .reader
+                .connection_event(ConnectionAttemptStatus::AnotherConnectionAttempted);
             notice.encode(&mut self.out);
             return Accepted::Refused(refusal.to_bytes());
         }
@@ -315,7 +321,7 @@ mod tests {
         Inbound::Frame(Message::new(id, m).to_bytes().freeze())
     }
 
-    fn attempt_status(m: &Message) -> Option<u16> {
+    fn attempt_status(m: &Message) -> Option<ConnectionAttemptStatus> {
         match &m.body {
             MessageBody::ReaderEventNotification(n) => n
                 .reader_event_notification_data
@@ -333,7 +339,7 @@ mod tests {
         let (greeting, close) = take(&mut s);
         assert_eq!(
             greeting.iter().map(attempt_status).collect::<Vec<_>>(),
-            [Some(0)]
+            [Some(ConnectionAttemptStatus::Success)]
         );
         assert!(!close);
         let Accepted::Refused(refusal) = s.connect(at(10, 0)) else {
@@ -342,12 +348,14 @@ mod tests {
         let refusal = messages(&refusal);
         assert_eq!(
             refusal.iter().map(attempt_status).collect::<Vec<_>>(),
-            [Some(2)]
+            [Some(
+                ConnectionAttemptStatus::FailedClientInitiatedConnectionExists
+            )]
         );
         let (notice, close) = take(&mut s);
         assert_eq!(
             notice.iter().map(attempt_status).collect::<Vec<_>>(),
-            [Some(4)]
+            [Some(ConnectionAttemptStatus::AnotherConnectionAttempted)]
         );
         assert!(!close, "the connected client carries on");
         // It still gets answers; once it is gone, the next client is accepted.
@@ -379,7 +387,7 @@ mod tests {
         );
         assert_eq!(
             out[0].body.status().map(|st| st.status_code),
-            Some(StatusCode::M_FieldError.code())
+            Some(StatusCode::M_FieldError)
         );
         // Nothing more is taken from that connection.
         s.receive(c, frame(GetRospecs::default(), 6), at(0, 0));
@@ -428,7 +436,7 @@ mod tests {
         // A periodic keepalive is a wall-clock deadline.
         let set = SetReaderConfig {
             keepalive_spec: Some(KeepaliveSpec {
-                keepalive_trigger_type: 1,
+                keepalive_trigger_type: llrp::enums::KeepaliveTriggerType::Periodic,
                 periodic_trigger_value: 3000,
                 ..Default::default()
             }),
@@ -467,26 +475,7 @@ mod tests {
         let mut s = session();
         let c = client(&mut s, at(0, 0));
         take(&mut s);
-        let spec = RoSpec {
-            ro_spec_id: 1,
-            ro_boundary_spec: RoBoundarySpec {
-                ro_spec_start_trigger: RoSpecStartTrigger {
-                    ro_spec_start_trigger_type: 1,
-                    ..Default::default()
-                },
-                ..Default::default()
-            },
-            specs: vec![SpecParameter::AiSpec(AiSpec {
-                antenna_ids: vec![0],
-                inventory_parameter_specs: vec![InventoryParameterSpec {
-                    inventory_parameter_spec_id: 1,
-                    protocol_id: 1,
-                    ..Default::default()
-                }],
-                ..Default::default()
-            })],
-            ..Default::default()
-        };
+        let spec = RoSpec::immediate(1, vec![0]);
         s.receive(
             c,
             frame(

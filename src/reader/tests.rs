@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 
+use llrp::enums::*;
 use llrp::message::*;
 use llrp::params::*;
 use llrp::Message;
@@ -9,6 +10,9 @@ use llrp::Message;
 use super::{Output, Reader, ReaderProfile};
 use crate::physics::Model;
 use crate::scenario::Scenario;
+
+const ON_AI_END: RoReportTriggerType = RoReportTriggerType::UponNTagsOrEndOfAiSpec;
+const ON_RO_END: RoReportTriggerType = RoReportTriggerType::UponNTagsOrEndOfRoSpec;
 
 fn s2_reader() -> Reader {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
@@ -22,42 +26,23 @@ fn add_rospec(
     antennas: Vec<u16>,
     ai_stop: AiSpecStopTrigger,
     power_index: u16,
-    trigger: u8,
+    trigger: RoReportTriggerType,
     n: u16,
 ) -> Message {
-    let spec = RoSpec {
-        ro_spec_id: 1,
-        ro_boundary_spec: RoBoundarySpec {
-            ro_spec_start_trigger: RoSpecStartTrigger {
-                ro_spec_start_trigger_type: 1,
+    let spec = RoSpec::immediate(1, antennas)
+        .with_ai_stop(ai_stop)
+        .with_antenna_configuration(vec![AntennaConfiguration {
+            antenna_id: 3,
+            rf_transmitter: Some(RfTransmitter {
+                hop_table_id: 1,
+                channel_index: 1,
+                transmit_power: power_index,
                 ..Default::default()
-            },
+            }),
             ..Default::default()
-        },
-        specs: vec![SpecParameter::AiSpec(AiSpec {
-            antenna_ids: antennas,
-            ai_spec_stop_trigger: ai_stop,
-            inventory_parameter_specs: vec![InventoryParameterSpec {
-                inventory_parameter_spec_id: 1,
-                protocol_id: 1,
-                antenna_configuration: vec![AntennaConfiguration {
-                    antenna_id: 3,
-                    rf_transmitter: Some(RfTransmitter {
-                        hop_table_id: 1,
-                        channel_index: 1,
-                        transmit_power: power_index,
-                        ..Default::default()
-                    }),
-                    ..Default::default()
-                }],
-                ..Default::default()
-            }],
-            ..Default::default()
-        })],
-        ro_report_spec: Some(RoReportSpec {
-            ro_report_trigger: trigger,
-            n,
-            tag_report_content_selector: TagReportContentSelector {
+        }])
+        .with_report(
+            RoReportSpec::new(trigger, n).with_content(TagReportContentSelector {
                 enable_antenna_id: true,
                 enable_channel_index: true,
                 enable_peak_rssi: true,
@@ -65,11 +50,8 @@ fn add_rospec(
                 enable_last_seen_timestamp: true,
                 enable_tag_seen_count: true,
                 ..Default::default()
-            },
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
+            }),
+        );
     Message {
         version: 1,
         id: 10,
@@ -124,19 +106,11 @@ fn prefetched_physics_sends_exactly_what_direct_physics_sends() {
     // All antennas with a per-antenna power (antenna 3 at index 1, the lowest), one report per
     // read; N = 100 on two antennas; an AISpec that ends at its first tag and restarts (what
     // sllurp's -n 1 asks for). The robot drives past the banners meanwhile.
-    let first_tag = AiSpecStopTrigger {
-        ai_spec_stop_trigger_type: 3,
-        tag_observation_trigger: Some(TagObservationTrigger {
-            trigger_type: 0,
-            number_of_tags: 1,
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
+    let first_tag = AiSpecStopTrigger::n_tags(1, 0);
     for spec in [
-        add_rospec(vec![0], AiSpecStopTrigger::default(), 1, 2, 1),
-        add_rospec(vec![2, 3], AiSpecStopTrigger::default(), 1, 1, 100),
-        add_rospec(vec![0], first_tag, 1, 2, 1),
+        add_rospec(vec![0], AiSpecStopTrigger::null(), 1, ON_RO_END, 1),
+        add_rospec(vec![2, 3], AiSpecStopTrigger::null(), 1, ON_AI_END, 100),
+        add_rospec(vec![0], first_tag, 1, ON_RO_END, 1),
     ] {
         let direct = session(false, spec.clone(), 120_000_000);
         let prefetched = session(true, spec, 120_000_000);
@@ -173,7 +147,8 @@ fn units_helper_and_advertised_hop_table_agree_in_every_region() {
         s.readers[0].region = region.clone();
         let model = Arc::new(Model::new(&s, 0));
         let profile = ReaderProfile::from_scenario(&s, 0, &model);
-        let caps = super::caps::capabilities(&profile, 3).expect("RequestedData 3 is valid");
+        let caps = super::caps::capabilities(&profile, CapabilitiesRequest::RegulatoryCapabilities)
+            .expect("RequestedData 3 is valid");
         let regulatory = caps
             .regulatory_capabilities
             .expect("regulatory capabilities requested");

@@ -3,9 +3,11 @@
 
 use std::time::Duration;
 
+pub use llrp::enums::*;
 use llrp::message::*;
 use llrp::params::*;
 use llrp::Message;
+pub use llrp::StatusCode;
 use llrp_gateway::net::client::Client;
 use llrp_gateway::net::clock::Speed;
 use llrp_gateway::scenario::Scenario;
@@ -40,12 +42,16 @@ pub async fn start(scenario: &Scenario, speed: Speed) -> RunningSim {
 pub async fn connect(sim: &RunningSim) -> Client {
     let mut c = Client::connect(sim.addrs[0]).await.expect("connects");
     let m = c.recv(T).await.expect("greeting");
-    assert_eq!(connection_status(&m), Some(0), "greeting: {m:?}");
+    assert_eq!(
+        connection_status(&m),
+        Some(ConnectionAttemptStatus::Success),
+        "greeting: {m:?}"
+    );
     c
 }
 
 /// The ConnectionAttemptEvent status in a message, if it carries one.
-pub fn connection_status(m: &Message) -> Option<u16> {
+pub fn connection_status(m: &Message) -> Option<ConnectionAttemptStatus> {
     match &m.body {
         MessageBody::ReaderEventNotification(n) => n
             .reader_event_notification_data
@@ -56,35 +62,16 @@ pub fn connection_status(m: &Message) -> Option<u16> {
     }
 }
 
-/// The LLRPStatus of a response.
+/// The LLRPStatus of a response (or ERROR_MESSAGE).
 pub fn status(m: &Message) -> LlrpStatus {
-    let s = match &m.body {
-        MessageBody::AddRospecResponse(r) => &r.llrp_status,
-        MessageBody::DeleteRospecResponse(r) => &r.llrp_status,
-        MessageBody::StartRospecResponse(r) => &r.llrp_status,
-        MessageBody::StopRospecResponse(r) => &r.llrp_status,
-        MessageBody::EnableRospecResponse(r) => &r.llrp_status,
-        MessageBody::DisableRospecResponse(r) => &r.llrp_status,
-        MessageBody::GetRospecsResponse(r) => &r.llrp_status,
-        MessageBody::AddAccessspecResponse(r) => &r.llrp_status,
-        MessageBody::DeleteAccessspecResponse(r) => &r.llrp_status,
-        MessageBody::EnableAccessspecResponse(r) => &r.llrp_status,
-        MessageBody::DisableAccessspecResponse(r) => &r.llrp_status,
-        MessageBody::GetReaderCapabilitiesResponse(r) => &r.llrp_status,
-        MessageBody::GetReaderConfigResponse(r) => &r.llrp_status,
-        MessageBody::SetReaderConfigResponse(r) => &r.llrp_status,
-        MessageBody::CloseConnectionResponse(r) => &r.llrp_status,
-        MessageBody::ErrorMessage(r) => &r.llrp_status,
-        MessageBody::ImpinjEnableExtensionsResponse(r) => &r.llrp_status,
-        MessageBody::GetSupportedVersionResponse(r) => &r.llrp_status,
-        MessageBody::SetProtocolVersionResponse(r) => &r.llrp_status,
-        other => panic!("no status in {}", other.name()),
-    };
-    s.clone()
+    match m.body.status() {
+        Some(s) => s.clone(),
+        None => panic!("no status in {}", m.name()),
+    }
 }
 
 /// Sends a request and returns its response's status code.
-pub async fn request_status(c: &mut Client, body: impl Into<MessageBody>) -> u16 {
+pub async fn request_status(c: &mut Client, body: impl Into<MessageBody>) -> StatusCode {
     let r = c.request(body, T).await.expect("response");
     status(&r).status_code
 }
@@ -97,98 +84,37 @@ pub fn rospec(
     ai_stop: AiSpecStopTrigger,
     report: RoReportSpec,
 ) -> RoSpec {
-    RoSpec {
-        ro_spec_id: id,
-        priority: 0,
-        current_state: 0,
-        ro_boundary_spec: RoBoundarySpec {
-            ro_spec_start_trigger: RoSpecStartTrigger {
-                ro_spec_start_trigger_type: 1,
-                ..Default::default()
-            },
-            ro_spec_stop_trigger: ro_stop,
-            ..Default::default()
-        },
-        specs: vec![SpecParameter::AiSpec(AiSpec {
-            antenna_ids: antennas,
-            ai_spec_stop_trigger: ai_stop,
-            inventory_parameter_specs: vec![InventoryParameterSpec {
-                inventory_parameter_spec_id: 1,
-                protocol_id: 1,
-                ..Default::default()
-            }],
-            ..Default::default()
-        })],
-        ro_report_spec: Some(report),
-        ..Default::default()
-    }
+    RoSpec::immediate(id, antennas)
+        .with_stop(ro_stop)
+        .with_ai_stop(ai_stop)
+        .with_report(report)
 }
 
 /// A report spec with trigger `trigger`, N = `n`, every standard field and the Impinj ones.
-pub fn full_report(trigger: u8, n: u16) -> RoReportSpec {
-    RoReportSpec {
-        ro_report_trigger: trigger,
-        n,
-        tag_report_content_selector: TagReportContentSelector {
-            enable_ro_spec_id: true,
-            enable_spec_index: true,
-            enable_inventory_parameter_spec_id: true,
-            enable_antenna_id: true,
-            enable_channel_index: true,
-            enable_peak_rssi: true,
-            enable_first_seen_timestamp: true,
-            enable_last_seen_timestamp: true,
-            enable_tag_seen_count: true,
-            enable_access_spec_id: true,
-            ..Default::default()
-        },
-        custom: vec![Custom::ImpinjTagReportContentSelector(Box::new(
-            ImpinjTagReportContentSelector {
-                enable_rf_phase_angle: Some(ImpinjEnableRfPhaseAngle {
-                    rf_phase_angle_mode: 1,
-                    ..Default::default()
-                }),
-                enable_peak_rssi: Some(ImpinjEnablePeakRssi {
-                    peak_rssi_mode: 1,
-                    ..Default::default()
-                }),
-                enable_rf_doppler_frequency: Some(ImpinjEnableRfDopplerFrequency {
-                    rf_doppler_frequency_mode: 1,
-                    ..Default::default()
-                }),
-                ..Default::default()
-            },
-        ))],
-        ..Default::default()
-    }
+pub fn full_report(trigger: RoReportTriggerType, n: u16) -> RoReportSpec {
+    RoReportSpec::new(trigger, n)
+        .with_content(TagReportContentSelector::all())
+        .with_impinj(true, true, true)
 }
 
 /// A duration stop trigger for the ROSpec.
 pub fn ro_duration(ms: u32) -> RoSpecStopTrigger {
-    RoSpecStopTrigger {
-        ro_spec_stop_trigger_type: 1,
-        duration_trigger_value: ms,
-        ..Default::default()
-    }
+    RoSpecStopTrigger::duration(ms)
 }
 
 /// A Null stop trigger for the ROSpec.
 pub fn ro_null() -> RoSpecStopTrigger {
-    RoSpecStopTrigger::default()
+    RoSpecStopTrigger::null()
 }
 
 /// A duration stop trigger for the AISpec.
 pub fn ai_duration(ms: u32) -> AiSpecStopTrigger {
-    AiSpecStopTrigger {
-        ai_spec_stop_trigger_type: 1,
-        duration_trigger: ms,
-        ..Default::default()
-    }
+    AiSpecStopTrigger::duration(ms)
 }
 
 /// A Null stop trigger for the AISpec.
 pub fn ai_null() -> AiSpecStopTrigger {
-    AiSpecStopTrigger::default()
+    AiSpecStopTrigger::null()
 }
 
 /// Collects the TagReportData of every RO_ACCESS_REPORT until `pred` says stop or `limit`

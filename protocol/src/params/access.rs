@@ -1,4 +1,5 @@
 //! AccessSpecs: tag memory operations and their results.
+use crate::enums::*;
 
 use super::*;
 use crate::codec::BitVec;
@@ -8,7 +9,7 @@ llrp_struct! {
     pub struct AccessSpec: tlv [207] "AccessSpec" {
         access_spec_id "AccessSpecID": u32,
         antenna_id "AntennaID": u16,
-        protocol_id "ProtocolID": u8,
+        protocol_id "ProtocolID": AirProtocol,
         current_state "CurrentState": bool = 1 bits; pad 7,
         ro_spec_id "ROSpecID": u32,
     } {
@@ -22,7 +23,7 @@ llrp_struct! {
 llrp_struct! {
     /// AccessSpec stop: 0 null, 1 after `operation_count_value` runs.
     pub struct AccessSpecStopTrigger: tlv [208] "AccessSpecStopTrigger" {
-        access_spec_stop_trigger_type "AccessSpecStopTriggerType": u8,
+        access_spec_stop_trigger_type "AccessSpecStopTriggerType": AccessSpecStopTriggerType,
         operation_count_value "OperationCountValue": u16,
     } {}
 }

@@ -1,4 +1,5 @@
 //! Reader configuration parameters not covered elsewhere (GET/SET_READER_CONFIG).
+use crate::enums::IdentificationType;
 
 llrp_struct! {
     /// Whether an antenna is connected, and its gain in hundredths of dBi.
@@ -12,7 +13,7 @@ llrp_struct! {
 llrp_struct! {
     /// The reader's identity: 0 MAC address, 1 EPC.
     pub struct Identification: tlv [218] "Identification" {
-        id_type "IDType": u8,
+        id_type "IDType": IdentificationType,
         reader_id "ReaderID": Vec<u8>,
     } {}
 }

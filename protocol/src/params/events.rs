@@ -1,4 +1,5 @@
 //! Reader events, their notification settings, keepalives and event holding.
+use crate::enums::*;
 
 use super::*;
 
@@ -54,7 +55,7 @@ llrp_struct! {
 llrp_struct! {
     /// An ROSpec started (0), ended (1) or was preempted (2).
     pub struct RoSpecEvent: tlv [249] "ROSpecEvent" {
-        event_type "EventType": u8,
+        event_type "EventType": RoSpecEventType,
         ro_spec_id "ROSpecID": u32,
         preempting_ro_spec_id "PreemptingROSpecID": u32,
     } {}
@@ -99,7 +100,7 @@ llrp_struct! {
 llrp_struct! {
     /// An AISpec ended (0), with optional singulation details.
     pub struct AiSpecEvent: tlv [254] "AISpecEvent" {
-        event_type "EventType": u8,
+        event_type "EventType": AiSpecEventType,
         ro_spec_id "ROSpecID": u32,
         spec_index "SpecIndex": u16,
     } {
@@ -110,7 +111,7 @@ llrp_struct! {
 llrp_struct! {
     /// An antenna was disconnected (0) or connected (1).
     pub struct AntennaEvent: tlv [255] "AntennaEvent" {
-        event_type "EventType": u8,
+        event_type "EventType": AntennaEventType,
         antenna_id "AntennaID": u16,
     } {}
 }
@@ -118,7 +119,7 @@ llrp_struct! {
 llrp_struct! {
     /// Outcome of a connection attempt: 0 success, 1..4 failures (4: another connection attempted).
     pub struct ConnectionAttemptEvent: tlv [256] "ConnectionAttemptEvent" {
-        status "Status": u16,
+        status "Status": ConnectionAttemptStatus,
     } {}
 }
 
@@ -137,7 +138,7 @@ llrp_struct! {
 llrp_struct! {
     /// Reporting on (true) or off for one event type (0 hopping .. 8 connection attempt).
     pub struct EventNotificationState: tlv [245] "EventNotificationState" {
-        event_type "EventType": u16,
+        event_type "EventType": NotificationEventType,
         notification_state "NotificationState": bool = 1 bits; pad 7,
     } {}
 }
@@ -145,7 +146,7 @@ llrp_struct! {
 llrp_struct! {
     /// Keepalive: 0 none, 1 periodic every `periodic_trigger_value` ms.
     pub struct KeepaliveSpec: tlv [220] "KeepaliveSpec" {
-        keepalive_trigger_type "KeepaliveTriggerType": u8,
+        keepalive_trigger_type "KeepaliveTriggerType": KeepaliveTriggerType,
         periodic_trigger_value "PeriodicTriggerValue": u32,
     } {}
 }

@@ -1,11 +1,12 @@
 //! What reports contain: report specs, content selectors and tag report data.
+use crate::enums::*;
 
 use super::*;
 
 llrp_struct! {
     /// When to send RO reports (0 none, 1 N tags or end of AISpec, 2 N tags or end of ROSpec, ...) and what they hold.
     pub struct RoReportSpec: tlv [237] "ROReportSpec" {
-        ro_report_trigger "ROReportTrigger": u8,
+        ro_report_trigger "ROReportTrigger": RoReportTriggerType,
         n "N": u16,
     } {
         tag_report_content_selector: one TagReportContentSelector,
@@ -44,7 +45,7 @@ llrp_struct! {
 llrp_struct! {
     /// When access results are reported: 0 with the RO report, 1 at the end of the AccessSpec.
     pub struct AccessReportSpec: tlv [239] "AccessReportSpec" {
-        access_report_trigger "AccessReportTrigger": u8,
+        access_report_trigger "AccessReportTrigger": AccessReportTriggerType,
     } {}
 }
 

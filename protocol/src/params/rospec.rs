@@ -1,4 +1,5 @@
 //! Reader operation specs: ROSpec, triggers, AISpec and the inventory configuration inside it.
+use crate::enums::*;
 
 use super::{Custom, RoReportSpec, UtcTimestamp};
 
@@ -7,7 +8,7 @@ llrp_struct! {
     pub struct RoSpec: tlv [177] "ROSpec" {
         ro_spec_id "ROSpecID": u32,
         priority "Priority": u8; in 0..=7,
-        current_state "CurrentState": u8,
+        current_state "CurrentState": RoSpecState,
     } {
         ro_boundary_spec: one RoBoundarySpec,
         specs: many1 SpecParameter,
@@ -35,7 +36,7 @@ llrp_struct! {
 llrp_struct! {
     /// ROSpec start trigger: 0 null, 1 immediate, 2 periodic, 3 GPI.
     pub struct RoSpecStartTrigger: tlv [179] "ROSpecStartTrigger" {
-        ro_spec_start_trigger_type "ROSpecStartTriggerType": u8; in 0..=3,
+        ro_spec_start_trigger_type "ROSpecStartTriggerType": RoSpecStartTriggerType; in 0..=3,
     } {
         periodic_trigger_value: opt PeriodicTriggerValue,
         gpi_trigger_value: opt GpiTriggerValue,
@@ -64,7 +65,7 @@ llrp_struct! {
 llrp_struct! {
     /// ROSpec stop trigger: 0 null, 1 duration (ms), 2 GPI with timeout.
     pub struct RoSpecStopTrigger: tlv [182] "ROSpecStopTrigger" {
-        ro_spec_stop_trigger_type "ROSpecStopTriggerType": u8; in 0..=2,
+        ro_spec_stop_trigger_type "ROSpecStopTriggerType": RoSpecStopTriggerType; in 0..=2,
         duration_trigger_value "DurationTriggerValue": u32,
     } {
         gpi_trigger_value: opt GpiTriggerValue,
@@ -85,7 +86,7 @@ llrp_struct! {
 llrp_struct! {
     /// AISpec stop trigger: 0 null, 1 duration, 2 GPI with timeout, 3 tag observation.
     pub struct AiSpecStopTrigger: tlv [184] "AISpecStopTrigger" {
-        ai_spec_stop_trigger_type "AISpecStopTriggerType": u8; in 0..=3,
+        ai_spec_stop_trigger_type "AISpecStopTriggerType": AiSpecStopTriggerType; in 0..=3,
         duration_trigger "DurationTrigger": u32,
     } {
         gpi_trigger_value: opt GpiTriggerValue,
@@ -96,7 +97,7 @@ llrp_struct! {
 llrp_struct! {
     /// Stop an AISpec after N tags, N attempts or T ms of silence (each with a timeout).
     pub struct TagObservationTrigger: tlv [185] "TagObservationTrigger" {
-        trigger_type "TriggerType": u8; pad 8,
+        trigger_type "TriggerType": TagObservationTriggerType; pad 8,
         number_of_tags "NumberOfTags": u16,
         number_of_attempts "NumberOfAttempts": u16,
         t "T": u16,
@@ -108,7 +109,7 @@ llrp_struct! {
     /// Air protocol and per-antenna settings of one inventory.
     pub struct InventoryParameterSpec: tlv [186] "InventoryParameterSpec" {
         inventory_parameter_spec_id "InventoryParameterSpecID": u16,
-        protocol_id "ProtocolID": u8,
+        protocol_id "ProtocolID": AirProtocol,
     } {
         antenna_configuration: many AntennaConfiguration,
         custom: many Custom,

@@ -5,7 +5,7 @@ use crate::error::StatusCode;
 llrp_struct! {
     /// Outcome of a request: a status code, a description and optional detail.
     pub struct LlrpStatus: tlv [287] "LLRPStatus" {
-        status_code "StatusCode": u16,
+        status_code "StatusCode": StatusCode,
         error_description "ErrorDescription": String,
     } {
         field_error: opt FieldError,
@@ -17,7 +17,7 @@ llrp_struct! {
     /// Which field of a message or parameter was in error, and why.
     pub struct FieldError: tlv [288] "FieldError" {
         field_num "FieldNum": u16,
-        error_code "ErrorCode": u16,
+        error_code "ErrorCode": StatusCode,
     } {}
 }
 
@@ -25,7 +25,7 @@ llrp_struct! {
     /// Which parameter was in error, and why; nests down to the innermost one.
     pub struct ParameterError: tlv [289] "ParameterError" {
         parameter_type "ParameterType": u16,
-        error_code "ErrorCode": u16,
+        error_code "ErrorCode": StatusCode,
     } {
         field_error: opt FieldError,
         parameter_error: opt Box<ParameterError>,
@@ -36,7 +36,7 @@ impl LlrpStatus {
     /// A status with this code and description and no detail.
     pub fn new(code: StatusCode, description: impl Into<String>) -> Self {
         LlrpStatus {
-            status_code: code.code(),
+            status_code: code,
             error_description: description.into(),
             ..Default::default()
         }
@@ -47,14 +47,14 @@ impl LlrpStatus {
         Self::new(StatusCode::M_Success, "")
     }
 
-    /// The status code, if it is a defined one.
+    /// The status code.
     pub fn code(&self) -> StatusCode {
-        StatusCode::from_code(self.status_code).unwrap_or(StatusCode::R_DeviceError)
+        self.status_code
     }
 
     /// True for M_Success.
     pub fn is_success(&self) -> bool {
-        self.status_code == 0
+        self.status_code == StatusCode::M_Success
     }
 }
 
@@ -63,7 +63,7 @@ impl ParameterError {
     pub fn new(ty: u16, code: StatusCode) -> Self {
         ParameterError {
             parameter_type: ty,
-            error_code: code.code(),
+            error_code: code,
             ..Default::default()
         }
     }
