@@ -405,6 +405,21 @@ async fn triggers_events_and_get_report() {
     );
     let (early, _) = collect_reports(&mut c, Duration::from_millis(500), |_| false).await;
     assert!(early.is_empty(), "no report before GET_REPORT");
+    // The reader is alive and inventorying: it answers, and nothing came before its answer.
+    let r = c.request(GetRospecs::default(), T).await.expect("answer");
+    let MessageBody::GetRospecsResponse(list) = r.body else {
+        panic!("{r:?}")
+    };
+    assert!(list
+        .ro_specs
+        .iter()
+        .any(|s| s.current_state == RoSpecState::Active));
+    assert!(
+        c.drain_pending()
+            .iter()
+            .all(|m| !matches!(m.body, MessageBody::RoAccessReport(_))),
+        "no report before GET_REPORT"
+    );
     c.send(GetReport::default()).await.expect("send");
     let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
     assert!(!tags.is_empty());

@@ -3,8 +3,6 @@
 
 mod common;
 
-use std::time::Duration;
-
 use common::*;
 use llrp::message::*;
 use llrp::params::*;
@@ -23,7 +21,10 @@ async fn second_client_is_refused_and_first_is_told() {
         Some(ConnectionAttemptStatus::FailedClientInitiatedConnectionExists),
         "{m:?}"
     );
-    assert!(second.recv(T).await.is_err(), "refused client is closed");
+    second
+        .until_closed(T)
+        .await
+        .expect("the refused client is closed");
     let told = first.recv(T).await.expect("notice");
     assert_eq!(
         connection_status(&told),
@@ -34,8 +35,10 @@ async fn second_client_is_refused_and_first_is_told() {
     let code = request_status(&mut first, GetReaderCapabilities::default()).await;
     assert_eq!(code, StatusCode::M_Success);
     // Once it leaves, a new client is accepted.
-    first.close().await.expect("close");
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    first
+        .close(T)
+        .await
+        .expect("the reader closes its side too");
     let _third = connect(&sim).await;
     sim.shutdown().await;
 }
@@ -318,17 +321,23 @@ async fn rospec_lifecycle_and_its_errors() {
         StatusCode::M_Success
     );
     // Immediate start: the spec becomes Active without START_ROSPEC.
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    let r = c.request(GetRospecs::default(), T).await.expect("list");
-    let MessageBody::GetRospecsResponse(list) = r.body else {
-        panic!("{r:?}")
-    };
-    assert_eq!(list.ro_specs.len(), 1);
-    assert_eq!(
-        list.ro_specs[0].current_state,
-        RoSpecState::Active,
-        "active"
-    );
+    // (The reader runs before it answers a request, so the spec is Active by the next one;
+    // ask until it is, within the deadline.)
+    let deadline = tokio::time::Instant::now() + T;
+    loop {
+        let r = c.request(GetRospecs::default(), T).await.expect("list");
+        let MessageBody::GetRospecsResponse(list) = r.body else {
+            panic!("{r:?}")
+        };
+        assert_eq!(list.ro_specs.len(), 1);
+        if list.ro_specs[0].current_state == RoSpecState::Active {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the Immediate spec never became Active"
+        );
+    }
     assert_eq!(
         request_status(
             &mut c,
@@ -500,10 +509,9 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
         .expect("send");
     let r = c.recv(T).await.expect("answer");
     assert_eq!(r.name(), "ERROR_MESSAGE");
-    assert!(
-        c.recv(T).await.is_err(),
-        "closed after an unrecoverable frame"
-    );
+    c.until_closed(T)
+        .await
+        .expect("closed after an unrecoverable frame");
     // The simulator itself is fine.
     let _again = connect(&sim).await;
     sim.shutdown().await;
@@ -543,17 +551,9 @@ async fn keepalives_flow_and_a_silent_client_is_dropped() {
         .await
         .expect("connection close event");
     assert_eq!(bye.name(), "READER_EVENT_NOTIFICATION");
-    let mut closed = false;
-    for _ in 0..10 {
-        match c.recv(Duration::from_secs(2)).await {
-            Ok(_) => continue,
-            Err(_) => {
-                closed = true;
-                break;
-            }
-        }
-    }
-    assert!(closed);
+    c.until_closed(T)
+        .await
+        .expect("the reader closes after its ConnectionCloseEvent");
     sim.shutdown().await;
 }
 
@@ -566,7 +566,9 @@ async fn close_connection_is_answered_then_closed() {
         .await
         .expect("answer");
     assert_eq!(status(&r).status_code, StatusCode::M_Success);
-    assert!(c.recv(T).await.is_err());
+    c.until_closed(T)
+        .await
+        .expect("the reader closes after its response");
     sim.shutdown().await;
 }
 

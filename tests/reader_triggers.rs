@@ -1,30 +1,32 @@
-//! Start/stop triggers, priorities and ground truth, with simulated time running at `max`.
+//! Start/stop triggers, priorities, report triggers, held reports and keepalives, driven in
+//! process with a virtual clock (tests/common/virtual_reader.rs): exact simulated times, no
+//! sockets, no sleeps.
 
 mod common;
 
-use std::time::Duration;
-
+use common::virtual_reader::{VirtualReader, UTC_EPOCH_US};
 use common::*;
 use llrp::message::*;
 use llrp::params::*;
 use llrp::Message;
-use llrp_gateway::net::client::Client;
-use llrp_gateway::net::clock::Speed;
-use llrp_gateway::sim::{self, SimOptions};
 
-async fn enable_rospec_events(c: &mut Client) {
+/// Turns ROSpecEvent (and AISpecEvent) notifications on.
+fn enable_events(v: &mut VirtualReader, types: &[NotificationEventType]) {
     let set = SetReaderConfig {
         reader_event_notification_spec: Some(ReaderEventNotificationSpec {
-            event_notification_state: vec![EventNotificationState {
-                event_type: NotificationEventType::RoSpecEvent,
-                notification_state: true,
-                ..Default::default()
-            }],
+            event_notification_state: types
+                .iter()
+                .map(|&t| EventNotificationState {
+                    event_type: t,
+                    notification_state: true,
+                    ..Default::default()
+                })
+                .collect(),
             ..Default::default()
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(c, set).await, StatusCode::M_Success);
+    assert_eq!(v.status(set), StatusCode::M_Success);
 }
 
 /// (event type, ROSpec, preempting ROSpec, UTC µs) of a ROSpecEvent.
@@ -45,298 +47,31 @@ fn rospec_event(m: &Message) -> Option<(RoSpecEventType, u32, u32, u64)> {
     ))
 }
 
-/// ENABLE_ROSPEC `id`, which must succeed.
-async fn enable(c: &mut Client, id: u32) {
+/// ADD_ROSPEC then ENABLE_ROSPEC, both of which must succeed.
+fn add_and_enable(v: &mut VirtualReader, spec: RoSpec) {
+    let id = spec.ro_spec_id;
+    let add = AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(v.status(add), StatusCode::M_Success);
     let enable = EnableRospec {
         ro_spec_id: id,
         ..Default::default()
     };
-    assert_eq!(request_status(c, enable).await, StatusCode::M_Success);
+    assert_eq!(v.status(enable), StatusCode::M_Success);
 }
 
-async fn add(c: &mut Client, spec: RoSpec) {
-    let code = request_status(
-        c,
-        AddRospec {
-            ro_spec: spec,
-            ..Default::default()
-        },
-    )
-    .await;
-    assert_eq!(code, StatusCode::M_Success);
-}
-
-#[tokio::test]
-async fn periodic_start_with_duration_stop() {
-    let sim = start(&s1(), Speed::Max).await;
-    let mut c = connect(&sim).await;
-    enable_rospec_events(&mut c).await;
-    let mut spec = rospec(
-        5,
-        vec![1],
-        ro_duration(200),
-        ai_null(),
-        full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0),
-    );
-    spec.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger {
-        ro_spec_start_trigger_type: RoSpecStartTriggerType::Periodic,
-        periodic_trigger_value: Some(PeriodicTriggerValue {
-            offset: 500,
-            period: 1000,
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    add(&mut c, spec).await;
-    enable(&mut c, 5).await;
-    let mut starts = Vec::new();
-    let mut ends = Vec::new();
-    while starts.len() < 4 {
-        let m = c.recv(T).await.expect("events keep coming");
-        if let Some((ty, id, _, t)) = rospec_event(&m) {
-            assert_eq!(id, 5);
-            match ty {
-                RoSpecEventType::StartOfRoSpec => starts.push(t),
-                RoSpecEventType::EndOfRoSpec => ends.push(t),
-                _ => panic!("unexpected event {ty:?}"),
-            }
-        }
-    }
-    for w in starts.windows(2) {
-        assert_eq!(w[1] - w[0], 1_000_000, "one start per 1000 ms period");
-    }
-    for (s, e) in starts.iter().zip(&ends) {
-        assert_eq!(e - s, 200_000, "the duration trigger stops it after 200 ms");
-    }
-    sim.shutdown().await;
-}
-
-#[tokio::test]
-async fn higher_priority_preempts_and_immediate_resumes() {
-    let sim = start(&s1(), Speed::Max).await;
-    let mut c = connect(&sim).await;
-    enable_rospec_events(&mut c).await;
-    let mut low = rospec(
-        1,
-        vec![1],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::None, 0),
-    );
-    low.priority = 3;
-    add(&mut c, low).await;
-    let mut high = rospec(
-        2,
-        vec![1],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::None, 0),
-    );
-    high.priority = 1;
-    high.ro_boundary_spec.ro_spec_start_trigger = RoSpecStartTrigger::default();
-    add(&mut c, high).await;
-    for id in [1, 2] {
-        enable(&mut c, id).await;
-    }
-    c.wait_for(
-        |m| rospec_event(m).is_some_and(|e| e.0 == RoSpecEventType::StartOfRoSpec && e.1 == 1),
-        T,
-    )
-    .await
-    .expect("low-priority spec starts");
-    let start2 = StartRospec {
-        ro_spec_id: 2,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, start2).await, StatusCode::M_Success);
-    c.wait_for(
-        |m| rospec_event(m).is_some_and(|e| e == (RoSpecEventType::PreemptionOfRoSpec, 1, 2, e.3)),
-        T,
-    )
-    .await
-    .expect("spec 1 preempted by spec 2");
-    let r = c.request(GetRospecs::default(), T).await.expect("list");
+/// The states GET_ROSPECS reports, by ROSpec ID.
+fn states(v: &mut VirtualReader) -> Vec<(u32, RoSpecState)> {
+    let r = v.request(GetRospecs::default());
     let MessageBody::GetRospecsResponse(list) = r.body else {
         panic!("{r:?}")
     };
-    let state = |id: u32| {
-        list.ro_specs
-            .iter()
-            .find(|s| s.ro_spec_id == id)
-            .map(|s| s.current_state)
-    };
-    assert_eq!(
-        (state(1), state(2)),
-        (Some(RoSpecState::Inactive), Some(RoSpecState::Active))
-    );
-    // A lower priority cannot preempt: starting spec 1 by hand leaves it waiting.
-    let start1 = StartRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, start1).await, StatusCode::M_Success);
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    let r = c.request(GetRospecs::default(), T).await.expect("list");
-    let MessageBody::GetRospecsResponse(list) = r.body else {
-        panic!("{r:?}")
-    };
-    let states: Vec<(u32, RoSpecState)> = list
-        .ro_specs
+    list.ro_specs
         .iter()
         .map(|s| (s.ro_spec_id, s.current_state))
-        .collect();
-    assert_eq!(
-        states,
-        vec![(1, RoSpecState::Inactive), (2, RoSpecState::Active)]
-    );
-    let stop2 = StopRospec {
-        ro_spec_id: 2,
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, stop2).await, StatusCode::M_Success);
-    c.wait_for(
-        |m| rospec_event(m).is_some_and(|e| e.0 == RoSpecEventType::StartOfRoSpec && e.1 == 1),
-        T,
-    )
-    .await
-    .expect("the Immediate spec resumes once the preempting one stops");
-    sim.shutdown().await;
-}
-
-#[tokio::test]
-async fn ground_truth_is_written_as_jsonl() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("truth.jsonl");
-    let scenario = s1();
-    let opts = SimOptions {
-        speed: Speed::Max,
-        truth: Some(path.clone()),
-        ..Default::default()
-    };
-    let sim = sim::start(&scenario, &opts).await.expect("starts");
-    let mut c = connect(&sim).await;
-    add(
-        &mut c,
-        rospec(
-            1,
-            vec![0],
-            ro_null(),
-            ai_null(),
-            full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 100),
-        ),
-    )
-    .await;
-    enable(&mut c, 1).await;
-    let _ = collect_reports(&mut c, Duration::from_secs(3), |t| t.len() >= 200).await;
-    c.close().await.expect("close");
-    sim.shutdown().await;
-    let text = std::fs::read_to_string(&path).expect("truth written");
-    let lines: Vec<serde_json::Value> = text
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json line"))
-        .collect();
-    assert!(lines.len() >= 10, "{} lines", lines.len());
-    let first = &lines[0];
-    assert_eq!(first["t_us"], 0);
-    let tags = first["tags"].as_array().expect("tags");
-    assert_eq!(tags.len(), scenario.tags.len());
-    for (t, spec) in tags.iter().zip(&scenario.tags) {
-        assert_eq!(t["epc"].as_str(), Some(spec.epc.to_lowercase().as_str()));
-        let p: Vec<f64> = serde_json::from_value(t["position"].clone()).expect("position");
-        assert_eq!(p, spec.position.to_vec());
-    }
-    for w in lines.windows(2) {
-        let dt = w[1]["t_us"].as_u64().expect("t") - w[0]["t_us"].as_u64().expect("t");
-        assert_eq!(dt, 100_000);
-    }
-    // S1's antenna rides a robot: its true pose changes over time.
-    let pos = |l: &serde_json::Value| l["antennas"][0]["pose"]["position"].clone();
-    assert_ne!(pos(&lines[0]), pos(lines.last().expect("lines")));
-}
-
-#[tokio::test]
-async fn reports_are_held_after_a_reconnect_until_enabled() {
-    let sim = start(&s1(), Speed::Max).await;
-    let mut c = connect(&sim).await;
-    let hold = SetReaderConfig {
-        events_and_reports: Some(EventsAndReports {
-            hold_events_and_reports_upon_reconnect: true,
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    assert_eq!(request_status(&mut c, hold).await, StatusCode::M_Success);
-    add(
-        &mut c,
-        rospec(
-            1,
-            vec![0],
-            ro_null(),
-            ai_null(),
-            full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1),
-        ),
-    )
-    .await;
-    enable(&mut c, 1).await;
-    let (first, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
-    assert!(!first.is_empty(), "reports flow on the first connection");
-    c.close().await.expect("close");
-    tokio::time::sleep(Duration::from_millis(200)).await;
-    // Reconnect: the ROSpec still runs, but reports wait for ENABLE_EVENTS_AND_REPORTS.
-    let mut c = connect(&sim).await;
-    let (held, _) = collect_reports(&mut c, Duration::from_millis(500), |_| false).await;
-    assert!(held.is_empty(), "{} reports leaked while held", held.len());
-    c.send(EnableEventsAndReports::default())
-        .await
-        .expect("send");
-    let (released, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
-    assert!(!released.is_empty(), "held reports arrive once enabled");
-    sim.shutdown().await;
-}
-
-#[tokio::test]
-async fn every_reader_of_a_scenario_listens() {
-    let mut scenario = s1();
-    let mut second = scenario.readers[0].clone();
-    second.name = "reader-2".into();
-    scenario.readers.push(second);
-    let sim = start(&scenario, Speed::Factor(1.0)).await;
-    assert_eq!(sim.addrs.len(), 2);
-    assert_ne!(sim.addrs[0], sim.addrs[1]);
-    for addr in &sim.addrs {
-        let mut c = Client::connect(*addr).await.expect("connects");
-        let m = c.recv(T).await.expect("greeting");
-        assert_eq!(
-            connection_status(&m),
-            Some(ConnectionAttemptStatus::Success)
-        );
-    }
-    sim.shutdown().await;
-}
-
-/// The TagReportData of each RO_ACCESS_REPORT received within `limit`, one Vec per report.
-async fn reports_by_message(
-    c: &mut Client,
-    limit: Duration,
-    want: usize,
-) -> Vec<Vec<TagReportData>> {
-    let deadline = tokio::time::Instant::now() + limit;
-    let mut out = Vec::new();
-    while out.len() < want {
-        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-        if left.is_zero() {
-            break;
-        }
-        match c.recv(left).await {
-            Ok(Message {
-                body: MessageBody::RoAccessReport(r),
-                ..
-            }) => out.push(r.tag_report_data),
-            Ok(_) => {}
-            Err(_) => break,
-        }
-    }
-    out
+        .collect()
 }
 
 fn last_seen(report: &[TagReportData]) -> u64 {
@@ -347,16 +82,171 @@ fn last_seen(report: &[TagReportData]) -> u64 {
         .expect("reports carry LastSeenTimestampUTC")
 }
 
-#[tokio::test]
-async fn an_aispec_without_end_reports_at_the_reader_interval() {
+#[test]
+fn periodic_start_with_duration_stop() {
+    let mut v = VirtualReader::new(&s1());
+    enable_events(&mut v, &[NotificationEventType::RoSpecEvent]);
+    let spec = rospec(
+        5,
+        vec![1],
+        ro_duration(200),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0),
+    )
+    .with_start(RoSpecStartTrigger::periodic(500, 1000));
+    add_and_enable(&mut v, spec);
+    v.run_for(4_000_000);
+    let mut starts = Vec::new();
+    let mut ends = Vec::new();
+    for m in v.take() {
+        if let Some((ty, id, _, t)) = rospec_event(&m) {
+            assert_eq!(id, 5);
+            match ty {
+                RoSpecEventType::StartOfRoSpec => starts.push(t - UTC_EPOCH_US),
+                RoSpecEventType::EndOfRoSpec => ends.push(t - UTC_EPOCH_US),
+                _ => panic!("unexpected event {ty:?}"),
+            }
+        }
+    }
+    // Enabled at 0: starts at the 500 ms offset and every 1000 ms period after it, each
+    // stopped by its 200 ms duration.
+    assert_eq!(starts, [500_000, 1_500_000, 2_500_000, 3_500_000]);
+    assert_eq!(ends, [700_000, 1_700_000, 2_700_000, 3_700_000]);
+}
+
+#[test]
+fn higher_priority_preempts_and_immediate_resumes() {
+    let mut v = VirtualReader::new(&s1());
+    enable_events(&mut v, &[NotificationEventType::RoSpecEvent]);
+    let low = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    )
+    .with_priority(3);
+    add_and_enable(&mut v, low);
+    let high = rospec(
+        2,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    )
+    .with_priority(1)
+    .with_start(RoSpecStartTrigger::null());
+    add_and_enable(&mut v, high);
+    let started = |id| {
+        move |m: &Message| {
+            rospec_event(m).is_some_and(|e| e.0 == RoSpecEventType::StartOfRoSpec && e.1 == id)
+        }
+    };
+    v.run_until(1_000_000, started(1))
+        .expect("the low-priority Immediate spec starts");
+    let start2 = StartRospec {
+        ro_spec_id: 2,
+        ..Default::default()
+    };
+    assert_eq!(v.status(start2), StatusCode::M_Success);
+    v.run_until(1_000_000, |m| {
+        rospec_event(m)
+            .is_some_and(|e| (e.0, e.1, e.2) == (RoSpecEventType::PreemptionOfRoSpec, 1, 2))
+    })
+    .expect("spec 1 preempted by spec 2");
+    assert_eq!(
+        states(&mut v),
+        [(1, RoSpecState::Inactive), (2, RoSpecState::Active)]
+    );
+    // A lower priority cannot preempt: starting spec 1 by hand leaves it waiting.
+    let start1 = StartRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(start1), StatusCode::M_Success);
+    v.run_for(500_000);
+    assert_eq!(
+        states(&mut v),
+        [(1, RoSpecState::Inactive), (2, RoSpecState::Active)]
+    );
+    let stop2 = StopRospec {
+        ro_spec_id: 2,
+        ..Default::default()
+    };
+    assert_eq!(v.status(stop2), StatusCode::M_Success);
+    v.run_until(1_000_000, started(1))
+        .expect("the Immediate spec resumes once the preempting one stops");
+}
+
+/// What a reader sends from a reconnect on, with or without HoldEventsAndReportsUponReconnect:
+/// the reports of one second of inventory on the first connection, then those of the two
+/// seconds after a reconnect, then those sent after ENABLE_EVENTS_AND_REPORTS.
+fn reconnect_run(hold: bool) -> (Vec<Message>, Vec<Message>, Vec<Message>) {
+    let reports = |ms: Vec<Message>| -> Vec<Message> {
+        ms.into_iter()
+            .filter(|m| matches!(m.body, MessageBody::RoAccessReport(_)))
+            .collect()
+    };
+    let mut v = VirtualReader::new(&s1());
+    let set = SetReaderConfig {
+        events_and_reports: Some(EventsAndReports {
+            hold_events_and_reports_upon_reconnect: hold,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(v.status(set), StatusCode::M_Success);
+    add_and_enable(
+        &mut v,
+        rospec(
+            1,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1),
+        ),
+    );
+    v.run_for(1_000_000);
+    let first = reports(v.take());
+    v.disconnect();
+    v.connect();
+    v.run_for(2_000_000);
+    let during = reports(v.take());
+    v.send(EnableEventsAndReports::default());
+    let released = reports(v.take());
+    (first, during, released)
+}
+
+#[test]
+fn reports_are_held_after_a_reconnect_and_released_as_they_were() {
+    let (first, held_during, released) = reconnect_run(true);
+    assert!(!first.is_empty(), "reports flow on the first connection");
+    assert!(
+        held_during.is_empty(),
+        "{} reports leaked while held",
+        held_during.len()
+    );
+    // The same run without holding sends, in those two seconds, exactly what the held run
+    // releases (same messages, same IDs, same order): nothing lost, nothing made up.
+    let (first_unheld, sent_unheld, after_unheld) = reconnect_run(false);
+    assert_eq!(first, first_unheld);
+    assert!(after_unheld.is_empty());
+    assert!(
+        !sent_unheld.is_empty(),
+        "the ROSpec inventories after a reconnect"
+    );
+    assert_eq!(released, sent_unheld);
+}
+
+#[test]
+fn an_aispec_without_end_reports_at_the_reader_interval() {
     // sllurp's default ROSpec: Null stop triggers, ROReportTrigger 1 with N = 0. Impinj
     // readers report such an AISpec while it runs; the scenario's reader says how often.
     let mut scenario = s1();
     scenario.readers[0].report_interval_ms = 500;
-    let sim = start(&scenario, Speed::Max).await;
-    let mut c = connect(&sim).await;
-    add(
-        &mut c,
+    let mut v = VirtualReader::new(&scenario);
+    add_and_enable(
+        &mut v,
         rospec(
             1,
             vec![0],
@@ -364,14 +254,13 @@ async fn an_aispec_without_end_reports_at_the_reader_interval() {
             ai_null(),
             full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
         ),
-    )
-    .await;
-    enable(&mut c, 1).await;
-    let reports = reports_by_message(&mut c, T, 6).await;
+    );
+    v.run_for(3_250_000);
+    let reports = v.take_reports();
     assert_eq!(
         reports.len(),
         6,
-        "reports keep coming while the AISpec runs"
+        "one report per 500 ms while the AISpec runs"
     );
     for r in &reports {
         let mut epcs: Vec<_> = r.iter().map(|t| format!("{:?}", t.epc)).collect();
@@ -384,25 +273,24 @@ async fn an_aispec_without_end_reports_at_the_reader_interval() {
             "reads aggregate between reports"
         );
     }
-    // Consecutive reports cover consecutive 500 ms windows of simulated time.
-    for w in reports.windows(2) {
-        let gap = last_seen(&w[1]) - last_seen(&w[0]);
+    // Each report holds the reads of its own 500 ms window of simulated time.
+    for (k, r) in reports.iter().enumerate() {
+        let end = UTC_EPOCH_US + 500_000 * (k as u64 + 1);
         assert!(
-            (250_000..=750_000).contains(&gap),
-            "last reads {gap} µs apart, expected about 500 ms"
+            last_seen(r) < end && last_seen(r) >= end - 500_000,
+            "report {k}: last read at {} µs",
+            last_seen(r) - UTC_EPOCH_US
         );
     }
-    sim.shutdown().await;
 }
 
-#[tokio::test]
-async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
+#[test]
+fn report_interval_zero_holds_reads_until_the_rospec_ends() {
     let mut scenario = s1();
     scenario.readers[0].report_interval_ms = 0;
-    let sim = start(&scenario, Speed::Factor(20.0)).await;
-    let mut c = connect(&sim).await;
-    add(
-        &mut c,
+    let mut v = VirtualReader::new(&scenario);
+    add_and_enable(
+        &mut v,
         rospec(
             1,
             vec![0],
@@ -410,19 +298,20 @@ async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
             ai_null(),
             full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
         ),
-    )
-    .await;
-    enable(&mut c, 1).await;
-    // 0.6 s at 20× is 12 s of simulated inventory.
-    let held = reports_by_message(&mut c, Duration::from_millis(600), 1).await;
-    assert!(held.is_empty(), "reads must wait for the end of the ROSpec");
-    c.send(StopRospec {
+    );
+    v.run_for(12_000_000);
+    assert!(
+        v.take_reports().is_empty(),
+        "reads wait for the end of the ROSpec"
+    );
+    // The reader is running all the while: its ROSpec is Active.
+    assert_eq!(states(&mut v), [(1, RoSpecState::Active)]);
+    let stop = StopRospec {
         ro_spec_id: 1,
         ..Default::default()
-    })
-    .await
-    .expect("send");
-    let end = reports_by_message(&mut c, T, 1).await;
+    };
+    assert_eq!(v.status(stop), StatusCode::M_Success);
+    let end = v.take_reports();
     assert_eq!(end.len(), 1, "stopping the ROSpec reports what it held");
     assert!(
         end[0]
@@ -432,17 +321,15 @@ async fn report_interval_zero_holds_reads_until_the_rospec_ends() {
             > 100,
         "the held report aggregates seconds of reads"
     );
-    sim.shutdown().await;
 }
 
-#[tokio::test]
-async fn a_rospec_duration_keeps_reads_until_its_end() {
+#[test]
+fn a_rospec_duration_keeps_reads_until_its_end() {
     // The interval applies only when nothing can end the inventory: with a 3 s ROSpec the
     // reads of trigger 1, N = 0 wait for its end, as LLRP says.
-    let sim = start(&s1(), Speed::Max).await;
-    let mut c = connect(&sim).await;
-    add(
-        &mut c,
+    let mut v = VirtualReader::new(&s1());
+    add_and_enable(
+        &mut v,
         rospec(
             1,
             vec![0],
@@ -450,10 +337,14 @@ async fn a_rospec_duration_keeps_reads_until_its_end() {
             ai_null(),
             full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
         ),
-    )
-    .await;
-    enable(&mut c, 1).await;
-    let reports = reports_by_message(&mut c, T, 1).await;
+    );
+    v.run_for(2_900_000);
+    assert!(
+        v.take_reports().is_empty(),
+        "nothing before the ROSpec ends"
+    );
+    v.run_for(200_000);
+    let reports = v.take_reports();
     assert_eq!(reports.len(), 1, "one report when the ROSpec ends");
     let first = reports[0]
         .iter()
@@ -465,27 +356,24 @@ async fn a_rospec_duration_keeps_reads_until_its_end() {
         span > 2_000_000,
         "the report spans the whole run, not one interval ({span} µs)"
     );
-    sim.shutdown().await;
 }
 
 /// An ROSpec without its own ROReportSpec reports as the reader's default one (set with
 /// SET_READER_CONFIG) says: its trigger and its content selector.
-#[tokio::test]
-async fn a_rospec_without_a_report_spec_follows_the_reader_default() {
-    let sim = start(&s1(), Speed::Max).await;
-    let mut c = connect(&sim).await;
-    let default = RoReportSpec {
-        tag_report_content_selector: TagReportContentSelector {
+#[test]
+fn a_rospec_without_a_report_spec_follows_the_reader_default() {
+    let mut v = VirtualReader::new(&s1());
+    let default = RoReportSpec::new(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1).with_content(
+        TagReportContentSelector {
             enable_antenna_id: true,
             ..Default::default()
         },
-        ..full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 1)
-    };
+    );
     let set = SetReaderConfig {
         ro_report_spec: Some(default),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
+    assert_eq!(v.status(set), StatusCode::M_Success);
     let mut spec = rospec(
         1,
         vec![0],
@@ -494,10 +382,15 @@ async fn a_rospec_without_a_report_spec_follows_the_reader_default() {
         full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 100),
     );
     spec.ro_report_spec = None;
-    add(&mut c, spec).await;
-    enable(&mut c, 1).await;
-    let (tags, _) = collect_reports(&mut c, T, |t| t.len() >= 20).await;
+    add_and_enable(&mut v, spec);
+    v.run_for(2_000_000);
+    let reports = v.take_reports();
+    let tags: Vec<&TagReportData> = reports.iter().flatten().collect();
     assert!(tags.len() >= 20, "only {} tag reports", tags.len());
+    assert!(
+        reports.iter().all(|r| r.len() == 1),
+        "the default trigger's N = 1, not the ROSpec's ignored 100"
+    );
     for t in &tags {
         assert!(
             t.antenna_id.is_some(),
@@ -512,5 +405,41 @@ async fn a_rospec_without_a_report_spec_follows_the_reader_default() {
             "fields the default selector leaves out: {t:?}"
         );
     }
-    sim.shutdown().await;
+}
+
+#[test]
+fn keepalives_run_on_the_wall_clock_and_a_silent_client_is_dropped() {
+    let mut v = VirtualReader::new(&s1());
+    v.take();
+    let set = SetReaderConfig {
+        keepalive_spec: Some(KeepaliveSpec {
+            keepalive_trigger_type: KeepaliveTriggerType::Periodic,
+            periodic_trigger_value: 100,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(v.status(set), StatusCode::M_Success);
+    v.run_for(100_000);
+    let names: Vec<&str> = v.take().iter().map(|m| m.name()).collect();
+    assert_eq!(names, ["KEEPALIVE"], "one keepalive per 100 ms");
+    v.send(KeepaliveAck::default());
+    // Three more go unanswered; at the fourth period the reader says why and closes.
+    v.run_for(350_000);
+    assert!(!v.is_closed(), "three unanswered keepalives are tolerated");
+    let names: Vec<String> = v.take().iter().map(|m| m.name().to_string()).collect();
+    assert_eq!(names, ["KEEPALIVE", "KEEPALIVE", "KEEPALIVE"]);
+    v.run_for(100_000);
+    assert!(v.is_closed(), "the reader closed the connection");
+    let last = v.take();
+    match &last[..] {
+        [m] => match &m.body {
+            MessageBody::ReaderEventNotification(n) => assert!(n
+                .reader_event_notification_data
+                .connection_close_event
+                .is_some()),
+            other => panic!("expected ConnectionCloseEvent, got {}", other.name()),
+        },
+        other => panic!("expected one message, got {other:?}"),
+    }
 }

@@ -26,9 +26,14 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Runs `sllurp inventory ARGS` against `port` for `seconds`, interrupts it like Ctrl-C, and
-/// returns the tag reports it logged (one Vec per RO_ACCESS_REPORT) and its whole log.
-fn run_sllurp(port: u16, args: &[&str], seconds: f64) -> (Vec<Vec<Value>>, String) {
+/// Longest a sllurp run may take to log the reports a test waits for (a hang guard, not a
+/// measurement).
+const SLLURP_GUARD: Duration = Duration::from_secs(60);
+
+/// Runs `sllurp inventory ARGS` against `port` until it has logged `want` tag reports (lines
+/// `saw tag(s)`), interrupts it like Ctrl-C, and returns the tag reports it logged (one Vec per
+/// RO_ACCESS_REPORT) and its whole log.
+fn run_sllurp(port: u16, args: &[&str], want: usize) -> (Vec<Vec<Value>>, String) {
     let dir = tempfile::tempdir().expect("temp dir");
     let log = dir.path().join("sllurp.log");
     let mut cmd = Command::new(venv().join("bin").join("sllurp"));
@@ -43,7 +48,17 @@ fn run_sllurp(port: u16, args: &[&str], seconds: f64) -> (Vec<Vec<Value>>, Strin
         .stderr(Stdio::null())
         .spawn()
         .expect("sllurp starts");
-    std::thread::sleep(Duration::from_secs_f64(seconds));
+    let guard = Instant::now() + SLLURP_GUARD;
+    loop {
+        let logged = std::fs::read_to_string(&log).unwrap_or_default();
+        if logged.matches("saw tag(s)").count() >= want {
+            break;
+        }
+        if child.try_wait().expect("wait").is_some() || Instant::now() > guard {
+            break; // sllurp ended, or never got there: the assertions say what is missing
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
     // Ctrl-C: sllurp deletes its AccessSpecs and ROSpecs, then disconnects.
     let _ = Command::new("kill")
         .arg("-INT")
@@ -129,20 +144,20 @@ fn check_tags(s: &Scenario, reports: &[Vec<Value>], impinj: bool) -> usize {
 
 async fn with_sim(
     args: &'static [&'static str],
-    seconds: f64,
+    want: usize,
 ) -> (Scenario, Vec<Vec<Value>>, String) {
-    with_scenario(s1(), args, seconds).await
+    with_scenario(s1(), args, want).await
 }
 
 /// As [`with_sim`], on scenario `s`.
 async fn with_scenario(
     s: Scenario,
     args: &'static [&'static str],
-    seconds: f64,
+    want: usize,
 ) -> (Scenario, Vec<Vec<Value>>, String) {
     let sim = start(&s, Speed::Factor(1.0)).await;
     let port = sim.addrs[0].port();
-    let (reports, log) = tokio::task::spawn_blocking(move || run_sllurp(port, args, seconds))
+    let (reports, log) = tokio::task::spawn_blocking(move || run_sllurp(port, args, want))
         .await
         .expect("join");
     sim.shutdown().await;
@@ -152,7 +167,7 @@ async fn with_scenario(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn impinj_reports_all_antennas_every_tag() {
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-n", "1"], 4.0).await;
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-n", "1"], 3).await;
     assert!(
         log.contains("Impinj"),
         "sllurp enabled the extensions:\n{log}"
@@ -168,7 +183,7 @@ async fn impinj_reports_all_antennas_every_tag() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn plain_reports_one_antenna_every_tag() {
-    let (s, reports, log) = with_sim(&["-a", "1", "-n", "1"], 4.0).await;
+    let (s, reports, log) = with_sim(&["-a", "1", "-n", "1"], 3).await;
     assert!(reports.len() >= 2, "got {} reports:\n{log}", reports.len());
     assert!(check_tags(&s, &reports, false) >= 2);
 }
@@ -177,7 +192,7 @@ async fn plain_reports_one_antenna_every_tag() {
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn default_reporting_with_a_duration() {
     // Report trigger "end of AISpec" with a 2 s AISpec: one aggregated report per run.
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-t", "2"], 4.0).await;
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-t", "2"], 1).await;
     assert!(
         !reports.is_empty(),
         "no report at the end of the AISpec:\n{log}"
@@ -197,7 +212,7 @@ async fn default_reporting_with_a_duration() {
 async fn default_reporting_one_antenna_short_duration() {
     // Without -n the reader reports at the end of the AISpec (N = 0): with -t 1 that is one
     // report after a second.
-    let (s, reports, log) = with_sim(&["-a", "1", "-t", "1"], 3.0).await;
+    let (s, reports, log) = with_sim(&["-a", "1", "-t", "1"], 1).await;
     assert!(
         !reports.is_empty(),
         "no report at the end of the AISpec:\n{log}"
@@ -211,7 +226,7 @@ async fn the_readme_command_shows_live_reads() {
     // `sllurp inventory --impinj-reports -a 0 HOST` with nothing else: Null stop triggers and
     // ROReportTrigger 1 with N = 0. Like an Impinj reader, the simulator reports the running
     // AISpec every second (the scenario's report_interval_ms), aggregated per tag.
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0"], 3.6).await;
+    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0"], 2).await;
     assert!(
         reports.len() >= 2,
         "a report every second while inventory runs (got {}):\n{log}",
@@ -233,7 +248,7 @@ async fn sllurp_sees_rssi_fall_40_db_per_decade() {
     let (s, reports, log) = with_scenario(
         line_scenario(&[1.0, 2.0, 4.0]),
         &["--impinj-reports", "-a", "1", "-n", "1"],
-        3.0,
+        60,
     )
     .await;
     assert!(check_tags(&s, &reports, true) >= 3, "{log}");

@@ -162,10 +162,30 @@ impl Client {
         self.pending.drain(..).collect()
     }
 
-    /// Closes the connection.
-    pub async fn close(mut self) -> Result<(), ClientError> {
+    /// Closes the sending side and waits (at most `timeout`) for the peer to close too, so
+    /// that the peer has seen the close when this returns; messages still arriving meanwhile
+    /// are dropped.
+    pub async fn close(mut self, timeout: Duration) -> Result<(), ClientError> {
         self.conn.shutdown().await?;
-        Ok(())
+        self.until_closed(timeout).await
+    }
+
+    /// Waits (at most `timeout`) until the peer closes the connection, by end-of-stream or a
+    /// reset; messages arriving meanwhile are dropped. `Err(Timeout)` if it stays open.
+    pub async fn until_closed(&mut self, timeout: Duration) -> Result<(), ClientError> {
+        self.pending.clear();
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            match self.read_frame(left, "the peer to close").await {
+                Ok(_) => continue,
+                Err(ClientError::Closed) => return Ok(()),
+                Err(ClientError::Io(e)) if e.kind() == io::ErrorKind::ConnectionReset => {
+                    return Ok(())
+                }
+                Err(e) => return Err(e),
+            }
+        }
     }
 }
 

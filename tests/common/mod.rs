@@ -1,6 +1,8 @@
 //! Shared helpers for the loopback tests: start the simulator, build requests.
 #![allow(dead_code)]
 
+pub mod virtual_reader;
+
 use std::time::Duration;
 
 pub use llrp::enums::*;

@@ -1,0 +1,202 @@
+//! A simulated reader's session driven in process with a virtual clock: requests go in as
+//! frames, time passes only when a test says so (stepping from deadline to deadline, as the
+//! socket layer sleeps), and what the session sends is decoded into an inbox. Deterministic
+//! and fast: no sockets, no sleeps.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use llrp::message::MessageBody;
+use llrp::params::TagReportData;
+use llrp::{Deframer, Inbound, Message, StatusCode};
+use llrp_gateway::physics::Model;
+use llrp_gateway::reader::session::{Accepted, ClientId, Now, Session};
+use llrp_gateway::reader::{Reader, ReaderProfile};
+use llrp_gateway::scenario::Scenario;
+
+/// UTC of simulated time 0 in every virtual reader (so two runs give the same bytes).
+pub const UTC_EPOCH_US: u64 = 1_700_000_000_000_000;
+
+/// Reader 0 of a scenario, a client connected to it, and a virtual clock.
+pub struct VirtualReader {
+    session: Session,
+    now: Now,
+    client: Option<ClientId>,
+    inbox: VecDeque<Message>,
+    closed: bool,
+    next_id: u32,
+}
+
+impl VirtualReader {
+    /// Reader 0 of `scenario` at simulated time 0, with a client connected (its greeting is
+    /// in the inbox).
+    pub fn new(scenario: &Scenario) -> Self {
+        let model = Arc::new(Model::new(scenario, 0));
+        let profile = ReaderProfile::from_scenario(scenario, 0, &model);
+        let mut v = VirtualReader {
+            session: Session::new(Reader::new(profile, model, UTC_EPOCH_US)),
+            now: Now::default(),
+            client: None,
+            inbox: VecDeque::new(),
+            closed: false,
+            next_id: 1,
+        };
+        v.connect();
+        v
+    }
+
+    /// The session behind it.
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+
+    /// Virtual simulated time, µs.
+    pub fn now_us(&self) -> u64 {
+        self.now.sim_us
+    }
+
+    /// A client connects (after a disconnect).
+    pub fn connect(&mut self) {
+        match self.session.connect(self.now) {
+            Accepted::Client(id) => self.client = Some(id),
+            Accepted::Refused(_) => panic!("a client is already connected"),
+        }
+        self.closed = false;
+        self.collect();
+    }
+
+    /// The client goes away.
+    pub fn disconnect(&mut self) {
+        if let Some(id) = self.client.take() {
+            self.session.disconnect(id);
+        }
+        self.inbox.clear();
+    }
+
+    /// Whether the reader has closed the connection.
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
+    /// Sends a request now; returns its message ID.
+    pub fn send(&mut self, body: impl Into<MessageBody>) -> u32 {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.send_bytes(&Message::new(id, body).to_bytes());
+        id
+    }
+
+    /// Sends raw bytes now (whole frames, or the start of a broken one).
+    pub fn send_bytes(&mut self, bytes: &[u8]) {
+        let client = self.client.expect("a connected client");
+        let mut d = Deframer::default();
+        d.buffer_mut().extend_from_slice(bytes);
+        while let Some(inbound) = d.next_frame() {
+            let unsynced = matches!(inbound, Inbound::Unsynced(_));
+            self.session.receive(client, inbound, self.now);
+            self.collect();
+            if unsynced {
+                break;
+            }
+        }
+    }
+
+    /// Sends a request and returns its answer (the reader answers at once; no time passes).
+    /// Other messages stay in the inbox.
+    pub fn request(&mut self, body: impl Into<MessageBody>) -> Message {
+        let id = self.send(body);
+        let k = self
+            .inbox
+            .iter()
+            .position(|m| m.id == id && m.body.status().is_some())
+            .expect("the reader answers a request at once");
+        self.inbox.remove(k).expect("index from position")
+    }
+
+    /// Sends a request and returns its answer's status code.
+    pub fn status(&mut self, body: impl Into<MessageBody>) -> StatusCode {
+        self.request(body)
+            .body
+            .status()
+            .expect("a response")
+            .status_code
+    }
+
+    /// Lets `us` of simulated time pass (wall clock alike), running the reader at each of
+    /// its deadlines on the way, as the socket layer does.
+    pub fn run_for(&mut self, us: u64) {
+        let target = self.now.sim_us + us;
+        while self.now.sim_us < target && !self.closed {
+            let d = self.session.deadline();
+            let wall = d.wall_ms.map(|ms| ms * 1000);
+            let next = [d.sim_us, wall, Some(target)]
+                .into_iter()
+                .flatten()
+                .min()
+                .unwrap_or(target)
+                .clamp(self.now.sim_us + 1, target);
+            self.now = Now {
+                sim_us: next,
+                wall_ms: next / 1000,
+            };
+            self.session.advance(self.now);
+            self.collect();
+        }
+    }
+
+    /// Runs (at most `limit_us` of simulated time) until a message satisfying `pred` is in the
+    /// inbox, and takes it; other messages stay.
+    pub fn run_until(&mut self, limit_us: u64, pred: impl Fn(&Message) -> bool) -> Option<Message> {
+        let end = self.now.sim_us + limit_us;
+        loop {
+            if let Some(k) = self.inbox.iter().position(&pred) {
+                return self.inbox.remove(k);
+            }
+            if self.now.sim_us >= end || self.closed {
+                return None;
+            }
+            let step = (end - self.now.sim_us).min(10_000);
+            self.run_for(step);
+        }
+    }
+
+    /// Takes every message received so far.
+    pub fn take(&mut self) -> Vec<Message> {
+        self.inbox.drain(..).collect()
+    }
+
+    /// Takes every RO_ACCESS_REPORT received so far (other messages stay), one Vec of
+    /// TagReportData per report.
+    pub fn take_reports(&mut self) -> Vec<Vec<TagReportData>> {
+        let mut out = Vec::new();
+        self.inbox.retain(|m| match &m.body {
+            MessageBody::RoAccessReport(r) => {
+                out.push(r.tag_report_data.clone());
+                false
+            }
+            _ => true,
+        });
+        out
+    }
+
+    /// Decodes what the session has for the client into the inbox.
+    fn collect(&mut self) {
+        let Some(t) = self.session.transmit() else {
+            return;
+        };
+        let mut d = Deframer::default();
+        d.buffer_mut().extend_from_slice(t.bytes);
+        t.bytes.clear();
+        let close = t.close;
+        while let Some(Inbound::Frame(f)) = d.next_frame() {
+            self.inbox
+                .push_back(Message::decode(&f).expect("the reader sends valid LLRP"));
+        }
+        if close {
+            self.closed = true;
+            if let Some(id) = self.client.take() {
+                self.session.disconnect(id);
+            }
+        }
+    }
+}
