@@ -1,0 +1,459 @@
+//! Running the active ROSpec over simulated time: antenna slices, the physics of each (from
+//! the prefetch), stop triggers, report triggers and the events they raise.
+
+use super::schedule::next_start;
+use super::*;
+
+impl Specs {
+    /// Runs the specs over simulated time [from, to).
+    pub fn run(&mut self, mut ctx: RunContext<'_>, from: u64, to: u64) -> Vec<Produced> {
+        let mut out = Vec::new();
+        let mut t = from;
+        // Bounded: each pass either advances time or changes a spec's state.
+        let mut guard = 0u32;
+        while t < to && guard < 1_000_000 {
+            guard += 1;
+            let mut events = Vec::new();
+            match self.active_idx() {
+                None => match self.due(t) {
+                    Some(i) => self.begin(i, t, &mut events),
+                    None => match self.next_start_after(t) {
+                        Some(n) if n < to => t = n,
+                        _ => break,
+                    },
+                },
+                Some(a) => {
+                    if let Some(i) = self.due(t) {
+                        if self.specs[i].spec.priority < self.specs[a].spec.priority {
+                            let by = self.specs[i].spec.ro_spec_id;
+                            self.preempt(a, by, t, &mut events);
+                            self.begin(i, t, &mut events);
+                        }
+                    }
+                    if events.is_empty() {
+                        let a = self.active_idx().unwrap_or(a);
+                        t = self.step(&mut ctx, a, t, to, &mut out);
+                    }
+                }
+            }
+            out.extend(events.into_iter().map(Produced::Event));
+        }
+        out
+    }
+
+    /// Runs active spec `a` from `t` to its next boundary (at most `to`); returns the time
+    /// reached.
+    fn step(
+        &mut self,
+        ctx: &mut RunContext<'_>,
+        a: usize,
+        t: u64,
+        to: u64,
+        out: &mut Vec<Produced>,
+    ) -> u64 {
+        let spec = Arc::clone(&self.specs[a].spec);
+        let ro_id = spec.ro_spec_id;
+        let config = ctx.config;
+        let report_spec: &RoReportSpec = spec
+            .ro_report_spec
+            .as_ref()
+            .unwrap_or(&config.ro_report_spec);
+        let content = Content {
+            selector: report_spec.tag_report_content_selector.clone(),
+            impinj: if ctx.impinj {
+                ImpinjContent::from_report_spec(report_spec)
+            } else {
+                ImpinjContent::default()
+            },
+        };
+        // Taken out for the step (its `seen` set would be costly to clone) and put back below.
+        let Some(run) = self.specs[a].run.take() else {
+            return to;
+        };
+        let stop = &spec.ro_boundary_spec.ro_spec_stop_trigger;
+        let ro_end = match stop.ro_spec_stop_trigger_type {
+            RoSpecStopTriggerType::Duration => {
+                Some(run.started_us + u64::from(stop.duration_trigger_value) * 1000)
+            }
+            RoSpecStopTriggerType::GpiWithTimeout => stop
+                .gpi_trigger_value
+                .as_ref()
+                .filter(|g| g.timeout > 0)
+                .map(|g| run.started_us + u64::from(g.timeout) * 1000),
+            _ => None,
+        };
+        let ai = match spec.specs.get(run.spec_idx) {
+            Some(SpecParameter::AiSpec(ai)) => ai,
+            // Validation admits only AISpecs; anything else ends the ROSpec.
+            _ => {
+                self.specs[a].run = Some(run);
+                self.finish_ro(a, t, report_spec, out);
+                return t;
+            }
+        };
+        let trig = &ai.ai_spec_stop_trigger;
+        let obs = trig.tag_observation_trigger.clone().unwrap_or_default();
+        let ai_end = match trig.ai_spec_stop_trigger_type {
+            AiSpecStopTriggerType::Duration => {
+                Some(run.spec_started_us + u64::from(trig.duration_trigger) * 1000)
+            }
+            AiSpecStopTriggerType::GpiWithTimeout => trig
+                .gpi_trigger_value
+                .as_ref()
+                .filter(|g| g.timeout > 0)
+                .map(|g| run.spec_started_us + u64::from(g.timeout) * 1000),
+            AiSpecStopTriggerType::TagObservation => {
+                let timeout =
+                    (obs.timeout > 0).then(|| run.spec_started_us + u64::from(obs.timeout) * 1000);
+                let quiet = (obs.trigger_type
+                    == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout)
+                    .then(|| run.last_new_us + u64::from(obs.t) * 1000);
+                match (timeout, quiet) {
+                    (Some(x), Some(y)) => Some(x.min(y)),
+                    (x, y) => x.or(y),
+                }
+            }
+            _ => None,
+        };
+        let mut end = to.min(run.slice_end_us);
+        if let Some(e) = ro_end {
+            end = end.min(e);
+        }
+        if let Some(e) = ai_end {
+            end = end.min(e);
+        }
+        if let Some(n) = self.next_start_after(t) {
+            end = end.min(n.max(t + 1));
+        }
+        // An Impinj-class reader does not hold the reads of an inventory that nothing ends
+        // (neither its AISpec nor its ROSpec has a stop condition that can fire) forever when
+        // ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
+        let interval = ctx.profile.report_interval_us;
+        let periodic = interval > 0
+            && report_spec.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
+            && report_spec.n == 0
+            && ai_end.is_none()
+            && ro_end.is_none()
+            && matches!(
+                trig.ai_spec_stop_trigger_type,
+                AiSpecStopTriggerType::Null | AiSpecStopTriggerType::GpiWithTimeout
+            )
+            && matches!(
+                stop.ro_spec_stop_trigger_type,
+                RoSpecStopTriggerType::Null | RoSpecStopTriggerType::GpiWithTimeout
+            );
+        if periodic {
+            end = end.min(run.last_report_us + interval);
+        }
+        let mut end = end.max(t);
+
+        let antennas: Vec<u16> = if ai.antenna_ids.contains(&0) {
+            (1..=ctx.profile.antennas).collect()
+        } else {
+            ai.antenna_ids.clone()
+        };
+        let antenna = antennas[run.antenna_pos % antennas.len().max(1)];
+        let ips = ai.inventory_parameter_specs.first();
+        let ips_id = ips.map_or(0, |p| p.inventory_parameter_spec_id);
+        let power = antenna_power(ips, ctx.config, antenna);
+        // ImpinjFixedFrequencyList (mode 2, channel list) in the ROSpec's or the reader's
+        // antenna configuration restricts the channels, which rotate at the region's dwell.
+        let channels = fixed_channel_list(ips, ctx.config, antenna);
+        let hop = ctx.model.hop_schedule();
+        let channel = (!channels.is_empty())
+            .then(|| channels[((t / hop.dwell_us) % channels.len() as u64) as usize]);
+        if channel.is_some() {
+            end = end.min(hop.dwell_start(t) + hop.dwell_us).max(t);
+        }
+        let reports_on_n = report_spec.ro_report_trigger != RoReportTriggerType::None;
+        let aggregate = !(reports_on_n && report_spec.n == 1);
+        let n_trigger = usize::from(report_spec.n);
+        self.buffer.expect(if reports_on_n { n_trigger } else { 0 });
+
+        let mut reached = end;
+        let mut ai_done = ai_end.is_some_and(|e| end >= e);
+        let ro_done = ro_end.is_some_and(|e| end >= e);
+        let mut run = run;
+        if end > t {
+            // Phase and Doppler are worked out only when reported.
+            let want = Want {
+                phase: content.impinj.phase,
+                doppler: content.impinj.doppler,
+            };
+            let slice = Slice {
+                antenna,
+                power_dbm: power,
+                t0_us: t,
+                t1_us: end,
+                want,
+            };
+            let reads = match channel {
+                Some(_) => ctx
+                    .model
+                    .inventory_with(antenna, t, end, power, channel, want),
+                None => {
+                    let until = [ai_end, ro_end].into_iter().flatten().min();
+                    self.prefetched(ctx, &slice, &run, &antennas, ips, until)
+                }
+            };
+            for r in reads {
+                let (op_spec_results, access_spec_id) =
+                    ctx.access.apply(ctx.model, r.tag, antenna, ro_id);
+                let o = Observation {
+                    epc: ctx.model.tag_epc(r.tag),
+                    ro_spec_id: ro_id,
+                    spec_index: (run.spec_idx + 1) as u16,
+                    inventory_parameter_spec_id: ips_id,
+                    antenna_id: r.antenna,
+                    channel_index: r.channel_index,
+                    rssi_dbm: r.rssi_dbm,
+                    phase_rad: r.phase_rad,
+                    doppler_hz: r.doppler_hz,
+                    utc_us: ctx.utc_epoch_us + r.time_us,
+                    uptime_us: r.time_us,
+                    op_spec_results,
+                    access_spec_id,
+                    tid: if content.impinj.serialized_tid {
+                        ctx.model.tag_tid(r.tag)
+                    } else {
+                        Vec::new()
+                    },
+                };
+                self.buffer.add(&o, &content, aggregate);
+                if run.seen.insert(r.tag) {
+                    run.last_new_us = r.time_us;
+                }
+                if reports_on_n && n_trigger > 0 && self.buffer.len() >= n_trigger {
+                    out.push(Produced::Reports(self.buffer.take()));
+                }
+                if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+                    && obs.trigger_type == TagObservationTriggerType::UponSeeingNTagsOrTimeout
+                    && obs.number_of_tags > 0
+                    && run.seen.len() >= usize::from(obs.number_of_tags)
+                {
+                    reached = (r.time_us + 1).clamp(t + 1, end);
+                    ai_done = true;
+                    break;
+                }
+            }
+        }
+        if periodic && reached >= run.last_report_us + interval {
+            run.last_report_us = reached;
+            if !self.buffer.is_empty() {
+                out.push(Produced::Reports(self.buffer.take()));
+            }
+        }
+        // Antenna rotation.
+        if reached >= run.slice_end_us {
+            run.antenna_pos += 1;
+            if run.antenna_pos % antennas.len().max(1) == 0 {
+                run.rounds += 1;
+            }
+            run.slice_end_us = reached + ANTENNA_DWELL_US;
+        }
+        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+            && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
+            && obs.number_of_attempts > 0
+            && run.rounds >= u32::from(obs.number_of_attempts)
+        {
+            ai_done = true;
+        }
+        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+            && obs.trigger_type == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout
+            && reached >= run.last_new_us + u64::from(obs.t) * 1000
+        {
+            ai_done = true;
+        }
+        self.specs[a].run = Some(run);
+        if ro_done {
+            self.end_ai(a, reached, report_spec, out);
+            self.finish_ro(a, reached, report_spec, out);
+        } else if ai_done {
+            self.end_ai(a, reached, report_spec, out);
+            let s = &mut self.specs[a];
+            let run = s
+                .run
+                .as_mut()
+                .expect("an active spec has a run (set by begin)");
+            run.spec_idx += 1;
+            run.spec_started_us = reached;
+            run.seen.clear();
+            run.last_new_us = reached;
+            run.rounds = 0;
+            run.last_report_us = reached;
+            run.antenna_pos = 0;
+            run.slice_end_us = reached + ANTENNA_DWELL_US;
+            if run.spec_idx >= s.spec.specs.len() {
+                self.finish_ro(a, reached, report_spec, out);
+            }
+        }
+        reached
+    }
+
+    /// The reads of `slice` from the prefetch. On a miss, takes the oldest batch computed in
+    /// the background if it covers it, else computes the slices the run will ask for next
+    /// (this one first, then the antennas in turn, up to the AISpec's or ROSpec's end when
+    /// known) on every core; either way keeps [`AHEAD_DEPTH`] batches after them computing in
+    /// the background.
+    fn prefetched(
+        &mut self,
+        ctx: &RunContext<'_>,
+        slice: &Slice,
+        run: &Run,
+        antennas: &[u16],
+        ips: Option<&InventoryParameterSpec>,
+        until: Option<u64>,
+    ) -> Vec<Read> {
+        if self.no_prefetch {
+            return slice.compute(ctx.model);
+        }
+        if let Some(reads) = self.prefetch.take(slice) {
+            return reads;
+        }
+        let plan = |pos: usize, t0: u64, count: usize| -> Vec<Slice> {
+            let mut out = Vec::with_capacity(count);
+            let mut t0 = t0;
+            for k in 0..count {
+                if until.is_some_and(|u| t0 >= u) {
+                    break;
+                }
+                let antenna = antennas[(pos + k) % antennas.len().max(1)];
+                // A pinned channel list is computed when asked for.
+                if !fixed_channel_list(ips, ctx.config, antenna).is_empty() {
+                    break;
+                }
+                out.push(Slice {
+                    antenna,
+                    power_dbm: antenna_power(ips, ctx.config, antenna),
+                    want: slice.want,
+                    t0_us: t0,
+                    t1_us: t0 + ANTENNA_DWELL_US,
+                });
+                t0 += ANTENNA_DWELL_US;
+            }
+            out
+        };
+        let batch = self.prefetch.batch_after_miss(slice.t0_us);
+        let reads = if self.prefetch.finish_ahead() {
+            self.prefetch.take(slice)
+        } else {
+            None
+        };
+        let (reads, mut next) = match reads {
+            Some(reads) => (reads, self.ahead_from),
+            None => {
+                let first = Slice {
+                    t1_us: run.slice_end_us.max(slice.t1_us),
+                    ..*slice
+                };
+                let mut p = vec![first];
+                p.extend(plan(run.antenna_pos + 1, first.t1_us, batch - 1));
+                let next = (
+                    run.antenna_pos + p.len(),
+                    first.t1_us + (p.len() as u64 - 1) * ANTENNA_DWELL_US,
+                );
+                self.prefetch.fill(ctx.model, p);
+                let reads = self
+                    .prefetch
+                    .take(slice)
+                    .unwrap_or_else(|| slice.compute(ctx.model));
+                (reads, next)
+            }
+        };
+        // The batches after: computed while this one's reads are reported.
+        while self.prefetch.ahead_count() < AHEAD_DEPTH {
+            let ahead = plan(next.0, next.1, batch);
+            if ahead.is_empty() {
+                break;
+            }
+            next = (
+                next.0 + ahead.len(),
+                next.1 + ahead.len() as u64 * ANTENNA_DWELL_US,
+            );
+            self.prefetch.start_ahead(ctx.model, ahead);
+        }
+        self.ahead_from = next;
+        reads
+    }
+
+    fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+        let s = &self.specs[a];
+        let idx = s.run.as_ref().map_or(0, |r| r.spec_idx);
+        if report.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
+            && !self.buffer.is_empty()
+        {
+            out.push(Produced::Reports(self.buffer.take()));
+        }
+        out.push(Produced::Event(Event {
+            at_us: at,
+            kind: EventKind::AiSpecEnd {
+                ro_spec_id: s.spec.ro_spec_id,
+                spec_index: (idx + 1) as u16,
+            },
+        }));
+    }
+
+    fn finish_ro(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+        if ends_report(report.ro_report_trigger) && !self.buffer.is_empty() {
+            out.push(Produced::Reports(self.buffer.take()));
+        }
+        let s = &mut self.specs[a];
+        let started = s.run.as_ref().map_or(at, |r| r.started_us);
+        s.state = SpecState::Inactive;
+        s.run = None;
+        s.next_start_us = next_start(&s.spec, started, at);
+        out.push(Produced::Event(Event {
+            at_us: at,
+            kind: EventKind::RoSpec {
+                event_type: RoSpecEventType::EndOfRoSpec,
+                ro_spec_id: s.spec.ro_spec_id,
+                preempting: 0,
+            },
+        }));
+    }
+}
+
+/// Transmit power of `antenna`: the ROSpec's RFTransmitter for it, else the reader's
+/// configuration (`None`: the scenario's).
+pub(super) fn antenna_power(
+    ips: Option<&InventoryParameterSpec>,
+    config: &ReaderConfig,
+    antenna: u16,
+) -> Option<f64> {
+    ips.and_then(|p| {
+        p.antenna_configuration
+            .iter()
+            .find(|c| c.antenna_id == antenna || c.antenna_id == 0)
+            .and_then(|c| c.rf_transmitter.as_ref())
+            .and_then(|tx| crate::reader::caps::power_dbm(tx.transmit_power))
+    })
+    .or_else(|| config.tx_power_dbm(antenna))
+}
+
+/// The channel list of an ImpinjFixedFrequencyList in mode 2 (Channel_List) configured for
+/// `antenna`, in the ROSpec's InventoryParameterSpec or else in the reader configuration.
+pub(super) fn fixed_channel_list(
+    ips: Option<&InventoryParameterSpec>,
+    config: &ReaderConfig,
+    antenna: u16,
+) -> Vec<u16> {
+    let in_spec = ips.into_iter().flat_map(|p| {
+        p.antenna_configuration
+            .iter()
+            .filter(move |c| c.antenna_id == antenna || c.antenna_id == 0)
+    });
+    let in_config = config.antennas.get(usize::from(antenna).saturating_sub(1));
+    in_spec
+        .chain(in_config)
+        .flat_map(|c| c.c1g2_inventory_command.iter())
+        .flat_map(|cmd| cmd.custom.iter())
+        .find_map(|p| match p {
+            Custom::ImpinjFixedFrequencyList(l)
+                if l.fixed_frequency_mode == 2 && !l.channel_list.is_empty() =>
+            {
+                Some(l.channel_list.clone())
+            }
+            _ => None,
+        })
+        .unwrap_or_default()
+}
