@@ -18,6 +18,7 @@ pub mod motion;
 pub mod multipath;
 pub mod noise;
 pub mod phase;
+pub mod pool;
 pub mod robot;
 pub mod rssi;
 pub mod schedule;

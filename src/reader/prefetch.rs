@@ -11,19 +11,10 @@
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{mpsc, Arc, OnceLock};
+use std::sync::{mpsc, Arc};
 
+use crate::physics::pool::Pool;
 use crate::physics::{Model, Read, Want};
-
-/// Threads one prefetch uses: the machine's cores, at most 8.
-fn workers() -> usize {
-    static WORKERS: OnceLock<usize> = OnceLock::new();
-    *WORKERS.get_or_init(|| {
-        std::thread::available_parallelism()
-            .map_or(1, usize::from)
-            .clamp(1, 8)
-    })
-}
 
 /// One antenna's share of simulated time, as the running AISpec will ask for it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,7 +59,7 @@ pub const MAX_BATCH: usize = 256;
 pub const AHEAD_DEPTH: usize = 2;
 
 /// Prefetched windows in time order, and how many slices the next miss should plan.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Prefetch {
     windows: VecDeque<Window>,
     /// Slices to plan at the next miss (0: not yet adapted, start at 8).
@@ -77,18 +68,14 @@ pub struct Prefetch {
     planned: usize,
     /// The following batches, being computed in the background, oldest first.
     ahead: VecDeque<Ahead>,
-    /// Threads that compute slices, parked between batches (started at the first batch).
-    pool: Vec<Worker>,
+    /// The process's physics threads, shared with every other reader.
+    pool: Arc<Pool>,
 }
 
-/// A batch for a worker: take slices of `plan` from `queue` (its own lane first) until none
-/// is left, and send the reads back.
-struct Job {
-    model: Arc<Model>,
-    plan: Arc<Vec<Slice>>,
-    queue: Arc<Queue>,
-    lane: usize,
-    reply: mpsc::Sender<Share>,
+impl Default for Prefetch {
+    fn default() -> Self {
+        Prefetch::new(Pool::shared())
+    }
 }
 
 /// The slices of a plan in lanes, one per worker, each antenna always in the same lane (so
@@ -140,35 +127,22 @@ impl Queue {
     }
 }
 
-/// A parked thread of the pool: it waits for jobs and ends once its sender is dropped.
-#[derive(Debug)]
-struct Worker {
-    jobs: mpsc::Sender<Job>,
-}
-
-impl Worker {
-    /// Starts a worker; `None` if the OS will not start a thread.
-    fn start() -> Option<Worker> {
-        let (jobs, inbox) = mpsc::channel::<Job>();
-        std::thread::Builder::new()
-            .name("llrp-physics".into())
-            .spawn(move || {
-                while let Ok(job) = inbox.recv() {
-                    let reads = share(&job.model, &job.plan, &job.queue, Some(job.lane));
-                    // The batch's owner may have gone; nothing else waits for these reads.
-                    let _ = job.reply.send(reads);
-                }
-            })
-            .ok()?;
-        Some(Worker { jobs })
-    }
-}
-
 fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
     a.map(f64::to_bits) == b.map(f64::to_bits)
 }
 
 impl Prefetch {
+    /// An empty prefetch computing on `pool`.
+    pub fn new(pool: Arc<Pool>) -> Self {
+        Prefetch {
+            windows: VecDeque::new(),
+            batch: 0,
+            planned: 0,
+            ahead: VecDeque::new(),
+            pool,
+        }
+    }
+
     /// How many slices to plan after a miss at `t_us`: doubled (up to [`MAX_BATCH`]) while
     /// the plans are used, quartered when most of the last one went unused (e.g. an AISpec
     /// that ends at its first tag and restarts), so prefetching never costs much more than it
@@ -210,42 +184,37 @@ impl Prefetch {
         Some(w.reads[lo..hi].to_vec())
     }
 
-    /// Hands `plan` to up to `n` workers of the pool (started as needed): the receiver of
-    /// their reads and how many will answer.
+    /// Hands `plan` to `n` threads of the pool, lane k to thread k: the receiver of the
+    /// reads of each slice they take.
     fn dispatch(
-        &mut self,
+        &self,
         model: &Arc<Model>,
         plan: &Arc<Vec<Slice>>,
         queue: &Arc<Queue>,
         n: usize,
-    ) -> (mpsc::Receiver<Share>, usize) {
-        while self.pool.len() < n {
-            match Worker::start() {
-                Some(w) => self.pool.push(w),
-                None => break,
-            }
-        }
+    ) -> mpsc::Receiver<SliceReads> {
         let (reply, replies) = mpsc::channel();
-        let mut sent = 0;
-        // A worker whose thread has ended (it cannot, short of a panic in the physics) is
-        // dropped; its share falls to the others.
-        self.pool.retain(|w| {
-            if sent == n {
-                return true;
-            }
-            let job = Job {
-                model: Arc::clone(model),
-                plan: Arc::clone(plan),
-                queue: Arc::clone(queue),
-                // Worker k of the pool always has lane k: its antennas stay with it.
-                lane: sent,
-                reply: reply.clone(),
-            };
-            let ok = w.jobs.send(job).is_ok();
-            sent += usize::from(ok);
-            ok
-        });
-        (replies, sent)
+        for lane in 0..n {
+            let (model, plan, queue, reply) = (
+                Arc::clone(model),
+                Arc::clone(plan),
+                Arc::clone(queue),
+                reply.clone(),
+            );
+            // Lane k always goes to thread k: its antennas stay on one core. A thread that is
+            // busy (with another reader's work, or the caller's own) starts late and finds
+            // its lane taken by the others: nobody waits for a task that has not started.
+            let task = Box::new(move || {
+                while let Some(i) = queue.take(Some(lane)) {
+                    if let Some(s) = plan.get(i) {
+                        // The batch's owner may have gone; nothing else waits for these reads.
+                        let _ = reply.send((i, s.compute(&model)));
+                    }
+                }
+            });
+            self.pool.run_on(lane, task);
+        }
+        replies
     }
 
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
@@ -254,13 +223,15 @@ impl Prefetch {
         self.cancel_ahead();
         self.planned = plan.len();
         let plan = Arc::new(plan);
-        let helpers = if plan.len() < 2 { 0 } else { workers() - 1 };
-        // The calling thread works the last lane.
+        let helpers = if plan.len() < 2 {
+            0
+        } else {
+            self.pool.threads().saturating_sub(1)
+        };
+        // The calling thread works the last lane, then whatever nobody has taken.
         let queue = Arc::new(Queue::new(&plan, helpers + 1));
-        let (replies, sent) = self.dispatch(model, &plan, &queue, helpers);
-        let mut parts = vec![share(model, &plan, &queue, Some(helpers))];
-        parts.extend(replies.iter().take(sent));
-        self.windows = assemble(model, Arc::unwrap_or_clone(plan), parts).into();
+        let replies = self.dispatch(model, &plan, &queue, helpers);
+        self.windows = collect(model, plan, &queue, &replies, Some(helpers)).into();
     }
 
     /// Starts computing `plan` in the background (the slices after the ones already
@@ -270,16 +241,19 @@ impl Prefetch {
             return;
         }
         let plan = Arc::new(plan);
-        // As many as there are cores: the calling thread is busy reporting meanwhile.
-        let n = if plan.len() < 2 { 1 } else { workers() };
-        let queue = Arc::new(Queue::new(&plan, n));
-        let (replies, sent) = self.dispatch(model, &plan, &queue, n);
+        // As many lanes as threads: the calling thread is busy reporting meanwhile.
+        let n = if plan.len() < 2 {
+            1
+        } else {
+            self.pool.threads()
+        };
+        let queue = Arc::new(Queue::new(&plan, n.max(1)));
+        let replies = self.dispatch(model, &plan, &queue, n);
         self.ahead.push_back(Ahead {
             model: Arc::clone(model),
             plan,
             queue,
             replies,
-            sent,
         });
     }
 
@@ -297,30 +271,28 @@ impl Prefetch {
     }
 
     /// Computes what is left of the oldest background batch, if any, on the calling thread
-    /// alongside the workers, waits for them and keeps its windows; whether there was one.
+    /// alongside the workers, waits for the slices they took and keeps its windows; whether
+    /// there was one.
     pub fn finish_ahead(&mut self) -> bool {
         let Some(Ahead {
             model,
             plan,
             queue,
             replies,
-            sent,
         }) = self.ahead.pop_front()
         else {
             return false;
         };
-        // The calling thread has no lane: it takes what the workers have not.
-        let mut parts = vec![share(&model, &plan, &queue, None)];
-        parts.extend(replies.iter().take(sent));
-        let plan = Arc::unwrap_or_clone(plan);
         self.planned = plan.len();
-        self.windows.extend(assemble(&model, plan, parts));
+        // The calling thread has no lane: it takes what the workers have not.
+        let windows = collect(&model, plan, &queue, &replies, None);
+        self.windows.extend(windows);
         true
     }
 }
 
-/// A worker's reads: (index in the plan, reads of that slice).
-type Share = Vec<(usize, Vec<Read>)>;
+/// The reads of one slice of a plan: (index in the plan, reads).
+type SliceReads = (usize, Vec<Read>);
 
 /// Slices being computed in the background.
 #[derive(Debug)]
@@ -329,30 +301,44 @@ struct Ahead {
     plan: Arc<Vec<Slice>>,
     /// The slices nobody has taken yet.
     queue: Arc<Queue>,
-    /// The workers' reads, `sent` of them.
-    replies: mpsc::Receiver<Share>,
-    sent: usize,
+    /// The reads of the slices the workers took.
+    replies: mpsc::Receiver<SliceReads>,
 }
 
-/// The reads of the slices of `plan` a worker takes from `queue` (lane `lane` first), with
-/// their indices.
-fn share(model: &Model, plan: &[Slice], queue: &Queue, lane: Option<usize>) -> Share {
-    let mut out = Vec::new();
+/// How long the caller waits for a slice a worker took before computing it itself (only a
+/// worker that died with it, a panic in the physics, is that late; the physics is a pure
+/// function, so the result is the same either way).
+const SLICE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// The windows of `plan`: the caller takes slices from `queue` (lane `lane` first, then any)
+/// until none is left, then waits for the ones the workers took.
+fn collect(
+    model: &Model,
+    plan: Arc<Vec<Slice>>,
+    queue: &Queue,
+    replies: &mpsc::Receiver<SliceReads>,
+    lane: Option<usize>,
+) -> Vec<Window> {
+    let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
     while let Some(i) = queue.take(lane) {
-        if let Some(s) = plan.get(i) {
-            out.push((i, s.compute(model)));
+        if let (Some(s), Some(r)) = (plan.get(i), results.get_mut(i)) {
+            *r = Some(s.compute(model));
         }
     }
-    out
-}
-
-/// The windows of `plan` from the workers' shares; a slice no share holds (its worker
-/// ended with it) is computed here.
-fn assemble(model: &Model, plan: Vec<Slice>, parts: Vec<Share>) -> Vec<Window> {
-    let mut results: Vec<Option<Vec<Read>>> = vec![None; plan.len()];
-    for (i, reads) in parts.into_iter().flatten() {
-        results[i] = Some(reads);
+    // Every slice is taken now: the missing ones are being computed by running workers.
+    let mut missing = results.iter().filter(|r| r.is_none()).count();
+    while missing > 0 {
+        match replies.recv_timeout(SLICE_WAIT) {
+            Ok((i, reads)) => {
+                if let Some(r @ None) = results.get_mut(i) {
+                    *r = Some(reads);
+                    missing -= 1;
+                }
+            }
+            Err(_) => break,
+        }
     }
+    let plan = Arc::unwrap_or_clone(plan);
     plan.into_iter()
         .zip(results)
         .map(|(slice, reads)| Window {
