@@ -454,9 +454,7 @@ impl Model {
                 let t = seconds(t_us);
                 let [x, y, theta] = trajectory.true_pose(t);
                 let (c, s) = fastmath::cis(theta);
-                let [ox, oy, oz] = offset.position;
-                let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
-                [x + c * ox - s * oy, y + s * ox + c * oy, z]
+                motion::mounted_position([x, y], (c, s), offset.position, vertical.as_ref(), t)
             }
             _ => self.pose(antenna, t_us, false).position,
         }
@@ -487,12 +485,16 @@ impl Model {
         let t = seconds(t_us);
         let [x, y, theta] = trajectory.true_pose(t);
         let (c, s) = fastmath::cis(theta);
-        let [ox, oy, oz] = offset.position;
-        let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
         let (yaw_cos, yaw_sin) = (c * m.yaw_cos - s * m.yaw_sin, s * m.yaw_cos + c * m.yaw_sin);
         let boresight = [m.pitch_cos * yaw_cos, m.pitch_cos * yaw_sin, m.pitch_sin];
         Aim {
-            position: [x + c * ox - s * oy, y + s * ox + c * oy, z],
+            position: motion::mounted_position(
+                [x, y],
+                (c, s),
+                offset.position,
+                vertical.as_ref(),
+                t,
+            ),
             boresight,
             boresight_norm: geometry::norm(boresight),
         }
@@ -535,10 +537,14 @@ impl Model {
                     trajectory.true_pose(t)
                 };
                 let (s, c) = theta.sin_cos();
-                let [ox, oy, oz] = offset.position;
-                let z = vertical.as_ref().map_or(oz, |v| motion::vertical_z(v, t));
                 AntennaPose {
-                    position: [x + c * ox - s * oy, y + s * ox + c * oy, z],
+                    position: motion::mounted_position(
+                        [x, y],
+                        (c, s),
+                        offset.position,
+                        vertical.as_ref(),
+                        t,
+                    ),
                     yaw_rad: wrap_pi(theta + offset.yaw_deg.to_radians()),
                     pitch_rad: offset.pitch_deg.to_radians(),
                 }

@@ -1,5 +1,5 @@
 //! Piecewise-linear motion: tags moving along waypoints, recorded antenna pose lists, and a
-//! robot's vertical antenna axis.
+//! robot's vertical antenna axis; and where on a robot its antenna is.
 
 use super::geometry::{add_scaled, distance, sub, wrap_pi, Vec3};
 use crate::scenario::{Path, PoseSample, VerticalAxis};
@@ -183,6 +183,22 @@ pub fn vertical_z(axis: &VerticalAxis, t_s: f64) -> f64 {
     }
 }
 
+/// Position of an antenna mounted on a robot at (`x`, `y`) whose heading has cosine `c` and
+/// sine `s`: the robot's position plus the mount `offset` turned by the heading, at the
+/// height of the robot's `vertical` axis at `t_s` if it has one (the offset's otherwise).
+/// The caller works out the cosine and sine, so that each keeps its own trigonometry.
+pub fn mounted_position(
+    [x, y]: [f64; 2],
+    (c, s): (f64, f64),
+    offset: Vec3,
+    vertical: Option<&VerticalAxis>,
+    t_s: f64,
+) -> Vec3 {
+    let [ox, oy, oz] = offset;
+    let z = vertical.map_or(oz, |v| vertical_z(v, t_s));
+    [x + c * ox - s * oy, y + s * ox + c * oy, z]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,5 +265,22 @@ mod tests {
         assert!((vertical_z(&axis, 3.0) - 2.0).abs() < 1e-12);
         assert!((vertical_z(&axis, 4.0) - 1.5).abs() < 1e-12);
         assert!((vertical_z(&axis, 6.0) - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mounted_antenna_turns_with_the_robot_and_rides_its_lift() {
+        // Heading +90°: the offset's +x points along +y, its +y along −x.
+        let offset = [0.2, 0.3, 0.5];
+        assert_eq!(
+            mounted_position([1.0, 2.0], (0.0, 1.0), offset, None, 1.0),
+            [1.0 - 0.3, 2.0 + 0.2, 0.5]
+        );
+        let axis = VerticalAxis {
+            min_z: 0.5,
+            max_z: 2.0,
+            speed: 0.5,
+        };
+        let p = mounted_position([1.0, 2.0], (1.0, 0.0), offset, Some(&axis), 1.0);
+        assert_eq!(p, [1.2, 2.3, vertical_z(&axis, 1.0)]);
     }
 }
