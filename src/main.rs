@@ -102,23 +102,54 @@ fn main() -> ExitCode {
     }
 }
 
-/// Resolves at Ctrl-C (SIGINT) or, on Unix, SIGTERM.
-async fn stop_signal() {
+/// Ctrl-C (SIGINT) and, on Unix, SIGTERM, watched from the moment this is made (so a signal
+/// that arrives while the readers start is not lost: it would end the process outright).
+struct StopSignal {
     #[cfg(unix)]
-    {
-        use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {}
-                    _ = term.recv() => {}
+    signals: Vec<tokio::signal::unix::Signal>,
+}
+
+impl StopSignal {
+    /// Starts watching; must run inside the runtime.
+    fn watch() -> Self {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{signal, SignalKind};
+            let mut signals = Vec::new();
+            for kind in [SignalKind::interrupt(), SignalKind::terminate()] {
+                match signal(kind) {
+                    Ok(s) => signals.push(s),
+                    Err(e) => eprintln!("llrp-gateway sim: cannot watch a stop signal: {e}"),
                 }
+            }
+            StopSignal { signals }
+        }
+        #[cfg(not(unix))]
+        StopSignal {}
+    }
+
+    /// Resolves at the first of the signals.
+    async fn wait(self) {
+        #[cfg(unix)]
+        {
+            let mut signals = self.signals;
+            if signals.is_empty() {
+                let _ = tokio::signal::ctrl_c().await;
                 return;
             }
-            Err(e) => eprintln!("llrp-gateway sim: cannot watch SIGTERM ({e}); Ctrl-C stops"),
+            let any = std::future::poll_fn(|cx| {
+                for s in &mut signals {
+                    if s.poll_recv(cx).is_ready() {
+                        return std::task::Poll::Ready(());
+                    }
+                }
+                std::task::Poll::Pending
+            });
+            any.await;
         }
+        #[cfg(not(unix))]
+        let _ = tokio::signal::ctrl_c().await;
     }
-    let _ = tokio::signal::ctrl_c().await;
 }
 
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
@@ -158,6 +189,7 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
         }
     };
     runtime.block_on(async move {
+        let stop = StopSignal::watch();
         let running = match sim::start(&scenario, &opts).await {
             Ok(r) => r,
             Err(e) => {
@@ -171,7 +203,7 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
                 scenario.name
             );
         }
-        stop_signal().await;
+        stop.wait().await;
         // Each client gets its ConnectionCloseEvent and the ground truth is flushed, within
         // a second: a client that does not take its last bytes does not hold the exit up.
         running.shutdown().await;
