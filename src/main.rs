@@ -171,12 +171,10 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
         },
         None => Scenario::default_s1(),
     };
-    // One async worker per simulated reader (each serves one client at a time), at most one
-    // per core: the physics runs on its own threads, and a spare worker would only take a
-    // busy connection's task over now and then (which costs its caches, and grows that
-    // thread's malloc arena by the connection's working set) and spin while idle.
-    let cores = std::thread::available_parallelism().map_or(1, usize::from);
-    let workers = scenario.readers.len().clamp(1, cores);
+    // One async worker: it only moves bytes between the sockets and the readers (whose work
+    // runs on the readers' pool and whose look-ahead physics on the physics pool, one thread
+    // per core each), so the process has 2 × cores threads plus this one and main.
+    let workers = 1;
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(workers)
         .enable_all()

@@ -3,16 +3,18 @@
 //! who is refused), hands the session every frame a [`Connection`] reads, writes what the
 //! session has to send, and otherwise sleeps until the session's next deadline.
 
+use std::collections::VecDeque;
 use std::io;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::watch;
+use tokio::sync::{oneshot, watch};
 
 use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
+use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
 
@@ -23,8 +25,10 @@ pub type Observer = Box<dyn FnMut(&Reader) + Send>;
 const FLUSH_BYTES: usize = 64 * 1024;
 /// ... or this long after the last send, so a slow scenario still streams.
 const FLUSH_AFTER: Duration = Duration::from_millis(1);
-/// `--speed max`: most steps, and longest time, run before the task looks at its sockets
-/// again.
+/// `--speed max`: most output one turn makes (several flushes' worth, so that handing the
+/// reader to its pool thread and back costs little per byte)...
+const TURN_BYTES: usize = 8 * FLUSH_BYTES;
+/// ... most steps, and longest time, one turn runs.
 const STEPS_PER_TURN: usize = 64;
 const TURN: Duration = Duration::from_millis(2);
 /// How long a reader that closes a connection waits for its client to take the last bytes
@@ -41,16 +45,25 @@ pub struct SimReader {
     session: Session,
     clock: Arc<Clock>,
     observer: Option<Observer>,
+    /// Where the reader's CPU-bound work (inventory physics, reports) runs.
+    pool: Arc<Pool>,
 }
 
 impl SimReader {
     /// Wraps a reader's session and its clock; `observer` sees the reader after every step.
+    /// Its inventory runs on the process's readers' pool.
     pub fn new(session: Session, clock: Arc<Clock>, observer: Option<Observer>) -> Self {
         SimReader {
             session,
             clock,
             observer,
+            pool: Pool::readers(),
         }
+    }
+
+    /// Whether running the reader now may compute physics (an ROSpec runs or is due).
+    fn busy(&self) -> bool {
+        self.session.reader().inventorying() || self.session.deadline().sim_us.is_some()
     }
 
     fn now(&self) -> Now {
@@ -67,6 +80,67 @@ impl SimReader {
     }
 }
 
+/// Runs `f` on the reader: on the readers' pool when it may compute physics (so CPU-bound
+/// work never runs on a tokio worker thread), here otherwise (a request to an idle reader, a
+/// keepalive). Gives the reader back; an error if the pool lost it (a panic in the physics).
+async fn work(
+    mut sim: Box<SimReader>,
+    f: impl FnOnce(&mut SimReader) + Send + 'static,
+) -> io::Result<Box<SimReader>> {
+    if !sim.busy() {
+        f(&mut sim);
+        return Ok(sim);
+    }
+    home(send_away(sim, f)).await
+}
+
+/// Starts `f` on the reader on the readers' pool (here if the pool has no thread); the reader
+/// comes back through the receiver.
+fn send_away(
+    sim: Box<SimReader>,
+    f: impl FnOnce(&mut SimReader) + Send + 'static,
+) -> oneshot::Receiver<Box<SimReader>> {
+    let pool = Arc::clone(&sim.pool);
+    let (tx, rx) = oneshot::channel();
+    let task = Box::new(move || {
+        let mut sim = sim;
+        f(&mut sim);
+        let _ = tx.send(sim);
+    });
+    if let Err(task) = pool.run(task) {
+        // No physics thread could be started: the work runs here after all.
+        task();
+    }
+    rx
+}
+
+/// The reader back from the pool; an error if the pool lost it (a panic in the physics).
+async fn home(away: oneshot::Receiver<Box<SimReader>>) -> io::Result<Box<SimReader>> {
+    away.await
+        .map_err(|_| io::Error::other("the simulated reader was lost in its physics"))
+}
+
+/// One `--speed max` turn: steps simulated time until a buffer's worth of output, the end of
+/// the work, a close, or [`TURN`].
+fn turn(sim: &mut SimReader) {
+    let start = Instant::now();
+    for _ in 0..STEPS_PER_TURN {
+        let now = Now {
+            sim_us: sim.clock.step(),
+            wall_ms: sim.clock.wall_ms(),
+        };
+        sim.session.advance(now);
+        sim.observe();
+        if sim.session.pending() >= TURN_BYTES
+            || sim.session.deadline().sim_us.is_none()
+            || sim.session.transmit().is_some_and(|t| t.close)
+            || start.elapsed() >= TURN
+        {
+            break;
+        }
+    }
+}
+
 /// The connected client's socket.
 struct Client {
     id: ClientId,
@@ -76,43 +150,77 @@ struct Client {
 
 /// Serves `listener` until `shutdown` turns true; then the connected client gets the
 /// ConnectionCloseEvent and is closed.
+///
+/// At `--speed max` the reader steps simulated time in turns on the readers' pool while this
+/// task sends the previous turn's output, so the two overlap; a turn starts only while less
+/// than a few flushes' worth wait to be sent, so a slow client slows simulated time down. Requests
+/// that arrive during a turn are handled once it is back, in order.
 pub async fn serve(
     listener: TcpListener,
-    mut sim: SimReader,
+    sim: SimReader,
     mut shutdown: watch::Receiver<bool>,
 ) -> io::Result<()> {
     let max = sim.clock.speed() == Speed::Max;
+    // The reader is here, or away on the pool for a turn.
+    let mut here: Option<Box<SimReader>> = Some(Box::new(sim));
+    let mut away: Option<oneshot::Receiver<Box<SimReader>>> = None;
+    let mut arrived: VecDeque<llrp::Inbound> = VecDeque::new();
     let mut client: Option<Client> = None;
     let mut flushed = Instant::now();
     let mut backoff = ACCEPT_BACKOFF_MIN;
     let mut accept_after: Option<tokio::time::Instant> = None;
     loop {
-        if let Some(c) = &mut client {
-            if let Some(t) = sim.session.transmit() {
-                c.conn.queue_buf(t.bytes);
-                if t.close {
-                    // What the session said last goes out, then the connection closes.
-                    let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
-                    sim.session.disconnect(c.id);
-                    tracing::info!(peer = %c.peer, "client disconnected by the reader");
-                    client = None;
+        if let Some(mut sim) = here.take() {
+            // Requests that came during a turn, in order.
+            while let (Some(inbound), Some(c)) = (arrived.pop_front(), client.as_ref()) {
+                let id = c.id;
+                sim = work(sim, move |sim| {
+                    let now = sim.now();
+                    sim.session.receive(id, inbound, now);
+                    sim.observe();
+                })
+                .await?;
+            }
+            if let Some(c) = &mut client {
+                if let Some(t) = sim.session.transmit() {
+                    c.conn.queue_buf(t.bytes);
+                    if t.close {
+                        // What the session said last goes out, then the connection closes.
+                        let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
+                        sim.session.disconnect(c.id);
+                        tracing::info!(peer = %c.peer, "client disconnected by the reader");
+                        client = None;
+                    }
                 }
             }
+            here = Some(sim);
         }
-        let deadline = sim.session.deadline();
-        let busy = max && client.is_some() && deadline.sim_us.is_some();
-        let wake = sim
-            .clock
-            .wake_at(deadline)
-            .map(tokio::time::Instant::from_std);
+        let (deadline, wake) = match here.as_deref() {
+            Some(sim) => {
+                let d = sim.session.deadline();
+                (d, sim.clock.wake_at(d).map(tokio::time::Instant::from_std))
+            }
+            None => Default::default(),
+        };
+        let streaming = max && client.is_some() && (away.is_some() || deadline.sim_us.is_some());
         let queued = client.as_ref().map_or(0, |c| c.conn.queued());
-        let flush_now =
-            queued > 0 && (!busy || queued >= FLUSH_BYTES || flushed.elapsed() >= FLUSH_AFTER);
-        let may_accept = accept_after.map_or(true, |t| t <= tokio::time::Instant::now());
+        let flush_now = queued > 0
+            && (!streaming
+                || away.is_some()
+                || queued >= FLUSH_BYTES
+                || flushed.elapsed() >= FLUSH_AFTER);
+        let may_accept =
+            here.is_some() && accept_after.map_or(true, |t| t <= tokio::time::Instant::now());
+        let may_turn = here.is_some() && streaming && queued < TURN_BYTES;
         tokio::select! {
             biased;
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {
+                    let mut sim = match (here.take(), away.take()) {
+                        (Some(s), _) => s,
+                        (None, Some(a)) => home(a).await?,
+                        (None, None) => return Ok(()),
+                    };
                     if let Some(mut c) = client.take() {
                         sim.session.shutdown();
                         if let Some(t) = sim.session.transmit() {
@@ -124,13 +232,17 @@ pub async fn serve(
                     return Ok(());
                 }
             }
+            back = returned(&mut away), if away.is_some() => {
+                // (Polling the receiver by reference: a turn still running when another
+                // branch wins is still there next time.)
+                away = None;
+                here = Some(back?);
+            }
             r = client_io(&mut client, flush_now) => {
                 let Some(c) = client.as_ref() else { continue };
                 match r {
                     Ok(Io::Frame(inbound)) => {
-                        let now = sim.now();
-                        sim.session.receive(c.id, inbound, now);
-                        sim.observe();
+                        arrived.push_back(inbound);
                     }
                     Ok(Io::Flushed) => flushed = Instant::now(),
                     Ok(Io::Closed) | Err(_) => {
@@ -138,12 +250,21 @@ pub async fn serve(
                             tracing::info!(peer = %c.peer, "connection ended: {e}");
                         }
                         tracing::info!(peer = %c.peer, "client disconnected");
-                        sim.session.disconnect(c.id);
+                        let id = c.id;
                         client = None;
+                        arrived.clear();
+                        let mut sim = match (here.take(), away.take()) {
+                            (Some(s), _) => s,
+                            (None, Some(a)) => home(a).await?,
+                            (None, None) => continue,
+                        };
+                        sim.session.disconnect(id);
+                        here = Some(sim);
                     }
                 }
             }
             accepted = listener.accept(), if may_accept => {
+                let Some(sim) = here.as_deref_mut() else { continue };
                 match accepted {
                     Ok((stream, peer)) => {
                         backoff = ACCEPT_BACKOFF_MIN;
@@ -170,32 +291,39 @@ pub async fn serve(
                     }
                 }
             }
-            _ = sleep_until(accept_after), if !may_accept => {
+            _ = sleep_until(accept_after), if !may_accept && here.is_some() => {
                 accept_after = None;
             }
-            _ = sleep_until(wake), if wake.is_some() => {
-                let now = sim.now();
-                sim.session.advance(now);
-                sim.observe();
-            }
-            _ = std::future::ready(()), if busy && queued < FLUSH_BYTES => {
-                let turn = Instant::now();
-                for _ in 0..STEPS_PER_TURN {
-                    let now = Now { sim_us: sim.clock.step(), wall_ms: sim.clock.wall_ms() };
-                    sim.session.advance(now);
-                    sim.observe();
-                    if sim.session.pending() >= FLUSH_BYTES
-                        || sim.session.deadline().sim_us.is_none()
-                        || sim.session.transmit().is_some_and(|t| t.close)
-                        || turn.elapsed() >= TURN
-                    {
-                        break;
-                    }
+            _ = sleep_until(wake), if wake.is_some() && !may_turn => {
+                if let Some(sim) = here.take() {
+                    here = Some(
+                        work(sim, |sim| {
+                            let now = sim.now();
+                            sim.session.advance(now);
+                            sim.observe();
+                        })
+                        .await?,
+                    );
                 }
-                // `--speed max` always has work: give the other tasks on this thread a turn.
-                tokio::task::yield_now().await;
+            }
+            _ = std::future::ready(()), if may_turn && arrived.is_empty() => {
+                if let Some(sim) = here.take() {
+                    away = Some(send_away(sim, turn));
+                }
             }
         }
+    }
+}
+
+/// The reader back from its turn; pending forever when it is not away.
+async fn returned(
+    away: &mut Option<oneshot::Receiver<Box<SimReader>>>,
+) -> io::Result<Box<SimReader>> {
+    match away {
+        Some(rx) => rx
+            .await
+            .map_err(|_| io::Error::other("the simulated reader was lost in its physics")),
+        None => std::future::pending().await,
     }
 }
 

@@ -212,7 +212,8 @@ impl Prefetch {
                     }
                 }
             });
-            self.pool.run_on(lane, task);
+            // A pool without threads leaves the lane to the caller, who takes every slice.
+            let _ = self.pool.run_on(lane, task);
         }
         replies
     }
@@ -241,11 +242,11 @@ impl Prefetch {
             return;
         }
         let plan = Arc::new(plan);
-        // As many lanes as threads: the calling thread is busy reporting meanwhile.
+        // As many lanes as threads other than the caller's: it is busy reporting meanwhile.
         let n = if plan.len() < 2 {
             1
         } else {
-            self.pool.threads()
+            self.pool.helpers()
         };
         let queue = Arc::new(Queue::new(&plan, n.max(1)));
         let replies = self.dispatch(model, &plan, &queue, n);
