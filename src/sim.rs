@@ -14,7 +14,7 @@ use tokio::task::JoinHandle;
 
 use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve, Observer, SimReader};
-use crate::physics::Model;
+use crate::physics::{Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::scenario::Scenario;
@@ -193,6 +193,8 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         .filter(|(_, t)| t.path.is_some())
         .map(|(i, _)| i)
         .collect();
+    // The tags, reflectors and robot drives, once for every reader.
+    let world = World::new(scenario);
     let clock = Arc::new(Clock::new(opts.speed));
     let (shutdown, rx) = watch::channel(false);
     let mut addrs = Vec::new();
@@ -216,7 +218,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
             addr: addr.clone(),
             source,
         })?;
-        let model = Arc::new(Model::new(scenario, i));
+        let model = Arc::new(Model::in_world(&world, scenario, i));
         let profile = ReaderProfile::from_scenario(scenario, i, &model);
         let reader = Reader::new(profile, model, utc0);
         let observer = truth

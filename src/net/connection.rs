@@ -12,9 +12,6 @@ use tokio::net::TcpStream;
 
 pub use llrp::Inbound;
 
-/// Bytes the write buffer starts with.
-const WRITE_CAPACITY: usize = 64 * 1024;
-
 /// What [`Connection::read_or_flush`] saw first.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Io {
@@ -48,7 +45,7 @@ impl Connection {
         Connection {
             stream,
             read: Deframer::new(splitter),
-            write: BytesMut::with_capacity(WRITE_CAPACITY),
+            write: BytesMut::new(),
         }
     }
 

@@ -157,13 +157,15 @@ pub struct Model {
     hops: HopSchedule,
     reads_per_second: f64,
     antennas: Vec<AntennaModel>,
-    tags: Vec<TagModel>,
-    reflectors: Vec<Reflector>,
+    /// The scenario's tags, shared by every reader's model.
+    tags: Arc<[TagModel]>,
+    reflectors: Arc<[Reflector]>,
     /// The reflectors with usable normals, prepared for the channel.
-    planes: Vec<Plane>,
+    planes: Arc<[Plane]>,
     /// The tag antenna's linear gain, [`rssi::db_to_linear`] of [`rssi::TAG_GAIN_DBI`].
     tag_gain_linear: f64,
-    robots: Vec<RobotTrajectory>,
+    /// Every robot of the scenario (shared; a robot mount names its index here).
+    robots: Arc<[RobotTrajectory]>,
     /// Field classifications per antenna ([`field`]); never changes a result.
     field_cache: FieldCache,
     /// `seed::mix(&[seed, PHASE_OFFSET, reader])`: the phase offsets' common prefix.
@@ -184,10 +186,81 @@ fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
     robots
 }
 
+/// What every reader of a scenario sees alike: the tags, reflectors and robot drives, built
+/// once and shared by the readers' models.
+#[derive(Clone, Debug)]
+pub struct World {
+    tags: Arc<[TagModel]>,
+    reflectors: Arc<[Reflector]>,
+    planes: Arc<[Plane]>,
+    robots: Arc<[RobotTrajectory]>,
+    /// When the last tag stops moving, µs (`u64::MAX`: never; 0: no tag moves).
+    tags_rest_us: u64,
+}
+
+impl World {
+    /// The shared part of `scenario`'s models: every tag, reflector and robot drive.
+    pub fn new(scenario: &Scenario) -> World {
+        let robots: Vec<RobotTrajectory> = distinct_robots(scenario)
+            .into_iter()
+            .enumerate()
+            .map(|(global, robot)| {
+                let mut rng = seed::rng(&[scenario.seed, seed::domain::ROBOT, global as u64]);
+                RobotTrajectory::simulate(robot, &mut rng)
+            })
+            .collect();
+        let tags: Vec<TagModel> = scenario
+            .tags
+            .iter()
+            .map(|t| {
+                let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
+                TagModel {
+                    epc,
+                    tid: t
+                        .tid
+                        .as_deref()
+                        .and_then(|h| parse_words(h).ok())
+                        .unwrap_or_else(|| default_tid(&epc)),
+                    user: t
+                        .user
+                        .as_deref()
+                        .and_then(|h| parse_words(h).ok())
+                        .unwrap_or_default(),
+                    motion: PolylineMotion::new(t.position, t.path.as_ref()),
+                }
+            })
+            .collect();
+        // Tags stop too: an antenna's field stops changing once both have.
+        let tags_rest_us = tags
+            .iter()
+            .map(|t| {
+                t.motion
+                    .rest_s()
+                    .map_or(u64::MAX, |s| rest_time_us(s + REST_MARGIN_S))
+            })
+            .max()
+            .unwrap_or(0);
+        World {
+            tags: tags.into(),
+            reflectors: scenario.reflectors.clone().into(),
+            planes: multipath::planes(&scenario.reflectors).into(),
+            robots: robots.into(),
+            tags_rest_us,
+        }
+    }
+}
+
 impl Model {
     /// Builds the model of reader `reader` (index into `scenario.readers`); seeds derive from
-    /// `scenario.seed`. An index past the last reader gives a model with no antennas.
+    /// `scenario.seed`. An index past the last reader gives a model with no antennas. (Models
+    /// of several readers of one scenario share its data through [`Model::in_world`].)
     pub fn new(scenario: &Scenario, reader: usize) -> Model {
+        Self::in_world(&World::new(scenario), scenario, reader)
+    }
+
+    /// The model of reader `reader` of `scenario`, sharing `world` (made from the same
+    /// scenario) with the other readers' models.
+    pub fn in_world(world: &World, scenario: &Scenario, reader: usize) -> Model {
         let spec = scenario.readers.get(reader);
         let table = spec.map(|r| r.region.frequencies_khz()).unwrap_or_default();
         let wavelengths = table.iter().map(|&f| phase::wavelength_m(f)).collect();
@@ -195,8 +268,7 @@ impl Model {
             HopSchedule::new(table.len(), r.hop_dwell_ms, r.fixed_channel)
         });
         let all_robots = distinct_robots(scenario);
-        let mut robot_ids: Vec<usize> = Vec::new();
-        let mut robots = Vec::new();
+        let robots = &world.robots;
         let mut antennas = Vec::new();
         let mut tables = Vec::new();
         let mut patterns = Vec::new();
@@ -207,18 +279,8 @@ impl Model {
                 Mount::Robot { robot, offset } => {
                     // `robot` was collected from this very scenario, so it is in the list.
                     let global = all_robots.iter().position(|r| *r == robot).unwrap_or(0);
-                    let local = match robot_ids.iter().position(|&g| g == global) {
-                        Some(i) => i,
-                        None => {
-                            let mut rng =
-                                seed::rng(&[scenario.seed, seed::domain::ROBOT, global as u64]);
-                            robots.push(RobotTrajectory::simulate(robot, &mut rng));
-                            robot_ids.push(global);
-                            robots.len() - 1
-                        }
-                    };
                     Mover::Robot {
-                        robot: local,
+                        robot: global,
                         offset: offset.clone(),
                         vertical: robot.vertical.clone(),
                     }
@@ -283,37 +345,7 @@ impl Model {
                 rest_us: still_s.map_or(u64::MAX, rest_time_us),
             });
         }
-        let tags: Vec<TagModel> = scenario
-            .tags
-            .iter()
-            .map(|t| {
-                let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
-                TagModel {
-                    epc,
-                    tid: t
-                        .tid
-                        .as_deref()
-                        .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_else(|| default_tid(&epc)),
-                    user: t
-                        .user
-                        .as_deref()
-                        .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_default(),
-                    motion: PolylineMotion::new(t.position, t.path.as_ref()),
-                }
-            })
-            .collect();
-        // Tags stop too: an antenna's field stops changing once both have.
-        let tags_rest = tags
-            .iter()
-            .map(|t| {
-                t.motion
-                    .rest_s()
-                    .map_or(u64::MAX, |s| rest_time_us(s + REST_MARGIN_S))
-            })
-            .max()
-            .unwrap_or(0);
+        let tags_rest = world.tags_rest_us;
         for a in &mut antennas {
             a.rest_us = field::rest_grid(a.rest_us.max(tags_rest));
         }
@@ -326,11 +358,11 @@ impl Model {
             hops,
             reads_per_second: spec.map_or(0.0, |r| r.reads_per_second),
             antennas,
-            tags,
-            reflectors: scenario.reflectors.clone(),
-            planes: multipath::planes(&scenario.reflectors),
+            tags: Arc::clone(&world.tags),
+            reflectors: Arc::clone(&world.reflectors),
+            planes: Arc::clone(&world.planes),
             tag_gain_linear: rssi::db_to_linear(rssi::TAG_GAIN_DBI),
-            robots,
+            robots: Arc::clone(&world.robots),
             field_cache,
             phase_prefix: seed::mix(&[scenario.seed, seed::domain::PHASE_OFFSET, reader as u64]),
         }

@@ -438,3 +438,27 @@ fn leaving_out_phase_and_doppler_changes_nothing_else() {
     }
     .covers(Want::ALL));
 }
+
+/// Readers of one scenario share its tags, reflectors and robots instead of each holding a
+/// copy, and read exactly what a model built alone reads.
+#[test]
+fn readers_in_one_world_share_its_data_and_read_the_same() {
+    let mut s = Scenario::default_s1();
+    let mut second = s.readers[0].clone();
+    second.name = "second".into();
+    s.readers.push(second);
+    let world = World::new(&s);
+    let a = Model::in_world(&world, &s, 0);
+    let b = Model::in_world(&world, &s, 1);
+    assert!(Arc::ptr_eq(&a.tags, &b.tags));
+    assert!(Arc::ptr_eq(&a.robots, &b.robots));
+    assert!(Arc::ptr_eq(&a.planes, &b.planes));
+    for reader in [0, 1] {
+        let shared = Model::in_world(&world, &s, reader);
+        let alone = Model::new(&s, reader);
+        let run = |m: &Model| m.inventory_with(1, 0, 5_000_000, None, None, Want::ALL);
+        let reads = run(&shared);
+        assert!(!reads.is_empty(), "S1's robot passes its tags in 5 s");
+        assert_eq!(reads, run(&alone), "reader {reader}");
+    }
+}

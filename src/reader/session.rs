@@ -83,7 +83,9 @@ impl Session {
             reader,
             client: None,
             next_client: 0,
-            out: BytesMut::with_capacity(64 * 1024),
+            // Grows to what the client is sent between two flushes (a fleet of idle readers
+            // holds next to nothing).
+            out: BytesMut::new(),
             close: false,
             ran_to_us: 0,
         }

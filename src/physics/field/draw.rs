@@ -144,8 +144,10 @@ impl Model {
         };
         // A kept link serves every later request, so it has its delay.
         let cached = bucket.rest.as_ref().and_then(|c| {
-            let i = usize::from(channel).checked_sub(1)? * self.tags.len() + tag;
-            let slot = c.links.get(i)?;
+            let ch = usize::from(channel).checked_sub(1)?;
+            // The field at rest is in tag order.
+            let k = c.at_rest.get(ch)?.binary_search(&tag).ok()?;
+            let slot = c.links.get(ch)?.get(k)?;
             (t_us >= c.t0_us && c.tx_bits == tx_power_dbm.to_bits())
                 .then(|| *slot.get_or_init(|| compute(true)))
         });

@@ -43,9 +43,11 @@ pub(in crate::physics) struct Classified {
     /// Once nothing moves any more (the interval never ends), the field on each channel of
     /// the table (index channel − 1), evaluated once; empty otherwise.
     pub(super) at_rest: Vec<Vec<usize>>,
-    /// Then too, the channel and forward-link margin of each tag on each channel (index
-    /// (channel − 1)·tags + tag), computed on first use: they no longer change.
-    pub(super) links: Vec<OnceLock<(Channel, f64)>>,
+    /// Then too, the channel and forward-link margin of each tag in the field on each
+    /// channel (beside its entry in `at_rest`), computed on first use: they no longer change.
+    /// Only the tags in the field: a scenario's other tags (thousands, in a fleet) cost
+    /// nothing here.
+    pub(super) links: Vec<Vec<OnceLock<(Channel, f64)>>>,
 }
 
 impl Classified {
@@ -291,8 +293,10 @@ impl Model {
         c.pool = merge(&c.inside, &c.undecided);
         if t1_us == u64::MAX {
             c.at_rest = self.fields_at_rest(antenna, tx_power_dbm, t0_us, &c);
-            c.links = (0..c.at_rest.len() * self.tags.len())
-                .map(|_| OnceLock::new())
+            c.links = c
+                .at_rest
+                .iter()
+                .map(|field| field.iter().map(|_| OnceLock::new()).collect())
                 .collect();
         }
         c
