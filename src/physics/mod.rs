@@ -23,9 +23,12 @@ pub mod robot;
 pub mod rssi;
 pub mod schedule;
 pub mod seed;
+mod world;
 
 #[cfg(test)]
 mod tests;
+
+pub use world::World;
 
 use crate::scenario::tagmem::{parse_epc, parse_words};
 use crate::scenario::{
@@ -184,70 +187,6 @@ fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
         }
     }
     robots
-}
-
-/// What every reader of a scenario sees alike: the tags, reflectors and robot drives, built
-/// once and shared by the readers' models.
-#[derive(Clone, Debug)]
-pub struct World {
-    tags: Arc<[TagModel]>,
-    reflectors: Arc<[Reflector]>,
-    planes: Arc<[Plane]>,
-    robots: Arc<[RobotTrajectory]>,
-    /// When the last tag stops moving, µs (`u64::MAX`: never; 0: no tag moves).
-    tags_rest_us: u64,
-}
-
-impl World {
-    /// The shared part of `scenario`'s models: every tag, reflector and robot drive.
-    pub fn new(scenario: &Scenario) -> World {
-        let robots: Vec<RobotTrajectory> = distinct_robots(scenario)
-            .into_iter()
-            .enumerate()
-            .map(|(global, robot)| {
-                let mut rng = seed::rng(&[scenario.seed, seed::domain::ROBOT, global as u64]);
-                RobotTrajectory::simulate(robot, &mut rng)
-            })
-            .collect();
-        let tags: Vec<TagModel> = scenario
-            .tags
-            .iter()
-            .map(|t| {
-                let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
-                TagModel {
-                    epc,
-                    tid: t
-                        .tid
-                        .as_deref()
-                        .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_else(|| default_tid(&epc)),
-                    user: t
-                        .user
-                        .as_deref()
-                        .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_default(),
-                    motion: PolylineMotion::new(t.position, t.path.as_ref()),
-                }
-            })
-            .collect();
-        // Tags stop too: an antenna's field stops changing once both have.
-        let tags_rest_us = tags
-            .iter()
-            .map(|t| {
-                t.motion
-                    .rest_s()
-                    .map_or(u64::MAX, |s| rest_time_us(s + REST_MARGIN_S))
-            })
-            .max()
-            .unwrap_or(0);
-        World {
-            tags: tags.into(),
-            reflectors: scenario.reflectors.clone().into(),
-            planes: multipath::planes(&scenario.reflectors).into(),
-            robots: robots.into(),
-            tags_rest_us,
-        }
-    }
 }
 
 impl Model {
