@@ -14,6 +14,7 @@ mod field;
 pub mod geometry;
 pub mod hopping;
 mod inventory;
+pub mod lookahead;
 pub mod motion;
 pub mod multipath;
 pub mod noise;

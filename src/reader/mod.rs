@@ -12,7 +12,6 @@
 mod access;
 pub mod caps;
 mod config;
-mod prefetch;
 pub mod report;
 mod requests;
 mod rospec;

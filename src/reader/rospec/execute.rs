@@ -290,11 +290,10 @@ impl Specs {
         reached
     }
 
-    /// The reads of `slice` from the prefetch. On a miss, takes the oldest batch computed in
-    /// the background if it covers it, else computes the slices the run will ask for next
-    /// (this one first, then the antennas in turn, up to the AISpec's or ROSpec's end when
-    /// known) on every core; either way keeps [`AHEAD_DEPTH`] batches after them computing in
-    /// the background.
+    /// The reads of `slice`, from the physics computed ahead, with the look-ahead hint of
+    /// this run: the current antenna to the end of its dwell, then the antennas in turn, a
+    /// dwell each, up to the AISpec's or ROSpec's end when known (and up to an antenna whose
+    /// channel list is pinned, computed when asked for).
     fn prefetched(
         &mut self,
         ctx: &RunContext<'_>,
@@ -307,73 +306,29 @@ impl Specs {
         if self.no_prefetch {
             return slice.compute(ctx.model);
         }
-        if let Some(reads) = self.prefetch.take(slice) {
-            return reads;
-        }
-        let plan = |pos: usize, t0: u64, count: usize| -> Vec<Slice> {
-            let mut out = Vec::with_capacity(count);
-            let mut t0 = t0;
-            for k in 0..count {
-                if until.is_some_and(|u| t0 >= u) {
-                    break;
-                }
-                let antenna = antennas[(pos + k) % antennas.len().max(1)];
-                // A pinned channel list is computed when asked for.
-                if !fixed_channel_list(ips, ctx.config, antenna).is_empty() {
-                    break;
-                }
-                out.push(Slice {
-                    antenna,
-                    power_dbm: antenna_power(ips, ctx.config, antenna),
-                    want: slice.want,
-                    t0_us: t0,
-                    t1_us: t0 + ANTENNA_DWELL_US,
-                });
-                t0 += ANTENNA_DWELL_US;
-            }
-            out
+        let dwell = Slice {
+            t1_us: run.slice_end_us.max(slice.t1_us),
+            ..*slice
         };
-        let batch = self.prefetch.batch_after_miss(slice.t0_us);
-        let reads = if self.prefetch.finish_ahead() {
-            self.prefetch.take(slice)
-        } else {
-            None
-        };
-        let (reads, mut next) = match reads {
-            Some(reads) => (reads, self.ahead_from),
-            None => {
-                let first = Slice {
-                    t1_us: run.slice_end_us.max(slice.t1_us),
-                    ..*slice
-                };
-                let mut p = vec![first];
-                p.extend(plan(run.antenna_pos + 1, first.t1_us, batch - 1));
-                let next = (
-                    run.antenna_pos + p.len(),
-                    first.t1_us + (p.len() as u64 - 1) * ANTENNA_DWELL_US,
-                );
-                self.prefetch.fill(ctx.model, p);
-                let reads = self
-                    .prefetch
-                    .take(slice)
-                    .unwrap_or_else(|| slice.compute(ctx.model));
-                (reads, next)
-            }
-        };
-        // The batches after: computed while this one's reads are reported.
-        while self.prefetch.ahead_count() < AHEAD_DEPTH {
-            let ahead = plan(next.0, next.1, batch);
-            if ahead.is_empty() {
-                break;
-            }
-            next = (
-                next.0 + ahead.len(),
-                next.1 + ahead.len() as u64 * ANTENNA_DWELL_US,
-            );
-            self.prefetch.start_ahead(ctx.model, ahead);
-        }
-        self.ahead_from = next;
-        reads
+        let config = ctx.config;
+        let upcoming = (1..)
+            .map(move |k: u64| {
+                let antenna = antennas[(run.antenna_pos + k as usize) % antennas.len().max(1)];
+                let t0_us = dwell.t1_us + (k - 1) * ANTENNA_DWELL_US;
+                (antenna, t0_us)
+            })
+            .take_while(move |&(antenna, t0)| {
+                !until.is_some_and(|u| t0 >= u)
+                    && fixed_channel_list(ips, config, antenna).is_empty()
+            })
+            .map(move |(antenna, t0_us)| Slice {
+                antenna,
+                power_dbm: antenna_power(ips, config, antenna),
+                want: slice.want,
+                t0_us,
+                t1_us: t0_us + ANTENNA_DWELL_US,
+            });
+        self.prefetch.reads(ctx.model, slice, dwell, upcoming)
     }
 
     fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {

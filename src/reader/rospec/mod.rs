@@ -21,9 +21,9 @@ use llrp::StatusCode;
 
 use super::access::AccessSpecs;
 use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
-use super::prefetch::{Prefetch, Slice, AHEAD_DEPTH};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
 use super::{field_error, ReaderProfile, MAX_ROSPECS};
+use crate::physics::lookahead::{Lookahead, Slice};
 use crate::physics::{Model, Read, Want};
 
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
@@ -184,11 +184,9 @@ pub struct Specs {
     /// A halted spec's report trigger asks for its buffered reads to be reported now.
     flush_on_halt: bool,
     /// Physics of the coming antenna slices, computed ahead in parallel.
-    prefetch: Prefetch,
+    prefetch: Lookahead,
     /// Computes every slice on the spot (tests compare both ways).
     no_prefetch: bool,
-    /// Rotation position and start of the slice after the last one prefetched.
-    ahead_from: (usize, u64),
 }
 
 impl Specs {

@@ -1,6 +1,9 @@
-//! Physics computed ahead: the coming antenna slices of a running AISpec, evaluated in
-//! parallel, and the batches after them in the background while the reader reports the
-//! current one, so that `--speed max` keeps every core busy with the channel model.
+//! Physics computed ahead: "the reads of this antenna window", served from windows computed
+//! in parallel on the physics pool, with the caller's look-ahead hint (the windows it expects
+//! to ask for next) computed in the background while it reports the current one, so that
+//! `--speed max` keeps every core busy with the channel model. The reader only says what it
+//! needs and what comes next ([`Lookahead::reads`]); when and where it is computed is decided
+//! here.
 //!
 //! Sound because the physics is a pure function of (antenna, time window, transmit power,
 //! channel) and a window split in two gives the same reads as the whole
@@ -13,8 +16,8 @@ use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 
-use crate::physics::pool::Pool;
-use crate::physics::{Model, Read, Want};
+use super::pool::Pool;
+use super::{Model, Read, Want};
 
 /// One antenna's share of simulated time, as the running AISpec will ask for it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,7 +63,7 @@ pub const AHEAD_DEPTH: usize = 2;
 
 /// Prefetched windows in time order, and how many slices the next miss should plan.
 #[derive(Debug)]
-pub struct Prefetch {
+pub struct Lookahead {
     windows: VecDeque<Window>,
     /// Slices to plan at the next miss (0: not yet adapted, start at 8).
     batch: usize,
@@ -70,11 +73,14 @@ pub struct Prefetch {
     ahead: VecDeque<Ahead>,
     /// The process's physics threads, shared with every other reader.
     pool: Arc<Pool>,
+    /// End of the last slice planned (computed or being computed): the hint's slices before
+    /// it are already on their way.
+    planned_until_us: u64,
 }
 
-impl Default for Prefetch {
+impl Default for Lookahead {
     fn default() -> Self {
-        Prefetch::new(Pool::shared())
+        Lookahead::new(Pool::shared())
     }
 }
 
@@ -131,23 +137,72 @@ fn same_power(a: Option<f64>, b: Option<f64>) -> bool {
     a.map(f64::to_bits) == b.map(f64::to_bits)
 }
 
-impl Prefetch {
+impl Lookahead {
     /// An empty prefetch computing on `pool`.
     pub fn new(pool: Arc<Pool>) -> Self {
-        Prefetch {
+        Lookahead {
             windows: VecDeque::new(),
             batch: 0,
             planned: 0,
             ahead: VecDeque::new(),
             pool,
+            planned_until_us: 0,
         }
+    }
+
+    /// The reads of `slice` (the window the caller needs now). `dwell` is that window as its
+    /// antenna will run it to the end (the same start, a later or equal end) and `upcoming`
+    /// the look-ahead hint: the windows the caller expects to ask for after it, in order
+    /// (it may end early, e.g. where an AISpec ends). A window computed ahead serves it;
+    /// on a miss the oldest batch computed in the background is finished if it covers it,
+    /// else `dwell` and the next slices of the hint are computed on every core; either way
+    /// [`AHEAD_DEPTH`] batches of the hint after them go on computing in the background.
+    pub fn reads(
+        &mut self,
+        model: &Arc<Model>,
+        slice: &Slice,
+        dwell: Slice,
+        upcoming: impl IntoIterator<Item = Slice>,
+    ) -> Vec<Read> {
+        if let Some(reads) = self.take(slice) {
+            return reads;
+        }
+        let batch = self.batch_after_miss(slice.t0_us);
+        let mut upcoming = upcoming.into_iter();
+        let hit = if self.finish_ahead() {
+            self.take(slice)
+        } else {
+            None
+        };
+        let reads = match hit {
+            Some(reads) => reads,
+            None => {
+                let mut plan = vec![dwell];
+                plan.extend(upcoming.by_ref().take(batch.saturating_sub(1)));
+                self.planned_until_us = plan.last().map_or(dwell.t1_us, |s| s.t1_us);
+                self.fill(model, plan);
+                self.take(slice).unwrap_or_else(|| slice.compute(model))
+            }
+        };
+        // The batches after: computed while this one's reads are reported.
+        let until = self.planned_until_us;
+        let mut rest = upcoming.skip_while(|s| s.t0_us < until);
+        while self.ahead_count() < AHEAD_DEPTH {
+            let ahead: Vec<Slice> = rest.by_ref().take(batch).collect();
+            let Some(last) = ahead.last() else {
+                break;
+            };
+            self.planned_until_us = last.t1_us;
+            self.start_ahead(model, ahead);
+        }
+        reads
     }
 
     /// How many slices to plan after a miss at `t_us`: doubled (up to [`MAX_BATCH`]) while
     /// the plans are used, quartered when most of the last one went unused (e.g. an AISpec
     /// that ends at its first tag and restarts), so prefetching never costs much more than it
     /// saves.
-    pub fn batch_after_miss(&mut self, t_us: u64) -> usize {
+    fn batch_after_miss(&mut self, t_us: u64) -> usize {
         let unused = self
             .windows
             .iter()
@@ -220,7 +275,7 @@ impl Prefetch {
 
     /// Computes the reads of every slice of `plan` (in parallel) and keeps them, replacing
     /// what was prefetched before (batches still computed in the background are dropped).
-    pub fn fill(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
+    fn fill(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
         self.cancel_ahead();
         self.planned = plan.len();
         let plan = Arc::new(plan);
@@ -237,7 +292,7 @@ impl Prefetch {
 
     /// Starts computing `plan` in the background (the slices after the ones already
     /// prefetched); [`Self::finish_ahead`] adds them once needed.
-    pub fn start_ahead(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
+    fn start_ahead(&mut self, model: &Arc<Model>, plan: Vec<Slice>) {
         if plan.is_empty() {
             return;
         }
@@ -259,7 +314,7 @@ impl Prefetch {
     }
 
     /// How many batches are being computed in the background.
-    pub fn ahead_count(&self) -> usize {
+    fn ahead_count(&self) -> usize {
         self.ahead.len()
     }
 
@@ -274,7 +329,7 @@ impl Prefetch {
     /// Computes what is left of the oldest background batch, if any, on the calling thread
     /// alongside the workers, waits for the slices they took and keeps its windows; whether
     /// there was one.
-    pub fn finish_ahead(&mut self) -> bool {
+    fn finish_ahead(&mut self) -> bool {
         let Some(Ahead {
             model,
             plan,
@@ -418,7 +473,7 @@ mod tests {
     fn background_batches_finish_in_order_and_cancel() {
         let m = s2();
         let slices = rotation(48, 8, 60_000_000);
-        let mut p = Prefetch::default();
+        let mut p = Lookahead::default();
         p.start_ahead(&m, slices[..16].to_vec());
         p.start_ahead(&m, slices[16..32].to_vec());
         assert_eq!(p.ahead_count(), 2);
@@ -458,7 +513,7 @@ mod tests {
         let m = s2();
         let slices = rotation(64, 8, 60_000_000);
         // The first half computed at once, the second in the background.
-        let mut p = Prefetch::default();
+        let mut p = Lookahead::default();
         p.fill(&m, slices[..32].to_vec());
         p.start_ahead(&m, slices[32..].to_vec());
         assert!(p.finish_ahead(), "a background plan was running");
