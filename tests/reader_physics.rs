@@ -2,17 +2,17 @@
 //! settings: RSSI falls with distance (−40 dB/decade in free space), the phase difference of
 //! two tags is 4πΔD/λ, channels come from the region's table, tx power changes range, the
 //! content selector is honoured field by field, report and stop triggers, events, GET_REPORT
-//! and AccessSpec reads of TID memory.
+//! and AccessSpec reads of TID memory. Driven in process with a virtual clock
+//! (tests/common/virtual_reader.rs).
 
 mod common;
 
 use std::collections::HashMap;
-use std::time::Duration;
 
+use common::virtual_reader::VirtualReader;
 use common::*;
 use llrp::message::*;
 use llrp::params::*;
-use llrp_gateway::net::clock::Speed;
 use llrp_gateway::scenario::Scenario;
 
 const LAMBDA_CH1: f64 = 299_792_458.0 / 865_700_000.0;
@@ -33,16 +33,13 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
-#[tokio::test]
-async fn rssi_and_phase_follow_the_closed_forms() {
+#[test]
+fn rssi_and_phase_follow_the_closed_forms() {
     // Tags 1 and 2 a decade apart in distance-ratio terms (1 m, 2 m), tag 3 at 2.1 m for the
     // phase, tag 4 far beyond the 7 m range.
     let s = line_scenario(&[1.0, 2.0, 2.1, 40.0]);
-    let sim = start(&s, Speed::Max).await;
-    let mut c = connect(&sim).await;
-    c.request(ImpinjEnableExtensions::default(), T)
-        .await
-        .expect("impinj");
+    let mut v = VirtualReader::new(&s);
+    v.request(ImpinjEnableExtensions::default());
     let spec = rospec(
         1,
         vec![1],
@@ -51,28 +48,20 @@ async fn rssi_and_phase_follow_the_closed_forms() {
         full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 1,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 600).await;
+    let (tags, _) = v.collect_reports(600_000_000, |t| t.len() >= 600);
     assert!(tags.len() >= 300, "only {} reads", tags.len());
     let per = by_tag(&tags);
     assert!(!per.contains_key(&4), "a tag 40 m away was read");
@@ -118,13 +107,11 @@ async fn rssi_and_phase_follow_the_closed_forms() {
         err < 0.01,
         "phase difference {measured:.4} rad, expected {expected:.4} rad"
     );
-    sim.shutdown().await;
 }
 
 /// Reads of the near and far tag in 5 s at transmit power index `power`.
-async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
-    let sim = start(s, Speed::Max).await;
-    let mut c = connect(&sim).await;
+fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
+    let mut v = VirtualReader::new(s);
     let set = SetReaderConfig {
         antenna_configuration: vec![AntennaConfiguration {
             antenna_id: 1,
@@ -138,7 +125,7 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
         }],
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
+    assert_eq!(v.status(set), StatusCode::M_Success);
     let spec = rospec(
         1,
         vec![1],
@@ -147,29 +134,20 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
         full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0),
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 1,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| !t.is_empty()).await;
-    sim.shutdown().await;
+    let (tags, _) = v.collect_reports(600_000_000, |t| !t.is_empty());
     let per = by_tag(&tags);
     let near = per.get(&1).map_or(0, |v| {
         v.iter()
@@ -184,11 +162,11 @@ async fn count_reads(s: &Scenario, power: u16) -> (u32, u32) {
     (near, far)
 }
 
-#[tokio::test]
-async fn tx_power_changes_the_read_range() {
+#[test]
+fn tx_power_changes_the_read_range() {
     let s = line_scenario(&[1.0, 6.0]);
-    let (near_hi, far_hi) = count_reads(&s, llrp_gateway::reader::caps::POWER_LEVELS).await;
-    let (near_lo, far_lo) = count_reads(&s, 1).await;
+    let (near_hi, far_hi) = count_reads(&s, llrp_gateway::reader::caps::POWER_LEVELS);
+    let (near_lo, far_lo) = count_reads(&s, 1);
     assert!(
         near_hi > 0 && near_lo > 0,
         "the near tag is read at any power ({near_hi}, {near_lo})"
@@ -200,11 +178,10 @@ async fn tx_power_changes_the_read_range() {
     );
 }
 
-#[tokio::test]
-async fn content_selector_is_honoured_field_by_field() {
+#[test]
+fn content_selector_is_honoured_field_by_field() {
     let s = line_scenario(&[1.5]);
-    let sim = start(&s, Speed::Max).await;
-    let mut c = connect(&sim).await;
+    let mut v = VirtualReader::new(&s);
     let report = RoReportSpec {
         ro_report_trigger: RoReportTriggerType::UponNTagsOrEndOfAiSpec,
         n: 1,
@@ -222,28 +199,20 @@ async fn content_selector_is_honoured_field_by_field() {
     };
     let spec = rospec(1, vec![0], ro_null(), ai_null(), report);
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 1,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    let (tags, _) = collect_reports(&mut c, Duration::from_secs(10), |t| t.len() >= 5).await;
+    let (tags, _) = v.collect_reports(600_000_000, |t| t.len() >= 5);
     assert!(tags.len() >= 5);
     for t in &tags {
         assert!(t.antenna_id.is_some() && t.first_seen_timestamp_utc.is_some());
@@ -259,14 +228,12 @@ async fn content_selector_is_honoured_field_by_field() {
         );
         assert_eq!(t.air_protocol_tag_data.len(), 2, "PC and CRC");
     }
-    sim.shutdown().await;
 }
 
-#[tokio::test]
-async fn triggers_events_and_get_report() {
+#[test]
+fn triggers_events_and_get_report() {
     let s = line_scenario(&[1.0, 2.0, 3.0]);
-    let sim = start(&s, Speed::Max).await;
-    let mut c = connect(&sim).await;
+    let mut v = VirtualReader::new(&s);
     let events = SetReaderConfig {
         reader_event_notification_spec: Some(ReaderEventNotificationSpec {
             event_notification_state: vec![
@@ -285,7 +252,7 @@ async fn triggers_events_and_get_report() {
         }),
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, events).await, StatusCode::M_Success);
+    assert_eq!(v.status(events), StatusCode::M_Success);
     // AISpec ends after seeing 2 distinct tags; reports at the end of the AISpec; the
     // Immediate ROSpec then runs again.
     let ai = AiSpecStopTrigger {
@@ -305,32 +272,24 @@ async fn triggers_events_and_get_report() {
         full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 0),
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 3,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 3,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     let mut reports = Vec::new();
     let mut starts = 0;
     let mut ai_ends = 0;
     while reports.len() < 3 {
-        let m = c.recv(T).await.expect("message");
+        let m = v.next_message(600_000_000);
         match m.body {
             MessageBody::RoAccessReport(r) => reports.push(r.tag_report_data),
             MessageBody::ReaderEventNotification(n) => {
@@ -361,17 +320,13 @@ async fn triggers_events_and_get_report() {
         "events: {starts} starts, {ai_ends} AISpec ends"
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            DeleteRospec {
-                ro_spec_id: 3,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(DeleteRospec {
+            ro_spec_id: 3,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    c.drain_pending();
+    v.take();
 
     // Trigger None: nothing arrives until GET_REPORT.
     let spec = rospec(
@@ -382,31 +337,23 @@ async fn triggers_events_and_get_report() {
         full_report(RoReportTriggerType::None, 0),
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 4,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 4,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    let (early, _) = collect_reports(&mut c, Duration::from_millis(500), |_| false).await;
+    let (early, _) = v.collect_reports(5_000_000, |_| false);
     assert!(early.is_empty(), "no report before GET_REPORT");
     // The reader is alive and inventorying: it answers, and nothing came before its answer.
-    let r = c.request(GetRospecs::default(), T).await.expect("answer");
+    let r = v.request(GetRospecs::default());
     let MessageBody::GetRospecsResponse(list) = r.body else {
         panic!("{r:?}")
     };
@@ -415,22 +362,20 @@ async fn triggers_events_and_get_report() {
         .iter()
         .any(|s| s.current_state == RoSpecState::Active));
     assert!(
-        c.drain_pending()
+        v.take()
             .iter()
             .all(|m| !matches!(m.body, MessageBody::RoAccessReport(_))),
         "no report before GET_REPORT"
     );
-    c.send(GetReport::default()).await.expect("send");
-    let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
+    v.send(GetReport::default());
+    let (tags, _) = v.collect_reports(600_000_000, |t| !t.is_empty());
     assert!(!tags.is_empty());
-    sim.shutdown().await;
 }
 
 /// The first TagReportData of an inventory of `s` on antenna 1 with an AccessSpec (ID 9)
 /// reading `word_count` words of memory bank `mb` (OpSpec ID 5) from every tag.
-async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReportData {
-    let sim = start(s, Speed::Max).await;
-    let mut c = connect(&sim).await;
+fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReportData {
+    let mut v = VirtualReader::new(s);
     let access = AccessSpec {
         access_spec_id: 9,
         antenna_id: 0,
@@ -460,25 +405,17 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
         ..Default::default()
     };
     assert_eq!(
-        request_status(
-            &mut c,
-            AddAccessspec {
-                access_spec: access,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddAccessspec {
+            access_spec: access,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableAccessspec {
-                access_spec_id: 9,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableAccessspec {
+            access_spec_id: 9,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     let spec = rospec(
@@ -489,36 +426,27 @@ async fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReport
         full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
     assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 1,
-                ..Default::default()
-            }
-        )
-        .await,
+        v.status(EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        }),
         StatusCode::M_Success
     );
-    let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
-    sim.shutdown().await;
+    let (tags, _) = v.collect_reports(600_000_000, |t| !t.is_empty());
     tags.into_iter().next().expect("a tag report")
 }
 
-#[tokio::test]
-async fn access_spec_reads_tid_memory() {
+#[test]
+fn access_spec_reads_tid_memory() {
     let s = line_scenario(&[1.0]);
-    let t = read_by_access_spec(&s, 2, 2).await;
+    let t = read_by_access_spec(&s, 2, 2);
     assert_eq!(t.access_spec_id.map(|a| a.0), Some(9));
     let Some(OpSpecResult::C1g2Read(r)) = t.op_spec_results.first() else {
         panic!("no read result in {t:?}")
@@ -528,11 +456,11 @@ async fn access_spec_reads_tid_memory() {
     assert_eq!(r.read_data, vec![0xE280, 0x1160]);
 }
 
-#[tokio::test]
-async fn access_spec_reads_user_memory_from_the_scenario() {
+#[test]
+fn access_spec_reads_user_memory_from_the_scenario() {
     let mut s = line_scenario(&[1.0]);
     s.tags[0].user = Some("CAFEF00D1234".into());
-    let t = read_by_access_spec(&s, 3, 3).await;
+    let t = read_by_access_spec(&s, 3, 3);
     assert_eq!(t.access_spec_id.map(|a| a.0), Some(9));
     let Some(OpSpecResult::C1g2Read(r)) = t.op_spec_results.first() else {
         panic!("no read result in {t:?}")
@@ -541,11 +469,10 @@ async fn access_spec_reads_user_memory_from_the_scenario() {
     assert_eq!(r.read_data, vec![0xCAFE, 0xF00D, 0x1234]);
 }
 
-#[tokio::test]
-async fn impinj_fixed_frequency_list_pins_the_channels() {
+#[test]
+fn impinj_fixed_frequency_list_pins_the_channels() {
     let s = line_scenario(&[1.0, 2.0]);
-    let sim = start(&s, Speed::Max).await;
-    let mut c = connect(&sim).await;
+    let mut v = VirtualReader::new(&s);
     let mut spec = rospec(
         1,
         vec![1],
@@ -576,10 +503,7 @@ async fn impinj_fixed_frequency_list_pins_the_channels() {
         ro_spec: bad,
         ..Default::default()
     };
-    assert_eq!(
-        request_status(&mut c, add).await,
-        llrp::StatusCode::M_ParameterError
-    );
+    assert_eq!(v.status(add), llrp::StatusCode::M_ParameterError);
     if let SpecParameter::AiSpec(ai) = &mut spec.specs[0] {
         ai.inventory_parameter_specs[0].antenna_configuration = list(vec![3]);
     }
@@ -587,14 +511,13 @@ async fn impinj_fixed_frequency_list_pins_the_channels() {
         ro_spec: spec,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, add).await, StatusCode::M_Success);
+    assert_eq!(v.status(add), StatusCode::M_Success);
     let enable = EnableRospec {
         ro_spec_id: 1,
         ..Default::default()
     };
-    assert_eq!(request_status(&mut c, enable).await, StatusCode::M_Success);
-    let (tags, _) = collect_reports(&mut c, T, |t| t.len() >= 50).await;
+    assert_eq!(v.status(enable), StatusCode::M_Success);
+    let (tags, _) = v.collect_reports(600_000_000, |t| t.len() >= 50);
     assert!(tags.len() >= 50);
     assert!(tags.iter().all(|t| t.channel_index.map(|c| c.0) == Some(3)));
-    sim.shutdown().await;
 }

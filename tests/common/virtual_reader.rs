@@ -160,6 +160,35 @@ impl VirtualReader {
         }
     }
 
+    /// Collects the TagReportData of every RO_ACCESS_REPORT until `done` says stop or
+    /// `limit_us` of simulated time has passed; other messages are returned separately.
+    pub fn collect_reports(
+        &mut self,
+        limit_us: u64,
+        mut done: impl FnMut(&[TagReportData]) -> bool,
+    ) -> (Vec<TagReportData>, Vec<Message>) {
+        let end = self.now.sim_us + limit_us;
+        let (mut tags, mut others) = (Vec::new(), Vec::new());
+        loop {
+            for m in self.inbox.drain(..) {
+                match m.body {
+                    MessageBody::RoAccessReport(r) => tags.extend(r.tag_report_data),
+                    _ => others.push(m),
+                }
+            }
+            if done(&tags) || self.now.sim_us >= end || self.closed {
+                return (tags, others);
+            }
+            self.run_for((end - self.now.sim_us).min(100_000));
+        }
+    }
+
+    /// The next message, running (at most `limit_us` of simulated time) until one arrives.
+    pub fn next_message(&mut self, limit_us: u64) -> Message {
+        self.run_until(limit_us, |_| true)
+            .expect("a message within the limit")
+    }
+
     /// Takes every message received so far.
     pub fn take(&mut self) -> Vec<Message> {
         self.inbox.drain(..).collect()
