@@ -55,6 +55,8 @@ struct Running {
     child: std::process::Child,
     addr: String,
     log: std::thread::JoinHandle<String>,
+    /// Every line of the log as it comes.
+    lines: std::sync::mpsc::Receiver<String>,
 }
 
 /// Starts `llrp-gateway sim` with `args` on a free loopback port and waits for its
@@ -72,10 +74,12 @@ fn spawn_sim(args: &[&str]) -> Running {
         .expect("runs");
     let stderr = child.stderr.take().expect("piped");
     let (addr_tx, addr_rx) = std::sync::mpsc::channel();
+    let (lines_tx, lines) = std::sync::mpsc::channel();
     let log = std::thread::spawn(move || {
         let mut all = String::new();
         for line in BufReader::new(stderr).lines() {
             let line = line.unwrap_or_default();
+            let _ = lines_tx.send(line.clone());
             if let Some(at) = line.find("listening on ") {
                 let _ = addr_tx.send(line[at + "listening on ".len()..].trim().to_string());
             }
@@ -87,7 +91,12 @@ fn spawn_sim(args: &[&str]) -> Running {
     let addr = addr_rx
         .recv_timeout(std::time::Duration::from_secs(20))
         .expect("the simulator listens");
-    Running { child, addr, log }
+    Running {
+        child,
+        addr,
+        log,
+        lines,
+    }
 }
 
 impl Running {
@@ -113,6 +122,56 @@ impl Running {
         };
         (status.success(), self.log.join().expect("log reader"))
     }
+}
+
+/// Failed accepts (here: out of file descriptors) pause accepting with a growing back-off
+/// instead of spinning, and the reader serves again once descriptors are free.
+#[test]
+fn failed_accepts_back_off_and_the_reader_recovers() {
+    use std::time::Duration;
+
+    let sim = spawn_sim(&[]);
+    let pid = sim.child.id().to_string();
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .expect("the simulator's descriptors")
+        .count();
+    // No descriptor left for an accepted connection (the soft limit; the hard one stays).
+    let limit = |n: usize| {
+        let ok = Command::new("prlimit")
+            .args(["--pid", &pid, &format!("--nofile={n}:")])
+            .status()
+            .expect("prlimit runs")
+            .success();
+        assert!(ok, "prlimit --nofile={n}");
+    };
+    limit(fds);
+    let mut s =
+        std::net::TcpStream::connect(&sim.addr).expect("the kernel completes the handshake");
+    s.set_read_timeout(Some(Duration::from_secs(20)))
+        .expect("timeout");
+    let mut failed = 0;
+    while failed < 3 {
+        let line = sim
+            .lines
+            .recv_timeout(Duration::from_secs(20))
+            .expect("the simulator logs the failed accepts");
+        failed += usize::from(line.contains("accept failed"));
+    }
+    limit(1024);
+    let hello = read_message(&mut s).expect("the greeting once descriptors are free");
+    assert_eq!(hello.name(), "READER_EVENT_NOTIFICATION");
+    let (ok, log) = sim.terminate();
+    assert!(ok, "{log}");
+    let failures = log.matches("accept failed").count();
+    // A loop that retried at once would log thousands; 10 ms doubling to 1 s logs a handful.
+    assert!(
+        (3..=50).contains(&failures),
+        "{failures} failed accepts logged:\n{log}"
+    );
+    assert!(
+        log.contains("pausing accepts for 20ms"),
+        "the pause grows: {log}"
+    );
 }
 
 /// Reads one LLRP message from a blocking stream.
