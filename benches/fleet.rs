@@ -59,10 +59,7 @@ async fn one(addr: String, n: u16, until: tokio::time::Instant) -> Result<Seen, 
         .await
         .map_err(|e| fail("connect", e))?;
     let hello = c.recv(T).await.map_err(|e| fail("greeting", e))?;
-    let ok = matches!(&hello.body, MessageBody::ReaderEventNotification(r)
-        if r.reader_event_notification_data.connection_attempt_event.as_ref()
-            .is_some_and(|e| e.status == ConnectionAttemptStatus::Success));
-    if !ok {
+    if hello.body.connection_attempt() != Some(ConnectionAttemptStatus::Success) {
         return Err(format!("{addr}: refused: {}", hello.name()));
     }
     let add = AddRospec {

@@ -429,12 +429,10 @@ fn run(addr: &str, n: u16, duration: Duration, idle: Option<Duration>) -> io::Re
     };
     // Greeting: READER_EVENT_NOTIFICATION with ConnectionAttemptEvent Success.
     let greeting = c.wait_for(63, "READER_EVENT_NOTIFICATION")?;
-    if let MessageBody::ReaderEventNotification(r) = &greeting.body {
-        match &r.reader_event_notification_data.connection_attempt_event {
-            Some(e) if e.status == ConnectionAttemptStatus::Success => {}
-            Some(e) => return Err(other(format!("connection refused (status {:?})", e.status))),
-            None => return Err(other("greeting without ConnectionAttemptEvent".into())),
-        }
+    match greeting.body.connection_attempt() {
+        Some(ConnectionAttemptStatus::Success) => {}
+        Some(s) => return Err(other(format!("connection refused (status {s:?})"))),
+        None => return Err(other("greeting without ConnectionAttemptEvent".into())),
     }
     c.send(
         1,

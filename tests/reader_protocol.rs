@@ -432,16 +432,7 @@ async fn keepalives_flow_and_a_silent_client_is_dropped() {
     let _ = k;
     // Stop answering: after a few unanswered keepalives the reader says goodbye and closes.
     let bye = c
-        .wait_for(
-            |m| match &m.body {
-                MessageBody::ReaderEventNotification(n) => n
-                    .reader_event_notification_data
-                    .connection_close_event
-                    .is_some(),
-                _ => false,
-            },
-            T,
-        )
+        .wait_for(|m| m.body.is_connection_close(), T)
         .await
         .expect("connection close event");
     assert_eq!(bye.name(), "READER_EVENT_NOTIFICATION");

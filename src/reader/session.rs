@@ -324,14 +324,7 @@ mod tests {
     }
 
     fn attempt_status(m: &Message) -> Option<ConnectionAttemptStatus> {
-        match &m.body {
-            MessageBody::ReaderEventNotification(n) => n
-                .reader_event_notification_data
-                .connection_attempt_event
-                .as_ref()
-                .map(|e| e.status),
-            _ => None,
-        }
+        m.body.connection_attempt()
     }
 
     #[test]
@@ -460,13 +453,7 @@ mod tests {
         let (out, close) = take(&mut s);
         assert!(close);
         match &out[..] {
-            [m] => match &m.body {
-                MessageBody::ReaderEventNotification(n) => assert!(n
-                    .reader_event_notification_data
-                    .connection_close_event
-                    .is_some()),
-                other => panic!("expected a ConnectionCloseEvent, got {}", other.name()),
-            },
+            [m] => assert!(m.body.is_connection_close(), "{m:?}"),
             other => panic!("expected one message, got {other:?}"),
         }
         assert_eq!(s.deadline(), Deadline::default());

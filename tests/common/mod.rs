@@ -54,14 +54,7 @@ pub async fn connect(sim: &RunningSim) -> Client {
 
 /// The ConnectionAttemptEvent status in a message, if it carries one.
 pub fn connection_status(m: &Message) -> Option<ConnectionAttemptStatus> {
-    match &m.body {
-        MessageBody::ReaderEventNotification(n) => n
-            .reader_event_notification_data
-            .connection_attempt_event
-            .as_ref()
-            .map(|e| e.status),
-        _ => None,
-    }
+    m.body.connection_attempt()
 }
 
 /// The LLRPStatus of a response (or ERROR_MESSAGE).

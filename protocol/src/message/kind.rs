@@ -178,6 +178,27 @@ requests! {
     reader_initiated { ClientRequestOp, RoAccessReport, Keepalive, ReaderEventNotification, ErrorMessage }
 }
 
+impl MessageBody {
+    /// The ConnectionAttemptEvent status of a READER_EVENT_NOTIFICATION that carries one.
+    pub fn connection_attempt(&self) -> Option<crate::enums::ConnectionAttemptStatus> {
+        match self {
+            MessageBody::ReaderEventNotification(n) => n
+                .reader_event_notification_data
+                .connection_attempt_event
+                .as_ref()
+                .map(|e| e.status),
+            _ => None,
+        }
+    }
+
+    /// Whether this is a READER_EVENT_NOTIFICATION with a ConnectionCloseEvent (a reader's
+    /// last word before it closes a connection).
+    pub fn is_connection_close(&self) -> bool {
+        matches!(self, MessageBody::ReaderEventNotification(n)
+            if n.reader_event_notification_data.connection_close_event.is_some())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
