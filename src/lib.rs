@@ -5,5 +5,7 @@ pub mod decode;
 pub mod net;
 pub mod physics;
 pub mod reader;
+pub mod reads;
+pub mod record;
 pub mod scenario;
 pub mod sim;

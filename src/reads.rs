@@ -1,0 +1,293 @@
+//! Tag reads as the gateway hands them on: one [`Read`] per TagReportData, in SI units, and
+//! the project's **reads file** (JSON Lines, one read a line), which the inventory client
+//! writes and the localizer reads.
+//!
+//! [`ReadDecoder`] turns the RO_ACCESS_REPORT frames of one reader connection into reads; it
+//! learns the reader's hop table from a GET_READER_CAPABILITIES_RESPONSE seen on the same
+//! connection (or is given one, e.g. from a `--region`), so a read's channel index becomes a
+//! frequency without guessing. It sees only LLRP frames, so it works the same on a real reader.
+
+use std::io::{self, BufRead, Write};
+
+use llrp::message::MessageBody;
+use llrp::message::{GetReaderCapabilitiesResponse, MessageDef, RoAccessReport};
+use llrp::units::{self, HopTable};
+use llrp::Message;
+use serde::{Deserialize, Serialize};
+
+use crate::scenario::Pose;
+
+/// One tag read (one TagReportData), in SI units; a line of the reads file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Read {
+    /// EPC, upper-case hex.
+    pub epc: String,
+    /// Name of the reader that reported it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reader: Option<String>,
+    /// Antenna port (1-based AntennaID); 0 when the report carried none.
+    pub antenna: u16,
+    /// First-seen time, UTC microseconds since the Unix epoch (FirstSeenTimestampUTC, else
+    /// the uptime timestamp, else the time the report arrived).
+    pub t_us: u64,
+    /// RF phase in radians, 0..2π (ImpinjRFPhaseAngle); null when the reader sent none.
+    pub phase_rad: Option<f64>,
+    /// Peak RSSI in dBm: ImpinjPeakRSSI (hundredths) when present, else PeakRSSI (whole dBm);
+    /// null when the reader sent neither.
+    pub rssi_dbm: Option<f64>,
+    /// 1-based ChannelIndex into the reader's hop table.
+    #[serde(default)]
+    pub channel_index: Option<u16>,
+    /// The channel's frequency in Hz, from the reader's hop table; null when unknown.
+    #[serde(default)]
+    pub channel_frequency_hz: Option<u64>,
+    /// Doppler frequency in Hz (ImpinjRFDopplerFrequency).
+    #[serde(default)]
+    pub doppler_hz: Option<f64>,
+    /// Pose of the antenna at the read, where the source knows it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub antenna_pose: Option<Pose>,
+    /// Last-seen time, UTC µs (not a reads-file field: the CSV output carries it).
+    #[serde(skip)]
+    pub last_seen_us: Option<u64>,
+}
+
+/// The columns of the CSV output, in order.
+pub const CSV_HEADER: &str = "epc,reader,antenna,t_us,last_seen_us,phase_rad,rssi_dbm,channel_index,channel_frequency_hz,doppler_hz";
+
+impl Read {
+    /// One CSV row (no line end) in the order of [`CSV_HEADER`]; absent values are empty.
+    pub fn csv_row(&self) -> String {
+        fn opt<T: ToString>(v: &Option<T>) -> String {
+            v.as_ref().map(ToString::to_string).unwrap_or_default()
+        }
+        format!(
+            "{},{},{},{},{},{},{},{},{},{}",
+            self.epc,
+            self.reader.as_deref().unwrap_or(""),
+            self.antenna,
+            self.t_us,
+            opt(&self.last_seen_us),
+            opt(&self.phase_rad),
+            opt(&self.rssi_dbm),
+            opt(&self.channel_index),
+            opt(&self.channel_frequency_hz),
+            opt(&self.doppler_hz),
+        )
+    }
+}
+
+/// Turns one connection's LLRP frames into [`Read`]s.
+#[derive(Clone, Debug, Default)]
+pub struct ReadDecoder {
+    reader: Option<String>,
+    hop_table: Option<HopTable>,
+    /// The hop table came from the reader's capabilities (not overridden by a fallback).
+    from_reader: bool,
+    /// Reader uptime at a UTC instant, from a UTCTimestamp/Uptime pair, for uptime-only reads.
+    uptime_offset_us: Option<i64>,
+}
+
+/// Why a frame gave no reads.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The RO_ACCESS_REPORT does not decode.
+    #[error("undecodable RO_ACCESS_REPORT: {0}")]
+    Decode(#[from] llrp::DecodeError),
+}
+
+impl ReadDecoder {
+    /// A decoder labelling its reads with `reader` (if given), with no hop table yet.
+    pub fn new(reader: Option<String>) -> Self {
+        ReadDecoder {
+            reader,
+            ..ReadDecoder::default()
+        }
+    }
+
+    /// Uses `table` until the reader's own capabilities are seen.
+    pub fn with_fallback_table(mut self, table: Option<HopTable>) -> Self {
+        if !self.from_reader {
+            self.hop_table = table;
+        }
+        self
+    }
+
+    /// The hop table in use, if any.
+    pub fn hop_table(&self) -> Option<&HopTable> {
+        self.hop_table.as_ref()
+    }
+
+    /// Learns from a decoded message (the hop table of a capabilities response).
+    pub fn observe(&mut self, message: &Message) {
+        if let MessageBody::GetReaderCapabilitiesResponse(r) = &message.body {
+            if let Some(caps) = &r.regulatory_capabilities {
+                // Readers hop by table 1 unless configured otherwise; a fixed-frequency
+                // region reports its table as 0.
+                let table = HopTable::from_capabilities(caps, 1).or_else(|| {
+                    caps.uhf_band_capabilities.as_ref().and_then(|u| {
+                        u.frequency_information
+                            .frequency_hop_table
+                            .first()
+                            .and_then(|t| HopTable::from_capabilities(caps, t.hop_table_id))
+                    })
+                });
+                if table.is_some() {
+                    self.hop_table = table;
+                    self.from_reader = true;
+                }
+            }
+        }
+    }
+
+    /// Looks at one frame from the reader: learns from capabilities responses, and appends
+    /// the reads of an RO_ACCESS_REPORT to `out`; `now_utc_us` stamps reads that carry no
+    /// timestamp. Other frames are ignored.
+    pub fn frame(
+        &mut self,
+        frame: &[u8],
+        now_utc_us: u64,
+        out: &mut Vec<Read>,
+    ) -> Result<(), ReadError> {
+        let Some(h) = llrp::FrameHeader::peek(frame) else {
+            return Ok(());
+        };
+        if h.msg_type == GetReaderCapabilitiesResponse::TYPE {
+            if let Ok(m) = Message::decode(frame) {
+                self.observe(&m);
+            }
+            return Ok(());
+        }
+        if h.msg_type != RoAccessReport::TYPE {
+            return Ok(());
+        }
+        for r in llrp::reads::tag_reads(frame)? {
+            let r = r?;
+            out.push(self.read(&r, now_utc_us));
+        }
+        Ok(())
+    }
+
+    /// One read from a walked TagReportData.
+    pub fn read(&self, r: &llrp::reads::TagRead<'_>, now_utc_us: u64) -> Read {
+        let uptime = |u: Option<u64>| {
+            u.zip(self.uptime_offset_us)
+                .map(|(u, off)| (u as i64 + off).max(0) as u64)
+        };
+        let t_us = r
+            .first_seen_utc
+            .or_else(|| uptime(r.first_seen_uptime))
+            .unwrap_or(now_utc_us);
+        let last_seen_us = r.last_seen_utc.or_else(|| uptime(r.last_seen_uptime));
+        let rssi_dbm = r
+            .impinj_peak_rssi
+            .map(units::centi_dbm_to_dbm)
+            .or(r.peak_rssi.map(f64::from));
+        let channel_frequency_hz = r
+            .channel_index
+            .zip(self.hop_table.as_ref())
+            .and_then(|(c, t)| t.frequency_khz(c))
+            .map(|khz| u64::from(khz) * 1000);
+        Read {
+            epc: hex_upper(r.epc),
+            reader: self.reader.clone(),
+            antenna: r.antenna_id.unwrap_or(0),
+            t_us,
+            phase_rad: r.phase_angle.map(units::phase_to_radians),
+            rssi_dbm,
+            channel_index: r.channel_index,
+            channel_frequency_hz,
+            doppler_hz: r.doppler_frequency.map(units::doppler_to_hz),
+            antenna_pose: None,
+            last_seen_us,
+        }
+    }
+}
+
+/// Upper-case hex of `bytes`.
+pub fn hex_upper(bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        // Writing to a String cannot fail.
+        let _ = write!(s, "{b:02X}");
+    }
+    s
+}
+
+/// Writes one read as a reads-file line.
+pub fn write_jsonl(out: &mut impl Write, read: &Read) -> io::Result<()> {
+    serde_json::to_writer(&mut *out, read)?;
+    out.write_all(b"\n")
+}
+
+/// A reads-file line that does not parse.
+#[derive(Debug, thiserror::Error)]
+#[error("reads file line {line}: {message}")]
+pub struct ReadsFileError {
+    /// 1-based line number.
+    pub line: usize,
+    /// What is wrong, naming the field.
+    pub message: String,
+}
+
+/// Reads a whole reads file; blank lines are skipped.
+pub fn read_jsonl(input: impl BufRead) -> Result<Vec<Read>, ReadsFileError> {
+    let mut reads = Vec::new();
+    for (i, line) in input.lines().enumerate() {
+        let line = line.map_err(|e| ReadsFileError {
+            line: i + 1,
+            message: e.to_string(),
+        })?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let mut de = serde_json::Deserializer::from_str(&line);
+        let read: Read = serde_path_to_error::deserialize(&mut de).map_err(|e| ReadsFileError {
+            line: i + 1,
+            message: format!("{}: {}", e.path(), e.inner()),
+        })?;
+        reads.push(read);
+    }
+    Ok(reads)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_read_round_trips_through_the_reads_file() {
+        let read = Read {
+            epc: "3034F8".into(),
+            reader: Some("dock".into()),
+            antenna: 2,
+            t_us: 1_700_000_000_000_000,
+            phase_rad: Some(1.5),
+            rssi_dbm: Some(-55.25),
+            channel_index: Some(7),
+            channel_frequency_hz: Some(915_250_000),
+            doppler_hz: None,
+            antenna_pose: None,
+            last_seen_us: None,
+        };
+        let mut buf = Vec::new();
+        write_jsonl(&mut buf, &read).expect("to memory");
+        let text = String::from_utf8(buf.clone()).expect("utf-8");
+        assert!(text.contains("\"doppler_hz\":null"), "{text}");
+        assert_eq!(read_jsonl(&buf[..]).expect("parses"), vec![read]);
+    }
+
+    #[test]
+    fn optional_fields_may_be_absent_and_a_bad_field_is_named() {
+        let ok = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":-60}"#;
+        let r = read_jsonl(&ok[..]).expect("parses");
+        assert_eq!(r[0].reader, None);
+        assert_eq!(r[0].channel_index, None);
+        let bad =
+            b"\n{\"epc\":\"AB\",\"antenna\":\"one\",\"t_us\":5,\"phase_rad\":0.5,\"rssi_dbm\":-60}";
+        let e = read_jsonl(&bad[..]).expect_err("antenna is a string");
+        assert_eq!(e.line, 2);
+        assert!(e.message.starts_with("antenna:"), "{}", e.message);
+    }
+}

@@ -1,0 +1,541 @@
+//! The recording format, version [`VERSION`]: JSON Lines, a header line then one line per
+//! frame, marker or reader identification. See `docs/recordings.md`.
+//!
+//! ```text
+//! {"llrp_recording":1,"gateway":"llrp-gateway 0.1.0","upstream":"10.0.0.5:5084","start_utc_us":…}
+//! {"t_us":0,"utc_us":…,"conn":1,"event":"connect","reason":"client 127.0.0.1:50312"}
+//! {"t_us":812,"utc_us":…,"conn":1,"dir":"from_reader","frame":"BD8AAAAg…"}
+//! {"t_us":1210,"utc_us":…,"conn":1,"reader":{"manufacturer":25882,"model":2001002,…}}
+//! {"t_us":9000,"utc_us":…,"conn":1,"event":"disconnect","reason":"client closed"}
+//! ```
+
+use std::io::{self, BufRead};
+
+use base64::engine::general_purpose::STANDARD as BASE64;
+use base64::Engine as _;
+use bytes::Bytes;
+use serde::{Deserialize, Serialize};
+
+/// The format version this build writes and reads.
+pub const VERSION: u32 = 1;
+
+/// The first line of a recording.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Format version ([`VERSION`]).
+    pub llrp_recording: u32,
+    /// The program that wrote it, e.g. `llrp-gateway 0.1.0`.
+    pub gateway: String,
+    /// The reader the frames came from: `HOST:PORT` of the upstream, or `sim:NAME`.
+    pub upstream: String,
+    /// The scenario a simulated reader ran, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario: Option<String>,
+    /// Wall-clock time of `t_us` = 0, UTC µs since the Unix epoch.
+    pub start_utc_us: u64,
+    /// Which part of a rotated recording this file is (0 = the first).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub part: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
+}
+
+impl Header {
+    /// A header of this version for `upstream`, starting at `start_utc_us`.
+    pub fn new(upstream: impl Into<String>, start_utc_us: u64) -> Self {
+        Header {
+            llrp_recording: VERSION,
+            gateway: format!("llrp-gateway {}", env!("CARGO_PKG_VERSION")),
+            upstream: upstream.into(),
+            scenario: None,
+            start_utc_us,
+            part: 0,
+        }
+    }
+}
+
+/// Which way a frame went.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// From the client to the reader.
+    ToReader,
+    /// From the reader to the client.
+    FromReader,
+}
+
+/// What a marker line marks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Event {
+    /// A client connected (and, through a proxy, its upstream connection was attempted).
+    Connect,
+    /// The connection ended; the reason says who ended it and why.
+    Disconnect,
+}
+
+/// When a line happened: monotonic offset from the recording's start, and wall-clock time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Stamp {
+    /// Microseconds since the recording started (monotonic clock).
+    pub t_us: u64,
+    /// UTC µs since the Unix epoch.
+    pub utc_us: u64,
+}
+
+/// What the gateway learnt of the reader (from its capabilities and configuration).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ReaderInfo {
+    /// DeviceManufacturerName (IANA enterprise number; 25882 is Impinj).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub manufacturer: Option<u32>,
+    /// ModelName.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<u32>,
+    /// ReaderFirmwareVersion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub firmware: Option<String>,
+    /// Identification's IDType: `mac` or `epc`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id_type: Option<String>,
+    /// Identification's ReaderID, upper-case hex.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reader_id: Option<String>,
+}
+
+/// One line after the header.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Entry {
+    /// One whole LLRP frame, byte for byte.
+    Frame {
+        /// When the frame was read (its first byte's read completed the frame).
+        at: Stamp,
+        /// Connection number, 1 for the first client of the recording.
+        conn: u32,
+        /// Which way it went.
+        dir: Direction,
+        /// The frame.
+        frame: Bytes,
+    },
+    /// Bytes that are not LLRP frames (after a length field that cannot be resynchronised),
+    /// as they were read.
+    Bytes {
+        /// When they were read.
+        at: Stamp,
+        /// Connection number.
+        conn: u32,
+        /// Which way they went.
+        dir: Direction,
+        /// The bytes.
+        bytes: Bytes,
+    },
+    /// A connection began or ended.
+    Marker {
+        /// When.
+        at: Stamp,
+        /// Connection number.
+        conn: u32,
+        /// Connect or disconnect.
+        event: Event,
+        /// Why, in words (peer address, who closed, the error).
+        reason: String,
+    },
+    /// The reader's identity, once seen.
+    Reader {
+        /// When it was seen.
+        at: Stamp,
+        /// Connection number.
+        conn: u32,
+        /// What was learnt.
+        reader: ReaderInfo,
+    },
+}
+
+impl Entry {
+    /// When the line happened.
+    pub fn at(&self) -> Stamp {
+        match self {
+            Entry::Frame { at, .. }
+            | Entry::Bytes { at, .. }
+            | Entry::Marker { at, .. }
+            | Entry::Reader { at, .. } => *at,
+        }
+    }
+
+    /// Its connection number.
+    pub fn conn(&self) -> u32 {
+        match self {
+            Entry::Frame { conn, .. }
+            | Entry::Bytes { conn, .. }
+            | Entry::Marker { conn, .. }
+            | Entry::Reader { conn, .. } => *conn,
+        }
+    }
+}
+
+/// The JSON shape of an entry line (all variants' fields, each optional).
+#[derive(Default, Serialize, Deserialize)]
+struct Line {
+    t_us: u64,
+    utc_us: u64,
+    conn: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    dir: Option<Direction>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bytes: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    event: Option<Event>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reader: Option<ReaderInfo>,
+}
+
+/// Appends `header` as a JSON line to `out`.
+pub fn encode_header(header: &Header, out: &mut Vec<u8>) {
+    // Serialising plain structs of strings and numbers to memory cannot fail.
+    let _ = serde_json::to_writer(&mut *out, header);
+    out.push(b'\n');
+}
+
+/// Appends `entry` as a JSON line to `out`.
+pub fn encode_entry(entry: &Entry, out: &mut Vec<u8>) {
+    let (at, conn) = (entry.at(), entry.conn());
+    let mut line = Line {
+        t_us: at.t_us,
+        utc_us: at.utc_us,
+        conn,
+        ..Line::default()
+    };
+    match entry {
+        Entry::Frame { dir, frame, .. } => {
+            line.dir = Some(*dir);
+            line.frame = Some(BASE64.encode(frame));
+        }
+        Entry::Bytes { dir, bytes, .. } => {
+            line.dir = Some(*dir);
+            line.bytes = Some(BASE64.encode(bytes));
+        }
+        Entry::Marker { event, reason, .. } => {
+            line.event = Some(*event);
+            line.reason = Some(reason.clone());
+        }
+        Entry::Reader { reader, .. } => line.reader = Some(reader.clone()),
+    }
+    // As above: to memory, no maps with non-string keys.
+    let _ = serde_json::to_writer(&mut *out, &line);
+    out.push(b'\n');
+}
+
+/// Why a recording cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The file cannot be read.
+    #[error("{0}")]
+    Io(#[from] io::Error),
+    /// The file is empty.
+    #[error("empty file: a recording starts with its header line")]
+    Empty,
+    /// The first line is not a recording header.
+    #[error("line 1 is not a recording header: {0}")]
+    Header(String),
+    /// The recording is of another format version.
+    #[error(
+        "recording format version {found} is not supported: this llrp-gateway reads version {}",
+        VERSION
+    )]
+    Version {
+        /// The version in the header.
+        found: u32,
+    },
+    /// A line (not the last) does not parse.
+    #[error("line {line}: {message}")]
+    Line {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong, naming the field.
+        message: String,
+    },
+}
+
+/// A whole recording in memory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recording {
+    /// Its header.
+    pub header: Header,
+    /// The lines after the header, in file order.
+    pub entries: Vec<Entry>,
+    /// Problems tolerated while reading (a truncated last line).
+    pub warnings: Vec<String>,
+}
+
+impl Recording {
+    /// Reads a recording file.
+    pub fn open(path: &std::path::Path) -> Result<Recording, RecordError> {
+        let file = std::fs::File::open(path)?;
+        Recording::read(io::BufReader::new(file))
+    }
+
+    /// Reads a recording: the header must be of this [`VERSION`]; a last line without its
+    /// line end that does not parse (a writer stopped mid-line) is dropped with a warning;
+    /// any other bad line is an error naming its line and field.
+    pub fn read(mut input: impl BufRead) -> Result<Recording, RecordError> {
+        let mut text = String::new();
+        if input.read_line(&mut text)? == 0 {
+            return Err(RecordError::Empty);
+        }
+        let value: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| RecordError::Header(e.to_string()))?;
+        match value.get("llrp_recording").and_then(|v| v.as_u64()) {
+            None => {
+                return Err(RecordError::Header(
+                    "llrp_recording: missing (not an llrp-gateway recording)".into(),
+                ))
+            }
+            Some(v) if v != u64::from(VERSION) => {
+                return Err(RecordError::Version {
+                    found: u32::try_from(v).unwrap_or(u32::MAX),
+                })
+            }
+            Some(_) => {}
+        }
+        let header: Header = serde_path_to_error::deserialize(value)
+            .map_err(|e| RecordError::Header(format!("{}: {}", e.path(), e.inner())))?;
+        let mut entries = Vec::new();
+        let mut warnings = Vec::new();
+        let mut number = 1;
+        loop {
+            text.clear();
+            if input.read_line(&mut text)? == 0 {
+                break;
+            }
+            number += 1;
+            if text.trim().is_empty() {
+                continue;
+            }
+            match parse_entry(&text) {
+                Ok(e) => entries.push(e),
+                Err(message) if !text.ends_with('\n') => {
+                    warnings.push(format!(
+                        "line {number}: truncated last line dropped ({message})"
+                    ));
+                }
+                Err(message) => {
+                    return Err(RecordError::Line {
+                        line: number,
+                        message,
+                    })
+                }
+            }
+        }
+        Ok(Recording {
+            header,
+            entries,
+            warnings,
+        })
+    }
+
+    /// The frames of connection `conn` in order, with their direction and stamp.
+    pub fn frames(&self, conn: u32) -> impl Iterator<Item = (Stamp, Direction, &Bytes)> {
+        self.entries.iter().filter_map(move |e| match e {
+            Entry::Frame {
+                at,
+                conn: c,
+                dir,
+                frame,
+            } if *c == conn => Some((*at, *dir, frame)),
+            _ => None,
+        })
+    }
+
+    /// The connection numbers in order of first appearance.
+    pub fn connections(&self) -> Vec<u32> {
+        let mut seen = Vec::new();
+        for e in &self.entries {
+            if !seen.contains(&e.conn()) {
+                seen.push(e.conn());
+            }
+        }
+        seen
+    }
+}
+
+fn parse_entry(text: &str) -> Result<Entry, String> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    let line: Line = serde_path_to_error::deserialize(&mut de)
+        .map_err(|e| format!("{}: {}", e.path(), e.inner()))?;
+    let at = Stamp {
+        t_us: line.t_us,
+        utc_us: line.utc_us,
+    };
+    let conn = line.conn;
+    let b64 = |field: &str, s: &str| {
+        BASE64
+            .decode(s)
+            .map(Bytes::from)
+            .map_err(|e| format!("{field}: not base64: {e}"))
+    };
+    let dir = || line.dir.ok_or_else(|| "dir: missing".to_string());
+    if let Some(f) = &line.frame {
+        let frame = b64("frame", f)?;
+        let ok = llrp::FrameHeader::peek(&frame).is_some_and(|h| h.length as usize == frame.len());
+        if !ok {
+            return Err(format!(
+                "frame: {} bytes that are not one whole LLRP frame",
+                frame.len()
+            ));
+        }
+        return Ok(Entry::Frame {
+            at,
+            conn,
+            dir: dir()?,
+            frame,
+        });
+    }
+    if let Some(b) = &line.bytes {
+        return Ok(Entry::Bytes {
+            at,
+            conn,
+            dir: dir()?,
+            bytes: b64("bytes", b)?,
+        });
+    }
+    if let Some(event) = line.event {
+        return Ok(Entry::Marker {
+            at,
+            conn,
+            event,
+            reason: line.reason.unwrap_or_default(),
+        });
+    }
+    if let Some(reader) = line.reader {
+        return Ok(Entry::Reader { at, conn, reader });
+    }
+    Err("the line has none of frame, bytes, event, reader".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use llrp::message::KeepaliveAck;
+    use llrp::Message;
+
+    fn sample() -> (Header, Vec<Entry>) {
+        let at = |t| Stamp {
+            t_us: t,
+            utc_us: 1_700_000_000_000_000 + t,
+        };
+        let frame = Message::new(7, KeepaliveAck::default()).to_bytes().freeze();
+        let entries = vec![
+            Entry::Marker {
+                at: at(0),
+                conn: 1,
+                event: Event::Connect,
+                reason: "client 127.0.0.1:5000".into(),
+            },
+            Entry::Frame {
+                at: at(10),
+                conn: 1,
+                dir: Direction::ToReader,
+                frame,
+            },
+            Entry::Bytes {
+                at: at(11),
+                conn: 1,
+                dir: Direction::FromReader,
+                bytes: Bytes::from_static(b"GET / HTTP/1.1\r\n"),
+            },
+            Entry::Reader {
+                at: at(12),
+                conn: 1,
+                reader: ReaderInfo {
+                    manufacturer: Some(25882),
+                    ..ReaderInfo::default()
+                },
+            },
+            Entry::Marker {
+                at: at(20),
+                conn: 1,
+                event: Event::Disconnect,
+                reason: "client closed".into(),
+            },
+        ];
+        (
+            Header::new("127.0.0.1:5084", 1_700_000_000_000_000),
+            entries,
+        )
+    }
+
+    fn encode(header: &Header, entries: &[Entry]) -> Vec<u8> {
+        let mut out = Vec::new();
+        encode_header(header, &mut out);
+        for e in entries {
+            encode_entry(e, &mut out);
+        }
+        out
+    }
+
+    #[test]
+    fn every_kind_of_line_round_trips() {
+        let (header, entries) = sample();
+        let text = encode(&header, &entries);
+        let r = Recording::read(&text[..]).expect("reads");
+        assert_eq!(r.header, header);
+        assert_eq!(r.entries, entries);
+        assert!(r.warnings.is_empty());
+        assert_eq!(r.connections(), vec![1]);
+        assert_eq!(r.frames(1).count(), 1);
+    }
+
+    #[test]
+    fn a_truncated_last_line_is_dropped_with_a_warning() {
+        let (header, entries) = sample();
+        let mut text = encode(&header, &entries);
+        text.truncate(text.len() - 9); // cut into the last marker, its line end gone
+        let r = Recording::read(&text[..]).expect("tolerated");
+        assert_eq!(r.entries, entries[..entries.len() - 1]);
+        assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
+        assert!(r.warnings[0].contains("truncated"), "{:?}", r.warnings);
+    }
+
+    #[test]
+    fn a_bad_line_in_the_middle_is_an_error_naming_line_and_field() {
+        let (header, entries) = sample();
+        let text = String::from_utf8(encode(&header, &entries)).expect("utf-8");
+        let text = text.replacen("\"dir\":\"to_reader\"", "\"dir\":\"sideways\"", 1);
+        match Recording::read(text.as_bytes()) {
+            Err(RecordError::Line { line: 3, message }) => {
+                assert!(message.starts_with("dir:"), "{message}")
+            }
+            other => panic!("expected a line-3 error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn another_format_version_is_refused_by_number() {
+        let (mut header, entries) = sample();
+        header.llrp_recording = 2;
+        let e = Recording::read(&encode(&header, &entries)[..]).expect_err("version 2");
+        assert!(matches!(e, RecordError::Version { found: 2 }), "{e:?}");
+        assert!(e.to_string().contains("reads version 1"), "{e}");
+        let e = Recording::read(&b"{\"hello\":1}\n"[..]).expect_err("not a recording");
+        assert!(e.to_string().contains("llrp_recording"), "{e}");
+    }
+
+    #[test]
+    fn a_frame_line_must_hold_exactly_one_frame() {
+        let line = format!(
+            "{{\"t_us\":1,\"utc_us\":1,\"conn\":1,\"dir\":\"to_reader\",\"frame\":\"{}\"}}\n",
+            BASE64.encode([4u8, 62, 0, 0])
+        );
+        let mut text = Vec::new();
+        encode_header(&Header::new("x", 0), &mut text);
+        text.extend_from_slice(line.as_bytes());
+        let e = Recording::read(&text[..]).expect_err("4 bytes");
+        assert!(e.to_string().contains("line 2: frame:"), "{e}");
+    }
+}

@@ -1,0 +1,8 @@
+//! Recordings of LLRP sessions: the versioned JSON Lines format ([`format`]), the writer the
+//! proxy and the simulated reader record through ([`writer`]).
+
+pub mod format;
+pub mod writer;
+
+pub use format::{Direction, Entry, Event, Header, ReaderInfo, RecordError, Recording, Stamp};
+pub use writer::{RecordOptions, Recorder, RecorderTask};
