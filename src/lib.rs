@@ -2,6 +2,7 @@
 //! client and frame decoder. The LLRP codec lives in the `llrp` crate (`protocol/`).
 
 pub mod decode;
+pub mod gateway;
 pub mod net;
 pub mod physics;
 pub mod reader;
@@ -9,3 +10,4 @@ pub mod reads;
 pub mod record;
 pub mod scenario;
 pub mod sim;
+pub mod stop;

@@ -9,6 +9,7 @@ use llrp_gateway::decode::{decode_stream, DecodeOptions};
 use llrp_gateway::net::clock::Speed;
 use llrp_gateway::scenario::Scenario;
 use llrp_gateway::sim::{self, SimOptions};
+use llrp_gateway::stop::StopSignal;
 
 #[derive(Parser)]
 #[command(
@@ -38,7 +39,16 @@ enum Command {
         /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
         #[arg(long)]
         truth: Option<PathBuf>,
+        /// Record every session to this file (one file per reader, `FILE-NAME`, when the
+        /// scenario has several), as the proxy does (docs/recordings.md).
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Start a numbered next recording file once a file would pass this many bytes.
+        #[arg(long)]
+        record_max_bytes: Option<u64>,
     },
+    /// Forward clients to a real reader byte for byte, recording the sessions.
+    Proxy(llrp_gateway::gateway::ProxyArgs),
     /// Decode LLRP frames and print one JSON object per message.
     Decode {
         /// Input file with LLRP frames; `-` or nothing reads standard input.
@@ -60,14 +70,21 @@ fn main() -> ExitCode {
             listen,
             speed,
             truth,
+            record,
+            record_max_bytes,
         } => run_sim(
             scenario,
             SimOptions {
                 listen,
                 speed,
                 truth,
+                record,
+                record_options: llrp_gateway::record::RecordOptions {
+                    max_bytes: record_max_bytes,
+                },
             },
         ),
+        Command::Proxy(args) => llrp_gateway::gateway::run(args),
         Command::Decode {
             file,
             hex,
@@ -102,65 +119,9 @@ fn main() -> ExitCode {
     }
 }
 
-/// Ctrl-C (SIGINT) and, on Unix, SIGTERM, watched from the moment this is made (so a signal
-/// that arrives while the readers start is not lost: it would end the process outright).
-struct StopSignal {
-    #[cfg(unix)]
-    signals: Vec<tokio::signal::unix::Signal>,
-}
-
-impl StopSignal {
-    /// Starts watching; must run inside the runtime.
-    fn watch() -> Self {
-        #[cfg(unix)]
-        {
-            use tokio::signal::unix::{signal, SignalKind};
-            let mut signals = Vec::new();
-            for kind in [SignalKind::interrupt(), SignalKind::terminate()] {
-                match signal(kind) {
-                    Ok(s) => signals.push(s),
-                    Err(e) => eprintln!("llrp-gateway sim: cannot watch a stop signal: {e}"),
-                }
-            }
-            StopSignal { signals }
-        }
-        #[cfg(not(unix))]
-        StopSignal {}
-    }
-
-    /// Resolves at the first of the signals.
-    async fn wait(self) {
-        #[cfg(unix)]
-        {
-            let mut signals = self.signals;
-            if signals.is_empty() {
-                let _ = tokio::signal::ctrl_c().await;
-                return;
-            }
-            let any = std::future::poll_fn(|cx| {
-                for s in &mut signals {
-                    if s.poll_recv(cx).is_ready() {
-                        return std::task::Poll::Ready(());
-                    }
-                }
-                std::task::Poll::Pending
-            });
-            any.await;
-        }
-        #[cfg(not(unix))]
-        let _ = tokio::signal::ctrl_c().await;
-    }
-}
-
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
 fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    llrp_gateway::stop::init_logging();
     let scenario = match scenario {
         Some(path) => match Scenario::load(&path) {
             Ok(s) => s,

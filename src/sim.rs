@@ -4,7 +4,7 @@
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -17,6 +17,7 @@ use crate::net::server::{serve, Observer, SimReader};
 use crate::physics::{Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
+use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::Scenario;
 
 /// Longest a shutdown waits for the readers' tasks (each gives its client at most half a
@@ -35,6 +36,11 @@ pub struct SimOptions {
     pub speed: Speed,
     /// Where to write ground truth (JSONL), if anywhere.
     pub truth: Option<PathBuf>,
+    /// Record every reader's sessions (one file per reader when there are several:
+    /// [`record_path`]).
+    pub record: Option<PathBuf>,
+    /// Rotation size of the recordings.
+    pub record_options: RecordOptions,
 }
 
 impl Default for SimOptions {
@@ -43,6 +49,8 @@ impl Default for SimOptions {
             listen: Vec::new(),
             speed: Speed::Factor(1.0),
             truth: None,
+            record: None,
+            record_options: RecordOptions::default(),
         }
     }
 }
@@ -60,6 +68,16 @@ pub enum SimError {
         reader: String,
         /// The address.
         addr: String,
+        /// Why.
+        source: io::Error,
+    },
+    /// A recording could not be created.
+    #[error("reader {reader}: cannot create the recording {path}: {source}")]
+    Record {
+        /// Reader name.
+        reader: String,
+        /// The file.
+        path: PathBuf,
         /// Why.
         source: io::Error,
     },
@@ -82,6 +100,7 @@ pub struct RunningSim {
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
+    recordings: Vec<RecorderTask>,
 }
 
 impl RunningSim {
@@ -97,6 +116,15 @@ impl RunningSim {
         };
         if tokio::time::timeout(SHUTDOWN_WAIT, all).await.is_err() {
             tracing::warn!("a reader did not stop within {SHUTDOWN_WAIT:?}");
+        }
+        // Each recording ends once its reader's task (holding the recorder) has ended.
+        for r in self.recordings {
+            match tokio::time::timeout(SHUTDOWN_WAIT, r).await {
+                Ok(Ok(Ok(()))) => {}
+                Ok(Ok(Err(e))) => tracing::error!("writing a recording failed: {e}"),
+                Ok(Err(e)) => tracing::error!("a recording's writer failed: {e}"),
+                Err(_) => tracing::warn!("a recording was not finished within {SHUTDOWN_WAIT:?}"),
+            }
         }
         if let Some(t) = &self.truth {
             t.flush();
@@ -200,6 +228,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     let mut addrs = Vec::new();
     let mut names = Vec::new();
     let mut tasks = Vec::new();
+    let mut recordings = Vec::new();
     for (i, spec) in scenario.readers.iter().enumerate() {
         let addr = opts
             .listen
@@ -225,8 +254,24 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
             .as_ref()
             .map(|t| truth_observer(t.clone(), spec.name.clone(), moving.clone(), utc0));
         let sim = SimReader::new(Session::new(reader), clock.clone(), observer);
+        let recorder = match &opts.record {
+            Some(path) => {
+                let path = record_path(path, &spec.name, scenario.readers.len());
+                let mut header = Header::new(format!("sim:{}", spec.name), 0);
+                header.scenario = Some(scenario.name.clone());
+                let (r, task) = Recorder::create(&path, header, opts.record_options.clone())
+                    .map_err(|source| SimError::Record {
+                        reader: spec.name.clone(),
+                        path: path.clone(),
+                        source,
+                    })?;
+                recordings.push(task);
+                Some(r)
+            }
+            None => None,
+        };
         tracing::info!(reader = %spec.name, %bound, "simulated reader listening");
-        tasks.push(tokio::spawn(serve(listener, sim, rx.clone())));
+        tasks.push(tokio::spawn(serve(listener, sim, rx.clone(), recorder)));
         addrs.push(bound);
         names.push(spec.name.clone());
     }
@@ -236,5 +281,23 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         shutdown,
         tasks,
         truth,
+        recordings,
     })
+}
+
+/// The recording file of reader `name`: `path` itself when the scenario has one reader,
+/// else `STEM-NAME.EXT` beside it.
+pub fn record_path(path: &Path, name: &str, readers: usize) -> PathBuf {
+    if readers <= 1 {
+        return path.to_owned();
+    }
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let file = match path.extension() {
+        Some(ext) => format!("{stem}-{name}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{name}"),
+    };
+    path.with_file_name(file)
 }

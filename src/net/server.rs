@@ -17,6 +17,7 @@ use super::connection::{Connection, Io};
 use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
+use crate::record::{Direction, Event, Recorder};
 
 /// Sees the reader after each step (writes ground truth).
 pub type Observer = Box<dyn FnMut(&Reader) + Send>;
@@ -146,6 +147,34 @@ struct Client {
     id: ClientId,
     conn: Connection,
     peer: String,
+    /// Its connection number in the recording.
+    rec: u32,
+}
+
+/// Records the frames of `bytes` (whole frames, as the session sends them) as sent by the
+/// reader on connection `conn`.
+async fn record_sent(recorder: &Option<Recorder>, conn: u32, bytes: &[u8]) {
+    let Some(r) = recorder else { return };
+    let at = r.now();
+    let mut rest = bytes;
+    while let Some(h) = llrp::FrameHeader::peek(rest) {
+        let len = (h.length as usize).clamp(llrp::frame::HEADER_LEN, rest.len());
+        let frame = bytes::Bytes::copy_from_slice(&rest[..len]);
+        if r.frame(at, conn, Direction::FromReader, frame)
+            .await
+            .is_err()
+        {
+            return;
+        }
+        rest = &rest[len..];
+    }
+}
+
+/// Records a marker on connection `conn`.
+async fn record_marker(recorder: &Option<Recorder>, conn: u32, event: Event, reason: String) {
+    if let Some(r) = recorder {
+        let _ = r.marker(conn, event, reason).await;
+    }
 }
 
 /// Serves `listener` until `shutdown` turns true; then the connected client gets the
@@ -159,6 +188,7 @@ pub async fn serve(
     listener: TcpListener,
     sim: SimReader,
     mut shutdown: watch::Receiver<bool>,
+    recorder: Option<Recorder>,
 ) -> io::Result<()> {
     let max = sim.clock.speed() == Speed::Max;
     // The reader is here, or away on the pool for a turn.
@@ -183,12 +213,20 @@ pub async fn serve(
             }
             if let Some(c) = &mut client {
                 if let Some(t) = sim.session.transmit() {
+                    record_sent(&recorder, c.rec, &t.bytes[..]).await;
                     c.conn.queue_buf(t.bytes);
                     if t.close {
                         // What the session said last goes out, then the connection closes.
                         let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
                         sim.session.disconnect(c.id);
                         tracing::info!(peer = %c.peer, "client disconnected by the reader");
+                        record_marker(
+                            &recorder,
+                            c.rec,
+                            Event::Disconnect,
+                            "the reader closed the connection".into(),
+                        )
+                        .await;
                         client = None;
                     }
                 }
@@ -224,10 +262,12 @@ pub async fn serve(
                     if let Some(mut c) = client.take() {
                         sim.session.shutdown();
                         if let Some(t) = sim.session.transmit() {
+                            record_sent(&recorder, c.rec, &t.bytes[..]).await;
                             c.conn.queue_buf(t.bytes);
                         }
                         let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
                         sim.session.disconnect(c.id);
+                        record_marker(&recorder, c.rec, Event::Disconnect, "the simulator stopped".into()).await;
                     }
                     return Ok(());
                 }
@@ -242,6 +282,9 @@ pub async fn serve(
                 let Some(c) = client.as_ref() else { continue };
                 match r {
                     Ok(Io::Frame(inbound)) => {
+                        if let (Some(r), llrp::Inbound::Frame(f)) = (&recorder, &inbound) {
+                            let _ = r.frame(r.now(), c.rec, Direction::ToReader, f.clone()).await;
+                        }
                         arrived.push_back(inbound);
                     }
                     Ok(Io::Flushed) => flushed = Instant::now(),
@@ -250,6 +293,11 @@ pub async fn serve(
                             tracing::info!(peer = %c.peer, "connection ended: {e}");
                         }
                         tracing::info!(peer = %c.peer, "client disconnected");
+                        let reason = match &r {
+                            Err(e) => format!("client connection failed: {e}"),
+                            Ok(_) => "client closed".to_string(),
+                        };
+                        record_marker(&recorder, c.rec, Event::Disconnect, reason).await;
                         let id = c.id;
                         client = None;
                         arrived.clear();
@@ -272,15 +320,22 @@ pub async fn serve(
                         match sim.session.connect(now) {
                             Accepted::Client(id) => {
                                 tracing::info!(%peer, "client connected");
+                                let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
+                                record_marker(&recorder, rec, Event::Connect, format!("client {peer}")).await;
                                 client = Some(Client {
                                     id,
                                     conn: Connection::new(stream),
                                     peer: peer.to_string(),
+                                    rec,
                                 });
                             }
                             Accepted::Refused(bytes) => {
                                 tracing::info!(%peer, "refusing a second client");
+                                let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
+                                record_marker(&recorder, rec, Event::Connect, format!("client {peer}")).await;
+                                record_sent(&recorder, rec, &bytes).await;
                                 refuse(stream, &bytes).await;
+                                record_marker(&recorder, rec, Event::Disconnect, "refused: another client is connected".into()).await;
                             }
                         }
                     }

@@ -1,5 +1,5 @@
-//! Recordings of LLRP sessions: the versioned JSON Lines format ([`format`]), the writer the
-//! proxy and the simulated reader record through ([`writer`]).
+//! Recordings of LLRP sessions: the versioned JSON Lines format ([`mod@format`]), the writer the
+//! proxy and the simulated reader record through ([`mod@writer`]).
 
 pub mod format;
 pub mod writer;

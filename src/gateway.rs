@@ -1,0 +1,384 @@
+//! `llrp-gateway proxy`: one or more transparent proxies in front of real readers, each
+//! optionally recording its sessions, until Ctrl-C or SIGTERM.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use llrp::units::HopTable;
+use serde::Deserialize;
+use tokio::sync::{mpsc, watch};
+
+use crate::net::proxy::{Proxy, ProxyConfig, Tap, Tapped};
+use crate::record::{Header, RecordOptions, Recorder};
+use crate::stop::StopSignal;
+
+/// The LLRP port a `HOST` without one means.
+pub const LLRP_PORT: u16 = 5084;
+
+/// Arguments of `llrp-gateway proxy`.
+#[derive(clap::Args, Debug)]
+pub struct ProxyArgs {
+    /// The reader, `HOST[:PORT]` (port 5084 if none).
+    #[arg(long, required_unless_present = "config", conflicts_with = "config")]
+    pub upstream: Option<String>,
+    /// Where clients connect.
+    #[arg(long, default_value = "0.0.0.0:5084")]
+    pub listen: String,
+    /// Record every session to this file (JSON Lines, docs/recordings.md).
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Start a numbered next recording file once a file would pass this many bytes.
+    #[arg(long)]
+    pub record_max_bytes: Option<u64>,
+    /// Regulatory region of the reader (`fcc` or `etsi`), for channel frequencies of tapped
+    /// reads until the reader's capabilities are seen.
+    #[arg(long)]
+    pub region: Option<Region>,
+    /// Longest wait for the reader to accept the connection, in milliseconds.
+    #[arg(long, default_value = "5000")]
+    pub connect_timeout_ms: u64,
+    /// Several proxies from a JSON file: `{"proxies": [{"name", "upstream", "listen",
+    /// "record"}]}`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+/// A regulatory region's channel table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Region {
+    /// FCC Part 15, 50 channels (902.75..927.25 MHz).
+    Fcc,
+    /// ETSI EN 302 208, 4 channels (865.7..867.5 MHz).
+    Etsi,
+}
+
+impl Region {
+    /// The region's hop table.
+    pub fn hop_table(self) -> HopTable {
+        match self {
+            Region::Fcc => HopTable::fcc(),
+            Region::Etsi => HopTable::etsi(),
+        }
+    }
+}
+
+/// One proxy in a `--config` file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProxyEntry {
+    /// Name in logs and on tapped reads.
+    pub name: String,
+    /// The reader, `HOST[:PORT]`.
+    pub upstream: String,
+    /// Where clients connect.
+    pub listen: String,
+    /// Record to this file (relative to the config file's folder).
+    #[serde(default)]
+    pub record: Option<PathBuf>,
+    /// The reader's region (`fcc`, `etsi`).
+    #[serde(default)]
+    pub region: Option<Region>,
+}
+
+/// A `--config` file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GatewayConfig {
+    /// The proxies.
+    pub proxies: Vec<ProxyEntry>,
+}
+
+/// A config file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// It cannot be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A field is wrong.
+    #[error("{path}: {field}: {message}")]
+    Field {
+        /// The file.
+        path: PathBuf,
+        /// JSON path of the field.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl GatewayConfig {
+    /// Reads and checks a config file: names unique, listen addresses unique, at least one
+    /// proxy; relative record paths are taken from the file's folder.
+    pub fn load(path: &Path) -> Result<GatewayConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let field = |field: String, message: String| ConfigError::Field {
+            path: path.to_owned(),
+            field,
+            message,
+        };
+        let mut de = serde_json::Deserializer::from_str(&text);
+        let mut config: GatewayConfig = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| field(e.path().to_string(), e.inner().to_string()))?;
+        if config.proxies.is_empty() {
+            return Err(field("proxies".into(), "no proxy given".into()));
+        }
+        let (mut names, mut listens) = (HashSet::new(), HashSet::new());
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for (i, p) in config.proxies.iter_mut().enumerate() {
+            if !names.insert(p.name.clone()) {
+                return Err(field(
+                    format!("proxies[{i}].name"),
+                    format!("'{}' is used twice", p.name),
+                ));
+            }
+            if !listens.insert(p.listen.clone()) {
+                return Err(field(
+                    format!("proxies[{i}].listen"),
+                    format!("{} is used twice", p.listen),
+                ));
+            }
+            if p.upstream.trim().is_empty() {
+                return Err(field(format!("proxies[{i}].upstream"), "empty".into()));
+            }
+            if let Some(r) = &mut p.record {
+                if r.is_relative() {
+                    *r = dir.join(&*r);
+                }
+            }
+        }
+        Ok(config)
+    }
+}
+
+/// `HOST` → `HOST:5084`; `HOST:PORT` and `[v6]:PORT` unchanged.
+pub fn with_default_port(addr: &str) -> String {
+    let has_port = match addr.rsplit_once(':') {
+        Some((host, port)) => {
+            port.parse::<u16>().is_ok() && (!host.contains(':') || host.ends_with(']'))
+        }
+        None => false,
+    };
+    if has_port {
+        addr.to_string()
+    } else if addr.contains(':') && !addr.starts_with('[') {
+        format!("[{addr}]:{LLRP_PORT}")
+    } else {
+        format!("{addr}:{LLRP_PORT}")
+    }
+}
+
+/// Runs `llrp-gateway proxy`.
+pub fn run(args: ProxyArgs) -> ExitCode {
+    crate::stop::init_logging();
+    let entries = match (&args.config, &args.upstream) {
+        (Some(path), _) => match GatewayConfig::load(path) {
+            Ok(c) => c.proxies,
+            Err(e) => {
+                eprintln!("llrp-gateway proxy: {e}");
+                return ExitCode::FAILURE;
+            }
+        },
+        (None, Some(upstream)) => vec![ProxyEntry {
+            name: "reader".into(),
+            upstream: upstream.clone(),
+            listen: args.listen.clone(),
+            record: args.record.clone(),
+            region: args.region,
+        }],
+        (None, None) => {
+            eprintln!("llrp-gateway proxy: give --upstream HOST[:PORT] or --config FILE");
+            return ExitCode::FAILURE;
+        }
+    };
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("llrp-gateway proxy: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let options = RecordOptions {
+        max_bytes: args.record_max_bytes,
+    };
+    let timeout = Duration::from_millis(args.connect_timeout_ms);
+    runtime.block_on(async move {
+        let stop = StopSignal::watch();
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let mut tasks = Vec::new();
+        let mut writers = Vec::new();
+        let mut taps = Vec::new();
+        for e in entries {
+            let upstream = with_default_port(&e.upstream);
+            let recorder = match &e.record {
+                Some(path) => {
+                    match Recorder::create(path, Header::new(&upstream, 0), options.clone()) {
+                        Ok((r, task)) => {
+                            writers.push(task);
+                            Some(r)
+                        }
+                        Err(err) => {
+                            eprintln!(
+                                "llrp-gateway proxy: {}: cannot create the recording: {err}",
+                                path.display()
+                            );
+                            return ExitCode::FAILURE;
+                        }
+                    }
+                }
+                None => None,
+            };
+            let (tap, rx) = Tap::new(4096);
+            taps.push((e.name.clone(), tap.clone()));
+            tokio::spawn(count_reads(e.name.clone(), rx));
+            let config = ProxyConfig {
+                name: e.name.clone(),
+                upstream,
+                listen: e.listen.clone(),
+                record: e.record.clone(),
+                region: e.region.map(Region::hop_table),
+                connect_timeout: timeout,
+            };
+            let proxy = match Proxy::bind(config, recorder, Some(tap)).await {
+                Ok(p) => p,
+                Err(err) => {
+                    eprintln!(
+                        "llrp-gateway proxy: {}: cannot listen on {}: {err}",
+                        e.name, e.listen
+                    );
+                    return ExitCode::FAILURE;
+                }
+            };
+            match proxy.local_addr() {
+                Ok(addr) => eprintln!(
+                    "llrp-gateway proxy: '{}' listening on {addr}, forwarding to {}{}",
+                    e.name,
+                    with_default_port(&e.upstream),
+                    e.record
+                        .as_ref()
+                        .map(|p| format!(", recording to {}", p.display()))
+                        .unwrap_or_default()
+                ),
+                Err(err) => eprintln!("llrp-gateway proxy: '{}': {err}", e.name),
+            }
+            tasks.push(tokio::spawn(proxy.run(stop_rx.clone())));
+        }
+        stop.wait().await;
+        eprintln!("llrp-gateway proxy: stopping: closing every session");
+        let _ = stop_tx.send(true);
+        for t in tasks {
+            let _ = t.await;
+        }
+        // The recorders end once the sessions holding them are gone.
+        let mut failed = false;
+        for w in writers {
+            match w.await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => {
+                    eprintln!("llrp-gateway proxy: writing the recording failed: {e}");
+                    failed = true;
+                }
+                Err(e) => {
+                    eprintln!("llrp-gateway proxy: the recording's writer failed: {e}");
+                    failed = true;
+                }
+            }
+        }
+        for (name, tap) in taps {
+            if tap.dropped() > 0 {
+                eprintln!(
+                    "llrp-gateway proxy: '{name}': the tap dropped {} items",
+                    tap.dropped()
+                );
+            }
+        }
+        eprintln!("llrp-gateway proxy: stopped");
+        if failed {
+            ExitCode::FAILURE
+        } else {
+            ExitCode::SUCCESS
+        }
+    })
+}
+
+/// Logs, every 10 s while reads flow, how many reads the proxy `name` has seen.
+async fn count_reads(name: String, mut rx: mpsc::Receiver<Tapped>) {
+    let mut total = 0u64;
+    let mut last = 0u64;
+    let mut tick = tokio::time::interval(Duration::from_secs(10));
+    tick.tick().await;
+    loop {
+        tokio::select! {
+            item = rx.recv() => match item {
+                Some(Tapped::Read(_)) => total += 1,
+                Some(Tapped::Event { .. }) => {}
+                None => break,
+            },
+            _ = tick.tick() => {
+                if total != last {
+                    tracing::info!(proxy = %name, "{total} tag reads so far ({}/s)", (total - last) / 10);
+                    last = total;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_host_without_a_port_gets_the_llrp_port() {
+        assert_eq!(with_default_port("reader.local"), "reader.local:5084");
+        assert_eq!(with_default_port("10.0.0.5:5085"), "10.0.0.5:5085");
+        assert_eq!(with_default_port("[::1]:6000"), "[::1]:6000");
+        assert_eq!(with_default_port("::1"), "[::1]:5084");
+    }
+
+    fn load(text: &str) -> Result<GatewayConfig, ConfigError> {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("gw.json");
+        std::fs::write(&path, text).expect("write");
+        GatewayConfig::load(&path)
+    }
+
+    #[test]
+    fn a_config_names_the_bad_field() {
+        let e = load(
+            r#"{"proxies":[{"name":"a","upstream":"x","listen":"127.0.0.1:1","recrod":"r"}]}"#,
+        )
+        .expect_err("typo");
+        assert!(e.to_string().contains("proxies[0]"), "{e}");
+        assert!(e.to_string().contains("recrod"), "{e}");
+        let e = load(
+            r#"{"proxies":[{"name":"a","upstream":"x","listen":"l1"},{"name":"a","upstream":"y","listen":"l2"}]}"#,
+        )
+        .expect_err("same name");
+        assert!(e.to_string().contains("proxies[1].name"), "{e}");
+        let e = load(r#"{"proxies":[]}"#).expect_err("none");
+        assert!(e.to_string().contains("no proxy"), "{e}");
+    }
+
+    #[test]
+    fn relative_record_paths_are_beside_the_config() {
+        let c = load(r#"{"proxies":[{"name":"a","upstream":"x","listen":"l","record":"a.jsonl","region":"etsi"}]}"#)
+            .expect("valid");
+        let r = c.proxies[0].record.as_ref().expect("record");
+        assert!(r.is_absolute() && r.ends_with("a.jsonl"), "{}", r.display());
+        assert_eq!(c.proxies[0].region, Some(Region::Etsi));
+    }
+}

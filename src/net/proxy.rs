@@ -1,0 +1,682 @@
+//! The transparent LLRP proxy: each client connection gets its own upstream connection to
+//! the reader, and every byte is forwarded unchanged both ways (frames the codec cannot
+//! decode and bytes that are not LLRP included). Beside the forwarding, a copy of each
+//! direction is split into frames (the codec's sans-IO [`FrameSplitter`]) for the recording and
+//! the tap; neither can change or drop what is forwarded.
+//!
+//! Backpressure is end to end: a direction reads its next chunk only once the last one is
+//! written, so a slow client slows the reading from the reader and memory stays bounded
+//! (one chunk buffer and at most one partial frame per direction).
+
+use std::future::Future;
+use std::io;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use bytes::{Bytes, BytesMut};
+use llrp::message::{CloseConnection, MessageBody, MessageDef, ReaderEventNotification};
+use llrp::units::HopTable;
+use llrp::{FrameError, FrameHeader, FrameSplitter, Inbound, Message, Split};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
+
+use crate::reads::{Read, ReadDecoder};
+use crate::record::writer::utc_now_us;
+use crate::record::{Direction, Entry, Event, ReaderInfo, Recorder};
+
+/// Bytes one direction reads at a time.
+const CHUNK: usize = 64 * 1024;
+/// How long the proxy waits for the reader to answer a CLOSE_CONNECTION it sent for a
+/// client that left (or at shutdown) before closing anyway.
+const CLOSE_WAIT: Duration = Duration::from_secs(2);
+/// How long a closing direction may take to hand its last bytes to its peer.
+const LINGER: Duration = Duration::from_secs(5);
+/// The message ID of the CLOSE_CONNECTION the proxy itself sends.
+const PROXY_CLOSE_ID: u32 = 0x7072_7879;
+
+/// One proxied reader.
+#[derive(Clone, Debug)]
+pub struct ProxyConfig {
+    /// Name in logs and on tapped reads.
+    pub name: String,
+    /// The reader, `HOST:PORT`.
+    pub upstream: String,
+    /// Where clients connect.
+    pub listen: String,
+    /// Record every session to this file.
+    pub record: Option<PathBuf>,
+    /// Hop table for tapped reads until the reader's capabilities are seen (`--region`).
+    pub region: Option<HopTable>,
+    /// Longest wait for the upstream connection.
+    pub connect_timeout: Duration,
+}
+
+/// What the tap hands on.
+#[derive(Clone, Debug)]
+pub enum Tapped {
+    /// A tag read from an RO_ACCESS_REPORT.
+    Read(Read),
+    /// A READER_EVENT_NOTIFICATION, decoded.
+    Event {
+        /// The proxy's name.
+        reader: String,
+        /// Its connection number.
+        conn: u32,
+        /// The message.
+        message: Box<Message>,
+    },
+}
+
+/// The sending side of the tap: a bounded channel that never waits; what does not fit is
+/// counted in [`Tap::dropped`].
+#[derive(Clone, Debug)]
+pub struct Tap {
+    tx: mpsc::Sender<Tapped>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl Tap {
+    /// A tap holding at most `capacity` items, and its receiver.
+    pub fn new(capacity: usize) -> (Tap, mpsc::Receiver<Tapped>) {
+        let (tx, rx) = mpsc::channel(capacity.max(1));
+        (
+            Tap {
+                tx,
+                dropped: Arc::new(AtomicU64::new(0)),
+            },
+            rx,
+        )
+    }
+
+    /// Items dropped because the receiver was behind (or gone).
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+
+    fn offer(&self, item: Tapped) {
+        if self.tx.try_send(item).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// A bound proxy, ready to run.
+pub struct Proxy {
+    listener: TcpListener,
+    config: Arc<ProxyConfig>,
+    recorder: Option<Recorder>,
+    tap: Option<Tap>,
+}
+
+impl Proxy {
+    /// Binds the listening address.
+    pub async fn bind(
+        config: ProxyConfig,
+        recorder: Option<Recorder>,
+        tap: Option<Tap>,
+    ) -> io::Result<Proxy> {
+        let listener = TcpListener::bind(&config.listen).await?;
+        Ok(Proxy {
+            listener,
+            config: Arc::new(config),
+            recorder,
+            tap,
+        })
+    }
+
+    /// The address clients connect to.
+    pub fn local_addr(&self) -> io::Result<SocketAddr> {
+        self.listener.local_addr()
+    }
+
+    /// Accepts clients until `shutdown` turns true; then each session sends CLOSE_CONNECTION
+    /// upstream and closes, and this returns once all have ended.
+    pub async fn run(self, mut shutdown: watch::Receiver<bool>) -> io::Result<()> {
+        let mut sessions = JoinSet::new();
+        let mut backoff = Duration::from_millis(10);
+        loop {
+            tokio::select! {
+                _ = shutdown.changed() => {
+                    if *shutdown.borrow() {
+                        break;
+                    }
+                }
+                Some(_) = sessions.join_next(), if !sessions.is_empty() => {}
+                accepted = self.listener.accept() => match accepted {
+                    Ok((stream, peer)) => {
+                        backoff = Duration::from_millis(10);
+                        let conn = self.recorder.as_ref().map_or(0, Recorder::next_conn);
+                        let s = Session {
+                            config: Arc::clone(&self.config),
+                            recorder: self.recorder.clone(),
+                            tap: self.tap.clone(),
+                            conn,
+                            peer,
+                        };
+                        sessions.spawn(s.run(stream, shutdown.clone()));
+                    }
+                    Err(e) => {
+                        tracing::warn!(proxy = %self.config.name, "accept failed: {e}; pausing accepts for {backoff:?}");
+                        tokio::time::sleep(backoff).await;
+                        backoff = (backoff * 2).min(Duration::from_secs(1));
+                    }
+                },
+            }
+        }
+        while sessions.join_next().await.is_some() {}
+        Ok(())
+    }
+}
+
+/// One client connection and its upstream connection.
+struct Session {
+    config: Arc<ProxyConfig>,
+    recorder: Option<Recorder>,
+    tap: Option<Tap>,
+    conn: u32,
+    peer: SocketAddr,
+}
+
+/// How a forwarding direction ended.
+enum End {
+    /// Its source closed the stream.
+    Eof,
+    /// Reading its source failed.
+    ReadError(io::Error),
+    /// Writing to its destination failed.
+    WriteError(io::Error),
+    /// The stop signal came.
+    Stopped,
+}
+
+impl Session {
+    async fn run(self, client: TcpStream, shutdown: watch::Receiver<bool>) {
+        let _ = client.set_nodelay(true);
+        let name = &self.config.name;
+        self.marker(
+            Event::Connect,
+            format!(
+                "client {} via proxy {name} to {}",
+                self.peer, self.config.upstream
+            ),
+        )
+        .await;
+        let upstream = tokio::time::timeout(
+            self.config.connect_timeout,
+            TcpStream::connect(&self.config.upstream),
+        )
+        .await
+        .unwrap_or_else(|_| Err(io::Error::new(io::ErrorKind::TimedOut, "timed out")));
+        let upstream = match upstream {
+            Ok(u) => u,
+            Err(e) => {
+                tracing::warn!(
+                    proxy = %name,
+                    client = %self.peer,
+                    "upstream {} unreachable ({e}): the client gets a failed ConnectionAttemptEvent",
+                    self.config.upstream
+                );
+                refuse(client).await;
+                self.marker(
+                    Event::Disconnect,
+                    format!("upstream {} unreachable: {e}", self.config.upstream),
+                )
+                .await;
+                return;
+            }
+        };
+        let _ = upstream.set_nodelay(true);
+        tracing::info!(proxy = %name, client = %self.peer, "forwarding to {}", self.config.upstream);
+        let reason = self.forward(client, upstream, shutdown).await;
+        tracing::info!(proxy = %name, client = %self.peer, "session ended: {reason}");
+        self.marker(Event::Disconnect, reason).await;
+    }
+
+    async fn marker(&self, event: Event, reason: String) {
+        if let Some(r) = &self.recorder {
+            if r.marker(self.conn, event, reason).await.is_err() {
+                tracing::error!(proxy = %self.config.name, "the recording has stopped");
+            }
+        }
+    }
+
+    /// Forwards both ways until one side ends; returns why the session ended.
+    async fn forward(
+        &self,
+        client: TcpStream,
+        upstream: TcpStream,
+        shutdown: watch::Receiver<bool>,
+    ) -> String {
+        let (client_rd, client_wr) = client.into_split();
+        let (upstream_rd, upstream_wr) = upstream.into_split();
+        let to_reader = Tee::new(self, Direction::ToReader);
+        let from_reader = Tee::new(self, Direction::FromReader);
+        // The client's direction also stops (between chunks, never in the middle of one) at
+        // a shutdown, so that the proxy can then send CLOSE_CONNECTION on a clean frame
+        // boundary.
+        let up = pump(client_rd, upstream_wr, to_reader, Some(shutdown));
+        let mut down = Box::pin(pump(upstream_rd, client_wr, from_reader, None));
+        tokio::pin!(up);
+        tokio::select! {
+            done = &mut down => {
+                let (end, _, mut client_wr, from_reader) = done;
+                // The reader went away: the client's connection closes too. The client's
+                // direction then runs on until the client closes (or LINGER passes), so that
+                // what it had read is recorded, and what it still sends finds its end.
+                let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+                let _ = tokio::time::timeout(LINGER, &mut up).await;
+                match end {
+                    End::Eof if from_reader.saw_close_response => {
+                        "reader closed the connection after CLOSE_CONNECTION".into()
+                    }
+                    End::Eof => "upstream closed the connection mid-session".into(),
+                    End::ReadError(e) => format!("upstream connection failed: {e}"),
+                    End::WriteError(e) => format!("writing to the client failed: {e}"),
+                    End::Stopped => unreachable!("the reader's direction has no stop signal"),
+                }
+            }
+            done = &mut up => {
+                let (end, _, mut upstream_wr, to_reader) = done;
+                if matches!(end, End::Eof) && to_reader.saw_close {
+                    // The client closed after its own CLOSE_CONNECTION: pass the end of stream
+                    // on, and the rest of the reader's answer back until the reader closes.
+                    let _ = upstream_wr.shutdown().await;
+                    return match tokio::time::timeout(LINGER, &mut down).await {
+                        Ok((_, _, mut client_wr, _)) => {
+                            let _ = client_wr.shutdown().await;
+                            "client closed after CLOSE_CONNECTION".into()
+                        }
+                        Err(_) => {
+                            "client closed after CLOSE_CONNECTION; the reader did not close in time"
+                                .into()
+                        }
+                    };
+                }
+                let why = match end {
+                    End::Eof => "client closed".to_string(),
+                    End::ReadError(e) => format!("client connection failed: {e}"),
+                    End::WriteError(e) => format!("writing to the reader failed: {e}"),
+                    End::Stopped => "proxy shutting down".to_string(),
+                };
+                let freed = self.close_upstream(&mut upstream_wr, down).await;
+                format!("{why}; {freed}")
+            }
+        }
+    }
+
+    /// Sends CLOSE_CONNECTION to the reader (recorded as sent) while `down` goes on
+    /// forwarding what the reader still sends, and waits for the reader to close; closes the
+    /// client's side then; says how that went.
+    async fn close_upstream<'a, D>(&'a self, wr: &mut OwnedWriteHalf, down: Pin<Box<D>>) -> String
+    where
+        D: Future<Output = PumpDone<'a, OwnedReadHalf, OwnedWriteHalf>>,
+    {
+        let close = Message::new(PROXY_CLOSE_ID, CloseConnection::default()).to_bytes();
+        if let Err(e) = wr.write_all(&close).await {
+            return format!("the reader's connection is gone ({e})");
+        }
+        if let Some(r) = &self.recorder {
+            let _ = r
+                .frame(r.now(), self.conn, Direction::ToReader, close.freeze())
+                .await;
+        }
+        let waited = tokio::time::timeout(CLOSE_WAIT, async move {
+            let (end, rd, mut client_wr, tee) = down.await;
+            let _ = client_wr.shutdown().await;
+            match end {
+                End::WriteError(_) => {
+                    // The client is gone: keep reading (and recording) what the reader sends
+                    // until it closes.
+                    pump(rd, tokio::io::sink(), tee, None).await.0
+                }
+                end => end,
+            }
+        })
+        .await;
+        match waited {
+            Ok(End::Eof) => "proxy sent CLOSE_CONNECTION and the reader closed".into(),
+            Ok(End::ReadError(e)) | Ok(End::WriteError(e)) => {
+                format!("proxy sent CLOSE_CONNECTION; the reader's connection failed: {e}")
+            }
+            Ok(End::Stopped) | Err(_) => {
+                let _ = wr.shutdown().await;
+                "proxy sent CLOSE_CONNECTION; the reader did not close in time, closed by the proxy"
+                    .into()
+            }
+        }
+    }
+}
+
+/// How a forwarding direction ended, and its parts back.
+type PumpDone<'a, R, W> = (End, R, W, Tee<'a>);
+
+/// Copies `rd` to `wr` chunk by chunk, showing each chunk to `tee` after it is written;
+/// with `stop`, also ends (between chunks) once it turns true.
+async fn pump<'a, R, W>(
+    mut rd: R,
+    mut wr: W,
+    mut tee: Tee<'a>,
+    mut stop: Option<watch::Receiver<bool>>,
+) -> PumpDone<'a, R, W>
+where
+    R: AsyncRead + Unpin,
+    W: AsyncWrite + Unpin,
+{
+    let mut buf = vec![0u8; CHUNK];
+    loop {
+        let read = match &mut stop {
+            Some(stop) => tokio::select! {
+                // Reading is cancel-safe: nothing is lost when the stop wins.
+                r = rd.read(&mut buf) => r,
+                _ = wait_true(stop) => return (End::Stopped, rd, wr, tee),
+            },
+            None => rd.read(&mut buf).await,
+        };
+        let n = match read {
+            Ok(0) => {
+                tee.finish().await;
+                return (End::Eof, rd, wr, tee);
+            }
+            Ok(n) => n,
+            Err(e) => return (End::ReadError(e), rd, wr, tee),
+        };
+        if let Err(e) = wr.write_all(&buf[..n]).await {
+            return (End::WriteError(e), rd, wr, tee);
+        }
+        tee.saw(&buf[..n]).await;
+    }
+}
+
+async fn wait_true(rx: &mut watch::Receiver<bool>) {
+    while !*rx.borrow() {
+        if rx.changed().await.is_err() {
+            // The sender is gone: nobody can ask for a shutdown any more.
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
+/// One direction's copy of the stream, split into frames for the recording and the tap.
+struct Tee<'a> {
+    session: &'a Session,
+    dir: Direction,
+    /// Bytes of a frame not yet complete.
+    buf: BytesMut,
+    splitter: FrameSplitter,
+    /// The stream stopped being LLRP: the rest is recorded as bytes.
+    unsynced: bool,
+    reads: ReadDecoder,
+    scratch: Vec<Read>,
+    reader: ReaderInfo,
+    /// The client sent CLOSE_CONNECTION.
+    saw_close: bool,
+    /// The reader sent CLOSE_CONNECTION_RESPONSE.
+    saw_close_response: bool,
+}
+
+impl<'a> Tee<'a> {
+    fn new(session: &'a Session, dir: Direction) -> Self {
+        Tee {
+            session,
+            dir,
+            buf: BytesMut::new(),
+            splitter: FrameSplitter::default(),
+            unsynced: false,
+            reads: ReadDecoder::new(Some(session.config.name.clone()))
+                .with_fallback_table(session.config.region.clone()),
+            scratch: Vec::new(),
+            reader: ReaderInfo::default(),
+            saw_close: false,
+            saw_close_response: false,
+        }
+    }
+
+    async fn saw(&mut self, chunk: &[u8]) {
+        let recorder = self.session.recorder.as_ref();
+        if recorder.is_none() && self.session.tap.is_none() && self.dir == Direction::FromReader {
+            // Nothing to record or tap; only the close handshake is tracked.
+            self.track_close_only(chunk);
+            return;
+        }
+        let at = recorder.map(Recorder::now).unwrap_or_default();
+        if self.unsynced {
+            self.record(Entry::Bytes {
+                at,
+                conn: self.session.conn,
+                dir: self.dir,
+                bytes: Bytes::copy_from_slice(chunk),
+            })
+            .await;
+            return;
+        }
+        self.buf.extend_from_slice(chunk);
+        while let Some(inbound) = self.next_frame() {
+            match inbound {
+                Inbound::Frame(frame) => {
+                    self.look(&frame);
+                    self.record(Entry::Frame {
+                        at,
+                        conn: self.session.conn,
+                        dir: self.dir,
+                        frame,
+                    })
+                    .await;
+                }
+                Inbound::Unsynced(e) => {
+                    tracing::warn!(
+                        proxy = %self.session.config.name,
+                        client = %self.session.peer,
+                        "{} stream is not LLRP any more ({e}); forwarding it unchanged",
+                        match self.dir { Direction::ToReader => "the client's", Direction::FromReader => "the reader's" }
+                    );
+                    self.unsynced = true;
+                    let rest = std::mem::take(&mut self.buf).freeze();
+                    self.record(Entry::Bytes {
+                        at,
+                        conn: self.session.conn,
+                        dir: self.dir,
+                        bytes: rest,
+                    })
+                    .await;
+                    break;
+                }
+            }
+        }
+    }
+
+    /// At the end of the stream: bytes left over that never made a whole frame are recorded
+    /// as bytes.
+    async fn finish(&mut self) {
+        if self.buf.is_empty() || self.session.recorder.is_none() {
+            return;
+        }
+        let at = self
+            .session
+            .recorder
+            .as_ref()
+            .map(Recorder::now)
+            .unwrap_or_default();
+        let rest = std::mem::take(&mut self.buf).freeze();
+        self.record(Entry::Bytes {
+            at,
+            conn: self.session.conn,
+            dir: self.dir,
+            bytes: rest,
+        })
+        .await;
+    }
+
+    /// Keeps just enough framing to see the CLOSE_CONNECTION handshake.
+    fn track_close_only(&mut self, chunk: &[u8]) {
+        if self.unsynced {
+            return;
+        }
+        self.buf.extend_from_slice(chunk);
+        while let Some(inbound) = self.next_frame() {
+            match inbound {
+                Inbound::Frame(frame) => self.look(&frame),
+                Inbound::Unsynced(_) => {
+                    self.unsynced = true;
+                    self.buf.clear();
+                    break;
+                }
+            }
+        }
+    }
+
+    /// The next whole frame in the buffer (of any header version, as the codec's
+    /// [`llrp::Deframer`] yields them), or the framing error, leaving the bytes that are not
+    /// a frame in the buffer for the recording.
+    fn next_frame(&mut self) -> Option<Inbound> {
+        let len = match self.splitter.split(&self.buf) {
+            Ok(Split::Frame(h)) | Err(FrameError::UnsupportedVersion(h)) => h.length as usize,
+            Ok(Split::Incomplete(_)) => return None,
+            Err(e) => return Some(Inbound::Unsynced(e)),
+        };
+        if self.buf.len() < len {
+            return None;
+        }
+        Some(Inbound::Frame(self.buf.split_to(len).freeze()))
+    }
+
+    /// Notes what matters in a frame: the close handshake, tag reads and events for the tap,
+    /// the reader's identity for the recording.
+    fn look(&mut self, frame: &Bytes) {
+        let Some(h) = FrameHeader::peek(frame) else {
+            return;
+        };
+        match self.dir {
+            Direction::ToReader => {
+                if h.msg_type == CloseConnection::TYPE {
+                    self.saw_close = true;
+                }
+            }
+            Direction::FromReader => {
+                if h.msg_type == llrp::message::CloseConnectionResponse::TYPE {
+                    self.saw_close_response = true;
+                }
+                if let Some(tap) = &self.session.tap {
+                    let now = utc_now_us();
+                    self.scratch.clear();
+                    if self.reads.frame(frame, now, &mut self.scratch).is_ok() {
+                        for r in self.scratch.drain(..) {
+                            tap.offer(Tapped::Read(r));
+                        }
+                    }
+                    if h.msg_type == ReaderEventNotification::TYPE {
+                        if let Ok(m) = Message::decode(frame) {
+                            tap.offer(Tapped::Event {
+                                reader: self.session.config.name.clone(),
+                                conn: self.session.conn,
+                                message: Box::new(m),
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    async fn record(&mut self, entry: Entry) {
+        let Some(r) = &self.session.recorder else {
+            return;
+        };
+        let info = match &entry {
+            Entry::Frame { frame, .. } if self.dir == Direction::FromReader => {
+                reader_info(frame, &self.reader)
+            }
+            _ => None,
+        };
+        let at = entry.at();
+        if r.entry(entry).await.is_err() {
+            return;
+        }
+        if let Some(info) = info {
+            self.reader = info.clone();
+            let _ = r
+                .entry(Entry::Reader {
+                    at,
+                    conn: self.session.conn,
+                    reader: info,
+                })
+                .await;
+        }
+    }
+}
+
+/// What `frame` adds to `known` of the reader's identity (capabilities or Identification),
+/// if anything.
+fn reader_info(frame: &[u8], known: &ReaderInfo) -> Option<ReaderInfo> {
+    use llrp::message::{GetReaderCapabilitiesResponse, GetReaderConfigResponse};
+    let h = FrameHeader::peek(frame)?;
+    if h.msg_type != GetReaderCapabilitiesResponse::TYPE
+        && h.msg_type != GetReaderConfigResponse::TYPE
+    {
+        return None;
+    }
+    let mut info = known.clone();
+    match Message::decode(frame).ok()?.body {
+        MessageBody::GetReaderCapabilitiesResponse(r) => {
+            let g = r.general_device_capabilities?;
+            info.manufacturer = Some(g.device_manufacturer_name);
+            info.model = Some(g.model_name);
+            info.firmware = Some(g.reader_firmware_version);
+        }
+        MessageBody::GetReaderConfigResponse(r) => {
+            let id = r.identification?;
+            info.id_type = Some(
+                match id.id_type {
+                    llrp::enums::IdentificationType::MacAddress => "mac",
+                    llrp::enums::IdentificationType::Epc => "epc",
+                    llrp::enums::IdentificationType::Unknown(_) => "unknown",
+                }
+                .into(),
+            );
+            info.reader_id = Some(crate::reads::hex_upper(&id.reader_id));
+        }
+        _ => return None,
+    }
+    (info != *known).then_some(info)
+}
+
+/// Tells a client whose reader cannot be reached: a READER_EVENT_NOTIFICATION with a failed
+/// ConnectionAttemptEvent, as a reader that cannot take the connection sends; then closes.
+async fn refuse(mut client: TcpStream) {
+    let m = Message::new(0, connection_failed(utc_now_us()));
+    let mut bytes = BytesMut::new();
+    m.encode(&mut bytes);
+    let _ = tokio::time::timeout(Duration::from_millis(500), async {
+        client.write_all(&bytes).await?;
+        client.shutdown().await
+    })
+    .await;
+}
+
+/// The READER_EVENT_NOTIFICATION a client gets when the proxy cannot reach the reader.
+pub fn connection_failed(utc_us: u64) -> ReaderEventNotification {
+    use llrp::enums::ConnectionAttemptStatus;
+    use llrp::params::{
+        ConnectionAttemptEvent, ReaderEventNotificationData, Timestamp, UtcTimestamp,
+    };
+    ReaderEventNotification {
+        reader_event_notification_data: ReaderEventNotificationData {
+            timestamp: Timestamp::Utc(UtcTimestamp {
+                microseconds: utc_us,
+                ..Default::default()
+            }),
+            connection_attempt_event: Some(ConnectionAttemptEvent {
+                status: ConnectionAttemptStatus::FailedOtherReason,
+                ..Default::default()
+            }),
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
