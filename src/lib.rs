@@ -3,6 +3,7 @@
 
 pub mod decode;
 pub mod gateway;
+pub mod inventory;
 pub mod net;
 pub mod physics;
 pub mod reader;

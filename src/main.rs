@@ -60,11 +60,14 @@ enum Command {
         #[arg(long)]
         roundtrip: bool,
     },
+    /// Inventory an LLRP reader and write its tag reads (see docs/client.md).
+    Inventory(llrp_gateway::inventory::InventoryArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Inventory(args) => llrp_gateway::inventory::run(args),
         Command::Sim {
             scenario,
             listen,
