@@ -41,7 +41,7 @@ const LIVE_EVERY: Duration = Duration::from_secs(1);
 /// Command-line options of `llrp-gateway inventory`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
 pub struct InventoryArgs {
-    /// The reader: HOST or HOST:PORT (port 5084 when none is given); IPv6 as [ADDR]:PORT.
+    /// The reader: HOST or HOST:PORT (port 5084 when none is given); IPv6 as `[ADDR]:PORT`.
     pub reader: String,
     /// Stop after this many seconds (default: run until Ctrl-C or SIGTERM).
     #[arg(long, value_parser = parse_seconds)]
@@ -556,7 +556,12 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
             if over(&stop) {
                 stats.keepalives += stream.keepalives_answered();
                 stats.bad_reports += stream.bad_reports();
-                if let Err(e) = stream.finish(CLOSE_TIMEOUT).await {
+                let closed = stream.finish(CLOSE_TIMEOUT, &mut batch).await;
+                for r in batch.drain(..) {
+                    sink.write(&r).map_err(output_error)?;
+                    stats.add(&r);
+                }
+                if let Err(e) = closed {
                     screen.log(&format!("closing the connection: {e}"));
                 }
                 break 'connections;

@@ -759,19 +759,35 @@ impl ReadStream {
 
     /// Ends the inventory cleanly: STOP_ROSPEC and DELETE_ROSPEC (their failures ignored:
     /// the reader may have ended the spec itself), then CLOSE_CONNECTION and the reader's
-    /// close, all within `timeout`.
-    pub async fn finish(mut self, timeout: Duration) -> Result<(), ClientError> {
+    /// close, all within `timeout`. The reads the reader sends on the way (the report "at the
+    /// end of the ROSpec" of reads not yet reported) are appended to `out`.
+    pub async fn finish(
+        mut self,
+        timeout: Duration,
+        out: &mut Vec<Read>,
+    ) -> Result<(), ClientError> {
         let deadline = tokio::time::Instant::now() + timeout;
         let left = || deadline.saturating_duration_since(tokio::time::Instant::now());
         for stop in [true, false] {
             let r = if stop {
                 self.client.stop_rospec(self.rospec_id, left()).await
             } else {
+                // Answered after everything the reader sent on stopping.
                 self.client.delete_rospec(self.rospec_id, left()).await
             };
             match r {
                 Ok(()) | Err(ClientError::Status { .. }) => {}
                 Err(e) => return Err(e),
+            }
+        }
+        for m in self.client.drain_pending() {
+            if matches!(m.body, MessageBody::RoAccessReport(_))
+                && self
+                    .decoder
+                    .frame(&m.to_bytes(), utc_now_us(), out)
+                    .is_err()
+            {
+                self.bad_reports += 1;
             }
         }
         self.client.close_connection(left()).await
