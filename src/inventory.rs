@@ -12,7 +12,7 @@
 
 use std::collections::{BTreeMap, HashSet};
 use std::fs::File;
-use std::io::{self, BufWriter, IsTerminal, Write};
+use std::io::{self, IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -52,7 +52,8 @@ pub struct InventoryArgs {
     /// Enable the Impinj extensions and ask for Impinj RF phase, peak RSSI and Doppler.
     #[arg(long)]
     pub impinj: bool,
-    /// The reader sends a report every N tag reads.
+    /// The reader sends a report every N tag entries (a reader may fold a tag's repeated
+    /// reads into one entry; reads not yet reported come when the inventory stops).
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
     pub report_every: u16,
     /// Gen2 session, 0-3 (default: the reader's).
@@ -281,43 +282,62 @@ fn rssi_range(r: Option<(f64, f64)>) -> String {
     }
 }
 
-/// The reads' destination, open.
-enum Sink {
-    None,
-    Jsonl(Box<dyn Write>),
-    Csv(Box<dyn Write>),
+/// Bytes of whole lines buffered before they are written out.
+const SINK_BUFFER: usize = 64 * 1024;
+
+/// The reads' destination, open. Lines are buffered here and written out whole (when the
+/// buffer fills, and at each flush), so the file never ends in a partial line between
+/// writes: a reader following it live only ever sees whole reads.
+struct Sink {
+    out: Option<Box<dyn Write>>,
+    csv: bool,
+    buf: Vec<u8>,
 }
 
 impl Sink {
     fn open(output: &Option<Output>) -> io::Result<Sink> {
-        let file = |p: &PathBuf| -> io::Result<Box<dyn Write>> {
-            Ok(Box::new(BufWriter::new(File::create(p)?)))
+        let (out, csv): (Option<Box<dyn Write>>, bool) = match output {
+            None => (None, false),
+            Some(Output::Stdout) => (Some(Box::new(io::stdout())), false),
+            Some(Output::Jsonl(p)) => (Some(Box::new(File::create(p)?)), false),
+            Some(Output::Csv(p)) => (Some(Box::new(File::create(p)?)), true),
         };
-        Ok(match output {
-            None => Sink::None,
-            Some(Output::Stdout) => Sink::Jsonl(Box::new(BufWriter::new(io::stdout()))),
-            Some(Output::Jsonl(p)) => Sink::Jsonl(file(p)?),
-            Some(Output::Csv(p)) => {
-                let mut w = file(p)?;
-                writeln!(w, "{}", reads::CSV_HEADER)?;
-                Sink::Csv(w)
-            }
-        })
+        let mut sink = Sink {
+            out,
+            csv,
+            buf: Vec::with_capacity(SINK_BUFFER),
+        };
+        if csv {
+            sink.buf.extend_from_slice(reads::CSV_HEADER.as_bytes());
+            sink.buf.push(b'\n');
+            sink.flush()?;
+        }
+        Ok(sink)
     }
 
     fn write(&mut self, r: &Read) -> io::Result<()> {
-        match self {
-            Sink::None => Ok(()),
-            Sink::Jsonl(w) => reads::write_jsonl(w, r),
-            Sink::Csv(w) => writeln!(w, "{}", r.csv_row()),
+        if self.out.is_none() {
+            return Ok(());
         }
+        if self.csv {
+            self.buf.extend_from_slice(r.csv_row().as_bytes());
+            self.buf.push(b'\n');
+        } else {
+            reads::write_jsonl(&mut self.buf, r)?;
+        }
+        if self.buf.len() >= SINK_BUFFER {
+            self.flush()?;
+        }
+        Ok(())
     }
 
     fn flush(&mut self) -> io::Result<()> {
-        match self {
-            Sink::None => Ok(()),
-            Sink::Jsonl(w) | Sink::Csv(w) => w.flush(),
+        if let Some(out) = &mut self.out {
+            out.write_all(&self.buf)?;
+            out.flush()?;
         }
+        self.buf.clear();
+        Ok(())
     }
 }
 
@@ -497,6 +517,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
     let mut stats = Stats::new();
     let mut screen = Screen::new();
     let mut batch = Vec::new();
+    let mut last_flush = Instant::now();
     let over = |stop: &AtomicBool| {
         stop.load(Ordering::SeqCst) || deadline.is_some_and(|t| Instant::now() >= t)
     };
@@ -605,7 +626,10 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
                 }
             }
             screen.tick(&mut stats, now);
-            sink.flush().map_err(output_error)?;
+            if now.duration_since(last_flush) >= TICK {
+                sink.flush().map_err(output_error)?;
+                last_flush = now;
+            }
         }
     }
     sink.flush().map_err(output_error)?;

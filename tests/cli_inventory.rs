@@ -428,7 +428,7 @@ fn a_reader_that_goes_away_is_reconnected_when_it_is_back() {
     let (ok, _, _) = first.terminate();
     assert!(ok.success());
     inv.wait_line("reconnecting in");
-    let before = reads_of(&path).len();
+    let before = whole_lines(&path);
     let restarted = utc_now_us();
     let second = sim(None, &addr);
     inv.wait_line("inventory started");
@@ -445,12 +445,17 @@ fn a_reader_that_goes_away_is_reconnected_when_it_is_back() {
     );
 }
 
+/// Whole lines in the file so far (0 if it does not exist yet).
+fn whole_lines(path: &Path) -> usize {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    text.matches('\n').count()
+}
+
 /// Waits (at most [`GUARD`]) until the reads file holds at least `n` whole lines.
 fn wait_for_reads(path: &Path, n: usize) {
     let until = Instant::now() + GUARD;
     loop {
-        let text = std::fs::read_to_string(path).unwrap_or_default();
-        if text.matches('\n').count() >= n {
+        if whole_lines(path) >= n {
             return;
         }
         assert!(

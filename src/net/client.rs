@@ -515,7 +515,7 @@ pub struct InventorySpec {
     pub antennas: Vec<u16>,
     /// Enable the Impinj extensions and ask for Impinj phase, peak RSSI and Doppler.
     pub impinj: bool,
-    /// A report after every N tag reads (ROReportTrigger "upon N tags or end of ROSpec").
+    /// A report after every N TagReportData (ROReportTrigger "upon N tags or end of ROSpec").
     pub report_every: u16,
     /// Gen2 session 0..=3 (C1G2SingulationControl).
     pub session: Option<u8>,
