@@ -163,8 +163,8 @@ impl Client {
         match m.body.connection_attempt() {
             Some(ConnectionAttemptStatus::Success) => Ok(()),
             Some(other) => Err(ClientError::Refused(other)),
-            // wait_for only returns a message the predicate accepted.
-            None => unreachable!("wait_for returned a message without a ConnectionAttemptEvent"),
+            // Not reached: wait_for returns only a message the predicate accepted.
+            None => Err(ClientError::Unexpected(m.name())),
         }
     }
 
