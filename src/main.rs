@@ -62,12 +62,18 @@ enum Command {
     },
     /// Inventory an LLRP reader and write its tag reads (see docs/client.md).
     Inventory(llrp_gateway::inventory::InventoryArgs),
+    /// Write a recording as a pcapng capture that Wireshark dissects as LLRP.
+    Export(llrp_gateway::record::pcapng::ExportArgs),
+    /// Turn the LLRP streams of a pcap or pcapng capture into a recording.
+    Import(llrp_gateway::record::pcapng::ImportArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Inventory(args) => llrp_gateway::inventory::run(args),
+        Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),
+        Command::Import(args) => llrp_gateway::record::pcapng::run_import(&args),
         Command::Sim {
             scenario,
             listen,

@@ -2,6 +2,7 @@
 //! proxy and the simulated reader record through ([`mod@writer`]).
 
 pub mod format;
+pub mod pcapng;
 pub mod writer;
 
 pub use format::{Direction, Entry, Event, Header, ReaderInfo, RecordError, Recording, Stamp};

@@ -1,0 +1,413 @@
+//! Recordings to and from packet captures: `llrp-gateway export FILE --pcapng OUT` writes a
+//! recording as a pcapng capture that Wireshark dissects as LLRP ([`export()`]), and
+//! `llrp-gateway import CAPTURE --output RECORDING` turns the LLRP streams of a pcap or
+//! pcapng capture into a recording that replays ([`import()`]). See `docs/recordings.md`.
+
+pub mod capture;
+pub mod export;
+pub mod packet;
+pub mod stream;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use pcap_file::PcapError;
+
+pub use export::{export, ExportError, ExportOptions, ExportSummary, DEFAULT_MSS};
+
+use super::format::{
+    encode_entry, encode_header, Direction, Entry, Event, Header, Recording, Stamp,
+};
+use packet::Skip;
+use stream::{Ending, Happening, Piece, Streams};
+
+/// The reader's TCP port in an export (LLRP's IANA port, which Wireshark dissects as LLRP).
+pub const READER_PORT: u16 = 5084;
+
+/// UTC µs since the Unix epoch as ISO-8601 with microseconds, e.g.
+/// `2023-11-14T22:13:20.000010Z`.
+pub fn iso8601(utc_us: u64) -> String {
+    let secs = utc_us / 1_000_000;
+    let (days, s) = ((secs / 86_400) as i64, secs % 86_400);
+    let (y, m, d) = civil_from_days(days);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:06}Z",
+        s / 3600,
+        s / 60 % 60,
+        s % 60,
+        utc_us % 1_000_000
+    )
+}
+
+/// Year, month, day of a day count since 1970-01-01 (proleptic Gregorian calendar), by the
+/// era arithmetic of H. Hinnant's "chrono-Compatible Low-Level Date Algorithms".
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m, d)
+}
+
+/// Why a capture cannot be imported.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// The file is neither pcap nor pcapng.
+    #[error("not a pcap or pcapng capture: it starts with {start}{hint}")]
+    NotACapture {
+        /// Its first bytes in hex.
+        start: String,
+        /// What it might be instead.
+        hint: &'static str,
+    },
+    /// The capture is malformed.
+    #[error("malformed capture at byte {offset}: {source}")]
+    Pcap {
+        /// Where the bad block or packet starts.
+        offset: usize,
+        /// What pcap-file found.
+        source: PcapError,
+    },
+    /// No packet has a link type this importer takes apart.
+    #[error(
+        "no packet of a supported link type (Ethernet, raw IP, Linux cooked, BSD loopback); the capture has link type {0}"
+    )]
+    LinkType(String),
+    /// Nothing in the capture is an LLRP stream.
+    #[error("no LLRP stream in the capture: {0}")]
+    NoLlrp(String),
+}
+
+/// Turns the LLRP streams of a pcap or pcapng capture into a recording: one connection per
+/// TCP stream, in order of their first packet; both directions reassembled and split into
+/// frames; connect and disconnect markers from SYN, FIN and RST. Streams that are not LLRP
+/// are skipped; what was skipped or tolerated is in the recording's `warnings`.
+pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
+    let read = capture::read(data)?;
+    let mut warnings = read.warnings;
+    let packets = read.packets;
+    let Some(first) = packets.first() else {
+        return Err(ImportError::NoLlrp("the capture holds no packets".into()));
+    };
+    let start_us = first.utc_us;
+    let mut unsupported: Vec<u32> = Vec::new();
+    let (mut not_tcp, mut fragments, mut truncated) = (0, 0, 0);
+    let mut streams = Streams::default();
+    for (i, p) in packets.iter().enumerate() {
+        let link = match p.link {
+            Ok(l) => l,
+            Err(t) => {
+                if !unsupported.contains(&t) {
+                    unsupported.push(t);
+                }
+                continue;
+            }
+        };
+        match packet::parse(link, p.data) {
+            Ok(seg) => streams.segment(&seg, i, p.utc_us),
+            Err(Skip::NotTcp) => not_tcp += 1,
+            Err(Skip::Fragment) => fragments += 1,
+            Err(Skip::Truncated) => truncated += 1,
+        }
+    }
+    let types = || {
+        let t: Vec<String> = unsupported.iter().map(u32::to_string).collect();
+        t.join(", ")
+    };
+    if !unsupported.is_empty() {
+        if packets.iter().all(|p| p.link.is_err()) {
+            return Err(ImportError::LinkType(types()));
+        }
+        warnings.push(format!(
+            "packets of link type {} are skipped (not supported)",
+            types()
+        ));
+    }
+    if fragments > 0 {
+        warnings.push(format!(
+            "{fragments} IP fragments skipped (fragments are not reassembled)"
+        ));
+    }
+    if truncated > 0 {
+        warnings.push(format!(
+            "{truncated} packets skipped: cut short (by the capture's snap length?) or with inconsistent headers"
+        ));
+    }
+    let _ = not_tcp; // other protocols are of no interest, and not worth a warning
+    let last = packets.len().saturating_sub(1);
+    streams.finish(last, packets[last].utc_us);
+
+    let mut entries: Vec<((usize, usize), Entry)> = Vec::new();
+    let mut upstream: Option<std::net::SocketAddr> = None;
+    let (mut conn, mut silent, mut readers) = (0u32, 0usize, Vec::new());
+    for s in &streams.streams {
+        if !s.is_llrp() {
+            if s.payload_bytes == 0 {
+                silent += 1;
+            } else {
+                warnings.push(format!(
+                    "skipped TCP stream {} <-> {} ({} bytes): not LLRP",
+                    s.ends[0], s.ends[1], s.payload_bytes
+                ));
+            }
+            continue;
+        }
+        conn += 1;
+        warnings.extend(s.warnings.iter().cloned());
+        if s.duplicate_bytes() > 0 {
+            warnings.push(format!(
+                "{} <-> {}: {} bytes arrived twice (retransmissions) and were taken once",
+                s.ends[0],
+                s.ends[1],
+                s.duplicate_bytes()
+            ));
+        }
+        let reader = s.reader_end();
+        let (reader_addr, client_addr) = (s.ends[reader], s.ends[1 - reader]);
+        upstream.get_or_insert(reader_addr);
+        if !readers.contains(&reader_addr) {
+            readers.push(reader_addr);
+        }
+        let role = |end: usize| if end == reader { "reader" } else { "client" };
+        for e in &s.events {
+            let at = Stamp {
+                t_us: e.utc_us.saturating_sub(start_us),
+                utc_us: e.utc_us,
+            };
+            let dir = |end: usize| {
+                if end == reader {
+                    Direction::FromReader
+                } else {
+                    Direction::ToReader
+                }
+            };
+            let entry = match &e.what {
+                Happening::Open { syn } => Entry::Marker {
+                    at,
+                    conn,
+                    event: Event::Connect,
+                    reason: if *syn {
+                        format!("client {client_addr}")
+                    } else {
+                        format!("client {client_addr} (the capture starts after the handshake)")
+                    },
+                },
+                Happening::Data { end, piece } => match piece {
+                    Piece::Frame(frame) => Entry::Frame {
+                        at,
+                        conn,
+                        dir: dir(*end),
+                        frame: frame.clone(),
+                    },
+                    Piece::Bytes(bytes) => Entry::Bytes {
+                        at,
+                        conn,
+                        dir: dir(*end),
+                        bytes: bytes.clone(),
+                    },
+                },
+                Happening::Close(ending) => Entry::Marker {
+                    at,
+                    conn,
+                    event: Event::Disconnect,
+                    reason: match ending {
+                        Ending::Fin(end) => format!("{} closed", role(*end)),
+                        Ending::Reset(end) => format!("reset by the {}", role(*end)),
+                    },
+                },
+            };
+            entries.push((e.at, entry));
+        }
+    }
+    if silent > 0 {
+        warnings.push(format!(
+            "{silent} TCP streams without payload, not on an LLRP port, skipped"
+        ));
+    }
+    let Some(upstream) = upstream else {
+        let n = streams.streams.len();
+        return Err(ImportError::NoLlrp(format!(
+            "{n} TCP streams, none on port 5084 or 5085 nor starting with an LLRP message"
+        )));
+    };
+    if readers.len() > 1 {
+        let all: Vec<String> = readers.iter().map(|a| a.to_string()).collect();
+        warnings.push(format!(
+            "the capture has {} readers ({}): the recording's header names the first",
+            readers.len(),
+            all.join(", ")
+        ));
+    }
+    // Capture order: by packet, then by order within the packet (stable).
+    entries.sort_by_key(|(at, _)| *at);
+    Ok(Recording {
+        header: Header::new(upstream.to_string(), start_us),
+        entries: entries.into_iter().map(|(_, e)| e).collect(),
+        warnings,
+    })
+}
+
+/// Writes `recording` (header and entries) to `path`, truncating it.
+pub fn write_recording(recording: &Recording, path: &Path) -> std::io::Result<()> {
+    let mut out = Vec::new();
+    encode_header(&recording.header, &mut out);
+    for e in &recording.entries {
+        encode_entry(e, &mut out);
+    }
+    std::fs::write(path, out)
+}
+
+/// `llrp-gateway export`: a recording as a pcapng capture.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ExportArgs {
+    /// The recording (JSON Lines) to export.
+    pub file: PathBuf,
+    /// The pcapng capture to write.
+    #[arg(long, value_name = "OUT")]
+    pub pcapng: PathBuf,
+    /// Largest TCP payload of a packet; longer frames are split into several segments.
+    #[arg(long, default_value_t = DEFAULT_MSS,
+          value_parser = clap::value_parser!(u16).range(i64::from(export::MIN_MSS)..=i64::from(export::MAX_MSS)))]
+    pub mss: u16,
+}
+
+/// `llrp-gateway import`: the LLRP streams of a capture as a recording.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ImportArgs {
+    /// The capture (pcap or pcapng) to read.
+    pub capture: PathBuf,
+    /// The recording to write.
+    #[arg(long, value_name = "RECORDING")]
+    pub output: PathBuf,
+}
+
+/// Runs `llrp-gateway export`; errors and a summary go to standard error.
+pub fn run_export(args: &ExportArgs) -> ExitCode {
+    let name = args.file.display();
+    let recording = match Recording::open(&args.file) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("llrp-gateway export: {name}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    for w in &recording.warnings {
+        eprintln!("llrp-gateway export: warning: {name}: {w}");
+    }
+    let out = args.pcapng.display();
+    let file = match std::fs::File::create(&args.pcapng) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("llrp-gateway export: cannot create {out}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let mut writer = std::io::BufWriter::new(file);
+    let options = ExportOptions { mss: args.mss };
+    let summary = match export(&recording, &options, &mut writer) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("llrp-gateway export: {out}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if let Err(e) = writer.flush() {
+        eprintln!("llrp-gateway export: writing {out}: {e}");
+        return ExitCode::FAILURE;
+    }
+    eprintln!(
+        "llrp-gateway export: {} TCP streams, {} frames, {} bytes entries: {} packets in {out}",
+        summary.streams, summary.frames, summary.bytes_entries, summary.packets
+    );
+    ExitCode::SUCCESS
+}
+
+/// Runs `llrp-gateway import`; warnings, errors and a summary go to standard error.
+pub fn run_import(args: &ImportArgs) -> ExitCode {
+    let name = args.capture.display();
+    let data = match std::fs::read(&args.capture) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("llrp-gateway import: cannot read {name}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let recording = match import(&data) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("llrp-gateway import: {name}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    for w in &recording.warnings {
+        eprintln!("llrp-gateway import: warning: {name}: {w}");
+    }
+    let out = args.output.display();
+    if let Err(e) = write_recording(&recording, &args.output) {
+        eprintln!("llrp-gateway import: cannot write {out}: {e}");
+        return ExitCode::FAILURE;
+    }
+    let frames = recording
+        .entries
+        .iter()
+        .filter(|e| matches!(e, Entry::Frame { .. }))
+        .count();
+    eprintln!(
+        "llrp-gateway import: {} connections, {frames} frames, reader {}: {out}",
+        recording.connections().len(),
+        recording.header.upstream
+    );
+    ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn iso8601_of_known_instants() {
+        assert_eq!(iso8601(0), "1970-01-01T00:00:00.000000Z");
+        assert_eq!(
+            iso8601(1_700_000_000_000_010),
+            "2023-11-14T22:13:20.000010Z"
+        );
+        // A leap day, and the last microsecond of a century year that is not a leap year.
+        assert_eq!(iso8601(951_782_400_000_000), "2000-02-29T00:00:00.000000Z");
+        assert_eq!(
+            iso8601(4_107_542_399_999_999),
+            "2100-02-28T23:59:59.999999Z"
+        );
+    }
+
+    #[test]
+    fn bad_files_are_named_for_what_they_are() {
+        let e = import(b"{\"llrp_recording\":1}\n").expect_err("JSON");
+        assert!(
+            e.to_string().contains("not a pcap or pcapng capture"),
+            "{e}"
+        );
+        assert!(e.to_string().contains("recording?"), "{e}");
+        let e = import(b"").expect_err("empty");
+        assert!(e.to_string().contains("empty file"), "{e}");
+        // A pcap header with link type 147 (user-defined), one packet.
+        let mut pcap = vec![0xD4, 0xC3, 0xB2, 0xA1, 2, 0, 4, 0];
+        pcap.extend_from_slice(&[0; 8]);
+        pcap.extend_from_slice(&65535u32.to_le_bytes());
+        pcap.extend_from_slice(&147u32.to_le_bytes());
+        pcap.extend_from_slice(&[0; 8]);
+        pcap.extend_from_slice(&4u32.to_le_bytes());
+        pcap.extend_from_slice(&4u32.to_le_bytes());
+        pcap.extend_from_slice(b"abcd");
+        let e = import(&pcap).expect_err("link type");
+        assert!(e.to_string().contains("link type 147"), "{e}");
+        // The same, cut inside its packet: tolerated, then no LLRP.
+        let e = import(&pcap[..pcap.len() - 2]).expect_err("cut");
+        assert!(e.to_string().contains("no LLRP stream"), "{e}");
+    }
+}

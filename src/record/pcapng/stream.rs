@@ -1,0 +1,641 @@
+//! TCP streams of a capture: reassembly of each direction by sequence number (duplicates
+//! and retransmissions dropped, out-of-order segments held until the gap fills), then
+//! LLRP framing of each direction, and which end is the reader.
+
+use std::collections::{BTreeMap, HashMap};
+use std::net::SocketAddr;
+
+use bytes::{Bytes, BytesMut};
+use llrp::{FrameError, FrameHeader, FrameSplitter, MessageKind, Split};
+
+use super::packet::{InSegment, ACK, FIN, RST, SYN};
+
+/// The LLRP ports: 5084 (plain) and 5085 (TLS, as IANA lists it).
+pub const LLRP_PORTS: [u16; 2] = [5084, 5085];
+
+/// What reassembly and framing made of a direction's bytes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Piece {
+    /// One whole LLRP frame.
+    Frame(Bytes),
+    /// Bytes that are not LLRP frames.
+    Bytes(Bytes),
+}
+
+/// Splits one direction's byte stream into frames with the codec's [`FrameSplitter`]; after
+/// a length field that cannot be right everything is [`Piece::Bytes`], as a recording has it.
+#[derive(Debug, Default)]
+pub struct Framer {
+    buf: BytesMut,
+    unsynced: bool,
+    /// Looking for the first frame boundary (the capture began after the handshake).
+    hunting: bool,
+    /// Bytes dropped while hunting.
+    pub skipped: usize,
+}
+
+impl Framer {
+    /// A framer for a stream that starts with a frame (`hunting` false) or somewhere inside
+    /// one (`hunting` true: bytes before the first plausible LLRP header are dropped).
+    pub fn new(hunting: bool) -> Framer {
+        Framer {
+            hunting,
+            ..Framer::default()
+        }
+    }
+
+    /// Takes the next bytes of the stream; appends what they complete to `out`.
+    pub fn push(&mut self, data: &[u8], out: &mut Vec<Piece>) {
+        if self.unsynced {
+            out.push(Piece::Bytes(Bytes::copy_from_slice(data)));
+            return;
+        }
+        self.buf.extend_from_slice(data);
+        if self.hunting {
+            self.hunt();
+        }
+        let splitter = FrameSplitter::default();
+        loop {
+            let len = match splitter.split(&self.buf) {
+                Ok(Split::Frame(h)) => h.length as usize,
+                Ok(Split::Incomplete(_)) => return,
+                // A version the codec does not speak is still a whole frame of sane length.
+                Err(FrameError::UnsupportedVersion(h)) if self.buf.len() >= h.length as usize => {
+                    h.length as usize
+                }
+                Err(FrameError::UnsupportedVersion(_)) => return,
+                Err(_) => {
+                    self.unsynced = true;
+                    out.push(Piece::Bytes(self.buf.split().freeze()));
+                    return;
+                }
+            };
+            out.push(Piece::Frame(self.buf.split_to(len).freeze()));
+        }
+    }
+
+    /// Drops the bytes before the first offset where a plausible LLRP header starts (version
+    /// 1 or 2, a sane length, a message type the codec names or CUSTOM_MESSAGE).
+    fn hunt(&mut self) {
+        let found = (0..self.buf.len().saturating_sub(llrp::frame::HEADER_LEN - 1))
+            .find(|&i| plausible(&self.buf[i..]));
+        let drop = match found {
+            Some(i) => {
+                self.hunting = false;
+                i
+            }
+            None => self.buf.len().saturating_sub(llrp::frame::HEADER_LEN - 1),
+        };
+        self.skipped += drop;
+        let _ = self.buf.split_to(drop);
+    }
+
+    /// Bytes left that make no whole frame (at the end of the stream).
+    pub fn finish(&mut self) -> Option<Bytes> {
+        (!self.buf.is_empty()).then(|| self.buf.split().freeze())
+    }
+}
+
+/// Whether `b` starts with a header that could begin an LLRP frame.
+fn plausible(b: &[u8]) -> bool {
+    let (Some(h), Some(k)) = (FrameHeader::peek(b), MessageKind::of_frame(b)) else {
+        return false;
+    };
+    (1..=2).contains(&h.version)
+        && (10..=llrp::frame::DEFAULT_MAX_FRAME_LEN).contains(&h.length)
+        && (k.msg_type == llrp::message::CUSTOM_MESSAGE_TYPE || k.name() != "UNKNOWN")
+}
+
+/// Whether a frame is of a message kind the codec names (or a vendor message) and version.
+pub fn known_frame(frame: &[u8]) -> bool {
+    plausible(frame)
+}
+
+/// One direction of a stream.
+#[derive(Debug, Default)]
+struct Half {
+    /// Whether the sequence space is known (from a SYN or the first segment).
+    started: bool,
+    /// The absolute sequence number of the next byte expected, and its offset in the stream.
+    next_seq: u32,
+    next_off: u64,
+    /// Segments beyond a gap, by stream offset.
+    held: BTreeMap<u64, Vec<u8>>,
+    /// Where the FIN is, once seen.
+    fin_at: Option<u64>,
+    /// The FIN was reached: this direction is done.
+    closed: bool,
+    framer: Framer,
+    /// The first frame this direction sent.
+    first_frame: Option<Bytes>,
+    /// Bytes that arrived again (retransmissions, duplicates).
+    duplicate_bytes: usize,
+}
+
+/// What happened in a stream, in capture order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Happening {
+    /// The connection began (SYN, or the first packet of a stream caught mid-way).
+    Open {
+        /// Whether the handshake was seen.
+        syn: bool,
+    },
+    /// End `end` sent this.
+    Data {
+        /// Which end sent it: index into [`Stream::ends`].
+        end: usize,
+        /// A frame or non-LLRP bytes.
+        piece: Piece,
+    },
+    /// The connection ended.
+    Close(Ending),
+}
+
+/// How a connection ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ending {
+    /// This end sent the first FIN.
+    Fin(usize),
+    /// This end sent a RST.
+    Reset(usize),
+}
+
+/// One event of a stream: the packet that caused it, and what.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Index of the packet in the capture (0-based) and the order within it.
+    pub at: (usize, usize),
+    /// UTC µs of the packet.
+    pub utc_us: u64,
+    /// What.
+    pub what: Happening,
+}
+
+/// One TCP connection of a capture.
+#[derive(Debug)]
+pub struct Stream {
+    /// Its two ends; end 0 sent the stream's first packet.
+    pub ends: [SocketAddr; 2],
+    halves: [Half; 2],
+    /// Which end sent the SYN, and which the SYN-ACK.
+    syn_from: Option<usize>,
+    synack_from: Option<usize>,
+    /// The SYN's sequence number (a different one on the same ports is a new connection).
+    syn_seq: Option<u32>,
+    first_data_from: Option<usize>,
+    ended: bool,
+    /// Everything that happened, in order.
+    pub events: Vec<Event>,
+    /// Payload bytes seen, both ways.
+    pub payload_bytes: u64,
+    /// Problems found at its end (gaps never filled, a frame cut).
+    pub warnings: Vec<String>,
+}
+
+impl Stream {
+    fn new(ends: [SocketAddr; 2]) -> Stream {
+        Stream {
+            ends,
+            halves: Default::default(),
+            syn_from: None,
+            synack_from: None,
+            syn_seq: None,
+            first_data_from: None,
+            ended: false,
+            events: Vec::new(),
+            payload_bytes: 0,
+            warnings: Vec::new(),
+        }
+    }
+
+    fn event(&mut self, packet: usize, utc_us: u64, what: Happening) {
+        let n = self.events.iter().filter(|e| e.at.0 == packet).count();
+        self.events.push(Event {
+            at: (packet, n),
+            utc_us,
+            what,
+        });
+    }
+
+    /// Takes one segment sent by end `end`.
+    fn segment(&mut self, end: usize, seg: &InSegment<'_>, packet: usize, utc_us: u64) {
+        if self.events.is_empty() {
+            let syn = seg.flags & SYN != 0;
+            self.event(packet, utc_us, Happening::Open { syn });
+        }
+        let mut seq = seg.seq;
+        if seg.flags & SYN != 0 {
+            if seg.flags & ACK == 0 {
+                self.syn_from = Some(end);
+                self.syn_seq = Some(seg.seq);
+            } else {
+                self.synack_from = Some(end);
+            }
+            let h = &mut self.halves[end];
+            if !h.started || (h.next_off == 0 && h.held.is_empty()) {
+                h.started = true;
+                h.next_seq = seg.seq.wrapping_add(1);
+                h.next_off = 0;
+                h.framer = Framer::new(false);
+            }
+            seq = seq.wrapping_add(1);
+        }
+        if !seg.payload.is_empty() {
+            self.first_data_from.get_or_insert(end);
+            self.payload_bytes += seg.payload.len() as u64;
+            self.data(end, seq, seg.payload, packet, utc_us);
+        }
+        if seg.flags & FIN != 0 {
+            let h = &mut self.halves[end];
+            if h.started {
+                let off = offset(h, seq.wrapping_add(seg.payload.len() as u32));
+                h.fin_at = Some(off.max(0) as u64);
+            }
+        }
+        self.check_fin(end, packet, utc_us);
+        if seg.flags & RST != 0 && !self.ended {
+            self.ended = true;
+            self.event(packet, utc_us, Happening::Close(Ending::Reset(end)));
+        }
+    }
+
+    /// Delivers payload at sequence number `seq` from `end`.
+    fn data(&mut self, end: usize, seq: u32, payload: &[u8], packet: usize, utc_us: u64) {
+        let h = &mut self.halves[end];
+        if !h.started {
+            // Caught mid-way: the first segment seen sets the sequence space.
+            h.started = true;
+            h.next_seq = seq;
+            h.next_off = 0;
+            h.framer = Framer::new(true);
+        }
+        let mut off = offset(h, seq);
+        let mut bytes = payload;
+        if off < 0 {
+            let before = off.unsigned_abs() as usize;
+            if before >= bytes.len() {
+                h.duplicate_bytes += bytes.len();
+                return;
+            }
+            bytes = &bytes[before..];
+            off = 0;
+        }
+        let off = off as u64;
+        let end_off = off + bytes.len() as u64;
+        if end_off <= h.next_off {
+            h.duplicate_bytes += bytes.len();
+            return;
+        }
+        if off > h.next_off {
+            let held = h.held.entry(off).or_default();
+            if held.len() < bytes.len() {
+                *held = bytes.to_vec();
+            }
+            return;
+        }
+        let mut out = Vec::new();
+        let fresh = &bytes[(h.next_off - off) as usize..];
+        h.duplicate_bytes += bytes.len() - fresh.len();
+        advance(h, fresh, &mut out);
+        while let Some((&at, _)) = h.held.first_key_value() {
+            if at > h.next_off {
+                break;
+            }
+            let (at, held) = h.held.pop_first().expect("a first entry exists");
+            let skip = (h.next_off - at) as usize;
+            if skip < held.len() {
+                h.duplicate_bytes += skip;
+                advance(h, &held[skip..], &mut out);
+            } else {
+                h.duplicate_bytes += held.len();
+            }
+        }
+        if h.first_frame.is_none() {
+            h.first_frame = out.iter().find_map(|p| match p {
+                Piece::Frame(f) => Some(f.clone()),
+                Piece::Bytes(_) => None,
+            });
+        }
+        for piece in out {
+            self.event(packet, utc_us, Happening::Data { end, piece });
+        }
+    }
+
+    /// Marks `end` closed once its FIN is reached; the connection ends when both are.
+    fn check_fin(&mut self, end: usize, packet: usize, utc_us: u64) {
+        let h = &mut self.halves[end];
+        if h.closed || h.fin_at != Some(h.next_off) {
+            return;
+        }
+        h.closed = true;
+        let other_closed = self.halves[1 - end].closed;
+        if !self.ended && other_closed {
+            self.ended = true;
+            // The other end closed first.
+            self.event(packet, utc_us, Happening::Close(Ending::Fin(1 - end)));
+        }
+    }
+
+    /// At the end of the capture: what is left in the framers, gaps never filled, a
+    /// connection closed by one end only.
+    fn finish(&mut self, packet: usize, utc_us: u64) {
+        let name = format!("{} <-> {}", self.ends[0], self.ends[1]);
+        for end in 0..2 {
+            let h = &mut self.halves[end];
+            if let Some((&at, _)) = h.held.first_key_value() {
+                let bytes: usize = h.held.values().map(Vec::len).sum();
+                self.warnings.push(format!(
+                    "{name}: {} bytes from {} were never captured; the {bytes} bytes after them are dropped",
+                    at - h.next_off,
+                    self.ends[end]
+                ));
+                h.held.clear();
+            }
+            if h.framer.skipped > 0 {
+                self.warnings.push(format!(
+                    "{name}: the capture starts inside the stream; {} bytes from {} before the first LLRP header are dropped",
+                    h.framer.skipped, self.ends[end]
+                ));
+            }
+            if let Some(rest) = h.framer.finish() {
+                self.warnings.push(format!(
+                    "{name}: the stream from {} ends inside a frame; its last {} bytes are kept as bytes",
+                    self.ends[end],
+                    rest.len()
+                ));
+                self.event(
+                    packet,
+                    utc_us,
+                    Happening::Data {
+                        end,
+                        piece: Piece::Bytes(rest),
+                    },
+                );
+            }
+        }
+        if !self.ended {
+            let closed: Vec<usize> = (0..2).filter(|&e| self.halves[e].closed).collect();
+            if let [e] = closed[..] {
+                self.ended = true;
+                self.event(packet, utc_us, Happening::Close(Ending::Fin(e)));
+            }
+        }
+    }
+
+    /// Which end is the reader (index into [`Stream::ends`]), and the rule that decided:
+    /// the end whose first frame is READER_EVENT_NOTIFICATION; else the end on an LLRP port
+    /// (5084, 5085); else the end that accepted the SYN; else the end whose first frame is of
+    /// a kind only readers send; else the end that sent the first byte.
+    pub fn reader_end(&self) -> usize {
+        let first = |e: usize| {
+            self.halves[e]
+                .first_frame
+                .as_deref()
+                .and_then(MessageKind::of_frame)
+        };
+        let one = |f: &dyn Fn(usize) -> bool| match (f(0), f(1)) {
+            (true, false) => Some(0),
+            (false, true) => Some(1),
+            _ => None,
+        };
+        let notification = MessageKind::standard(63);
+        one(&|e| first(e) == Some(notification))
+            .or_else(|| one(&|e| LLRP_PORTS.contains(&self.ends[e].port())))
+            .or(self.synack_from)
+            .or(self.syn_from.map(|e| 1 - e))
+            .or_else(|| one(&|e| first(e).is_some_and(|k| k.is_from_reader())))
+            .or(self.first_data_from)
+            .unwrap_or(1)
+    }
+
+    /// Whether the stream carries LLRP: one end is on an LLRP port, or a direction's first
+    /// frame is a whole LLRP message of a known kind.
+    pub fn is_llrp(&self) -> bool {
+        self.ends.iter().any(|e| LLRP_PORTS.contains(&e.port()))
+            || self
+                .halves
+                .iter()
+                .any(|h| h.first_frame.as_deref().is_some_and(known_frame))
+    }
+
+    /// Bytes that arrived twice (retransmissions), both ways.
+    pub fn duplicate_bytes(&self) -> usize {
+        self.halves.iter().map(|h| h.duplicate_bytes).sum()
+    }
+}
+
+/// The stream offset of sequence number `seq` (negative: before the stream's start).
+fn offset(h: &Half, seq: u32) -> i64 {
+    h.next_off as i64 + i64::from(seq.wrapping_sub(h.next_seq) as i32)
+}
+
+fn advance(h: &mut Half, bytes: &[u8], out: &mut Vec<Piece>) {
+    h.next_off += bytes.len() as u64;
+    // Sequence numbers are modulo 2^32.
+    h.next_seq = h.next_seq.wrapping_add(bytes.len() as u32);
+    h.framer.push(bytes, out);
+}
+
+/// Every TCP stream of a capture, in order of their first packet.
+#[derive(Debug, Default)]
+pub struct Streams {
+    /// The streams.
+    pub streams: Vec<Stream>,
+    /// The open stream of each pair of ends (ordered).
+    by_ends: HashMap<(SocketAddr, SocketAddr), usize>,
+}
+
+impl Streams {
+    /// Takes one captured segment.
+    pub fn segment(&mut self, seg: &InSegment<'_>, packet: usize, utc_us: u64) {
+        let key = if seg.src <= seg.dst {
+            (seg.src, seg.dst)
+        } else {
+            (seg.dst, seg.src)
+        };
+        let fresh_syn = seg.flags & (SYN | ACK) == SYN;
+        let index = match self.by_ends.get(&key) {
+            // A new SYN on the ports of an ended connection, or with another initial
+            // sequence number, starts a new connection.
+            Some(&i)
+                if !(fresh_syn
+                    && (self.streams[i].ended
+                        || self.streams[i].syn_seq.is_some_and(|s| s != seg.seq))) =>
+            {
+                i
+            }
+            _ => {
+                self.streams.push(Stream::new([seg.src, seg.dst]));
+                self.by_ends.insert(key, self.streams.len() - 1);
+                self.streams.len() - 1
+            }
+        };
+        let s = &mut self.streams[index];
+        let end = usize::from(s.ends[0] != seg.src);
+        s.segment(end, seg, packet, utc_us);
+    }
+
+    /// Ends the capture: flushes what each stream holds (bytes left in a framer, gaps never
+    /// filled) and closes streams that only one end closed.
+    pub fn finish(&mut self, packet: usize, utc_us: u64) {
+        for s in &mut self.streams {
+            s.finish(packet, utc_us);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use llrp::message::{Keepalive, KeepaliveAck};
+    use llrp::Message;
+
+    fn frame(id: u32) -> Vec<u8> {
+        Message::new(id, KeepaliveAck::default())
+            .to_bytes()
+            .to_vec()
+    }
+
+    fn seg<'a>(from_client: bool, seq: u32, flags: u8, payload: &'a [u8]) -> InSegment<'a> {
+        let (c, r) = ("10.1.1.1:51000", "10.1.1.2:6000");
+        let (src, dst) = if from_client { (c, r) } else { (r, c) };
+        InSegment {
+            src: src.parse().expect("addr"),
+            dst: dst.parse().expect("addr"),
+            seq,
+            ack: 0,
+            flags,
+            payload,
+        }
+    }
+
+    fn frames_of(s: &Stream, end: usize) -> Vec<Bytes> {
+        s.events
+            .iter()
+            .filter_map(|e| match &e.what {
+                Happening::Data {
+                    end: x,
+                    piece: Piece::Frame(f),
+                } if *x == end => Some(f.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn out_of_order_duplicate_and_wrapping_segments_reassemble() {
+        let mut wire = Vec::new();
+        for id in 1..=5 {
+            wire.extend_from_slice(&frame(id));
+        }
+        let isn = u32::MAX - 20; // the sequence numbers wrap inside the stream
+        let mut st = Streams::default();
+        st.segment(&seg(true, isn, SYN, &[]), 0, 0);
+        st.segment(&seg(false, 500, SYN | ACK, &[]), 1, 0);
+        let start = isn.wrapping_add(1);
+        let at = |o: usize| start.wrapping_add(o as u32);
+        // Pieces of 7 bytes: the third before the second, the first twice, one overlapping.
+        st.segment(&seg(true, at(0), ACK, &wire[0..7]), 2, 1);
+        st.segment(&seg(true, at(14), ACK, &wire[14..21]), 3, 2);
+        st.segment(&seg(true, at(0), ACK, &wire[0..7]), 4, 3);
+        st.segment(&seg(true, at(7), ACK, &wire[7..14]), 5, 4);
+        st.segment(&seg(true, at(10), ACK, &wire[10..30]), 6, 5);
+        st.segment(&seg(true, at(30), ACK | FIN, &wire[30..]), 7, 6);
+        st.segment(&seg(false, 501, ACK | FIN, &[]), 8, 7);
+        st.finish(9, 8);
+        let s = &st.streams[0];
+        let got = frames_of(s, 0);
+        assert_eq!(got.len(), 5);
+        assert_eq!(got.concat(), wire);
+        assert_eq!(s.duplicate_bytes(), 7 + 11);
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        // The client's FIN came first; the close is the last event.
+        assert_eq!(
+            s.events.last().map(|e| &e.what),
+            Some(&Happening::Close(Ending::Fin(0)))
+        );
+        // Not on port 5084 and the reader sent nothing: the SYN-ACK decides.
+        assert_eq!(s.reader_end(), 1);
+    }
+
+    #[test]
+    fn a_gap_never_filled_is_reported_and_a_reset_ends_the_stream() {
+        let f = frame(1);
+        let mut st = Streams::default();
+        st.segment(&seg(true, 100, SYN, &[]), 0, 0);
+        st.segment(&seg(true, 101, ACK, &f), 1, 0);
+        st.segment(&seg(true, 101 + 30, ACK, &f), 2, 0);
+        st.segment(&seg(false, 9, RST, &[]), 3, 0);
+        st.finish(4, 0);
+        let s = &st.streams[0];
+        assert_eq!(frames_of(s, 0).len(), 1);
+        assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+        assert!(s.warnings[0].contains("20 bytes from 10.1.1.1:51000 were never captured"));
+        assert!(s
+            .events
+            .iter()
+            .any(|e| e.what == Happening::Close(Ending::Reset(1))));
+    }
+
+    #[test]
+    fn the_end_that_sends_reader_event_notification_first_is_the_reader() {
+        // A reader-initiated connection: the reader connects out, to the client's port 5084.
+        let hello = Message::new(1, llrp::message::ReaderEventNotification::default()).to_bytes();
+        let ka = Message::new(2, Keepalive::default()).to_bytes();
+        let mut st = Streams::default();
+        let r = "10.1.1.2:40000".parse().expect("addr");
+        let c = "10.1.1.1:5084".parse().expect("addr");
+        let s = |src, dst, seq, flags, payload| InSegment {
+            src,
+            dst,
+            seq,
+            ack: 0,
+            flags,
+            payload,
+        };
+        st.segment(&s(r, c, 1, SYN, &[]), 0, 0);
+        st.segment(&s(c, r, 1, SYN | ACK, &[]), 1, 0);
+        st.segment(&s(r, c, 2, ACK, &hello), 2, 0);
+        st.segment(&s(r, c, 2 + hello.len() as u32, ACK, &ka), 3, 0);
+        st.finish(4, 0);
+        assert_eq!(st.streams[0].ends[st.streams[0].reader_end()], r);
+        assert!(st.streams[0].is_llrp());
+    }
+
+    #[test]
+    fn a_stream_caught_mid_way_resynchronises_at_the_first_header() {
+        let mut wire = frame(1);
+        wire.extend_from_slice(&frame(2));
+        let mut st = Streams::default();
+        // The first 4 bytes were sent before the capture started.
+        st.segment(&seg(true, 1004, ACK, &wire[4..12]), 0, 0);
+        st.segment(&seg(true, 1012, ACK, &wire[12..]), 1, 0);
+        st.finish(2, 0);
+        let s = &st.streams[0];
+        assert_eq!(frames_of(s, 0), vec![Bytes::from(frame(2))]);
+        assert_eq!(s.events[0].what, Happening::Open { syn: false });
+        assert!(
+            s.warnings.iter().any(|w| w.contains("6 bytes")),
+            "{:?}",
+            s.warnings
+        );
+    }
+
+    #[test]
+    fn after_a_bad_length_everything_is_bytes() {
+        let mut f = Framer::new(false);
+        let mut out = Vec::new();
+        f.push(&frame(1), &mut out);
+        f.push(b"GET / HTTP/1.1\r\n", &mut out);
+        f.push(b"Host: x\r\n", &mut out);
+        assert_eq!(
+            out,
+            vec![
+                Piece::Frame(Bytes::from(frame(1))),
+                Piece::Bytes(Bytes::from_static(b"GET / HTTP/1.1\r\n")),
+                Piece::Bytes(Bytes::from_static(b"Host: x\r\n")),
+            ]
+        );
+        assert_eq!(f.finish(), None);
+    }
+}
