@@ -16,11 +16,11 @@ use bytes::Bytes;
 use common::*;
 use llrp::message::*;
 use llrp::params::*;
-use llrp::{Message, MessageKind};
+use llrp::Message;
 use llrp_gateway::net::client::{is_unsolicited, Client, ClientError};
 use llrp_gateway::net::clock::Speed;
 use llrp_gateway::record::format::{encode_entry, encode_header};
-use llrp_gateway::record::pcapng::{self, ExportOptions};
+use llrp_gateway::record::pcapng;
 use llrp_gateway::record::writer::utc_now_us;
 use llrp_gateway::record::{Direction, Entry, Event, Header, Recording, Stamp};
 
@@ -170,7 +170,13 @@ fn s2() -> llrp_gateway::scenario::Scenario {
 /// at the ROSpec's end (far larger than an MSS), then a short second connection.
 async fn sim_recording() -> Recording {
     let sim = start(&s2(), Speed::Max).await;
-    let addr = sim.addrs[0];
+    let r = session(sim.addrs[0]).await;
+    sim.shutdown().await;
+    r
+}
+
+/// The two sessions of [`sim_recording`] with the reader at `addr`.
+async fn session(addr: std::net::SocketAddr) -> Recording {
     let clock = Clock::new();
     let mut entries = Vec::new();
     let mut s = Recorded::open(addr, 1, &clock, &mut entries).await;
@@ -192,7 +198,10 @@ async fn sim_recording() -> Recording {
     let MessageBody::GetReaderConfigResponse(cfg) = &r.body else {
         panic!("{r:?}")
     };
-    assert!(cfg.identification.is_some(), "the config has Identification");
+    assert!(
+        cfg.identification.is_some(),
+        "the config has Identification"
+    );
     // Every read held until the ROSpec ends: one large report.
     let spec = rospec(
         1,
@@ -237,7 +246,6 @@ async fn sim_recording() -> Recording {
     };
     assert_eq!(s.request(cfg).await.name(), "GET_READER_CONFIG_RESPONSE");
     s.close().await;
-    sim.shutdown().await;
     Recording {
         header: Header::new(format!("sim:{addr}"), clock.utc0),
         entries,
@@ -254,8 +262,15 @@ fn write(recording: &Recording, path: &Path) {
     std::fs::write(path, text).expect("write the recording");
 }
 
-/// The frames and bytes of each connection, in order, with their direction.
-fn streams(r: &Recording) -> Vec<(Vec<(Direction, Bytes)>, [Vec<u8>; 2])> {
+/// One connection of a recording: its frames in order with their direction, and its
+/// non-LLRP bytes to and from the reader.
+struct Conn {
+    frames: Vec<(Direction, Bytes)>,
+    bytes: [Vec<u8>; 2],
+}
+
+/// The frames and bytes of each connection.
+fn streams(r: &Recording) -> Vec<Conn> {
     r.connections()
         .into_iter()
         .map(|conn| {
@@ -263,7 +278,10 @@ fn streams(r: &Recording) -> Vec<(Vec<(Direction, Bytes)>, [Vec<u8>; 2])> {
             let mut bytes = [Vec::new(), Vec::new()];
             for e in &r.entries {
                 if let Entry::Bytes {
-                    conn: c, dir, bytes: b, ..
+                    conn: c,
+                    dir,
+                    bytes: b,
+                    ..
                 } = e
                 {
                     if *c == conn {
@@ -271,11 +289,10 @@ fn streams(r: &Recording) -> Vec<(Vec<(Direction, Bytes)>, [Vec<u8>; 2])> {
                     }
                 }
             }
-            (frames, bytes)
+            Conn { frames, bytes }
         })
         .collect()
 }
-
 
 /// Runs tshark with `args`; fails naming the install script if it is missing.
 fn tshark(args: &[&str]) -> String {
@@ -317,6 +334,7 @@ fn excusable(frames: &[Bytes]) -> (usize, usize) {
 /// What tshark's verbose tree says of one expert item at warning or error level: its text
 /// and the line of the tree item it hangs on.
 #[derive(Debug)]
+#[allow(dead_code)] // `frame` is there for the failure message
 struct Expert {
     frame: usize,
     message: String,
@@ -437,8 +455,20 @@ fn check_with_tshark(name: &str, recording: &Recording, dir: &Path) {
         })
         .collect();
     let fields = run(&[
-        "-T", "fields", "-E", "occurrence=a", "-E", "aggregator=,", "-e", "llrp.type", "-e",
-        "llrp.id", "-e", "ip.checksum.status", "-e", "tcp.checksum.status",
+        "-T",
+        "fields",
+        "-E",
+        "occurrence=a",
+        "-E",
+        "aggregator=,",
+        "-e",
+        "llrp.type",
+        "-e",
+        "llrp.id",
+        "-e",
+        "ip.checksum.status",
+        "-e",
+        "tcp.checksum.status",
     ]);
     let mut dissected = Vec::new();
     let mut packets = 0;
@@ -455,7 +485,10 @@ fn check_with_tshark(name: &str, recording: &Recording, dir: &Path) {
             continue;
         }
         for (t, id) in cols[0].split(',').zip(cols[1].split(',')) {
-            dissected.push((t.parse::<u16>().expect("type"), id.parse::<u32>().expect("id")));
+            dissected.push((
+                t.parse::<u16>().expect("type"),
+                id.parse::<u32>().expect("id"),
+            ));
         }
     }
     let expected: Vec<(u16, u32)> = frames
@@ -558,7 +591,342 @@ async fn tshark_dissects_every_exported_frame_as_llrp_with_only_the_known_faults
     check_with_tshark("sim-session", &session, dir.path());
     for path in fixtures() {
         let r = Recording::open(&path).expect("a shipped fixture reads");
-        let name = path.file_stem().expect("a name").to_string_lossy().to_string();
+        let name = path
+            .file_stem()
+            .expect("a name")
+            .to_string_lossy()
+            .to_string();
         check_with_tshark(&name, &r, dir.path());
     }
+}
+
+/// A third connection for the round trip: no connect or disconnect marker, a report far
+/// larger than any MSS, then bytes that are not LLRP both ways.
+fn add_synthetic(r: &mut Recording) {
+    let at = r.entries.last().map(Entry::at).unwrap_or_default();
+    let read = |n: u32| TagReportData {
+        epc: Epc::Epc96(Epc96([
+            0x30,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            (n >> 8) as u8,
+            n as u8,
+        ])),
+        antenna_id: Some(AntennaId(1)),
+        ..Default::default()
+    };
+    let report = RoAccessReport {
+        tag_report_data: (0..5000).map(read).collect(),
+        ..Default::default()
+    };
+    let frames = [
+        (
+            Direction::ToReader,
+            Message::new(9, GetReaderCapabilities::default()),
+        ),
+        (Direction::FromReader, Message::new(77, report)),
+        (
+            Direction::FromReader,
+            Message::new(78, Keepalive::default()),
+        ),
+    ];
+    for (dir, m) in frames {
+        r.entries.push(Entry::Frame {
+            at,
+            conn: 3,
+            dir,
+            frame: m.to_bytes().freeze(),
+        });
+    }
+    let bytes = [
+        (
+            Direction::ToReader,
+            &b"GET / HTTP/1.1\r\nHost: reader\r\n\r\n"[..],
+        ),
+        // A header whose length (4) is below the header's own 10 bytes.
+        (
+            Direction::FromReader,
+            &[0x04, 0x3E, 0, 0, 0, 4, 0, 0, 0, 1, 0xFF][..],
+        ),
+        (Direction::ToReader, &b"more after the first"[..]),
+    ];
+    for (dir, b) in bytes {
+        r.entries.push(Entry::Bytes {
+            at,
+            conn: 3,
+            dir,
+            bytes: Bytes::copy_from_slice(b),
+        });
+    }
+}
+
+fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(out.status.success(), "{cmd:?}: {err}");
+    err
+}
+
+#[tokio::test]
+async fn export_then_import_gives_back_the_same_frames_and_bytes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut original = sim_recording().await;
+    add_synthetic(&mut original);
+    let rec = dir.path().join("original.jsonl");
+    write(&original, &rec);
+    let want = streams(&original);
+    assert_eq!(want.len(), 3);
+    for mss in ["536", "1460", "65495"] {
+        let cap = dir.path().join(format!("mss-{mss}.pcapng"));
+        let back = dir.path().join(format!("mss-{mss}.jsonl"));
+        run_ok(
+            bin()
+                .arg("export")
+                .arg(&rec)
+                .arg("--pcapng")
+                .arg(&cap)
+                .args(["--mss", mss]),
+        );
+        let log = run_ok(bin().arg("import").arg(&cap).arg("--output").arg(&back));
+        assert!(!log.contains("warning"), "MSS {mss}: {log}");
+        let imported = Recording::open(&back).expect("the import reads back");
+        assert_eq!(imported.header.upstream, "127.0.0.1:5084");
+        assert_eq!(
+            imported.header.start_utc_us,
+            original.entries[0].at().utc_us
+        );
+        let got = streams(&imported);
+        assert_eq!(
+            got.len(),
+            want.len(),
+            "MSS {mss}: one connection per stream"
+        );
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                g.frames == w.frames,
+                "MSS {mss}: conn {}: the same frames, in order and direction",
+                i + 1
+            );
+            assert_eq!(
+                g.bytes,
+                w.bytes,
+                "MSS {mss}: conn {}: the same bytes",
+                i + 1
+            );
+        }
+        // Every connection opens and closes, and the frames keep their times.
+        for conn in imported.connections() {
+            let markers: Vec<Event> = imported
+                .entries
+                .iter()
+                .filter_map(|e| match e {
+                    Entry::Marker { conn: c, event, .. } if *c == conn => Some(*event),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(markers, [Event::Connect, Event::Disconnect], "conn {conn}");
+        }
+        let times =
+            |r: &Recording| -> Vec<u64> { r.frames(1).map(|(at, _, _)| at.utc_us).collect() };
+        assert_eq!(
+            times(&imported),
+            times(&original),
+            "MSS {mss}: packet times"
+        );
+    }
+}
+
+#[test]
+fn export_refuses_a_bad_mss_and_import_names_a_file_that_is_no_capture() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rec = dir.path().join("r.jsonl");
+    write(
+        &Recording {
+            header: Header::new("x", 0),
+            entries: Vec::new(),
+            warnings: Vec::new(),
+        },
+        &rec,
+    );
+    let out = bin()
+        .arg("export")
+        .arg(&rec)
+        .args(["--pcapng", "/dev/null", "--mss", "100"])
+        .output()
+        .expect("runs");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("536..=65495"));
+    let out = bin()
+        .arg("import")
+        .arg(&rec)
+        .arg("--output")
+        .arg(dir.path().join("o.jsonl"))
+        .output()
+        .expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("not a pcap or pcapng capture"), "{err}");
+    assert!(err.contains("r.jsonl"), "names the file: {err}");
+}
+
+/// A running `tshark -i lo` writing a capture, stopped by its PID.
+struct Capture {
+    child: std::process::Child,
+    path: PathBuf,
+}
+
+impl Capture {
+    /// Starts capturing TCP port `port` on loopback into `path`; returns once the capture
+    /// holds a probe connection to a port of its own (tshark says "Capturing on" before its
+    /// capture filter is in place), with a guard against a hang.
+    fn start(port: u16, path: &Path) -> Capture {
+        use std::io::{BufRead, BufReader};
+        let probe = std::net::TcpListener::bind("127.0.0.1:0").expect("a probe port");
+        let probe_port = probe.local_addr().expect("bound").port();
+        let filter = format!("tcp port {port} or tcp port {probe_port}");
+        let mut child = Command::new("tshark")
+            .args(["-i", "lo", "-f", &filter, "-w"])
+            .arg(path)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("tshark cannot run ({e}): install it with scripts/install-tshark")
+            });
+        let stderr = child.stderr.take().expect("piped");
+        let log = std::thread::spawn(move || {
+            let mut all = String::new();
+            for line in BufReader::new(stderr).lines() {
+                all.push_str(&line.unwrap_or_default());
+                all.push('\n');
+            }
+            all
+        });
+        let seen = |path: &Path| {
+            let Ok(data) = std::fs::read(path) else {
+                return false;
+            };
+            let Ok(read) = pcapng::capture::read(&data) else {
+                return false;
+            };
+            read.packets.iter().any(|p| {
+                p.link.is_ok_and(|l| {
+                    pcapng::packet::parse(l, p.data).is_ok_and(|s| s.dst.port() == probe_port)
+                })
+            })
+        };
+        let guard = Instant::now() + std::time::Duration::from_secs(30);
+        while !seen(path) {
+            if let Some(status) = child.try_wait().expect("wait") {
+                let log = log.join().unwrap_or_default();
+                panic!("tshark exited ({status}) before capturing on lo (root or CAP_NET_RAW needed): {log}");
+            }
+            assert!(
+                Instant::now() < guard,
+                "tshark captured no probe within 30 s"
+            );
+            let _ = std::net::TcpStream::connect(("127.0.0.1", probe_port));
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        drop(probe);
+        Capture {
+            child,
+            path: path.to_path_buf(),
+        }
+    }
+
+    /// Waits (hang guard 20 s) until the capture holds `conns` closed connections, then
+    /// stops tshark with SIGINT and returns the capture's bytes.
+    async fn stop_when_closed(mut self, conns: usize) -> Vec<u8> {
+        let closed = |data: &[u8]| {
+            pcapng::import(data).is_ok_and(|r| {
+                r.entries
+                    .iter()
+                    .filter(|e| {
+                        matches!(
+                            e,
+                            Entry::Marker {
+                                event: Event::Disconnect,
+                                ..
+                            }
+                        )
+                    })
+                    .count()
+                    >= conns
+            })
+        };
+        let guard = Instant::now() + std::time::Duration::from_secs(20);
+        while Instant::now() < guard {
+            if std::fs::read(&self.path).is_ok_and(|d| closed(&d)) {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+        let pid = self.child.id().to_string();
+        let sent = Command::new("kill")
+            .args(["-INT", &pid])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success(), "SIGINT to tshark");
+        let status = self.child.wait().expect("tshark exits");
+        assert!(
+            status.success() || status.code().is_none(),
+            "tshark: {status}"
+        );
+        std::fs::read(&self.path).expect("the capture file")
+    }
+}
+
+#[tokio::test]
+#[ignore = "needs tshark and a loopback capture (root): ./scripts/test runs it"]
+async fn a_capture_by_tshark_on_loopback_imports_as_the_frames_the_client_saw() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("live.pcapng");
+    let sim = start(&s2(), Speed::Max).await;
+    let addr = sim.addrs[0];
+    let capture = Capture::start(addr.port(), &path);
+    let client_side = session(addr).await;
+    let data = capture.stop_when_closed(2).await;
+    sim.shutdown().await;
+    let imported = pcapng::import(&data).expect("the capture imports");
+    eprintln!("import warnings: {:?}", imported.warnings);
+    assert_eq!(
+        imported.header.upstream,
+        addr.to_string(),
+        "the reader's side"
+    );
+    let got = streams(&imported);
+    let want = streams(&client_side);
+    assert_eq!(got.len(), 2, "two connections: {:?}", imported.warnings);
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(
+            g.frames.len(),
+            w.frames.len(),
+            "conn {}: frame count",
+            i + 1
+        );
+        assert!(
+            g.frames == w.frames,
+            "conn {}: the frames the client sent and received",
+            i + 1
+        );
+        assert!(
+            g.bytes[0].is_empty() && g.bytes[1].is_empty(),
+            "no stray bytes"
+        );
+    }
+    // Through the command line too.
+    let back = dir.path().join("live.jsonl");
+    run_ok(bin().arg("import").arg(&path).arg("--output").arg(&back));
+    assert_eq!(
+        Recording::open(&back).expect("reads").entries,
+        imported.entries
+    );
 }
