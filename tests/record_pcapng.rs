@@ -783,16 +783,16 @@ struct Capture {
 }
 
 impl Capture {
-    /// Starts capturing TCP port `port` on loopback into `path`; returns once the capture
+    /// Starts capturing TCP port `port` on `interface` into `path`; returns once the capture
     /// holds a probe connection to a port of its own (tshark says "Capturing on" before its
     /// capture filter is in place), with a guard against a hang.
-    fn start(port: u16, path: &Path) -> Capture {
+    fn start(interface: &str, port: u16, path: &Path) -> Capture {
         use std::io::{BufRead, BufReader};
         let probe = std::net::TcpListener::bind("127.0.0.1:0").expect("a probe port");
         let probe_port = probe.local_addr().expect("bound").port();
         let filter = format!("tcp port {port} or tcp port {probe_port}");
         let mut child = Command::new("tshark")
-            .args(["-i", "lo", "-f", &filter, "-w"])
+            .args(["-i", interface, "-f", &filter, "-w"])
             .arg(path)
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::piped())
@@ -826,7 +826,7 @@ impl Capture {
         while !seen(path) {
             if let Some(status) = child.try_wait().expect("wait") {
                 let log = log.join().unwrap_or_default();
-                panic!("tshark exited ({status}) before capturing on lo (root or CAP_NET_RAW needed): {log}");
+                panic!("tshark exited ({status}) before capturing on {interface} (root or CAP_NET_RAW needed): {log}");
             }
             assert!(
                 Instant::now() < guard,
@@ -887,11 +887,23 @@ impl Capture {
 #[tokio::test]
 #[ignore = "needs tshark and a loopback capture (root): ./scripts/test runs it"]
 async fn a_capture_by_tshark_on_loopback_imports_as_the_frames_the_client_saw() {
+    live_capture("lo").await;
+}
+
+/// On `any`, libpcap writes Linux cooked (SLL) headers instead of Ethernet.
+#[tokio::test]
+#[ignore = "needs tshark and a capture on `any` (root): ./scripts/test runs it"]
+async fn a_linux_cooked_capture_by_tshark_on_any_imports_as_the_frames_the_client_saw() {
+    live_capture("any").await;
+}
+
+/// Captures a real session on `interface` with tshark and imports it.
+async fn live_capture(interface: &str) {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("live.pcapng");
     let sim = start(&s2(), Speed::Max).await;
     let addr = sim.addrs[0];
-    let capture = Capture::start(addr.port(), &path);
+    let capture = Capture::start(interface, addr.port(), &path);
     let client_side = session(addr).await;
     let data = capture.stop_when_closed(2).await;
     sim.shutdown().await;
@@ -934,11 +946,25 @@ async fn a_capture_by_tshark_on_loopback_imports_as_the_frames_the_client_saw() 
             "no stray bytes"
         );
     }
-    // Through the command line too.
+    // Through the command line too, and the same capture as legacy pcap (microseconds).
     let back = dir.path().join("live.jsonl");
     run_ok(bin().arg("import").arg(&path).arg("--output").arg(&back));
     assert_eq!(
         Recording::open(&back).expect("reads").entries,
         imported.entries
     );
+    let pcap = dir.path().join("live.pcap");
+    run_ok(
+        Command::new("editcap")
+            .args(["-F", "pcap"])
+            .arg(&path)
+            .arg(&pcap),
+    );
+    let legacy = pcapng::import(&std::fs::read(&pcap).expect("pcap")).expect("imports");
+    let frames = |r: &Recording| -> Vec<Entry> {
+        let mut e = r.entries.clone();
+        e.retain(|e| matches!(e, Entry::Frame { .. }));
+        e
+    };
+    assert_eq!(frames(&legacy), frames(&imported), "pcap and pcapng alike");
 }
