@@ -8,7 +8,7 @@ use pcap_file::pcapng::blocks::interface_description::{
     InterfaceDescriptionBlock, InterfaceDescriptionOption,
 };
 use pcap_file::pcapng::{Block, PcapNgParser};
-use pcap_file::PcapError;
+use pcap_file::{PcapError, TsResolution};
 
 use super::packet::Link;
 use super::ImportError;
@@ -108,11 +108,16 @@ fn borrowed(data: Cow<'_, [u8]>) -> &'_ [u8] {
 
 fn read_pcap(data: &[u8]) -> Result<Packets<'_>, ImportError> {
     let (mut rest, parser) = PcapParser::new(data).map_err(|e| bad(data, data, e))?;
-    let linktype = u32::from(parser.header().datalink);
+    let header = parser.header();
+    let linktype = u32::from(header.datalink);
     let link = Link::from_linktype(linktype).ok_or(linktype);
+    let nanos = header.ts_resolution == TsResolution::NanoSecond;
     let mut out = Packets::default();
     while !rest.is_empty() {
-        let (next, p) = match parser.next_packet(rest) {
+        // Raw packets: pcap-file's checked ones refuse a packet longer than the snap length,
+        // which a capture made with a small snap length has everywhere; such a packet is
+        // skipped as cut short, the capture still read.
+        let (next, p) = match parser.next_raw_packet(rest) {
             Ok(x) => x,
             Err(PcapError::IncompleteBuffer) => {
                 out.warnings.push(cut(data, rest));
@@ -120,9 +125,10 @@ fn read_pcap(data: &[u8]) -> Result<Packets<'_>, ImportError> {
             }
             Err(e) => return Err(bad(data, rest, e)),
         };
+        let frac_us = if nanos { p.ts_frac / 1000 } else { p.ts_frac };
         out.packets.push(Packet {
             number: out.packets.len() + 1,
-            utc_us: p.timestamp.as_micros() as u64,
+            utc_us: u64::from(p.ts_sec) * 1_000_000 + u64::from(frac_us),
             link,
             data: borrowed(p.data),
         });
@@ -218,4 +224,44 @@ fn read_pcapng(data: &[u8]) -> Result<Packets<'_>, ImportError> {
         rest = next;
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A little-endian pcap with `magic`, snap length 60 and one packet cut to 60 bytes of 100.
+    fn pcap(magic: [u8; 4], frac: u32) -> Vec<u8> {
+        let mut p = magic.to_vec();
+        p.extend_from_slice(&[2, 0, 4, 0]);
+        p.extend_from_slice(&[0; 8]);
+        p.extend_from_slice(&60u32.to_le_bytes());
+        p.extend_from_slice(&1u32.to_le_bytes());
+        p.extend_from_slice(&1_700_000_000u32.to_le_bytes());
+        p.extend_from_slice(&frac.to_le_bytes());
+        p.extend_from_slice(&60u32.to_le_bytes());
+        p.extend_from_slice(&100u32.to_le_bytes());
+        p.extend_from_slice(&[0xAB; 60]);
+        p
+    }
+
+    #[test]
+    fn pcap_in_micro_and_nanoseconds_with_packets_cut_by_the_snap_length() {
+        for (magic, frac) in [
+            ([0xD4, 0xC3, 0xB2, 0xA1], 123_456),
+            ([0x4D, 0x3C, 0xB2, 0xA1], 123_456_789),
+        ] {
+            let data = pcap(magic, frac);
+            let read = read(&data).expect("reads");
+            assert!(read.warnings.is_empty(), "{:?}", read.warnings);
+            let [p] = &read.packets[..] else {
+                panic!("one packet: {:?}", read.packets)
+            };
+            assert_eq!(p.utc_us, 1_700_000_000_123_456);
+            assert_eq!(
+                (p.link, p.data.len(), p.number),
+                (Ok(Link::Ethernet), 60, 1)
+            );
+        }
+    }
 }
