@@ -297,11 +297,11 @@ impl Stream {
         let fresh = &bytes[(h.next_off - off) as usize..];
         h.duplicate_bytes += bytes.len() - fresh.len();
         advance(h, fresh, &mut out);
-        while let Some((&at, _)) = h.held.first_key_value() {
-            if at > h.next_off {
+        while let Some(first) = h.held.first_entry() {
+            if *first.key() > h.next_off {
                 break;
             }
-            let (at, held) = h.held.pop_first().expect("a first entry exists");
+            let (at, held) = first.remove_entry();
             let skip = (h.next_off - at) as usize;
             if skip < held.len() {
                 h.duplicate_bytes += skip;
