@@ -49,6 +49,8 @@ enum Command {
     },
     /// Forward clients to a real reader byte for byte, recording the sessions.
     Proxy(llrp_gateway::gateway::ProxyArgs),
+    /// Serve a recording to a client as the reader did.
+    Replay(llrp_gateway::gateway::ReplayArgs),
     /// Decode LLRP frames and print one JSON object per message.
     Decode {
         /// Input file with LLRP frames; `-` or nothing reads standard input.
@@ -94,6 +96,7 @@ fn main() -> ExitCode {
             },
         ),
         Command::Proxy(args) => llrp_gateway::gateway::run(args),
+        Command::Replay(args) => llrp_gateway::gateway::run_replay(args),
         Command::Decode {
             file,
             hex,

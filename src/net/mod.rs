@@ -5,4 +5,5 @@ pub mod client;
 pub mod clock;
 pub mod connection;
 pub mod proxy;
+pub mod replay;
 pub mod server;

@@ -3,6 +3,7 @@
 
 pub mod format;
 pub mod pcapng;
+pub mod replay;
 pub mod writer;
 
 pub use format::{Direction, Entry, Event, Header, ReaderInfo, RecordError, Recording, Stamp};
