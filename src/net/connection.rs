@@ -1,15 +1,20 @@
-//! One framed LLRP connection: a TCP stream, a bounded read buffer (the codec's [`Deframer`])
-//! and a write buffer. Reads whole frames and writes encoded messages; it decodes nothing, so
-//! the reader's server, the LLRP client and a byte-exact proxy share it.
+//! One framed LLRP connection: a stream (plain TCP or TLS, [`Stream`]), a bounded read buffer
+//! (the codec's [`Deframer`]) and a write buffer. Reads whole frames and writes encoded
+//! messages; it decodes nothing, so the reader's server, the LLRP client and a byte-exact proxy
+//! share it.
 
 use std::io;
 use std::net::SocketAddr;
+use std::pin::Pin;
+use std::sync::{Mutex, PoisonError};
+use std::task::{Context, Poll};
 
 use bytes::{Buf, BytesMut};
 use llrp::{Deframer, FrameSplitter, Message};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
 use tokio::net::TcpStream;
 
+pub use super::stream::Stream;
 pub use llrp::Inbound;
 
 /// What [`Connection::read_or_flush`] saw first.
@@ -23,33 +28,65 @@ pub enum Io {
     Flushed,
 }
 
-/// A TCP stream carrying LLRP frames.
+/// A stream (TCP or TLS) carrying LLRP frames.
 #[derive(Debug)]
 pub struct Connection {
-    stream: TcpStream,
+    stream: Stream,
     read: Deframer,
     write: BytesMut,
+    /// TLS only: bytes were handed to TLS since its last flush, so encrypted records may still
+    /// wait inside rustls for the socket.
+    unflushed: bool,
+}
+
+/// What the write side does during one turn of [`Connection::read_or_flush`].
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Want {
+    /// Only read.
+    Read,
+    /// Also write from the write buffer.
+    Write,
+    /// Also push the records TLS still holds to the socket.
+    Flush,
+}
+
+/// What one turn of [`Connection::read_or_flush`] did.
+enum Step {
+    /// Read this many bytes into the read buffer (0: end of stream).
+    Read(usize),
+    /// Wrote this many bytes of the write buffer.
+    Wrote(usize),
+    /// TLS has no record left to send.
+    Flushed,
 }
 
 impl Connection {
-    /// Wraps a connected stream with the codec's default frame limit (4 MiB); sets TCP_NODELAY,
-    /// since LLRP requests and responses are small and latency-bound.
+    /// Wraps a connected TCP stream with the codec's default frame limit (4 MiB); sets
+    /// TCP_NODELAY, since LLRP requests and responses are small and latency-bound.
     pub fn new(stream: TcpStream) -> Self {
         Self::with_splitter(stream, FrameSplitter::default())
     }
 
+    /// Wraps a connected stream, plain or TLS (after its handshake), with the codec's default
+    /// frame limit; sets TCP_NODELAY.
+    pub fn from_stream(stream: impl Into<Stream>) -> Self {
+        Self::with_splitter(stream, FrameSplitter::default())
+    }
+
     /// Wraps a connected stream with the given frame limits.
-    pub fn with_splitter(stream: TcpStream, splitter: FrameSplitter) -> Self {
+    pub fn with_splitter(stream: impl Into<Stream>, splitter: FrameSplitter) -> Self {
+        let stream = stream.into();
         // Best effort: without it the connection still works, only with Nagle's delay.
         let _ = stream.set_nodelay(true);
         Connection {
             stream,
             read: Deframer::new(splitter),
             write: BytesMut::new(),
+            unflushed: false,
         }
     }
 
-    /// Connects to `addr`.
+    /// Connects to `addr` (plain TCP).
     pub async fn connect(addr: impl tokio::net::ToSocketAddrs) -> io::Result<Self> {
         Ok(Self::new(TcpStream::connect(addr).await?))
     }
@@ -57,6 +94,11 @@ impl Connection {
     /// The peer's address.
     pub fn peer_addr(&self) -> io::Result<SocketAddr> {
         self.stream.peer_addr()
+    }
+
+    /// Whether the connection runs over TLS.
+    pub fn is_tls(&self) -> bool {
+        self.stream.is_tls()
     }
 
     /// The next frame (or the framing error that ended the stream); `Ok(None)` once the peer
@@ -75,33 +117,54 @@ impl Connection {
     }
 
     /// The next frame while sending what is queued (when `flush` is set): returns on a frame,
-    /// at the end of the stream, or once the write buffer has been sent.
+    /// at the end of the stream, or once the write buffer has been sent. Over TLS, records
+    /// that TLS still holds from earlier writes are pushed to the socket in any case.
     ///
-    /// Cancel-safe: bytes read stay buffered, bytes not yet written stay queued.
+    /// Cancel-safe: bytes read stay buffered, bytes not yet written stay queued. Each turn
+    /// polls one read and at most one write (or TLS flush) of the same stream in this task,
+    /// and applies what finished before the next await: a cancelled turn has done nothing
+    /// that is not recorded. Over TCP the two are the borrowed halves of
+    /// [`TcpStream::split`]; over TLS both must drive one TLS state, so they share it behind a
+    /// [`Mutex`] that lives for the turn and is held only inside a single poll. As both are
+    /// polled by this task, it is never contended, and whichever side TLS makes wait (a read
+    /// may have to write, and a write to read) wakes this same task.
     pub async fn read_or_flush(&mut self, flush: bool) -> io::Result<Io> {
-        let mut flush = flush && !self.write.is_empty();
+        let asked = flush && (!self.write.is_empty() || self.unflushed);
         loop {
             if let Some(inbound) = self.read.next_frame() {
                 return Ok(Io::Frame(inbound));
             }
-            let (mut rd, mut wr) = self.stream.split();
-            tokio::select! {
-                biased;
-                n = rd.read_buf(self.read.buffer_mut()) => {
-                    if n? == 0 {
-                        return self.end_of_stream().map(|()| Io::Closed);
-                    }
-                }
-                n = wr.write(&self.write), if flush => {
-                    let n = n?;
-                    if n == 0 {
-                        return Err(io::ErrorKind::WriteZero.into());
-                    }
+            let want = if asked && !self.write.is_empty() {
+                Want::Write
+            } else if self.unflushed {
+                Want::Flush
+            } else {
+                Want::Read
+            };
+            let read = self.read.buffer_mut();
+            let step = if let Stream::Tcp(s) = &mut self.stream {
+                let (rd, wr) = s.split();
+                turn(rd, wr, read, &self.write, want).await?
+            } else {
+                let shared = Mutex::new(&mut self.stream);
+                turn(Shared(&shared), Shared(&shared), read, &self.write, want).await?
+            };
+            match step {
+                Step::Read(0) => return self.end_of_stream().map(|()| Io::Closed),
+                Step::Read(_) => {}
+                Step::Wrote(0) => return Err(io::ErrorKind::WriteZero.into()),
+                Step::Wrote(n) => {
                     self.write.advance(n);
-                    if self.write.is_empty() {
+                    self.unflushed = self.stream.is_tls();
+                    if self.write.is_empty() && !self.unflushed {
                         return Ok(Io::Flushed);
                     }
-                    flush = true;
+                }
+                Step::Flushed => {
+                    self.unflushed = false;
+                    if asked && self.write.is_empty() {
+                        return Ok(Io::Flushed);
+                    }
                 }
             }
         }
@@ -146,7 +209,7 @@ impl Connection {
         self.write.len()
     }
 
-    /// Sends everything in the write buffer.
+    /// Sends everything in the write buffer (over TLS, to the socket: TLS is flushed too).
     ///
     /// Cancel-safe in the sense that bytes not yet written stay queued.
     pub async fn flush(&mut self) -> io::Result<()> {
@@ -156,6 +219,11 @@ impl Connection {
                 return Err(io::ErrorKind::WriteZero.into());
             }
             self.write.advance(n);
+            self.unflushed = self.stream.is_tls();
+        }
+        if self.unflushed {
+            self.stream.flush().await?;
+            self.unflushed = false;
         }
         Ok(())
     }
@@ -172,10 +240,84 @@ impl Connection {
         self.flush().await
     }
 
-    /// Sends what is queued, then closes the sending side.
+    /// Sends what is queued, then closes the sending side (over TLS with a close_notify
+    /// first).
     pub async fn shutdown(&mut self) -> io::Result<()> {
         self.flush().await?;
         self.stream.shutdown().await
+    }
+}
+
+/// One turn of [`Connection::read_or_flush`]: the first of a read into `read` and, as `want`
+/// says, a write of `write` or a flush. Each branch is cancel-safe on its own.
+async fn turn<R, W>(
+    mut rd: R,
+    mut wr: W,
+    read: &mut BytesMut,
+    write: &[u8],
+    want: Want,
+) -> io::Result<Step>
+where
+    R: AsyncRead + Unpin,
+    W: AsyncWrite + Unpin,
+{
+    // One await each, so each branch is as cancel-safe as the call it awaits.
+    let out = async {
+        match want {
+            Want::Write => wr.write(write).await.map(Step::Wrote),
+            Want::Flush => wr.flush().await.map(|()| Step::Flushed),
+            Want::Read => std::future::pending().await,
+        }
+    };
+    tokio::select! {
+        biased;
+        n = rd.read_buf(read) => Ok(Step::Read(n?)),
+        r = out => r,
+    }
+}
+
+/// One of the two handles [`Connection::read_or_flush`] makes on a TLS stream: each poll
+/// locks the stream for the length of that poll only.
+struct Shared<'a, 's, S>(&'a Mutex<&'s mut S>);
+
+impl<S> Shared<'_, '_, S> {
+    /// Runs `f` on the stream. The lock is never contended (both handles are polled by one
+    /// task, one after the other); a poisoned lock (a panic inside a poll) still holds a
+    /// stream whose own state says what it can do, so it is used as it is.
+    fn with<T>(&self, f: impl FnOnce(Pin<&mut S>) -> T) -> T
+    where
+        S: Unpin,
+    {
+        let mut s = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        f(Pin::new(&mut **s))
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for Shared<'_, '_, S> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        self.with(|s| s.poll_read(cx, buf))
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for Shared<'_, '_, S> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        self.with(|s| s.poll_write(cx, buf))
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        self.with(|s| s.poll_flush(cx))
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        self.with(|s| s.poll_shutdown(cx))
     }
 }
 

@@ -1,5 +1,6 @@
-//! Sockets: one framed [`connection::Connection`] for every LLRP socket, the simulated
-//! reader's server, an LLRP client, and the simulated clock.
+//! Sockets: one framed [`connection::Connection`] for every LLRP socket (plain TCP or TLS,
+//! [`stream::Stream`], [`tls`]), the simulated reader's server, an LLRP client, the proxy, and
+//! the simulated clock.
 
 pub mod client;
 pub mod clock;
@@ -7,3 +8,5 @@ pub mod connection;
 pub mod proxy;
 pub mod replay;
 pub mod server;
+pub mod stream;
+pub mod tls;
