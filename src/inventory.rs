@@ -20,6 +20,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::net::client::{Backoff, Client, ClientError, InventorySpec, ReadStream};
+use crate::net::tls::{self, Connector, TlsError, Verify};
 use crate::reads::{self, Read};
 
 /// The LLRP port a reader listens on when HOST has none.
@@ -86,6 +87,23 @@ pub struct InventoryArgs {
     /// Longest wait before a retry, ms.
     #[arg(long, value_name = "MS", default_value_t = 30_000)]
     pub backoff_max_ms: u64,
+    /// LLRP over TLS (port 5085 when HOST has none), with --tls-ca or --tls-insecure.
+    #[arg(long)]
+    pub tls: bool,
+    /// With --tls: CA certificates (PEM) the reader's certificate must be issued by.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "tls",
+        conflicts_with = "tls_insecure"
+    )]
+    pub tls_ca: Option<PathBuf>,
+    /// With --tls: accept any reader certificate (encrypted, but not authenticated).
+    #[arg(long, requires = "tls")]
+    pub tls_insecure: bool,
+    /// With --tls: the name the reader's certificate must carry (default: HOST).
+    #[arg(long, value_name = "NAME", requires = "tls")]
+    pub tls_server_name: Option<String>,
 }
 
 /// How many times a failed connection is retried.
@@ -140,18 +158,43 @@ fn parse_output(s: &str) -> Result<Output, String> {
 
 /// `HOST[:PORT]` as a socket address string: port 5084 when none is given.
 pub fn reader_address(reader: &str) -> String {
+    reader_address_on(reader, LLRP_PORT)
+}
+
+/// `HOST[:PORT]` as a socket address string: port `port` when none is given.
+pub fn reader_address_on(reader: &str, port: u16) -> String {
     if reader.parse::<std::net::SocketAddr>().is_ok() {
         return reader.to_string();
     }
     if let Ok(ip) = reader.parse::<std::net::IpAddr>() {
-        return std::net::SocketAddr::new(ip, LLRP_PORT).to_string();
+        return std::net::SocketAddr::new(ip, port).to_string();
     }
     match reader.rsplit_once(':') {
-        Some((host, port)) if !host.contains(':') && port.parse::<u16>().is_ok() => {
-            reader.to_string()
-        }
-        _ => format!("{reader}:{LLRP_PORT}"),
+        Some((host, p)) if !host.contains(':') && p.parse::<u16>().is_ok() => reader.to_string(),
+        _ => format!("{reader}:{port}"),
     }
+}
+
+/// The TLS client of `--tls`, if asked for: `--tls-ca` or (logged) `--tls-insecure`.
+fn connector(args: &InventoryArgs) -> Result<Option<Connector>, InventoryError> {
+    if !args.tls {
+        return Ok(None);
+    }
+    let verify = match (&args.tls_ca, args.tls_insecure) {
+        (Some(ca), _) => Verify::Ca(ca.clone()),
+        (None, true) => {
+            eprintln!(
+                "llrp-gateway inventory: warning: --tls-insecure: the reader's certificate is \
+                 not checked (the connection is encrypted, not authenticated)"
+            );
+            Verify::Insecure
+        }
+        (None, false) => return Err(InventoryError::TlsTrust),
+    };
+    Ok(Some(Connector::new(
+        &verify,
+        args.tls_server_name.as_deref(),
+    )?))
 }
 
 /// Why an inventory ended in failure.
@@ -175,6 +218,12 @@ pub enum InventoryError {
         /// What the reader said.
         source: ClientError,
     },
+    /// The TLS settings cannot be used.
+    #[error("TLS: {0}")]
+    Tls(#[from] TlsError),
+    /// `--tls` without saying which certificates to trust.
+    #[error("--tls needs --tls-ca FILE (the CA, or the reader's own self-signed certificate) or --tls-insecure (accept any certificate)")]
+    TlsTrust,
     /// The run ended (time, or a stop signal) before any connection was made.
     #[error("no connection to {0} before the end of the run")]
     NeverConnected(String),
@@ -475,7 +524,12 @@ pub fn run(args: InventoryArgs) -> ExitCode {
 /// The inventory itself: connects (and reconnects) until the end of the run, writes the reads,
 /// prints the summary.
 pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
-    let addr = reader_address(&args.reader);
+    let tls = connector(args)?;
+    let addr = if args.tls {
+        reader_address_on(&args.reader, tls::LLRP_TLS_PORT)
+    } else {
+        reader_address(&args.reader)
+    };
     let spec = InventorySpec {
         antennas: args.antennas.clone(),
         impinj: args.impinj,
@@ -525,7 +579,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
     'connections: while !over(&stop) {
         // Connect and set up, giving up early at the end of the run.
         let setup = async {
-            let client = Client::connect_reader(addr.as_str(), REQUEST_TIMEOUT).await?;
+            let client = Client::connect_reader_with(&addr, tls.as_ref(), REQUEST_TIMEOUT).await?;
             ReadStream::start(client, &spec, name.clone(), REQUEST_TIMEOUT).await
         };
         let watch_end = async {
@@ -569,7 +623,10 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
             ),
             None => "no hop table in the reader's capabilities: frequencies unknown".into(),
         };
-        screen.log(&format!("connected to {addr}, inventory started; {table}"));
+        let via = if tls.is_some() { " over TLS" } else { "" };
+        screen.log(&format!(
+            "connected to {addr}{via}, inventory started; {table}"
+        ));
         let mut last_heard = Instant::now();
         let mut keepalives = 0;
         loop {

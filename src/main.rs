@@ -46,6 +46,13 @@ enum Command {
         /// Start a numbered next recording file once a file would pass this many bytes.
         #[arg(long)]
         record_max_bytes: Option<u64>,
+        /// Serve LLRP over TLS with this certificate chain (PEM) on every reader's address
+        /// (port 5085 by convention: choose it with --listen); see docs/tls.md.
+        #[arg(long, requires = "tls_key")]
+        tls_cert: Option<PathBuf>,
+        /// The TLS certificate's private key (PEM).
+        #[arg(long, requires = "tls_cert")]
+        tls_key: Option<PathBuf>,
     },
     /// Forward clients to a real reader byte for byte, recording the sessions.
     Proxy(llrp_gateway::gateway::ProxyArgs),
@@ -83,6 +90,8 @@ fn main() -> ExitCode {
             truth,
             record,
             record_max_bytes,
+            tls_cert,
+            tls_key,
         } => run_sim(
             scenario,
             SimOptions {
@@ -93,6 +102,9 @@ fn main() -> ExitCode {
                 record_options: llrp_gateway::record::RecordOptions {
                     max_bytes: record_max_bytes,
                 },
+                tls: tls_cert
+                    .zip(tls_key)
+                    .map(|(cert, key)| llrp_gateway::net::tls::ServerFiles { cert, key }),
             },
         ),
         Command::Proxy(args) => llrp_gateway::gateway::run(args),
@@ -168,9 +180,10 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
+        let tls = if opts.tls.is_some() { " (TLS)" } else { "" };
         for (name, addr) in running.names.iter().zip(&running.addrs) {
             eprintln!(
-                "llrp-gateway sim: scenario '{}': reader '{name}' listening on {addr}",
+                "llrp-gateway sim: scenario '{}': reader '{name}' listening on {addr}{tls}",
                 scenario.name
             );
         }

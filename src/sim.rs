@@ -13,7 +13,8 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use crate::net::clock::{Clock, Speed};
-use crate::net::server::{serve, Observer, SimReader};
+use crate::net::server::{serve_tls, Observer, SimReader};
+use crate::net::tls::{ServerFiles, TlsError};
 use crate::physics::{Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
@@ -41,6 +42,9 @@ pub struct SimOptions {
     pub record: Option<PathBuf>,
     /// Rotation size of the recordings.
     pub record_options: RecordOptions,
+    /// Serve LLRP over TLS with this certificate and key on every reader's address (LLRP over
+    /// TLS is on port 5085 by convention; `listen` chooses the port).
+    pub tls: Option<ServerFiles>,
 }
 
 impl Default for SimOptions {
@@ -51,6 +55,7 @@ impl Default for SimOptions {
             truth: None,
             record: None,
             record_options: RecordOptions::default(),
+            tls: None,
         }
     }
 }
@@ -61,6 +66,9 @@ pub enum SimError {
     /// The scenario has no reader.
     #[error("the scenario has no reader")]
     NoReader,
+    /// The TLS certificate or key cannot be used.
+    #[error("TLS: {0}")]
+    Tls(#[from] TlsError),
     /// A listen address could not be bound.
     #[error("reader {reader}: cannot listen on {addr}: {source}")]
     Listen {
@@ -221,6 +229,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         .filter(|(_, t)| t.path.is_some())
         .map(|(i, _)| i)
         .collect();
+    let tls = opts.tls.as_ref().map(ServerFiles::acceptor).transpose()?;
     // The tags, reflectors and robot drives, once for every reader.
     let world = World::new(scenario);
     let clock = Arc::new(Clock::new(opts.speed));
@@ -270,8 +279,14 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
             }
             None => None,
         };
-        tracing::info!(reader = %spec.name, %bound, "simulated reader listening");
-        tasks.push(tokio::spawn(serve(listener, sim, rx.clone(), recorder)));
+        tracing::info!(reader = %spec.name, %bound, tls = tls.is_some(), "simulated reader listening");
+        tasks.push(tokio::spawn(serve_tls(
+            listener,
+            tls.clone(),
+            sim,
+            rx.clone(),
+            recorder,
+        )));
         addrs.push(bound);
         names.push(spec.name.clone());
     }

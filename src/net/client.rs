@@ -28,9 +28,10 @@ use llrp::params::{
     TagReportContentSelector,
 };
 use llrp::{Inbound, Message, Request, Response};
-use tokio::net::ToSocketAddrs;
+use tokio::net::{TcpStream, ToSocketAddrs};
 
 use super::connection::Connection;
+use super::tls::{self, Connector};
 use crate::reads::{Read, ReadDecoder};
 
 /// Errors of the client.
@@ -39,6 +40,9 @@ pub enum ClientError {
     /// Socket error.
     #[error("i/o: {0}")]
     Io(#[from] io::Error),
+    /// The TLS handshake failed ([`tls::rustls_error`] gives rustls' reason, when it has one).
+    #[error("TLS handshake: {0}")]
+    Tls(#[source] io::Error),
     /// The peer sent bytes that are not LLRP.
     #[error("bad frame from peer: {0}")]
     Frame(#[from] llrp::FrameError),
@@ -72,16 +76,22 @@ pub enum ClientError {
 
 impl ClientError {
     /// Whether connecting again may help: the connection failed, closed, stalled or was
-    /// refused (another client held it), as opposed to a request the reader rejects.
+    /// refused (another client held it), as opposed to a request the reader rejects or a
+    /// certificate that will be refused again.
     pub fn is_transient(&self) -> bool {
-        matches!(
-            self,
-            ClientError::Io(_)
-                | ClientError::Timeout(_)
-                | ClientError::Closed
-                | ClientError::Frame(_)
-                | ClientError::Refused(_)
-        )
+        match self {
+            ClientError::Tls(e) => {
+                !tls::is_certificate_error(e) && e.kind() != io::ErrorKind::InvalidInput
+            }
+            e => matches!(
+                e,
+                ClientError::Io(_)
+                    | ClientError::Timeout(_)
+                    | ClientError::Closed
+                    | ClientError::Frame(_)
+                    | ClientError::Refused(_)
+            ),
+        }
     }
 }
 
@@ -126,14 +136,28 @@ pub struct Client {
 impl Client {
     /// Connects to a reader.
     pub async fn connect(addr: impl ToSocketAddrs) -> Result<Client, ClientError> {
-        Ok(Client {
-            conn: Connection::connect(addr).await?,
+        Ok(Client::over(Connection::connect(addr).await?))
+    }
+
+    /// Connects to a reader over TLS (LLRP over TLS, port 5085 by convention): TCP, then the
+    /// handshake; the reader's certificate is checked as `tls` says, for the host of `addr`
+    /// unless `tls` names another. A failed handshake is [`ClientError::Tls`].
+    pub async fn connect_tls(addr: &str, tls: &Connector) -> Result<Client, ClientError> {
+        let tcp = TcpStream::connect(addr).await?;
+        let stream = tls.connect(addr, tcp).await.map_err(ClientError::Tls)?;
+        Ok(Client::over(Connection::from_stream(stream)))
+    }
+
+    /// A client on an established connection.
+    pub fn over(conn: Connection) -> Client {
+        Client {
+            conn,
             next_id: 1000,
             version: 1,
             pending: VecDeque::new(),
             answer_keepalives: false,
             keepalives_answered: 0,
-        })
+        }
     }
 
     /// Connects within `timeout` and waits (within `timeout` too) for the reader's greeting,
@@ -146,6 +170,22 @@ impl Client {
         let mut c = tokio::time::timeout(timeout, Client::connect(addr))
             .await
             .map_err(|_| ClientError::Timeout("the TCP connection"))??;
+        c.handshake(timeout).await?;
+        Ok(c)
+    }
+
+    /// [`Client::connect_reader`], over TLS when `tls` is given ([`Client::connect_tls`]).
+    pub async fn connect_reader_with(
+        addr: &str,
+        tls: Option<&Connector>,
+        timeout: Duration,
+    ) -> Result<Client, ClientError> {
+        let Some(tls) = tls else {
+            return Client::connect_reader(addr, timeout).await;
+        };
+        let mut c = tokio::time::timeout(timeout, Client::connect_tls(addr, tls))
+            .await
+            .map_err(|_| ClientError::Timeout("the TLS connection"))??;
         c.handshake(timeout).await?;
         Ok(c)
     }

@@ -2,18 +2,28 @@
 //! moves bytes between it and the sockets. The task accepts connections (the session decides
 //! who is refused), hands the session every frame a [`Connection`] reads, writes what the
 //! session has to send, and otherwise sleeps until the session's next deadline.
+//!
+//! With TLS ([`serve_tls`]) each accepted connection's handshake runs in a task of its own
+//! (at most [`MAX_HANDSHAKES`] at once, each within [`tls::HANDSHAKE_TIMEOUT`]); only a
+//! finished handshake reaches the session, so a client that fails it (plain LLRP sent to the
+//! TLS port, a certificate it refuses, silence) is logged and changes nothing for the reader.
 
 use std::collections::VecDeque;
 use std::io;
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use tokio::io::AsyncWriteExt;
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 use tokio::sync::{oneshot, watch};
+use tokio::task::JoinSet;
+use tokio_rustls::TlsAcceptor;
 
 use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
+use super::stream::Stream;
+use super::tls;
 use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
@@ -40,6 +50,8 @@ const REFUSAL_WRITE: Duration = Duration::from_millis(200);
 /// First and longest pause after a failed accept (e.g. out of file descriptors).
 const ACCEPT_BACKOFF_MIN: Duration = Duration::from_millis(10);
 const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
+/// Most TLS handshakes under way at once; accepting waits while this many run.
+pub const MAX_HANDSHAKES: usize = 16;
 
 /// A simulated reader ready to serve: its session, clock and ground-truth observer.
 pub struct SimReader {
@@ -187,9 +199,22 @@ async fn record_marker(recorder: &Option<Recorder>, conn: u32, event: Event, rea
 pub async fn serve(
     listener: TcpListener,
     sim: SimReader,
+    shutdown: watch::Receiver<bool>,
+    recorder: Option<Recorder>,
+) -> io::Result<()> {
+    serve_tls(listener, None, sim, shutdown, recorder).await
+}
+
+/// [`serve`], over TLS when `tls` is given: every client does the TLS handshake first (see the
+/// module's documentation).
+pub async fn serve_tls(
+    listener: TcpListener,
+    tls: Option<TlsAcceptor>,
+    sim: SimReader,
     mut shutdown: watch::Receiver<bool>,
     recorder: Option<Recorder>,
 ) -> io::Result<()> {
+    let mut handshakes: JoinSet<(SocketAddr, io::Result<Stream>)> = JoinSet::new();
     let max = sim.clock.speed() == Speed::Max;
     // The reader is here, or away on the pool for a turn.
     let mut here: Option<Box<SimReader>> = Some(Box::new(sim));
@@ -247,8 +272,9 @@ pub async fn serve(
                 || away.is_some()
                 || queued >= FLUSH_BYTES
                 || flushed.elapsed() >= FLUSH_AFTER);
-        let may_accept =
-            here.is_some() && accept_after.map_or(true, |t| t <= tokio::time::Instant::now());
+        let may_accept = here.is_some()
+            && handshakes.len() < MAX_HANDSHAKES
+            && accept_after.map_or(true, |t| t <= tokio::time::Instant::now());
         let may_turn = here.is_some() && streaming && queued < TURN_BYTES;
         tokio::select! {
             biased;
@@ -316,26 +342,15 @@ pub async fn serve(
                 match accepted {
                     Ok((stream, peer)) => {
                         backoff = ACCEPT_BACKOFF_MIN;
-                        let now = sim.now();
-                        match sim.session.connect(now) {
-                            Accepted::Client(id) => {
-                                tracing::info!(%peer, "client connected");
-                                let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
-                                record_marker(&recorder, rec, Event::Connect, format!("client {peer}")).await;
-                                client = Some(Client {
-                                    id,
-                                    conn: Connection::new(stream),
-                                    peer: peer.to_string(),
-                                    rec,
+                        match &tls {
+                            Some(acceptor) => {
+                                let acceptor = acceptor.clone();
+                                handshakes.spawn(async move {
+                                    (peer, tls::accept(&acceptor, stream).await.map(Stream::from))
                                 });
                             }
-                            Accepted::Refused(bytes) => {
-                                tracing::info!(%peer, "refusing a second client");
-                                let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
-                                record_marker(&recorder, rec, Event::Connect, format!("client {peer}")).await;
-                                record_sent(&recorder, rec, &bytes).await;
-                                refuse(stream, &bytes).await;
-                                record_marker(&recorder, rec, Event::Disconnect, "refused: another client is connected".into()).await;
+                            None => {
+                                admit(sim, &mut client, &recorder, Stream::from(stream), peer).await;
                             }
                         }
                     }
@@ -344,6 +359,18 @@ pub async fn serve(
                         accept_after = Some(tokio::time::Instant::now() + backoff);
                         backoff = (backoff * 2).min(ACCEPT_BACKOFF_MAX);
                     }
+                }
+            }
+            Some(done) = handshakes.join_next(), if here.is_some() && !handshakes.is_empty() => {
+                let Some(sim) = here.as_deref_mut() else { continue };
+                match done {
+                    Ok((peer, Ok(stream))) => {
+                        admit(sim, &mut client, &recorder, stream, peer).await;
+                    }
+                    Ok((peer, Err(e))) => {
+                        tracing::warn!(%peer, "TLS handshake failed: {e}; the client is dropped, the reader carries on");
+                    }
+                    Err(e) => tracing::warn!("a TLS handshake task failed: {e}"),
                 }
             }
             _ = sleep_until(accept_after), if !may_accept && here.is_some() => {
@@ -398,11 +425,52 @@ async fn sleep_until(at: Option<tokio::time::Instant>) {
     }
 }
 
+/// A new client (its TLS handshake done, if any): the session takes it, or refuses it when
+/// another client is connected.
+async fn admit(
+    sim: &mut SimReader,
+    client: &mut Option<Client>,
+    recorder: &Option<Recorder>,
+    stream: Stream,
+    peer: SocketAddr,
+) {
+    let now = sim.now();
+    let tls = if stream.is_tls() { " over TLS" } else { "" };
+    match sim.session.connect(now) {
+        Accepted::Client(id) => {
+            tracing::info!(%peer, "client connected{tls}");
+            let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
+            record_marker(recorder, rec, Event::Connect, format!("client {peer}{tls}")).await;
+            *client = Some(Client {
+                id,
+                conn: Connection::from_stream(stream),
+                peer: peer.to_string(),
+                rec,
+            });
+        }
+        Accepted::Refused(bytes) => {
+            tracing::info!(%peer, "refusing a second client");
+            let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
+            record_marker(recorder, rec, Event::Connect, format!("client {peer}{tls}")).await;
+            record_sent(recorder, rec, &bytes).await;
+            refuse(stream, &bytes).await;
+            record_marker(
+                recorder,
+                rec,
+                Event::Disconnect,
+                "refused: another client is connected".into(),
+            )
+            .await;
+        }
+    }
+}
+
 /// Tells a second client it is refused, then closes (a client that does not read in time is
 /// closed all the same).
-async fn refuse(mut stream: TcpStream, bytes: &[u8]) {
+async fn refuse(mut stream: Stream, bytes: &[u8]) {
     let _ = tokio::time::timeout(REFUSAL_WRITE, async {
         stream.write_all(bytes).await?;
+        stream.flush().await?;
         stream.shutdown().await
     })
     .await;

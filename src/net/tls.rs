@@ -136,6 +136,22 @@ pub fn load_key(path: &Path) -> Result<PrivateKeyDer<'static>, TlsError> {
     })
 }
 
+/// A server's certificate chain and private key, both PEM files (`--tls-cert`, `--tls-key`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ServerFiles {
+    /// The certificate chain, the server's own certificate first.
+    pub cert: PathBuf,
+    /// Its private key.
+    pub key: PathBuf,
+}
+
+impl ServerFiles {
+    /// Loads both files and builds the server side ([`acceptor`]).
+    pub fn acceptor(&self) -> Result<TlsAcceptor, TlsError> {
+        acceptor(&self.cert, &self.key)
+    }
+}
+
 /// The server side: a certificate chain (`cert`, PEM) and its key (`key`, PEM); TLS 1.2 and
 /// 1.3, no client certificates.
 pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
