@@ -12,6 +12,7 @@ use serde::Deserialize;
 use tokio::sync::{mpsc, watch};
 
 use crate::net::proxy::{Proxy, ProxyConfig, Tap, Tapped};
+use crate::net::tls::{self, ServerFiles, Verify};
 use crate::record::{Header, RecordOptions, Recorder};
 use crate::stop::StopSignal;
 
@@ -40,8 +41,40 @@ pub struct ProxyArgs {
     /// Longest wait for the reader to accept the connection, in milliseconds.
     #[arg(long, default_value = "5000")]
     pub connect_timeout_ms: u64,
+    /// Clients connect with TLS: this certificate chain (PEM); see docs/tls.md.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "tls_key",
+        conflicts_with = "config"
+    )]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of --tls-cert.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "tls_cert",
+        conflicts_with = "config"
+    )]
+    pub tls_key: Option<PathBuf>,
+    /// Reach the reader with TLS (LLRP over TLS, port 5085 on readers that offer it), with
+    /// --upstream-ca or --upstream-insecure.
+    #[arg(long, conflicts_with = "config")]
+    pub upstream_tls: bool,
+    /// With --upstream-tls: CA certificates (PEM) the reader's certificate must be issued by.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "upstream_tls",
+        conflicts_with = "upstream_insecure"
+    )]
+    pub upstream_ca: Option<PathBuf>,
+    /// With --upstream-tls: accept any reader certificate (encrypted, not authenticated).
+    #[arg(long, requires = "upstream_tls")]
+    pub upstream_insecure: bool,
     /// Several proxies from a JSON file: `{"proxies": [{"name", "upstream", "listen",
-    /// "record"}]}`.
+    /// "record", "region", "tls_cert", "tls_key", "upstream_tls", "upstream_ca",
+    /// "upstream_insecure"}]}`.
     #[arg(long)]
     pub config: Option<PathBuf>,
 }
@@ -82,6 +115,71 @@ pub struct ProxyEntry {
     /// The reader's region (`fcc`, `etsi`).
     #[serde(default)]
     pub region: Option<Region>,
+    /// Clients connect with TLS: this certificate chain (PEM; relative to the config file's
+    /// folder), with `tls_key`.
+    #[serde(default)]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of `tls_cert`.
+    #[serde(default)]
+    pub tls_key: Option<PathBuf>,
+    /// Reach the reader with TLS, with `upstream_ca` or `upstream_insecure`.
+    #[serde(default)]
+    pub upstream_tls: bool,
+    /// CA certificates (PEM) the reader's certificate must be issued by.
+    #[serde(default)]
+    pub upstream_ca: Option<PathBuf>,
+    /// Accept any reader certificate.
+    #[serde(default)]
+    pub upstream_insecure: bool,
+}
+
+impl ProxyEntry {
+    /// The TLS settings checked together: the field that is wrong, and why.
+    fn check_tls(&self) -> Result<(), (&'static str, &'static str)> {
+        match (&self.tls_cert, &self.tls_key) {
+            (Some(_), None) => return Err(("tls_key", "tls_cert needs tls_key")),
+            (None, Some(_)) => return Err(("tls_cert", "tls_key needs tls_cert")),
+            _ => {}
+        }
+        match (self.upstream_tls, &self.upstream_ca, self.upstream_insecure) {
+            (true, None, false) => Err((
+                "upstream_tls",
+                "needs upstream_ca (a PEM file) or upstream_insecure: true",
+            )),
+            (true, Some(_), true) => Err((
+                "upstream_insecure",
+                "upstream_ca and upstream_insecure exclude each other",
+            )),
+            (false, Some(_), _) => Err(("upstream_ca", "needs upstream_tls: true")),
+            (false, None, true) => Err(("upstream_insecure", "needs upstream_tls: true")),
+            _ => Ok(()),
+        }
+    }
+
+    /// The server side of `tls_cert`/`tls_key`, if set.
+    pub fn acceptor(&self) -> Result<Option<tls::Acceptor>, tls::TlsError> {
+        match (&self.tls_cert, &self.tls_key) {
+            (Some(cert), Some(key)) => ServerFiles {
+                cert: cert.clone(),
+                key: key.clone(),
+            }
+            .acceptor()
+            .map(Some),
+            _ => Ok(None),
+        }
+    }
+
+    /// The client side of `upstream_tls`, if set (`upstream_insecure` logs a warning).
+    pub fn connector(&self) -> Result<Option<tls::Connector>, tls::TlsError> {
+        if !self.upstream_tls {
+            return Ok(None);
+        }
+        let verify = match &self.upstream_ca {
+            Some(ca) => Verify::Ca(ca.clone()),
+            None => Verify::Insecure,
+        };
+        tls::Connector::new(&verify, None).map(Some)
+    }
 }
 
 /// A `--config` file.
@@ -152,9 +250,20 @@ impl GatewayConfig {
             if p.upstream.trim().is_empty() {
                 return Err(field(format!("proxies[{i}].upstream"), "empty".into()));
             }
-            if let Some(r) = &mut p.record {
-                if r.is_relative() {
-                    *r = dir.join(&*r);
+            if let Err((name, message)) = p.check_tls() {
+                return Err(field(format!("proxies[{i}].{name}"), message.into()));
+            }
+            for f in [
+                &mut p.record,
+                &mut p.tls_cert,
+                &mut p.tls_key,
+                &mut p.upstream_ca,
+            ]
+            .into_iter()
+            .flatten()
+            {
+                if f.is_relative() {
+                    *f = dir.join(&*f);
                 }
             }
         }
@@ -164,6 +273,11 @@ impl GatewayConfig {
 
 /// `HOST` → `HOST:5084`; `HOST:PORT` and `[v6]:PORT` unchanged.
 pub fn with_default_port(addr: &str) -> String {
+    with_port_or(addr, LLRP_PORT)
+}
+
+/// `HOST` → `HOST:PORT` with the given `port`; `HOST:PORT` and `[v6]:PORT` unchanged.
+pub fn with_port_or(addr: &str, port: u16) -> String {
     let has_port = match addr.rsplit_once(':') {
         Some((host, port)) => {
             port.parse::<u16>().is_ok() && (!host.contains(':') || host.ends_with(']'))
@@ -173,9 +287,9 @@ pub fn with_default_port(addr: &str) -> String {
     if has_port {
         addr.to_string()
     } else if addr.contains(':') && !addr.starts_with('[') {
-        format!("[{addr}]:{LLRP_PORT}")
+        format!("[{addr}]:{port}")
     } else {
-        format!("{addr}:{LLRP_PORT}")
+        format!("{addr}:{port}")
     }
 }
 
@@ -196,12 +310,24 @@ pub fn run(args: ProxyArgs) -> ExitCode {
             listen: args.listen.clone(),
             record: args.record.clone(),
             region: args.region,
+            tls_cert: args.tls_cert.clone(),
+            tls_key: args.tls_key.clone(),
+            upstream_tls: args.upstream_tls,
+            upstream_ca: args.upstream_ca.clone(),
+            upstream_insecure: args.upstream_insecure,
         }],
         (None, None) => {
             eprintln!("llrp-gateway proxy: give --upstream HOST[:PORT] or --config FILE");
             return ExitCode::FAILURE;
         }
     };
+    if args.upstream_tls && args.upstream_ca.is_none() && !args.upstream_insecure {
+        eprintln!(
+            "llrp-gateway proxy: --upstream-tls needs --upstream-ca FILE (the CA, or the \
+             reader's own self-signed certificate) or --upstream-insecure (accept any certificate)"
+        );
+        return ExitCode::FAILURE;
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -223,7 +349,13 @@ pub fn run(args: ProxyArgs) -> ExitCode {
         let mut writers = Vec::new();
         let mut taps = Vec::new();
         for e in entries {
-            let upstream = with_default_port(&e.upstream);
+            // LLRP over TLS is on port 5085 by convention.
+            let port = if e.upstream_tls {
+                tls::LLRP_TLS_PORT
+            } else {
+                LLRP_PORT
+            };
+            let upstream = with_port_or(&e.upstream, port);
             let recorder = match &e.record {
                 Some(path) => {
                     match Recorder::create(path, Header::new(&upstream, 0), options.clone()) {
@@ -242,9 +374,17 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 }
                 None => None,
             };
+            let tls = match (e.acceptor(), e.connector()) {
+                (Ok(a), Ok(c)) => (a, c),
+                (Err(err), _) | (_, Err(err)) => {
+                    eprintln!("llrp-gateway proxy: '{}': TLS: {err}", e.name);
+                    return ExitCode::FAILURE;
+                }
+            };
             let (tap, rx) = Tap::new(4096);
             taps.push((e.name.clone(), tap.clone()));
             tokio::spawn(count_reads(e.name.clone(), rx));
+            let upstream_shown = upstream.clone();
             let config = ProxyConfig {
                 name: e.name.clone(),
                 upstream,
@@ -252,6 +392,8 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 record: e.record.clone(),
                 region: e.region.map(Region::hop_table),
                 connect_timeout: timeout,
+                tls: tls.0,
+                upstream_tls: tls.1,
             };
             let proxy = match Proxy::bind(config, recorder, Some(tap)).await {
                 Ok(p) => p,
@@ -265,9 +407,11 @@ pub fn run(args: ProxyArgs) -> ExitCode {
             };
             match proxy.local_addr() {
                 Ok(addr) => eprintln!(
-                    "llrp-gateway proxy: '{}' listening on {addr}, forwarding to {}{}",
+                    "llrp-gateway proxy: '{}' listening on {addr}{}, forwarding to {}{}{}",
                     e.name,
-                    with_default_port(&e.upstream),
+                    if e.tls_cert.is_some() { " (TLS)" } else { "" },
+                    upstream_shown,
+                    if e.upstream_tls { " (TLS)" } else { "" },
                     e.record
                         .as_ref()
                         .map(|p| format!(", recording to {}", p.display()))
@@ -468,5 +612,39 @@ mod tests {
         let r = c.proxies[0].record.as_ref().expect("record");
         assert!(r.is_absolute() && r.ends_with("a.jsonl"), "{}", r.display());
         assert_eq!(c.proxies[0].region, Some(Region::Etsi));
+    }
+
+    #[test]
+    fn tls_settings_are_checked_together_and_their_paths_are_beside_the_config() {
+        let c = load(
+            r#"{"proxies":[{"name":"a","upstream":"x","listen":"l","tls_cert":"c.pem","tls_key":"k.pem","upstream_tls":true,"upstream_ca":"ca.pem"}]}"#,
+        )
+        .expect("valid");
+        let p = &c.proxies[0];
+        for f in [&p.tls_cert, &p.tls_key, &p.upstream_ca] {
+            let f = f.as_ref().expect("set");
+            assert!(f.is_absolute(), "{}", f.display());
+        }
+        assert!(p.upstream_tls && !p.upstream_insecure);
+        for (text, field) in [
+            (r#""tls_cert":"c.pem""#, "proxies[0].tls_key"),
+            (r#""tls_key":"k.pem""#, "proxies[0].tls_cert"),
+            (r#""upstream_tls":true"#, "proxies[0].upstream_tls"),
+            (r#""upstream_ca":"ca.pem""#, "proxies[0].upstream_ca"),
+            (
+                r#""upstream_insecure":true"#,
+                "proxies[0].upstream_insecure",
+            ),
+            (
+                r#""upstream_tls":true,"upstream_ca":"ca.pem","upstream_insecure":true"#,
+                "proxies[0].upstream_insecure",
+            ),
+        ] {
+            let e = load(&format!(
+                r#"{{"proxies":[{{"name":"a","upstream":"x","listen":"l",{text}}}]}}"#
+            ))
+            .expect_err(text);
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
     }
 }

@@ -57,6 +57,8 @@ async fn proxy(upstream: &str, record: Option<&Path>, tap: Option<Tap>) -> Runni
         record: record.map(Path::to_owned),
         region: None,
         connect_timeout: Duration::from_secs(5),
+        tls: None,
+        upstream_tls: None,
     };
     let p = Proxy::bind(config, recorder, tap).await.expect("binds");
     let addr = p.local_addr().expect("bound");

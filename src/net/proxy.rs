@@ -7,6 +7,15 @@
 //! Backpressure is end to end: a direction reads its next chunk only once the last one is
 //! written, so a slow client slows the reading from the reader and memory stays bounded
 //! (one chunk buffer and at most one partial frame per direction).
+//!
+//! Either side may be TLS ([`ProxyConfig::tls`] towards the clients, [`ProxyConfig::upstream_tls`]
+//! towards the reader): the forwarding is then of the plaintext, byte for byte as over TCP, and
+//! each side's TLS session is its own (the proxy terminates both). The streams are split with
+//! [`Stream::into_split`]: TCP's owned halves, or for TLS two halves sharing the one TLS state
+//! (tokio's split), which both directions of a session poll from the session's one task. A
+//! chunk counts as written once it is flushed, so that TLS holds no record back. A client
+//! whose TLS handshake fails is dropped (logged, and in the recording); an upstream whose TLS
+//! handshake fails is treated as unreachable: the client gets a failed ConnectionAttemptEvent.
 
 use std::future::Future;
 use std::io;
@@ -22,11 +31,12 @@ use llrp::message::{CloseConnection, MessageBody, MessageDef, ReaderEventNotific
 use llrp::units::HopTable;
 use llrp::{FrameError, FrameHeader, FrameSplitter, Inbound, Message, Split};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
-use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
+use super::stream::{ReadHalf, Stream, WriteHalf};
+use super::tls;
 use crate::reads::{Read, ReadDecoder};
 use crate::record::writer::utc_now_us;
 use crate::record::{Direction, Entry, Event, ReaderInfo, Recorder};
@@ -56,6 +66,10 @@ pub struct ProxyConfig {
     pub region: Option<HopTable>,
     /// Longest wait for the upstream connection.
     pub connect_timeout: Duration,
+    /// Clients connect with TLS (`--tls-cert`, `--tls-key`).
+    pub tls: Option<tls::Acceptor>,
+    /// The reader is reached with TLS (`--upstream-tls`).
+    pub upstream_tls: Option<tls::Connector>,
 }
 
 /// What the tap hands on.
@@ -184,6 +198,27 @@ struct Session {
     peer: SocketAddr,
 }
 
+/// Why the reader could not be reached.
+#[derive(Debug, thiserror::Error)]
+enum Unreachable {
+    /// No TCP connection (refused, timed out, no route).
+    #[error("upstream {addr} unreachable: {source}")]
+    Connect {
+        /// The reader's address.
+        addr: String,
+        /// Why.
+        source: io::Error,
+    },
+    /// TCP connected, the TLS handshake failed.
+    #[error("upstream {addr} unreachable: TLS handshake failed: {source}")]
+    Tls {
+        /// The reader's address.
+        addr: String,
+        /// Why (rustls' reason inside, when it has one).
+        source: io::Error,
+    },
+}
+
 /// How a forwarding direction ended.
 enum End {
     /// Its source closed the stream.
@@ -200,43 +235,80 @@ impl Session {
     async fn run(self, client: TcpStream, shutdown: watch::Receiver<bool>) {
         let _ = client.set_nodelay(true);
         let name = &self.config.name;
+        let tls = if self.config.tls.is_some() {
+            " over TLS"
+        } else {
+            ""
+        };
         self.marker(
             Event::Connect,
             format!(
-                "client {} via proxy {name} to {}",
+                "client {}{tls} via proxy {name} to {}",
                 self.peer, self.config.upstream
             ),
         )
         .await;
-        let upstream = tokio::time::timeout(
-            self.config.connect_timeout,
-            TcpStream::connect(&self.config.upstream),
-        )
-        .await
-        .unwrap_or_else(|_| Err(io::Error::new(io::ErrorKind::TimedOut, "timed out")));
-        let upstream = match upstream {
+        let client = match &self.config.tls {
+            Some(acceptor) => match acceptor.accept(client).await {
+                Ok(s) => Stream::from(s),
+                Err(e) => {
+                    tracing::warn!(
+                        proxy = %name,
+                        client = %self.peer,
+                        "TLS handshake with the client failed: {e}; the client is dropped"
+                    );
+                    self.marker(
+                        Event::Disconnect,
+                        format!("client TLS handshake failed: {e}"),
+                    )
+                    .await;
+                    return;
+                }
+            },
+            None => Stream::from(client),
+        };
+        let upstream = match self.connect_upstream().await {
             Ok(u) => u,
             Err(e) => {
                 tracing::warn!(
                     proxy = %name,
                     client = %self.peer,
-                    "upstream {} unreachable ({e}): the client gets a failed ConnectionAttemptEvent",
-                    self.config.upstream
+                    "{e}: the client gets a failed ConnectionAttemptEvent"
                 );
                 refuse(client).await;
-                self.marker(
-                    Event::Disconnect,
-                    format!("upstream {} unreachable: {e}", self.config.upstream),
-                )
-                .await;
+                self.marker(Event::Disconnect, e.to_string()).await;
                 return;
             }
         };
-        let _ = upstream.set_nodelay(true);
         tracing::info!(proxy = %name, client = %self.peer, "forwarding to {}", self.config.upstream);
         let reason = self.forward(client, upstream, shutdown).await;
         tracing::info!(proxy = %name, client = %self.peer, "session ended: {reason}");
         self.marker(Event::Disconnect, reason).await;
+    }
+
+    /// The upstream connection: TCP within the connect timeout, then the TLS handshake if
+    /// configured (within [`tls::HANDSHAKE_TIMEOUT`]).
+    async fn connect_upstream(&self) -> Result<Stream, Unreachable> {
+        let addr = &self.config.upstream;
+        let tcp = tokio::time::timeout(self.config.connect_timeout, TcpStream::connect(addr))
+            .await
+            .unwrap_or_else(|_| Err(io::Error::new(io::ErrorKind::TimedOut, "timed out")))
+            .map_err(|source| Unreachable::Connect {
+                addr: addr.clone(),
+                source,
+            })?;
+        let _ = tcp.set_nodelay(true);
+        match &self.config.upstream_tls {
+            Some(connector) => connector
+                .connect(addr, tcp)
+                .await
+                .map(Stream::from)
+                .map_err(|source| Unreachable::Tls {
+                    addr: addr.clone(),
+                    source,
+                }),
+            None => Ok(Stream::from(tcp)),
+        }
     }
 
     async fn marker(&self, event: Event, reason: String) {
@@ -250,8 +322,8 @@ impl Session {
     /// Forwards both ways until one side ends; returns why the session ended.
     async fn forward(
         &self,
-        client: TcpStream,
-        upstream: TcpStream,
+        client: Stream,
+        upstream: Stream,
         shutdown: watch::Receiver<bool>,
     ) -> String {
         let (client_rd, client_wr) = client.into_split();
@@ -314,12 +386,12 @@ impl Session {
     /// Sends CLOSE_CONNECTION to the reader (recorded as sent) while `down` goes on
     /// forwarding what the reader still sends, and waits for the reader to close; closes the
     /// client's side then; says how that went.
-    async fn close_upstream<'a, D>(&'a self, wr: &mut OwnedWriteHalf, down: Pin<Box<D>>) -> String
+    async fn close_upstream<'a, D>(&'a self, wr: &mut WriteHalf, down: Pin<Box<D>>) -> String
     where
-        D: Future<Output = PumpDone<'a, OwnedReadHalf, OwnedWriteHalf>>,
+        D: Future<Output = PumpDone<'a, ReadHalf, WriteHalf>>,
     {
         let close = Message::new(PROXY_CLOSE_ID, CloseConnection::default()).to_bytes();
-        if let Err(e) = wr.write_all(&close).await {
+        if let Err(e) = write_flushed(wr, &close).await {
             return format!("the reader's connection is gone ({e})");
         }
         if let Some(r) = &self.recorder {
@@ -357,8 +429,14 @@ impl Session {
 /// How a forwarding direction ended, and its parts back.
 type PumpDone<'a, R, W> = (End, R, W, Tee<'a>);
 
-/// Copies `rd` to `wr` chunk by chunk, showing each chunk to `tee` after it is written;
-/// with `stop`, also ends (between chunks) once it turns true.
+/// Writes all of `bytes` and flushes (so that TLS sends its records now; nothing for TCP).
+async fn write_flushed<W: AsyncWrite + Unpin>(wr: &mut W, bytes: &[u8]) -> io::Result<()> {
+    wr.write_all(bytes).await?;
+    wr.flush().await
+}
+
+/// Copies `rd` to `wr` chunk by chunk, showing each chunk to `tee` after it is written (and
+/// flushed); with `stop`, also ends (between chunks) once it turns true.
 async fn pump<'a, R, W>(
     mut rd: R,
     mut wr: W,
@@ -387,7 +465,7 @@ where
             Ok(n) => n,
             Err(e) => return (End::ReadError(e), rd, wr, tee),
         };
-        if let Err(e) = wr.write_all(&buf[..n]).await {
+        if let Err(e) = write_flushed(&mut wr, &buf[..n]).await {
             return (End::WriteError(e), rd, wr, tee);
         }
         tee.saw(&buf[..n]).await;
@@ -648,12 +726,12 @@ fn reader_info(frame: &[u8], known: &ReaderInfo) -> Option<ReaderInfo> {
 
 /// Tells a client whose reader cannot be reached: a READER_EVENT_NOTIFICATION with a failed
 /// ConnectionAttemptEvent, as a reader that cannot take the connection sends; then closes.
-async fn refuse(mut client: TcpStream) {
+async fn refuse(mut client: Stream) {
     let m = Message::new(0, connection_failed(utc_now_us()));
     let mut bytes = BytesMut::new();
     m.encode(&mut bytes);
     let _ = tokio::time::timeout(Duration::from_millis(500), async {
-        client.write_all(&bytes).await?;
+        write_flushed(&mut client, &bytes).await?;
         client.shutdown().await
     })
     .await;

@@ -18,7 +18,6 @@ use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinSet;
-use tokio_rustls::TlsAcceptor;
 
 use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
@@ -209,7 +208,7 @@ pub async fn serve(
 /// module's documentation).
 pub async fn serve_tls(
     listener: TcpListener,
-    tls: Option<TlsAcceptor>,
+    tls: Option<tls::Acceptor>,
     sim: SimReader,
     mut shutdown: watch::Receiver<bool>,
     recorder: Option<Recorder>,
@@ -346,7 +345,7 @@ pub async fn serve_tls(
                             Some(acceptor) => {
                                 let acceptor = acceptor.clone();
                                 handshakes.spawn(async move {
-                                    (peer, tls::accept(&acceptor, stream).await.map(Stream::from))
+                                    (peer, acceptor.accept(stream).await.map(Stream::from))
                                 });
                             }
                             None => {

@@ -147,8 +147,28 @@ pub struct ServerFiles {
 
 impl ServerFiles {
     /// Loads both files and builds the server side ([`acceptor`]).
-    pub fn acceptor(&self) -> Result<TlsAcceptor, TlsError> {
-        acceptor(&self.cert, &self.key)
+    pub fn acceptor(&self) -> Result<Acceptor, TlsError> {
+        Ok(Acceptor(acceptor(&self.cert, &self.key)?))
+    }
+}
+
+/// The server side of TLS, ready to take handshakes (cheap to clone).
+#[derive(Clone)]
+pub struct Acceptor(pub TlsAcceptor);
+
+impl std::fmt::Debug for Acceptor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Acceptor")
+    }
+}
+
+impl Acceptor {
+    /// The server's handshake on an accepted `tcp` (within [`HANDSHAKE_TIMEOUT`]).
+    pub async fn accept(
+        &self,
+        tcp: TcpStream,
+    ) -> io::Result<tokio_rustls::server::TlsStream<TcpStream>> {
+        with_timeout(self.0.accept(tcp)).await
     }
 }
 
@@ -253,14 +273,6 @@ impl Connector {
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
         with_timeout(self.connector.connect(name, tcp)).await
     }
-}
-
-/// The server's handshake on an accepted `tcp` (within [`HANDSHAKE_TIMEOUT`]).
-pub async fn accept(
-    acceptor: &TlsAcceptor,
-    tcp: TcpStream,
-) -> io::Result<tokio_rustls::server::TlsStream<TcpStream>> {
-    with_timeout(acceptor.accept(tcp)).await
 }
 
 async fn with_timeout<T>(
