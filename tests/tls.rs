@@ -247,6 +247,46 @@ async fn a_reader_certificate_from_another_ca_is_refused_as_a_certificate_error(
 }
 
 #[tokio::test]
+async fn a_self_signed_reader_certificate_marked_as_a_ca_is_trusted_when_given_as_the_ca_file() {
+    // As `openssl req -x509` makes them (basicConstraints CA:TRUE): WebPKI alone refuses such
+    // a certificate as an end entity (CaUsedAsEndEntity); given itself, it is pinned.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let key = rcgen::KeyPair::generate().expect("key");
+    let mut params = rcgen::CertificateParams::new(vec!["127.0.0.1".to_string()]).expect("params");
+    params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    let cert = params.self_signed(&key).expect("certificate");
+    let (cert_path, key_path) = (dir.path().join("self.pem"), dir.path().join("self.key"));
+    std::fs::write(&cert_path, cert.pem()).expect("write");
+    std::fs::write(&key_path, key.serialize_pem()).expect("write");
+    let sim = sim::start(
+        &s1(),
+        &SimOptions {
+            tls: Some(ServerFiles {
+                cert: cert_path.clone(),
+                key: key_path,
+            }),
+            ..Default::default()
+        },
+    )
+    .await
+    .expect("starts");
+    let pinned = Connector::new(&Verify::Ca(cert_path), None).expect("client TLS");
+    let mut c = Client::connect_reader_with(&sim.addrs[0].to_string(), Some(&pinned), T)
+        .await
+        .expect("the pinned certificate is trusted");
+    c.capabilities(T).await.expect("the session works");
+    c.close_connection(T).await.expect("closed");
+    // Another self-signed certificate is still refused.
+    let other = Pki::new();
+    let wrong = Connector::new(&Verify::Ca(other.cert.clone()), None).expect("client TLS");
+    assert!(matches!(
+        Client::connect_reader_with(&sim.addrs[0].to_string(), Some(&wrong), T).await,
+        Err(ClientError::Tls(_))
+    ));
+    sim.shutdown().await;
+}
+
+#[tokio::test]
 async fn tls_insecure_accepts_a_certificate_nobody_vouches_for() {
     let pki = Pki::new();
     let sim = tls_sim(&pki).await;

@@ -7,7 +7,10 @@
 //!
 //! The client trusts either the certificates of a CA file (`--tls-ca`) or, as an explicit
 //! opt-in with a logged warning, any certificate (`--tls-insecure`): readers ship self-signed
-//! certificates, so the system's roots would not help, and none are loaded. With
+//! certificates, so the system's roots would not help, and none are loaded. A certificate of
+//! the CA file that the reader presents itself is trusted as it is (pinned), even where WebPKI
+//! would refuse it as an end entity: `openssl req -x509` and many readers mark their
+//! self-signed certificate as a CA. With
 //! `--tls-insecure` the handshake's signatures are still checked against the certificate the
 //! reader sent; only who signed that certificate, its validity period and its name are not.
 
@@ -21,6 +24,7 @@ use tokio_rustls::rustls;
 use tokio_rustls::rustls::client::danger::{
     HandshakeSignatureValid, ServerCertVerified, ServerCertVerifier,
 };
+use tokio_rustls::rustls::client::WebPkiServerVerifier;
 use tokio_rustls::rustls::crypto::CryptoProvider;
 use tokio_rustls::rustls::pki_types::pem::{self, PemObject};
 use tokio_rustls::rustls::pki_types::{CertificateDer, PrivateKeyDer, ServerName, UnixTime};
@@ -192,8 +196,8 @@ pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
 /// Which reader certificates a client accepts.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Verify {
-    /// Certificates issued by one of the CA certificates in this PEM file (a self-signed
-    /// reader certificate can be its own CA), for the server name connected to.
+    /// Certificates issued by one of the CA certificates in this PEM file, for the server name
+    /// connected to, or one of those very certificates (a reader's self-signed one, pinned).
     Ca(PathBuf),
     /// Any certificate (explicit opt-in: logged as a warning).
     Insecure,
@@ -223,14 +227,26 @@ impl Connector {
             .with_safe_default_protocol_versions()?;
         let config = match verify {
             Verify::Ca(path) => {
+                let ca_error = |source| TlsError::Ca {
+                    path: path.clone(),
+                    source,
+                };
+                let certs = load_certs(path)?;
                 let mut roots = RootCertStore::empty();
-                for cert in load_certs(path)? {
-                    roots.add(cert).map_err(|source| TlsError::Ca {
-                        path: path.clone(),
-                        source,
-                    })?;
+                for cert in &certs {
+                    roots.add(cert.clone()).map_err(ca_error)?;
                 }
-                builder.with_root_certificates(roots).with_no_client_auth()
+                let webpki =
+                    WebPkiServerVerifier::builder_with_provider(Arc::new(roots), provider())
+                        .build()
+                        .map_err(|e| ca_error(rustls::Error::General(e.to_string())))?;
+                builder
+                    .dangerous()
+                    .with_custom_certificate_verifier(Arc::new(CaOrPinned {
+                        webpki,
+                        pinned: certs,
+                    }))
+                    .with_no_client_auth()
             }
             Verify::Insecure => {
                 tracing::warn!(
@@ -325,6 +341,62 @@ pub fn is_certificate_error(e: &io::Error) -> bool {
                 | A::UnknownCA
         ),
         _ => false,
+    }
+}
+
+/// `--tls-ca`: WebPKI verification against the CA file's certificates (issuer chain, validity,
+/// name); failing that, a server certificate byte-identical to one of them is accepted
+/// (pinned: the user gave that very certificate).
+#[derive(Debug)]
+struct CaOrPinned {
+    webpki: Arc<WebPkiServerVerifier>,
+    pinned: Vec<CertificateDer<'static>>,
+}
+
+impl ServerCertVerifier for CaOrPinned {
+    fn verify_server_cert(
+        &self,
+        end_entity: &CertificateDer<'_>,
+        intermediates: &[CertificateDer<'_>],
+        server_name: &ServerName<'_>,
+        ocsp_response: &[u8],
+        now: UnixTime,
+    ) -> Result<ServerCertVerified, rustls::Error> {
+        match self.webpki.verify_server_cert(
+            end_entity,
+            intermediates,
+            server_name,
+            ocsp_response,
+            now,
+        ) {
+            Ok(v) => Ok(v),
+            Err(_) if self.pinned.iter().any(|c| c == end_entity) => {
+                Ok(ServerCertVerified::assertion())
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn verify_tls12_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        self.webpki.verify_tls12_signature(message, cert, dss)
+    }
+
+    fn verify_tls13_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        self.webpki.verify_tls13_signature(message, cert, dss)
+    }
+
+    fn supported_verify_schemes(&self) -> Vec<rustls::SignatureScheme> {
+        self.webpki.supported_verify_schemes()
     }
 }
 
