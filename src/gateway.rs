@@ -241,7 +241,8 @@ impl GatewayConfig {
                     format!("'{}' is used twice", p.name),
                 ));
             }
-            if !listens.insert(p.listen.clone()) {
+            // Port 0 (any free port) may be given to several.
+            if !p.listen.ends_with(":0") && !listens.insert(p.listen.clone()) {
                 return Err(field(
                     format!("proxies[{i}].listen"),
                     format!("{} is used twice", p.listen),

@@ -278,6 +278,70 @@ mod tests {
         assert_eq!(read_jsonl(&buf[..]).expect("parses"), vec![read]);
     }
 
+    fn report_on_channel(channel: u16) -> Vec<u8> {
+        use llrp::message::RoAccessReport;
+        use llrp::params::{ChannelIndex, Epc, Epc96, TagReportData};
+        let data = TagReportData {
+            epc: Epc::Epc96(Epc96([0xAB; 12])),
+            channel_index: Some(ChannelIndex(channel)),
+            ..Default::default()
+        };
+        Message::new(
+            1,
+            RoAccessReport {
+                tag_report_data: vec![data],
+                ..Default::default()
+            },
+        )
+        .to_bytes()
+        .to_vec()
+    }
+
+    #[test]
+    fn the_frequency_comes_from_the_readers_table_else_the_fallback_else_none() {
+        let frame = report_on_channel(2);
+        let mut out = Vec::new();
+        let mut none = ReadDecoder::new(None);
+        none.frame(&frame, 0, &mut out).expect("decodes");
+        assert_eq!(out[0].channel_frequency_hz, None);
+        assert_eq!(out[0].epc, "AB".repeat(12));
+        let mut d = ReadDecoder::new(None).with_fallback_table(Some(HopTable::etsi()));
+        out.clear();
+        d.frame(&frame, 0, &mut out).expect("decodes");
+        assert_eq!(out[0].channel_frequency_hz, Some(866_300_000));
+        // The reader's own capabilities win over the fallback.
+        use llrp::message::GetReaderCapabilitiesResponse;
+        use llrp::params::{
+            FrequencyHopTable, FrequencyInformation, RegulatoryCapabilities, UhfBandCapabilities,
+        };
+        let caps = GetReaderCapabilitiesResponse {
+            regulatory_capabilities: Some(RegulatoryCapabilities {
+                uhf_band_capabilities: Some(UhfBandCapabilities {
+                    frequency_information: FrequencyInformation {
+                        hopping: true,
+                        frequency_hop_table: vec![FrequencyHopTable {
+                            hop_table_id: 1,
+                            frequencies: HopTable::fcc().frequencies_khz,
+                            ..Default::default()
+                        }],
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                }),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        d.observe(&Message::new(2, caps));
+        out.clear();
+        d.frame(&frame, 0, &mut out).expect("decodes");
+        let fcc = HopTable::fcc();
+        assert_eq!(
+            out[0].channel_frequency_hz,
+            fcc.frequency_khz(2).map(|k| u64::from(k) * 1000)
+        );
+    }
+
     #[test]
     fn optional_fields_may_be_absent_and_a_bad_field_is_named() {
         let ok = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":-60}"#;

@@ -670,3 +670,72 @@ async fn an_overloaded_tap_drops_and_counts_while_forwarding_loses_nothing() {
     );
     assert!(tap.dropped() > 0);
 }
+
+#[tokio::test]
+async fn the_simulated_reader_records_its_sessions_as_the_proxy_does() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rec = dir.path().join("sim.jsonl");
+    let sim = llrp_gateway::sim::start(
+        &s1(),
+        &llrp_gateway::sim::SimOptions {
+            record: Some(rec.clone()),
+            ..Default::default()
+        },
+    )
+    .await
+    .expect("starts");
+    let (addr, log, task) = relay(sim.addrs[0]).await;
+    let mut c = llrp_gateway::net::client::Client::connect(addr)
+        .await
+        .expect("connects");
+    c.recv(T).await.expect("greeting");
+    c.request(ImpinjEnableExtensions::default(), T)
+        .await
+        .expect("extensions");
+    let spec = rospec(
+        1,
+        vec![0],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
+    request_status(
+        &mut c,
+        AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        },
+    )
+    .await;
+    request_status(
+        &mut c,
+        EnableRospec {
+            ro_spec_id: 1,
+            ..Default::default()
+        },
+    )
+    .await;
+    let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 10).await;
+    assert!(tags.len() >= 10);
+    c.request(CloseConnection::default(), T)
+        .await
+        .expect("closed");
+    c.until_closed(T).await.expect("closed");
+    drop(c);
+    task.await.expect("relay");
+    sim.shutdown().await;
+    let r = Recording::open(&rec).expect("reads");
+    assert_eq!(r.header.upstream, "sim:s1-reader");
+    assert_eq!(r.header.scenario.as_deref(), Some("s1"));
+    assert_eq!(
+        recorded_stream(&r, 1, Direction::ToReader),
+        log.forward.lock().expect("lock").clone()
+    );
+    assert_eq!(
+        recorded_stream(&r, 1, Direction::FromReader),
+        log.back.lock().expect("lock").clone()
+    );
+    let m = markers(&r);
+    assert_eq!(m.first().map(|m| m.0), Some(Event::Connect));
+    assert_eq!(m.last().map(|m| m.0), Some(Event::Disconnect));
+}
