@@ -739,3 +739,53 @@ async fn the_simulated_reader_records_its_sessions_as_the_proxy_does() {
     assert_eq!(m.first().map(|m| m.0), Some(Event::Connect));
     assert_eq!(m.last().map(|m| m.0), Some(Event::Disconnect));
 }
+
+#[tokio::test]
+async fn at_shutdown_each_reader_gets_close_connection_and_each_client_is_closed() {
+    let reader = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let upstream = reader.local_addr().expect("bound").to_string();
+    let reader_task = tokio::spawn(async move {
+        let (s, _) = reader.accept().await.expect("accept");
+        let mut conn = llrp_gateway::net::connection::Connection::new(s);
+        conn.write_message(&Message::new(0, KeepaliveAck::default()))
+            .await
+            .expect("greeting");
+        while let Ok(Some(llrp::Inbound::Frame(f))) = conn.read_frame().await {
+            let m = Message::decode(&f).expect("decodes");
+            if let MessageBody::CloseConnection(_) = m.body {
+                conn.write_message(&Message::new(m.id, CloseConnectionResponse::default()))
+                    .await
+                    .expect("answer");
+                conn.shutdown().await.expect("close");
+                return true;
+            }
+        }
+        false
+    });
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rec = dir.path().join("rec.jsonl");
+    let p = proxy(&upstream, Some(&rec), None).await;
+    let mut c = llrp_gateway::net::client::Client::connect(p.addr)
+        .await
+        .expect("connects");
+    c.recv(T).await.expect("greeting");
+    // The proxy stops while the session is open.
+    let _ = p.stop.send(true);
+    c.until_closed(T).await.expect("the client is closed");
+    assert!(
+        reader_task.await.expect("reader"),
+        "the reader got CLOSE_CONNECTION"
+    );
+    p.task.await.expect("joined").expect("proxy ran");
+    p.recording
+        .expect("recording")
+        .await
+        .expect("joined")
+        .expect("written");
+    let r = Recording::open(&rec).expect("reads");
+    let last = markers(&r).pop().expect("marker");
+    assert!(
+        last.1.contains("proxy shutting down") && last.1.contains("reader closed"),
+        "{last:?}"
+    );
+}

@@ -546,7 +546,7 @@ fn check_with_tshark(name: &str, recording: &Recording, dir: &Path) {
     );
 }
 
-/// The recordings shipped in `fixtures/sessions/`, if any.
+/// The recordings shipped in `fixtures/sessions/`.
 fn fixtures() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/sessions");
     let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
@@ -589,7 +589,9 @@ async fn tshark_dissects_every_exported_frame_as_llrp_with_only_the_known_faults
         "a frame spans several segments: {largest:?}"
     );
     check_with_tshark("sim-session", &session, dir.path());
-    for path in fixtures() {
+    let shipped = fixtures();
+    assert!(shipped.len() >= 3, "the shipped fixtures: {shipped:?}");
+    for path in shipped {
         let r = Recording::open(&path).expect("a shipped fixture reads");
         let name = path
             .file_stem()
