@@ -477,6 +477,12 @@ pub struct ReplayArgs {
     /// Replay this recorded connection (default: the first one the reader spoke on).
     #[arg(long)]
     pub conn: Option<u32>,
+    /// Serve LLRP over TLS with this certificate chain (PEM), as readers do on port 5085.
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of `--tls-cert`.
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
 }
 
 /// Runs `llrp-gateway replay`.
@@ -508,6 +514,16 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
         },
         looped: args.looped,
     };
+    let tls = match args.tls_cert.clone().zip(args.tls_key.clone()) {
+        Some((cert, key)) => match (crate::net::tls::ServerFiles { cert, key }).acceptor() {
+            Ok(a) => Some(a),
+            Err(e) => {
+                eprintln!("llrp-gateway replay: {e}");
+                return ExitCode::FAILURE;
+            }
+        },
+        None => None,
+    };
     let runtime = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -538,7 +554,7 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
             Err(e) => eprintln!("llrp-gateway replay: {e}"),
         }
         let (tx, rx) = watch::channel(false);
-        let task = tokio::spawn(crate::net::replay::serve(listener, script, options, rx));
+        let task = tokio::spawn(crate::net::replay::serve(listener, script, options, tls, rx));
         stop.wait().await;
         let _ = tx.send(true);
         let _ = task.await;

@@ -43,7 +43,9 @@ async fn serve(path: &Path, options: ReplayOptions) -> (std::net::SocketAddr, wa
     let l = TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = l.local_addr().expect("bound");
     let (tx, rx) = watch::channel(false);
-    tokio::spawn(llrp_gateway::net::replay::serve(l, script, options, rx));
+    tokio::spawn(llrp_gateway::net::replay::serve(
+        l, script, options, None, rx,
+    ));
     (addr, tx)
 }
 

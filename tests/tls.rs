@@ -699,3 +699,40 @@ fn the_inventory_binary_reads_over_tls_from_the_sim_binary() {
     assert!(!run.status.success());
     assert!(log.contains("bad-ca.pem") && log.contains("PEM"), "{log}");
 }
+
+#[tokio::test]
+async fn a_recording_replays_over_tls() {
+    use llrp_gateway::record::replay::{ReplayOptions, Script};
+    use llrp_gateway::record::Recording;
+    let pki = Pki::new();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/sessions/dock-door-inventory.jsonl");
+    let recording = Recording::open(&path).expect("fixture");
+    let script = std::sync::Arc::new(Script::new(&recording, None).expect("script"));
+    let l = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let addr = l.local_addr().expect("bound").to_string();
+    let (stop, rx) = tokio::sync::watch::channel(false);
+    let options = ReplayOptions {
+        speed: None,
+        looped: false,
+    };
+    tokio::spawn(llrp_gateway::net::replay::serve(
+        l,
+        script,
+        options,
+        Some(pki.acceptor()),
+        rx,
+    ));
+    // A plain TCP client that never starts a handshake stays connected meanwhile: it must
+    // not keep the TLS client out (a replay serves one client at a time).
+    let plain = Client::connect(&addr).await.expect("TCP");
+    let client = Client::connect_reader_with(&addr, Some(&pki.connector()), T)
+        .await
+        .expect("TLS connection and the recorded greeting");
+    let reads = inventory(client).await;
+    assert!(reads.len() >= 20, "only {} reads", reads.len());
+    drop(plain);
+    let _ = stop.send(true);
+}

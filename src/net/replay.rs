@@ -5,6 +5,7 @@
 
 use std::io;
 use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -12,26 +13,28 @@ use llrp::enums::ConnectionAttemptStatus;
 use llrp::message::ErrorMessage;
 use llrp::params::LlrpStatus;
 use llrp::{Inbound, Message, StatusCode};
-use tokio::io::AsyncWriteExt;
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 use tokio::sync::watch;
 
 use super::connection::{Connection, Io};
+use super::tls::Acceptor;
 use crate::record::replay::{ReplayOptions, ReplaySession, Script};
 use crate::record::writer::utc_now_us;
 
 /// Bytes queued for the client before the session stops moving due frames to it.
 const QUEUE_BYTES: usize = 256 * 1024;
 
-/// Serves `script` on `listener` until `shutdown` turns true.
+/// Serves `script` on `listener` until `shutdown` turns true; over TLS when `tls` is given.
 pub async fn serve(
     listener: TcpListener,
     script: Arc<Script>,
     options: ReplayOptions,
+    tls: Option<Acceptor>,
     mut shutdown: watch::Receiver<bool>,
 ) -> io::Result<()> {
-    let (busy_tx, busy_rx) = watch::channel(false);
-    let busy_tx = Arc::new(busy_tx);
+    // Whether a client is being served; taken once a client's TLS handshake (if any) is
+    // done, so a client that never finishes one does not keep the next one out.
+    let busy = Arc::new(AtomicBool::new(false));
     loop {
         tokio::select! {
             _ = shutdown.changed() => {
@@ -48,22 +51,36 @@ pub async fn serve(
                         continue;
                     }
                 };
-                if *busy_rx.borrow() {
-                    tracing::info!(%peer, "refusing a second client");
-                    tokio::spawn(refuse(stream));
-                    continue;
-                }
-                let _ = busy_tx.send(true);
                 let script = Arc::clone(&script);
-                let busy = Arc::clone(&busy_tx);
+                let busy = Arc::clone(&busy);
                 let stop = shutdown.clone();
+                let tls = tls.clone();
                 tokio::spawn(async move {
+                    let conn = match &tls {
+                        None => Ok(Connection::new(stream)),
+                        Some(a) => a.accept(stream).await.map(Connection::from_stream),
+                    };
+                    let conn = match conn {
+                        Ok(c) => c,
+                        Err(e) => {
+                            tracing::warn!(%peer, "TLS handshake failed: {e}");
+                            return;
+                        }
+                    };
+                    let refused = busy
+                        .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+                        .is_err();
+                    if refused {
+                        tracing::info!(%peer, "refusing a second client");
+                        refuse(conn).await;
+                        return;
+                    }
                     tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
-                    match session(stream, peer, &script, options, stop).await {
+                    match session(conn, peer, &script, options, stop).await {
                         Ok(()) => tracing::info!(%peer, "client disconnected"),
                         Err(e) => tracing::info!(%peer, "connection ended: {e}"),
                     }
-                    let _ = busy.send(false);
+                    busy.store(false, Ordering::Release);
                 });
             }
         }
@@ -72,13 +89,12 @@ pub async fn serve(
 
 /// One client's replay.
 async fn session(
-    stream: TcpStream,
+    mut conn: Connection,
     peer: SocketAddr,
     script: &Script,
     options: ReplayOptions,
     mut shutdown: watch::Receiver<bool>,
 ) -> io::Result<()> {
-    let mut conn = Connection::new(stream);
     let start = Instant::now();
     let now = || start.elapsed().as_micros() as u64;
     let mut s = ReplaySession::new(script, options, now());
@@ -135,15 +151,11 @@ async fn sleep_until(at: Option<tokio::time::Instant>) {
 }
 
 /// Refuses a second client as a reader does.
-async fn refuse(mut stream: TcpStream) {
+async fn refuse(mut conn: Connection) {
     let mut body = crate::net::proxy::connection_failed(utc_now_us());
     if let Some(e) = &mut body.reader_event_notification_data.connection_attempt_event {
         e.status = ConnectionAttemptStatus::FailedClientInitiatedConnectionExists;
     }
-    let bytes = Message::new(0, body).to_bytes();
-    let _ = tokio::time::timeout(Duration::from_millis(500), async {
-        stream.write_all(&bytes).await?;
-        stream.shutdown().await
-    })
-    .await;
+    conn.queue(&Message::new(0, body));
+    let _ = tokio::time::timeout(Duration::from_millis(500), conn.shutdown()).await;
 }
