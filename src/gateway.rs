@@ -16,6 +16,9 @@ use crate::net::tls::{self, ServerFiles, Verify};
 use crate::record::{Header, RecordOptions, Recorder};
 use crate::stop::StopSignal;
 
+/// Longest the proxy waits at a stop for its sessions to close.
+const STOP_WAIT: Duration = Duration::from_secs(10);
+
 /// The LLRP port a `HOST` without one means.
 pub const LLRP_PORT: u16 = 5084;
 
@@ -232,7 +235,8 @@ impl GatewayConfig {
         if config.proxies.is_empty() {
             return Err(field("proxies".into(), "no proxy given".into()));
         }
-        let (mut names, mut listens) = (HashSet::new(), HashSet::new());
+        let (mut names, mut listens, mut records) =
+            (HashSet::new(), HashSet::new(), HashSet::new());
         let dir = path.parent().unwrap_or(Path::new("."));
         for (i, p) in config.proxies.iter_mut().enumerate() {
             if !names.insert(p.name.clone()) {
@@ -247,6 +251,14 @@ impl GatewayConfig {
                     format!("proxies[{i}].listen"),
                     format!("{} is used twice", p.listen),
                 ));
+            }
+            if let Some(r) = &p.record {
+                if !records.insert(dir.join(r)) {
+                    return Err(field(
+                        format!("proxies[{i}].record"),
+                        format!("{} is used twice", r.display()),
+                    ));
+                }
             }
             if p.upstream.trim().is_empty() {
                 return Err(field(format!("proxies[{i}].upstream"), "empty".into()));
@@ -425,13 +437,24 @@ pub fn run(args: ProxyArgs) -> ExitCode {
         stop.wait().await;
         eprintln!("llrp-gateway proxy: stopping: closing every session");
         let _ = stop_tx.send(true);
+        // Each session takes at most a few seconds to close (CLOSE_CONNECTION, then the
+        // reader's close); past STOP_WAIT the process exits all the same.
+        let deadline = tokio::time::Instant::now() + STOP_WAIT;
         for t in tasks {
-            let _ = t.await;
+            if tokio::time::timeout_at(deadline, t).await.is_err() {
+                eprintln!("llrp-gateway proxy: a session did not close within {STOP_WAIT:?}");
+                break;
+            }
         }
         // The recorders end once the sessions holding them are gone.
         let mut failed = false;
         for w in writers {
-            match w.await {
+            let Ok(w) = tokio::time::timeout_at(deadline + Duration::from_secs(1), w).await else {
+                eprintln!("llrp-gateway proxy: a recording was not finished in time");
+                failed = true;
+                continue;
+            };
+            match w {
                 Ok(Ok(())) => {}
                 Ok(Err(e)) => {
                     eprintln!("llrp-gateway proxy: writing the recording failed: {e}");

@@ -27,8 +27,9 @@ pub struct Read {
     pub reader: Option<String>,
     /// Antenna port (1-based AntennaID); 0 when the report carried none.
     pub antenna: u16,
-    /// First-seen time, UTC microseconds since the Unix epoch (FirstSeenTimestampUTC, else
-    /// the uptime timestamp, else the time the report arrived).
+    /// First-seen time, UTC microseconds since the Unix epoch (FirstSeenTimestampUTC; a
+    /// read without it, e.g. with only the uptime timestamp, gets the time its report
+    /// arrived).
     pub t_us: u64,
     /// RF phase in radians, 0..2π (ImpinjRFPhaseAngle); null when the reader sent none.
     pub phase_rad: Option<f64>,
@@ -84,8 +85,6 @@ pub struct ReadDecoder {
     hop_table: Option<HopTable>,
     /// The hop table came from the reader's capabilities (not overridden by a fallback).
     from_reader: bool,
-    /// Reader uptime at a UTC instant, from a UTCTimestamp/Uptime pair, for uptime-only reads.
-    uptime_offset_us: Option<i64>,
 }
 
 /// Why a frame gave no reads.
@@ -170,15 +169,10 @@ impl ReadDecoder {
 
     /// One read from a walked TagReportData.
     pub fn read(&self, r: &llrp::reads::TagRead<'_>, now_utc_us: u64) -> Read {
-        let uptime = |u: Option<u64>| {
-            u.zip(self.uptime_offset_us)
-                .map(|(u, off)| (u as i64 + off).max(0) as u64)
-        };
-        let t_us = r
-            .first_seen_utc
-            .or_else(|| uptime(r.first_seen_uptime))
-            .unwrap_or(now_utc_us);
-        let last_seen_us = r.last_seen_utc.or_else(|| uptime(r.last_seen_uptime));
+        // An uptime timestamp alone cannot be placed on the UTC axis without knowing when the
+        // reader booted, which LLRP does not say: such reads take the arrival time.
+        let t_us = r.first_seen_utc.unwrap_or(now_utc_us);
+        let last_seen_us = r.last_seen_utc;
         let rssi_dbm = r
             .impinj_peak_rssi
             .map(units::centi_dbm_to_dbm)

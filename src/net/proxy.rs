@@ -21,7 +21,6 @@ use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -35,7 +34,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
-use super::stream::{ReadHalf, Stream, WriteHalf};
+use super::stream::{Stream, WriteHalf};
 use super::tls;
 use crate::reads::{Read, ReadDecoder};
 use crate::record::writer::utc_now_us;
@@ -157,8 +156,9 @@ impl Proxy {
         let mut backoff = Duration::from_millis(10);
         loop {
             tokio::select! {
-                _ = shutdown.changed() => {
-                    if *shutdown.borrow() {
+                changed = shutdown.changed() => {
+                    // A dropped sender can never ask again: taken as the stop.
+                    if changed.is_err() || *shutdown.borrow() {
                         break;
                     }
                 }
@@ -330,15 +330,29 @@ impl Session {
         let (upstream_rd, upstream_wr) = upstream.into_split();
         let to_reader = Tee::new(self, Direction::ToReader);
         let from_reader = Tee::new(self, Direction::FromReader);
-        // The client's direction also stops (between chunks, never in the middle of one) at
-        // a shutdown, so that the proxy can then send CLOSE_CONNECTION on a clean frame
-        // boundary.
+        // The client's direction also stops at a shutdown (while waiting to read, or in the
+        // middle of a write to a reader that does not read); the proxy then sends
+        // CLOSE_CONNECTION only if the stream stands on a frame boundary.
         let up = pump(client_rd, upstream_wr, to_reader, Some(shutdown));
         let mut down = Box::pin(pump(upstream_rd, client_wr, from_reader, None));
         tokio::pin!(up);
         tokio::select! {
             done = &mut down => {
-                let (end, _, mut client_wr, from_reader) = done;
+                let (end, upstream_rd, mut client_wr, from_reader) = done;
+                if let End::WriteError(e) = end {
+                    // The client is gone (a reset): free the reader as when it closes.
+                    let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+                    let Ok((_, _, mut upstream_wr, to_reader)) =
+                        tokio::time::timeout(LINGER, &mut up).await
+                    else {
+                        return format!("writing to the client failed: {e}; the client's side did not end");
+                    };
+                    let drain = async move { pump(upstream_rd, tokio::io::sink(), from_reader, None).await.0 };
+                    let freed = self
+                        .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
+                        .await;
+                    return format!("writing to the client failed: {e}; {freed}");
+                }
                 // The reader went away: the client's connection closes too. The client's
                 // direction then runs on until the client closes (or LINGER passes), so that
                 // what it had read is recorded, and what it still sends finds its end.
@@ -350,8 +364,9 @@ impl Session {
                     }
                     End::Eof => "upstream closed the connection mid-session".into(),
                     End::ReadError(e) => format!("upstream connection failed: {e}"),
-                    End::WriteError(e) => format!("writing to the client failed: {e}"),
-                    End::Stopped => unreachable!("the reader's direction has no stop signal"),
+                    End::WriteError(_) | End::Stopped => {
+                        unreachable!("handled above / the reader's direction has no stop signal")
+                    }
                 }
             }
             done = &mut up => {
@@ -359,10 +374,10 @@ impl Session {
                 if matches!(end, End::Eof) && to_reader.saw_close {
                     // The client closed after its own CLOSE_CONNECTION: pass the end of stream
                     // on, and the rest of the reader's answer back until the reader closes.
-                    let _ = upstream_wr.shutdown().await;
+                    let _ = tokio::time::timeout(LINGER, upstream_wr.shutdown()).await;
                     return match tokio::time::timeout(LINGER, &mut down).await {
                         Ok((_, _, mut client_wr, _)) => {
-                            let _ = client_wr.shutdown().await;
+                            let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
                             "client closed after CLOSE_CONNECTION".into()
                         }
                         Err(_) => {
@@ -377,50 +392,61 @@ impl Session {
                     End::WriteError(e) => format!("writing to the reader failed: {e}"),
                     End::Stopped => "proxy shutting down".to_string(),
                 };
-                let freed = self.close_upstream(&mut upstream_wr, down).await;
+                let drain = async move {
+                    let (end, rd, mut client_wr, tee) = down.await;
+                    let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+                    match end {
+                        // The client is gone: keep reading (and recording) what the reader
+                        // sends until it closes.
+                        End::WriteError(_) => pump(rd, tokio::io::sink(), tee, None).await.0,
+                        end => end,
+                    }
+                };
+                let freed = self
+                    .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
+                    .await;
                 format!("{why}; {freed}")
             }
         }
     }
 
-    /// Sends CLOSE_CONNECTION to the reader (recorded as sent) while `down` goes on
-    /// forwarding what the reader still sends, and waits for the reader to close; closes the
-    /// client's side then; says how that went.
-    async fn close_upstream<'a, D>(&'a self, wr: &mut WriteHalf, down: Pin<Box<D>>) -> String
-    where
-        D: Future<Output = PumpDone<'a, ReadHalf, WriteHalf>>,
-    {
-        let close = Message::new(PROXY_CLOSE_ID, CloseConnection::default()).to_bytes();
-        if let Err(e) = write_flushed(wr, &close).await {
-            return format!("the reader's connection is gone ({e})");
-        }
-        if let Some(r) = &self.recorder {
-            let _ = r
-                .frame(r.now(), self.conn, Direction::ToReader, close.freeze())
-                .await;
-        }
-        let waited = tokio::time::timeout(CLOSE_WAIT, async move {
-            let (end, rd, mut client_wr, tee) = down.await;
-            let _ = client_wr.shutdown().await;
-            match end {
-                End::WriteError(_) => {
-                    // The client is gone: keep reading (and recording) what the reader sends
-                    // until it closes.
-                    pump(rd, tokio::io::sink(), tee, None).await.0
+    /// Frees the reader for its next client: sends CLOSE_CONNECTION (recorded as sent) when
+    /// the client's stream ended on a frame boundary (else it would land inside the cut
+    /// frame: then only the end of stream is sent), and waits for the reader to close while
+    /// `drain` reads what it still sends; says how that went.
+    async fn close_upstream(
+        &self,
+        wr: &mut WriteHalf,
+        boundary: bool,
+        drain: impl Future<Output = End>,
+    ) -> String {
+        let sent = if boundary {
+            let close = Message::new(PROXY_CLOSE_ID, CloseConnection::default()).to_bytes();
+            match tokio::time::timeout(CLOSE_WAIT, write_flushed(wr, &close)).await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => return format!("the reader's connection is gone ({e})"),
+                Err(_) => {
+                    return "the reader takes no more bytes: closed by the proxy without CLOSE_CONNECTION".into()
                 }
-                end => end,
             }
-        })
-        .await;
-        match waited {
-            Ok(End::Eof) => "proxy sent CLOSE_CONNECTION and the reader closed".into(),
+            if let Some(r) = &self.recorder {
+                let _ = r
+                    .frame(r.now(), self.conn, Direction::ToReader, close.freeze())
+                    .await;
+            }
+            "proxy sent CLOSE_CONNECTION"
+        } else {
+            let _ = tokio::time::timeout(LINGER, wr.shutdown()).await;
+            "the client's stream ended inside a frame, so the proxy closed without CLOSE_CONNECTION"
+        };
+        match tokio::time::timeout(CLOSE_WAIT, drain).await {
+            Ok(End::Eof) => format!("{sent} and the reader closed"),
             Ok(End::ReadError(e)) | Ok(End::WriteError(e)) => {
-                format!("proxy sent CLOSE_CONNECTION; the reader's connection failed: {e}")
+                format!("{sent}; the reader's connection failed: {e}")
             }
             Ok(End::Stopped) | Err(_) => {
-                let _ = wr.shutdown().await;
-                "proxy sent CLOSE_CONNECTION; the reader did not close in time, closed by the proxy"
-                    .into()
+                let _ = tokio::time::timeout(LINGER, wr.shutdown()).await;
+                format!("{sent}; the reader did not close in time, closed by the proxy")
             }
         }
     }
@@ -436,7 +462,8 @@ async fn write_flushed<W: AsyncWrite + Unpin>(wr: &mut W, bytes: &[u8]) -> io::R
 }
 
 /// Copies `rd` to `wr` chunk by chunk, showing each chunk to `tee` after it is written (and
-/// flushed); with `stop`, also ends (between chunks) once it turns true.
+/// flushed); with `stop`, also ends once it turns true: between chunks, or in the middle of
+/// a write that does not complete (the tee then knows the stream was cut).
 async fn pump<'a, R, W>(
     mut rd: R,
     mut wr: W,
@@ -453,7 +480,10 @@ where
             Some(stop) => tokio::select! {
                 // Reading is cancel-safe: nothing is lost when the stop wins.
                 r = rd.read(&mut buf) => r,
-                _ = wait_true(stop) => return (End::Stopped, rd, wr, tee),
+                _ = wait_true(stop) => {
+                    tee.finish().await;
+                    return (End::Stopped, rd, wr, tee);
+                }
             },
             None => rd.read(&mut buf).await,
         };
@@ -463,9 +493,26 @@ where
                 return (End::Eof, rd, wr, tee);
             }
             Ok(n) => n,
-            Err(e) => return (End::ReadError(e), rd, wr, tee),
+            Err(e) => {
+                tee.finish().await;
+                return (End::ReadError(e), rd, wr, tee);
+            }
         };
-        if let Err(e) = write_flushed(&mut wr, &buf[..n]).await {
+        let written = match &mut stop {
+            Some(stop) => tokio::select! {
+                w = write_flushed(&mut wr, &buf[..n]) => w,
+                _ = wait_true(stop) => {
+                    // Part of the chunk may have gone out (how much is unknown, so it is not
+                    // recorded): the stream is cut.
+                    tee.cut = true;
+                    tee.finish().await;
+                    return (End::Stopped, rd, wr, tee);
+                }
+            },
+            None => write_flushed(&mut wr, &buf[..n]).await,
+        };
+        if let Err(e) = written {
+            tee.cut = true;
             return (End::WriteError(e), rd, wr, tee);
         }
         tee.saw(&buf[..n]).await;
@@ -497,6 +544,8 @@ struct Tee<'a> {
     saw_close: bool,
     /// The reader sent CLOSE_CONNECTION_RESPONSE.
     saw_close_response: bool,
+    /// A write of this direction was abandoned part-way: where the stream stands is unknown.
+    cut: bool,
 }
 
 impl<'a> Tee<'a> {
@@ -513,6 +562,7 @@ impl<'a> Tee<'a> {
             reader: ReaderInfo::default(),
             saw_close: false,
             saw_close_response: false,
+            cut: false,
         }
     }
 
@@ -569,9 +619,18 @@ impl<'a> Tee<'a> {
         }
     }
 
+    /// Whether everything seen so far was whole frames (so a frame may follow).
+    fn at_frame_boundary(&self) -> bool {
+        !self.cut && !self.unsynced && self.buf.is_empty()
+    }
+
     /// At the end of the stream: bytes left over that never made a whole frame are recorded
     /// as bytes.
     async fn finish(&mut self) {
+        if !self.buf.is_empty() {
+            // The stream ended inside a frame.
+            self.cut = true;
+        }
         if self.buf.is_empty() || self.session.recorder.is_none() {
             return;
         }

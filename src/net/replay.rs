@@ -37,8 +37,9 @@ pub async fn serve(
     let busy = Arc::new(AtomicBool::new(false));
     loop {
         tokio::select! {
-            _ = shutdown.changed() => {
-                if *shutdown.borrow() {
+            changed = shutdown.changed() => {
+                // A dropped sender can never ask again: taken as the stop.
+                if changed.is_err() || *shutdown.borrow() {
                     return Ok(());
                 }
             }
@@ -75,12 +76,14 @@ pub async fn serve(
                         refuse(conn).await;
                         return;
                     }
+                    // Frees the slot however the session ends (a panic included).
+                    let slot = Slot(&busy);
                     tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
                     match session(conn, peer, &script, options, stop).await {
                         Ok(()) => tracing::info!(%peer, "client disconnected"),
                         Err(e) => tracing::info!(%peer, "connection ended: {e}"),
                     }
-                    busy.store(false, Ordering::Release);
+                    drop(slot);
                 });
             }
         }
@@ -107,14 +110,16 @@ async fn session(
             return Ok(());
         }
         let wake = match s.deadline() {
-            Some(d) if conn.queued() < QUEUE_BYTES => Some(tokio::time::Instant::from_std(
-                start + Duration::from_micros(d),
-            )),
+            // A time too far to represent is never.
+            Some(d) if conn.queued() < QUEUE_BYTES => start
+                .checked_add(Duration::from_micros(d))
+                .map(tokio::time::Instant::from_std),
             _ => None,
         };
         tokio::select! {
-            _ = shutdown.changed() => {
-                if *shutdown.borrow() {
+            changed = shutdown.changed() => {
+                // A dropped sender can never ask again: taken as the stop.
+                if changed.is_err() || *shutdown.borrow() {
                     let _ = tokio::time::timeout(Duration::from_secs(1), conn.shutdown()).await;
                     return Ok(());
                 }
@@ -158,4 +163,13 @@ async fn refuse(mut conn: Connection) {
     }
     conn.queue(&Message::new(0, body));
     let _ = tokio::time::timeout(Duration::from_millis(500), conn.shutdown()).await;
+}
+
+/// The replay's one client slot, held while a client is served.
+struct Slot<'a>(&'a AtomicBool);
+
+impl Drop for Slot<'_> {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Release);
+    }
 }

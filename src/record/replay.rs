@@ -156,6 +156,11 @@ impl Script {
                 }
             }
         }
+        // Captures' timestamps can go backwards: each list in time order.
+        script.greeting.sort_by_key(|t| t.offset_us);
+        for frames in script.streams.values_mut() {
+            frames.sort_by_key(|t| t.offset_us);
+        }
         // The stream to loop: the last one (in recorded order of its anchor) with reports.
         let mut best: Option<((MessageKind, usize), u64)> = None;
         let mut best_first = 0;
@@ -171,11 +176,16 @@ impl Script {
             let first_abs = first.offset_us + anchor_time(recording, conn, key);
             if best.is_none() || first_abs > best_first {
                 let gap = if reports.len() > 1 {
-                    (last.offset_us - first.offset_us) / (reports.len() as u64 - 1)
+                    last.offset_us.saturating_sub(first.offset_us) / (reports.len() as u64 - 1)
                 } else {
                     1_000
                 };
-                best = Some((*key, last.offset_us - first.offset_us + gap.max(1)));
+                best = Some((
+                    *key,
+                    last.offset_us
+                        .saturating_sub(first.offset_us)
+                        .saturating_add(gap.max(1)),
+                ));
                 best_first = first_abs;
             }
         }
@@ -282,8 +292,10 @@ impl<'a> ReplaySession<'a> {
             } else {
                 shift_timestamps(&t.frame, shift_us)
             };
-            self.due
-                .insert((now_us + self.scale(t.offset_us), self.seq), frame);
+            self.due.insert(
+                (now_us.saturating_add(self.scale(t.offset_us)), self.seq),
+                frame,
+            );
             self.seq += 1;
         }
     }
@@ -395,7 +407,9 @@ impl<'a> ReplaySession<'a> {
                 self.rounds += 1;
                 // Round k runs k periods after the first, at the recorded offsets.
                 let at = match self.options.speed {
-                    Some(_) => started + self.scale(self.rounds * period),
+                    Some(_) => {
+                        started.saturating_add(self.scale(self.rounds.saturating_mul(period)))
+                    }
                     None => now_us,
                 };
                 let frames = self
@@ -413,7 +427,7 @@ impl<'a> ReplaySession<'a> {
                     .into_iter()
                     .filter(|t| t.offset_us >= first)
                     .collect();
-                self.schedule(at, &again, self.rounds * period);
+                self.schedule(at, &again, self.rounds.saturating_mul(period));
             }
         }
     }
@@ -444,23 +458,23 @@ pub fn shift_timestamps(frame: &[u8], shift_us: u64) -> Bytes {
         MessageBody::RoAccessReport(r) => {
             for t in &mut r.tag_report_data {
                 if let Some(x) = &mut t.first_seen_timestamp_utc {
-                    x.0 += shift_us;
+                    x.0 = x.0.saturating_add(shift_us);
                 }
                 if let Some(x) = &mut t.first_seen_timestamp_uptime {
-                    x.0 += shift_us;
+                    x.0 = x.0.saturating_add(shift_us);
                 }
                 if let Some(x) = &mut t.last_seen_timestamp_utc {
-                    x.0 += shift_us;
+                    x.0 = x.0.saturating_add(shift_us);
                 }
                 if let Some(x) = &mut t.last_seen_timestamp_uptime {
-                    x.0 += shift_us;
+                    x.0 = x.0.saturating_add(shift_us);
                 }
             }
         }
         MessageBody::ReaderEventNotification(r) => {
             match &mut r.reader_event_notification_data.timestamp {
-                Timestamp::Utc(t) => t.microseconds += shift_us,
-                Timestamp::Uptime(t) => t.microseconds += shift_us,
+                Timestamp::Utc(t) => t.microseconds = t.microseconds.saturating_add(shift_us),
+                Timestamp::Uptime(t) => t.microseconds = t.microseconds.saturating_add(shift_us),
             }
         }
         _ => return Bytes::copy_from_slice(frame),

@@ -53,8 +53,9 @@ pub struct Recorder {
 pub type RecorderTask = tokio::task::JoinHandle<io::Result<()>>;
 
 impl Recorder {
-    /// Creates (truncating) `path`, writes `header` (its `start_utc_us` is set to now) and
-    /// starts the writing task on the current runtime.
+    /// Creates `path` (which must not exist, nor its numbered parts: an earlier recording is
+    /// never overwritten), writes `header` (its `start_utc_us` is set to now) and starts the
+    /// writing task on the current runtime.
     pub fn create(
         path: &Path,
         mut header: Header,
@@ -177,13 +178,18 @@ struct FileSet {
 
 impl FileSet {
     fn create(path: &Path, header: Header, max_bytes: Option<u64>) -> io::Result<Self> {
+        if part_path(path, 1).exists() {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                format!(
+                    "{} exists (part of an earlier recording): choose another name or remove it",
+                    part_path(path, 1).display()
+                ),
+            ));
+        }
         let mut set = FileSet {
             path: path.to_owned(),
-            file: OpenOptions::new()
-                .write(true)
-                .create(true)
-                .truncate(true)
-                .open(path)?,
+            file: create_new(path)?,
             header,
             max_bytes,
             written: 0,
@@ -229,16 +235,33 @@ impl FileSet {
         self.file.sync_data()?;
         self.header.part += 1;
         let next = part_path(&self.path, self.header.part);
-        self.file = OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&next)?;
+        self.file = create_new(&next)?;
         tracing::info!(file = %next.display(), "recording continues in the next file");
         self.write_header()?;
         *buf = line;
         Ok(())
     }
+}
+
+/// Opens a new file for writing; an existing one is an error that names it.
+fn create_new(path: &Path) -> io::Result<File> {
+    OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .map_err(|e| {
+            if e.kind() == io::ErrorKind::AlreadyExists {
+                io::Error::new(
+                    e.kind(),
+                    format!(
+                        "{} exists: a recording is never overwritten; choose another name or remove it",
+                        path.display()
+                    ),
+                )
+            } else {
+                e
+            }
+        })
 }
 
 fn header_len(header: &Header) -> u64 {
@@ -298,6 +321,22 @@ mod tests {
         assert_eq!(seen, 1);
         drop(rec);
         task.await.expect("joined").expect("written");
+    }
+
+    #[tokio::test]
+    async fn an_existing_recording_is_never_overwritten() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("rec.jsonl");
+        std::fs::write(&path, "earlier\n").expect("write");
+        let e = Recorder::create(&path, Header::new("up", 0), RecordOptions::default())
+            .expect_err("exists");
+        assert!(e.to_string().contains("never overwritten"), "{e}");
+        assert_eq!(std::fs::read_to_string(&path).expect("read"), "earlier\n");
+        std::fs::remove_file(&path).expect("remove");
+        std::fs::write(part_path(&path, 1), "earlier part\n").expect("write");
+        let e = Recorder::create(&path, Header::new("up", 0), RecordOptions::default())
+            .expect_err("a part exists");
+        assert!(e.to_string().contains("rec.1.jsonl"), "{e}");
     }
 
     #[tokio::test]
