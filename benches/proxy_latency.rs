@@ -1,30 +1,35 @@
 //! Proxy latency: how long an RO_ACCESS_REPORT takes from a reader's socket to its client's,
 //! with both ends in this one process so that one monotonic clock stamps both sides.
 //!
-//! Usage: `proxy_latency LISTEN CONNECT RATE SECONDS [WARMUP]` (driven by
+//! Usage: `proxy_latency LISTEN CONNECT[,CONNECT...] RATE SECONDS [WARMUP]` (driven by
 //! `scripts/bench-proxy`; `cargo bench` alone, without arguments, prints the usage and does
 //! nothing).
 //!
 //! * LISTEN: where the scripted reader listens (`127.0.0.1:PORT`).
-//! * CONNECT: where the client connects: LISTEN itself (direct), or a proxy whose upstream is
-//!   LISTEN (`llrp-gateway proxy --upstream LISTEN`).
+//! * CONNECT: where a client connects: LISTEN itself (direct), or a proxy whose upstream is
+//!   LISTEN (`llrp-gateway proxy --upstream LISTEN`). With several, one client per address,
+//!   all at once, and the reader sends every frame to each of them, back to back (the order
+//!   rotating from frame to frame): the paths are measured over the same moments, so a busy
+//!   spell of the host falls on all of them alike.
 //! * RATE: frames per second the reader sends, paced on absolute deadlines; 0 sends as fast as
-//!   the path takes them (full load).
+//!   the path takes them (full load; meant for one CONNECT).
 //! * SECONDS: how long the reader sends.
 //! * WARMUP: frames sent first and left out of the statistics (default 100).
 //!
-//! The reader accepts one connection, sends a READER_EVENT_NOTIFICATION greeting
+//! The reader accepts one connection per client, sends a READER_EVENT_NOTIFICATION greeting
 //! (ConnectionAttemptEvent Success), waits a moment, and then sends one frame after another:
 //! an RO_ACCESS_REPORT of one TagReportData (EPC-96, AntennaID, PeakRSSI, ChannelIndex, first
 //! and last seen UTC timestamps, TagSeenCount, ImpinjRFPhaseAngle and ImpinjPeakRSSI: the
-//! fields an Impinj reader sends for sllurp's `--impinj-reports`), encoded once, with frame `i` carrying message ID `i`. Just before each frame's `write`, it
-//! notes the frame's send time in a table indexed by ID. The client reads as much as the socket
-//! holds at a time, notes the receive time of that read for every whole frame in it (found with
+//! fields an Impinj reader sends for sllurp's `--impinj-reports`), encoded once, with frame `i`
+//! carrying message ID `i`. Just before each frame's `write`, it notes the frame's send time in
+//! a table per connection indexed by ID. Each client reads as much as its socket holds at a
+//! time, notes the receive time of that read for every whole frame in it (found with
 //! `llrp::FrameSplitter`), and checks that each frame arrived once and byte for byte as sent
 //! (apart from the ID). Latency is receive time minus send time, per frame.
 //!
-//! Output: one JSON line with the frame count, the achieved rate, p50 / p99 / p99.9 / max of
-//! the latency in µs, and the frames lost, doubled or changed (all three must be 0).
+//! Output: one JSON line per CONNECT, in order, with the frame count, the achieved rate,
+//! p50 / p99 / p99.9 / max of the latency in µs, and the frames lost, doubled or changed (all
+//! three must be 0).
 
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
@@ -65,7 +70,7 @@ fn main() -> ExitCode {
         [l, c, r, s, w] => (l, c, r, s, w.as_str()),
         _ => {
             eprintln!(
-                "usage: proxy_latency LISTEN CONNECT RATE SECONDS [WARMUP]  (run by \
+                "usage: proxy_latency LISTEN CONNECT[,CONNECT...] RATE SECONDS [WARMUP]  (run by \
                  scripts/bench-proxy; nothing to do without addresses)"
             );
             return ExitCode::SUCCESS;
@@ -88,10 +93,15 @@ fn main() -> ExitCode {
         duration: Duration::from_secs_f64(seconds),
         warmup,
     };
-    match run(listen, connect, &plan) {
-        Ok(r) => {
-            println!("{}", r.json(&plan));
-            if r.lost + r.doubled + r.changed > 0 {
+    let connect: Vec<&str> = connect.split(',').collect();
+    match run(listen, &connect, &plan) {
+        Ok(paths) => {
+            let mut bad = false;
+            for (r, addr) in paths.iter().zip(&connect) {
+                println!("{}", r.json(&plan, addr));
+                bad |= r.lost + r.doubled + r.changed > 0;
+            }
+            if bad {
                 eprintln!("proxy_latency: frames were lost, doubled or changed");
                 return ExitCode::FAILURE;
             }
@@ -141,9 +151,9 @@ impl Outcome {
         v[rank - 1] as f64 / 1e3
     }
 
-    fn json(&self, plan: &Plan) -> String {
+    fn json(&self, plan: &Plan, addr: &str) -> String {
         format!(
-            "{{\"rate\": {}, \"frames\": {}, \"sent_per_sec\": {:.0}, \"p50_us\": {:.1}, \
+            "{{\"connect\": \"{addr}\", \"rate\": {}, \"frames\": {}, \"sent_per_sec\": {:.0}, \"p50_us\": {:.1}, \
              \"p99_us\": {:.1}, \"p999_us\": {:.1}, \"max_us\": {:.1}, \"lost\": {}, \
              \"doubled\": {}, \"changed\": {}, \"warmup\": {}}}",
             plan.rate,
@@ -250,20 +260,30 @@ fn accept(listener: &TcpListener) -> io::Result<TcpStream> {
     }
 }
 
-/// The scripted reader: greeting, then frames per `plan`; returns each frame's send time
-/// (ns since `epoch`), indexed by message ID.
-fn reader(mut s: TcpStream, plan: &Plan, template: &[u8], epoch: Instant) -> io::Result<Vec<u64>> {
-    s.write_all(&greeting())?;
+/// The scripted reader: greeting, then frames per `plan`, each frame on every connection
+/// (in an order that rotates from frame to frame, so that no path is always first); returns,
+/// per connection, each frame's send time (ns since `epoch`) indexed by message ID.
+fn reader(
+    mut conns: Vec<TcpStream>,
+    plan: &Plan,
+    template: &[u8],
+    epoch: Instant,
+) -> io::Result<Vec<Vec<u64>>> {
+    for s in &mut conns {
+        s.write_all(&greeting())?;
+    }
     thread::sleep(SETTLE);
     let mut frame = template.to_vec();
-    let mut sent = Vec::with_capacity(if plan.rate > 0.0 {
+    let expected = if plan.rate > 0.0 {
         (plan.rate * plan.duration.as_secs_f64()) as usize + plan.warmup + 1
     } else {
         1 << 20
-    });
+    };
+    let mut sent = vec![Vec::with_capacity(expected); conns.len()];
     let start = Instant::now();
     let end = start + plan.duration;
     let period = (plan.rate > 0.0).then(|| Duration::from_secs_f64(1.0 / plan.rate));
+    let m = conns.len();
     let mut i: u32 = 0;
     loop {
         let now = Instant::now();
@@ -279,18 +299,25 @@ fn reader(mut s: TcpStream, plan: &Plan, template: &[u8], epoch: Instant) -> io:
             break;
         }
         frame[ID_AT].copy_from_slice(&i.to_be_bytes());
-        sent.push(epoch.elapsed().as_nanos() as u64);
-        s.write_all(&frame)?;
+        for k in 0..m {
+            let j = (i as usize + k) % m;
+            sent[j].push(epoch.elapsed().as_nanos() as u64);
+            conns[j].write_all(&frame)?;
+        }
         i = i
             .checked_add(1)
             .ok_or_else(|| other("more frames than message IDs".into()))?;
     }
     // End of stream; then wait for the other side to close (the proxy passes the end on to
     // the client, whose close comes back the same way).
-    s.shutdown(Shutdown::Write)?;
-    s.set_read_timeout(Some(DRAIN))?;
+    for s in &conns {
+        s.shutdown(Shutdown::Write)?;
+    }
     let mut sink = [0u8; 4096];
-    while matches!(s.read(&mut sink), Ok(k) if k > 0) {}
+    for s in &mut conns {
+        s.set_read_timeout(Some(DRAIN))?;
+        while matches!(s.read(&mut sink), Ok(k) if k > 0) {}
+    }
     Ok(sent)
 }
 
@@ -381,28 +408,48 @@ fn client(
     }
 }
 
-fn run(listen: &str, connect: &str, plan: &Plan) -> io::Result<Outcome> {
+/// Sets up one connection per address in `connect` (each accepted by the reader before the
+/// next is made, so the reader's connections are in the same order), runs the plan, and
+/// returns what each path saw.
+fn run(listen: &str, connect: &[&str], plan: &Plan) -> io::Result<Vec<Outcome>> {
     let template = report().to_bytes().to_vec();
     let listener = TcpListener::bind(listen)?;
     let epoch = Instant::now();
-    let to_client = TcpStream::connect(connect)?;
-    to_client.set_nodelay(true)?;
-    let at_reader = accept(&listener)?;
-    at_reader.set_nodelay(true)?;
+    let (mut clients, mut at_reader) = (Vec::new(), Vec::new());
+    for addr in connect {
+        let c = TcpStream::connect(addr)?;
+        c.set_nodelay(true)?;
+        clients.push(c);
+        let r = accept(&listener)?;
+        r.set_nodelay(true)?;
+        at_reader.push(r);
+    }
     let give_up = Instant::now() + SETTLE + plan.duration + DRAIN;
     let (sent, received) = thread::scope(|scope| {
         let t = &template;
-        let rx = scope.spawn(move || client(to_client, t, epoch, give_up));
+        let rx: Vec<_> = clients
+            .into_iter()
+            .map(|c| scope.spawn(move || client(c, t, epoch, give_up)))
+            .collect();
         let tx = scope.spawn(move || reader(at_reader, plan, t, epoch));
         let sent = tx
             .join()
             .map_err(|_| other("reader thread panicked".into()));
-        let received = rx
-            .join()
-            .map_err(|_| other("client thread panicked".into()));
+        let received: Vec<_> = rx
+            .into_iter()
+            .map(|h| h.join().map_err(|_| other("client thread panicked".into())))
+            .collect();
         (sent, received)
     });
-    let (sent, received) = (sent??, received??);
+    let sent = sent??;
+    sent.into_iter()
+        .zip(received)
+        .map(|(sent, received)| outcome(plan, &sent, &received??))
+        .collect()
+}
+
+/// The statistics of one path.
+fn outcome(plan: &Plan, sent: &[u64], received: &Received) -> io::Result<Outcome> {
     let counted = sent.len().saturating_sub(plan.warmup);
     if counted == 0 {
         return Err(other("no frame sent after the warm-up".into()));
