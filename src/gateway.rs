@@ -9,9 +9,9 @@ use std::time::Duration;
 
 use llrp::units::HopTable;
 use serde::Deserialize;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 
-use crate::net::proxy::{Proxy, ProxyConfig, Tap, Tapped};
+use crate::net::proxy::{Proxy, ProxyConfig, Stats};
 use crate::net::tls::{self, ServerFiles, Verify};
 use crate::record::{Header, RecordOptions, Recorder};
 use crate::stop::StopSignal;
@@ -360,7 +360,6 @@ pub fn run(args: ProxyArgs) -> ExitCode {
         let (stop_tx, stop_rx) = watch::channel(false);
         let mut tasks = Vec::new();
         let mut writers = Vec::new();
-        let mut taps = Vec::new();
         for e in entries {
             // LLRP over TLS is on port 5085 by convention.
             let port = if e.upstream_tls {
@@ -394,9 +393,6 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                     return ExitCode::FAILURE;
                 }
             };
-            let (tap, rx) = Tap::new(4096);
-            taps.push((e.name.clone(), tap.clone()));
-            tokio::spawn(count_reads(e.name.clone(), rx));
             let upstream_shown = upstream.clone();
             let config = ProxyConfig {
                 name: e.name.clone(),
@@ -408,7 +404,9 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 tls: tls.0,
                 upstream_tls: tls.1,
             };
-            let proxy = match Proxy::bind(config, recorder, Some(tap)).await {
+            // No tap yet: its consumers (the localizer, the fleet publisher) are still to
+            // come, and decoding every read for nobody costs a third of the throughput.
+            let proxy = match Proxy::bind(config, recorder, None).await {
                 Ok(p) => p,
                 Err(err) => {
                     eprintln!(
@@ -432,6 +430,7 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 ),
                 Err(err) => eprintln!("llrp-gateway proxy: '{}': {err}", e.name),
             }
+            tokio::spawn(log_stats(e.name.clone(), proxy.stats()));
             tasks.push(tokio::spawn(proxy.run(stop_rx.clone())));
         }
         stop.wait().await;
@@ -464,14 +463,6 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                     eprintln!("llrp-gateway proxy: the recording's writer failed: {e}");
                     failed = true;
                 }
-            }
-        }
-        for (name, tap) in taps {
-            if tap.dropped() > 0 {
-                eprintln!(
-                    "llrp-gateway proxy: '{name}': the tap dropped {} items",
-                    tap.dropped()
-                );
             }
         }
         eprintln!("llrp-gateway proxy: stopped");
@@ -586,25 +577,24 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
     })
 }
 
-/// Logs, every 10 s while reads flow, how many reads the proxy `name` has seen.
-async fn count_reads(name: String, mut rx: mpsc::Receiver<Tapped>) {
-    let mut total = 0u64;
+/// Logs, every 10 s while frames flow, how many the proxy `name` has forwarded.
+async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
+    use std::sync::atomic::Ordering::Relaxed;
     let mut last = 0u64;
     let mut tick = tokio::time::interval(Duration::from_secs(10));
     tick.tick().await;
     loop {
-        tokio::select! {
-            item = rx.recv() => match item {
-                Some(Tapped::Read(_)) => total += 1,
-                Some(Tapped::Event { .. }) => {}
-                None => break,
-            },
-            _ = tick.tick() => {
-                if total != last {
-                    tracing::info!(proxy = %name, "{total} tag reads so far ({}/s)", (total - last) / 10);
-                    last = total;
-                }
-            }
+        tick.tick().await;
+        let now = stats.frames_from_reader.load(Relaxed);
+        if now != last {
+            tracing::info!(
+                proxy = %name,
+                "{} sessions, {} frames to the reader, {now} from it ({}/s)",
+                stats.sessions.load(Relaxed),
+                stats.frames_to_reader.load(Relaxed),
+                (now - last) / 10
+            );
+            last = now;
         }
     }
 }

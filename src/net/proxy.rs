@@ -74,8 +74,8 @@ pub struct ProxyConfig {
 /// What the tap hands on.
 #[derive(Clone, Debug)]
 pub enum Tapped {
-    /// A tag read from an RO_ACCESS_REPORT.
-    Read(Read),
+    /// The tag reads of one RO_ACCESS_REPORT.
+    Reads(Vec<Read>),
     /// A READER_EVENT_NOTIFICATION, decoded.
     Event {
         /// The proxy's name.
@@ -87,8 +87,8 @@ pub enum Tapped {
     },
 }
 
-/// The sending side of the tap: a bounded channel that never waits; what does not fit is
-/// counted in [`Tap::dropped`].
+/// The sending side of the tap: a bounded channel (of reports and events) that never waits;
+/// what does not fit is counted, read by read, in [`Tap::dropped`].
 #[derive(Clone, Debug)]
 pub struct Tap {
     tx: mpsc::Sender<Tapped>,
@@ -108,14 +108,18 @@ impl Tap {
         )
     }
 
-    /// Items dropped because the receiver was behind (or gone).
+    /// Reads and events dropped because the receiver was behind (or gone).
     pub fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
 
     fn offer(&self, item: Tapped) {
+        let n = match &item {
+            Tapped::Reads(r) => r.len() as u64,
+            Tapped::Event { .. } => 1,
+        };
         if self.tx.try_send(item).is_err() {
-            self.dropped.fetch_add(1, Ordering::Relaxed);
+            self.dropped.fetch_add(n, Ordering::Relaxed);
         }
     }
 }
@@ -126,6 +130,27 @@ pub struct Proxy {
     config: Arc<ProxyConfig>,
     recorder: Option<Recorder>,
     tap: Option<Tap>,
+    stats: Arc<Stats>,
+}
+
+/// Counters of a proxy, over all its sessions (cheap: one atomic add per frame).
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// Client connections accepted.
+    pub sessions: AtomicU64,
+    /// Whole LLRP frames forwarded from the reader to clients.
+    pub frames_from_reader: AtomicU64,
+    /// Whole LLRP frames forwarded from clients to the reader.
+    pub frames_to_reader: AtomicU64,
+}
+
+impl Stats {
+    fn frames(&self, dir: Direction) -> &AtomicU64 {
+        match dir {
+            Direction::ToReader => &self.frames_to_reader,
+            Direction::FromReader => &self.frames_from_reader,
+        }
+    }
 }
 
 impl Proxy {
@@ -141,7 +166,13 @@ impl Proxy {
             config: Arc::new(config),
             recorder,
             tap,
+            stats: Arc::default(),
         })
+    }
+
+    /// The proxy's counters.
+    pub fn stats(&self) -> Arc<Stats> {
+        Arc::clone(&self.stats)
     }
 
     /// The address clients connect to.
@@ -167,10 +198,12 @@ impl Proxy {
                     Ok((stream, peer)) => {
                         backoff = Duration::from_millis(10);
                         let conn = self.recorder.as_ref().map_or(0, Recorder::next_conn);
+                        self.stats.sessions.fetch_add(1, Ordering::Relaxed);
                         let s = Session {
                             config: Arc::clone(&self.config),
                             recorder: self.recorder.clone(),
                             tap: self.tap.clone(),
+                            stats: Arc::clone(&self.stats),
                             conn,
                             peer,
                         };
@@ -194,6 +227,7 @@ struct Session {
     config: Arc<ProxyConfig>,
     recorder: Option<Recorder>,
     tap: Option<Tap>,
+    stats: Arc<Stats>,
     conn: u32,
     peer: SocketAddr,
 }
@@ -546,6 +580,8 @@ struct Tee<'a> {
     saw_close_response: bool,
     /// A write of this direction was abandoned part-way: where the stream stands is unknown.
     cut: bool,
+    /// Recording entries of the chunk being looked at.
+    pending: Vec<Entry>,
 }
 
 impl<'a> Tee<'a> {
@@ -563,6 +599,7 @@ impl<'a> Tee<'a> {
             saw_close: false,
             saw_close_response: false,
             cut: false,
+            pending: Vec::new(),
         }
     }
 
@@ -580,8 +617,8 @@ impl<'a> Tee<'a> {
                 conn: self.session.conn,
                 dir: self.dir,
                 bytes: Bytes::copy_from_slice(chunk),
-            })
-            .await;
+            });
+            self.send_records().await;
             return;
         }
         self.buf.extend_from_slice(chunk);
@@ -594,8 +631,7 @@ impl<'a> Tee<'a> {
                         conn: self.session.conn,
                         dir: self.dir,
                         frame,
-                    })
-                    .await;
+                    });
                 }
                 Inbound::Unsynced(e) => {
                     tracing::warn!(
@@ -611,12 +647,12 @@ impl<'a> Tee<'a> {
                         conn: self.session.conn,
                         dir: self.dir,
                         bytes: rest,
-                    })
-                    .await;
+                    });
                     break;
                 }
             }
         }
+        self.send_records().await;
     }
 
     /// Whether everything seen so far was whole frames (so a frame may follow).
@@ -646,8 +682,8 @@ impl<'a> Tee<'a> {
             conn: self.session.conn,
             dir: self.dir,
             bytes: rest,
-        })
-        .await;
+        });
+        self.send_records().await;
     }
 
     /// Keeps just enough framing to see the CLOSE_CONNECTION handshake.
@@ -680,6 +716,10 @@ impl<'a> Tee<'a> {
         if self.buf.len() < len {
             return None;
         }
+        self.session
+            .stats
+            .frames(self.dir)
+            .fetch_add(1, Ordering::Relaxed);
         Some(Inbound::Frame(self.buf.split_to(len).freeze()))
     }
 
@@ -702,10 +742,11 @@ impl<'a> Tee<'a> {
                 if let Some(tap) = &self.session.tap {
                     let now = utc_now_us();
                     self.scratch.clear();
-                    if self.reads.frame(frame, now, &mut self.scratch).is_ok() {
-                        for r in self.scratch.drain(..) {
-                            tap.offer(Tapped::Read(r));
-                        }
+                    self.scratch.clear();
+                    if self.reads.frame(frame, now, &mut self.scratch).is_ok()
+                        && !self.scratch.is_empty()
+                    {
+                        tap.offer(Tapped::Reads(std::mem::take(&mut self.scratch)));
                     }
                     if h.msg_type == ReaderEventNotification::TYPE {
                         if let Ok(m) = Message::decode(frame) {
@@ -721,10 +762,13 @@ impl<'a> Tee<'a> {
         }
     }
 
-    async fn record(&mut self, entry: Entry) {
-        let Some(r) = &self.session.recorder else {
+    /// Queues an entry for the recording (sent, with the rest of the chunk's, by
+    /// [`Tee::send_records`]); adds a reader line when the frame tells something new of the
+    /// reader.
+    fn record(&mut self, entry: Entry) {
+        if self.session.recorder.is_none() {
             return;
-        };
+        }
         let info = match &entry {
             Entry::Frame { frame, .. } if self.dir == Direction::FromReader => {
                 reader_info(frame, &self.reader)
@@ -732,18 +776,24 @@ impl<'a> Tee<'a> {
             _ => None,
         };
         let at = entry.at();
-        if r.entry(entry).await.is_err() {
-            return;
-        }
+        self.pending.push(entry);
         if let Some(info) = info {
             self.reader = info.clone();
-            let _ = r
-                .entry(Entry::Reader {
-                    at,
-                    conn: self.session.conn,
-                    reader: info,
-                })
-                .await;
+            self.pending.push(Entry::Reader {
+                at,
+                conn: self.session.conn,
+                reader: info,
+            });
+        }
+    }
+
+    /// Hands the queued entries to the recorder in one batch (waiting while it is behind).
+    async fn send_records(&mut self) {
+        if let (Some(r), false) = (&self.session.recorder, self.pending.is_empty()) {
+            let batch = std::mem::take(&mut self.pending);
+            if r.entries(batch).await.is_err() {
+                tracing::error!(proxy = %self.session.config.name, "the recording has stopped");
+            }
         }
     }
 }

@@ -18,8 +18,9 @@ use super::format::{encode_entry, encode_header, Direction, Entry, Event, Header
 /// Longest a queued line waits before it is written to the file.
 pub const FLUSH_MS: u64 = 10;
 
-/// Lines that may wait in the channel before senders wait.
-const QUEUE: usize = 8192;
+/// Batches (one per chunk a connection read, or one marker) that may wait in the channel
+/// before senders wait.
+const QUEUE: usize = 1024;
 
 /// Buffered bytes that are written at once, whatever the time.
 const FLUSH_BYTES: usize = 256 * 1024;
@@ -42,7 +43,7 @@ pub fn utc_now_us() -> u64 {
 /// A handle to a running recording; cheap to clone, one per connection.
 #[derive(Clone, Debug)]
 pub struct Recorder {
-    tx: mpsc::Sender<Entry>,
+    tx: mpsc::Sender<Vec<Entry>>,
     start: Instant,
     start_utc_us: u64,
     next_conn: Arc<AtomicU32>,
@@ -65,7 +66,7 @@ impl Recorder {
         let start_utc_us = utc_now_us();
         header.start_utc_us = start_utc_us;
         let mut file = FileSet::create(path, header, options.max_bytes)?;
-        let (tx, mut rx) = mpsc::channel::<Entry>(QUEUE);
+        let (tx, mut rx) = mpsc::channel::<Vec<Entry>>(QUEUE);
         let task = tokio::spawn(async move {
             let mut buf = Vec::with_capacity(FLUSH_BYTES);
             let mut due: Option<tokio::time::Instant> = None;
@@ -81,11 +82,14 @@ impl Recorder {
                     },
                     None => rx.recv().await,
                 };
-                let Some(entry) = entry else { break };
-                let marker = matches!(entry, Entry::Marker { .. });
-                let before = buf.len();
-                encode_entry(&entry, &mut buf);
-                file.rotate_if_full(&mut buf, before)?;
+                let Some(batch) = entry else { break };
+                let mut marker = false;
+                for entry in &batch {
+                    marker |= matches!(entry, Entry::Marker { .. });
+                    let before = buf.len();
+                    encode_entry(entry, &mut buf);
+                    file.rotate_if_full(&mut buf, before)?;
+                }
                 if marker || buf.len() >= FLUSH_BYTES {
                     file.write(&mut buf)?;
                     due = None;
@@ -124,7 +128,12 @@ impl Recorder {
     /// Records an entry; waits while the writer is behind. Fails only if the writer has
     /// stopped (its task's result says why).
     pub async fn entry(&self, entry: Entry) -> Result<(), RecorderGone> {
-        self.tx.send(entry).await.map_err(|_| RecorderGone)
+        self.entries(vec![entry]).await
+    }
+
+    /// Records several entries in order (one channel message for all).
+    pub async fn entries(&self, entries: Vec<Entry>) -> Result<(), RecorderGone> {
+        self.tx.send(entries).await.map_err(|_| RecorderGone)
     }
 
     /// Records a frame.
