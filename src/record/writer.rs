@@ -18,9 +18,9 @@ use super::format::{encode_entry, encode_header, Direction, Entry, Event, Header
 /// Longest a queued line waits before it is written to the file.
 pub const FLUSH_MS: u64 = 10;
 
-/// Batches (one per chunk a connection read, or one marker) that may wait in the channel
-/// before senders wait.
-const QUEUE: usize = 1024;
+/// Batches (one per chunk a connection read, up to 64 KiB of frames, or one marker) that may
+/// wait in the channel before senders wait: a few MiB at most, however far behind the disk is.
+const QUEUE: usize = 16;
 
 /// Buffered bytes that are written at once, whatever the time.
 const FLUSH_BYTES: usize = 256 * 1024;
