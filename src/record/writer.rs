@@ -11,16 +11,18 @@ use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use bytes::Bytes;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, OwnedSemaphorePermit, Semaphore};
 
 use super::format::{encode_entry, encode_header, Direction, Entry, Event, Header, Stamp};
 
 /// Longest a queued line waits before it is written to the file.
 pub const FLUSH_MS: u64 = 10;
 
-/// Batches (one per chunk a connection read, up to 64 KiB of frames, or one marker) that may
-/// wait in the channel before senders wait: a few MiB at most, however far behind the disk is.
-const QUEUE: usize = 16;
+/// Bytes of entries (their frames, plus [`ENTRY_COST`] each) that may wait for the writer
+/// before senders wait: the recorder's memory, however far behind the disk is.
+const QUEUE_BYTES: usize = 16 << 20;
+/// What an entry costs in the queue besides its frame's bytes.
+const ENTRY_COST: usize = 96;
 
 /// Buffered bytes that are written at once, whatever the time.
 const FLUSH_BYTES: usize = 256 * 1024;
@@ -43,7 +45,9 @@ pub fn utc_now_us() -> u64 {
 /// A handle to a running recording; cheap to clone, one per connection.
 #[derive(Clone, Debug)]
 pub struct Recorder {
-    tx: mpsc::Sender<Vec<Entry>>,
+    tx: mpsc::UnboundedSender<(Vec<Entry>, OwnedSemaphorePermit)>,
+    /// Bytes of queue left ([`QUEUE_BYTES`]); a batch holds its share until it is written.
+    room: Arc<Semaphore>,
     start: Instant,
     start_utc_us: u64,
     next_conn: Arc<AtomicU32>,
@@ -66,7 +70,8 @@ impl Recorder {
         let start_utc_us = utc_now_us();
         header.start_utc_us = start_utc_us;
         let mut file = FileSet::create(path, header, options.max_bytes)?;
-        let (tx, mut rx) = mpsc::channel::<Vec<Entry>>(QUEUE);
+        // Unbounded as a channel, bounded in bytes by `room`.
+        let (tx, mut rx) = mpsc::unbounded_channel::<(Vec<Entry>, OwnedSemaphorePermit)>();
         let task = tokio::spawn(async move {
             let mut buf = Vec::with_capacity(FLUSH_BYTES);
             let mut due: Option<tokio::time::Instant> = None;
@@ -82,7 +87,7 @@ impl Recorder {
                     },
                     None => rx.recv().await,
                 };
-                let Some(batch) = entry else { break };
+                let Some((batch, _room)) = entry else { break };
                 let mut marker = false;
                 for entry in &batch {
                     marker |= matches!(entry, Entry::Marker { .. });
@@ -103,6 +108,7 @@ impl Recorder {
         Ok((
             Recorder {
                 tx,
+                room: Arc::new(Semaphore::new(QUEUE_BYTES)),
                 start,
                 start_utc_us,
                 next_conn: Arc::new(AtomicU32::new(1)),
@@ -133,7 +139,24 @@ impl Recorder {
 
     /// Records several entries in order (one channel message for all).
     pub async fn entries(&self, entries: Vec<Entry>) -> Result<(), RecorderGone> {
-        self.tx.send(entries).await.map_err(|_| RecorderGone)
+        let cost: usize = entries
+            .iter()
+            .map(|e| {
+                ENTRY_COST
+                    + match e {
+                        Entry::Frame { frame, .. } => frame.len(),
+                        Entry::Bytes { bytes, .. } => bytes.len(),
+                        _ => 0,
+                    }
+            })
+            .sum();
+        // A batch larger than the whole queue waits for all of it.
+        let permits = u32::try_from(cost.min(QUEUE_BYTES)).unwrap_or(u32::MAX);
+        let room = Arc::clone(&self.room)
+            .acquire_many_owned(permits)
+            .await
+            .map_err(|_| RecorderGone)?;
+        self.tx.send((entries, room)).map_err(|_| RecorderGone)
     }
 
     /// Records a frame.

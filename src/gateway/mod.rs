@@ -16,6 +16,10 @@ use crate::net::tls::{self, ServerFiles, Verify};
 use crate::record::{Header, RecordOptions, Recorder};
 use crate::stop::StopSignal;
 
+mod replay;
+
+pub use replay::{run_replay, ReplayArgs};
+
 /// Longest the proxy waits at a stop for its sessions to close.
 const STOP_WAIT: Duration = Duration::from_secs(10);
 
@@ -474,109 +478,6 @@ pub fn run(args: ProxyArgs) -> ExitCode {
     })
 }
 
-/// Arguments of `llrp-gateway replay`.
-#[derive(clap::Args, Debug)]
-pub struct ReplayArgs {
-    /// The recording (JSON Lines, docs/recordings.md).
-    pub file: PathBuf,
-    /// Where clients connect.
-    #[arg(long, default_value = "0.0.0.0:5084")]
-    pub listen: String,
-    /// Recorded time per real time: a factor (1 = as recorded) or `max` (no waiting).
-    #[arg(long, default_value = "1")]
-    pub speed: crate::net::clock::Speed,
-    /// Start the reports stream over when it ends, timestamps shifted.
-    #[arg(long = "loop")]
-    pub looped: bool,
-    /// Replay this recorded connection (default: the first one the reader spoke on).
-    #[arg(long)]
-    pub conn: Option<u32>,
-    /// Serve LLRP over TLS with this certificate chain (PEM), as readers do on port 5085.
-    #[arg(long, requires = "tls_key")]
-    pub tls_cert: Option<PathBuf>,
-    /// The private key (PEM) of `--tls-cert`.
-    #[arg(long, requires = "tls_cert")]
-    pub tls_key: Option<PathBuf>,
-}
-
-/// Runs `llrp-gateway replay`.
-pub fn run_replay(args: ReplayArgs) -> ExitCode {
-    use crate::record::replay::{ReplayOptions, Script};
-    use crate::record::Recording;
-    crate::stop::init_logging();
-    let recording = match Recording::open(&args.file) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway replay: {}: {e}", args.file.display());
-            return ExitCode::FAILURE;
-        }
-    };
-    for w in &recording.warnings {
-        eprintln!("llrp-gateway replay: {}: warning: {w}", args.file.display());
-    }
-    let script = match Script::new(&recording, args.conn) {
-        Ok(s) => std::sync::Arc::new(s),
-        Err(e) => {
-            eprintln!("llrp-gateway replay: {}: {e}", args.file.display());
-            return ExitCode::FAILURE;
-        }
-    };
-    let options = ReplayOptions {
-        speed: match args.speed {
-            crate::net::clock::Speed::Max => None,
-            crate::net::clock::Speed::Factor(x) => Some(x),
-        },
-        looped: args.looped,
-    };
-    let tls = match args.tls_cert.clone().zip(args.tls_key.clone()) {
-        Some((cert, key)) => match (crate::net::tls::ServerFiles { cert, key }).acceptor() {
-            Ok(a) => Some(a),
-            Err(e) => {
-                eprintln!("llrp-gateway replay: {e}");
-                return ExitCode::FAILURE;
-            }
-        },
-        None => None,
-    };
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway replay: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    runtime.block_on(async move {
-        let stop = StopSignal::watch();
-        let listener = match tokio::net::TcpListener::bind(&args.listen).await {
-            Ok(l) => l,
-            Err(e) => {
-                eprintln!("llrp-gateway replay: cannot listen on {}: {e}", args.listen);
-                return ExitCode::FAILURE;
-            }
-        };
-        match listener.local_addr() {
-            Ok(addr) => eprintln!(
-                "llrp-gateway replay: {} (connection {}: {} responses, {} reports and events) listening on {addr}",
-                args.file.display(),
-                script.conn(),
-                script.responses(),
-                script.unsolicited()
-            ),
-            Err(e) => eprintln!("llrp-gateway replay: {e}"),
-        }
-        let (tx, rx) = watch::channel(false);
-        let task = tokio::spawn(crate::net::replay::serve(listener, script, options, tls, rx));
-        stop.wait().await;
-        let _ = tx.send(true);
-        let _ = task.await;
-        eprintln!("llrp-gateway replay: stopped");
-        ExitCode::SUCCESS
-    })
-}
-
 /// Logs, every 10 s while frames flow, how many the proxy `name` has forwarded.
 async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
     use std::sync::atomic::Ordering::Relaxed;
@@ -600,81 +501,4 @@ async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_host_without_a_port_gets_the_llrp_port() {
-        assert_eq!(with_default_port("reader.local"), "reader.local:5084");
-        assert_eq!(with_default_port("10.0.0.5:5085"), "10.0.0.5:5085");
-        assert_eq!(with_default_port("[::1]:6000"), "[::1]:6000");
-        assert_eq!(with_default_port("::1"), "[::1]:5084");
-    }
-
-    fn load(text: &str) -> Result<GatewayConfig, ConfigError> {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = dir.path().join("gw.json");
-        std::fs::write(&path, text).expect("write");
-        GatewayConfig::load(&path)
-    }
-
-    #[test]
-    fn a_config_names_the_bad_field() {
-        let e = load(
-            r#"{"proxies":[{"name":"a","upstream":"x","listen":"127.0.0.1:1","recrod":"r"}]}"#,
-        )
-        .expect_err("typo");
-        assert!(e.to_string().contains("proxies[0]"), "{e}");
-        assert!(e.to_string().contains("recrod"), "{e}");
-        let e = load(
-            r#"{"proxies":[{"name":"a","upstream":"x","listen":"l1"},{"name":"a","upstream":"y","listen":"l2"}]}"#,
-        )
-        .expect_err("same name");
-        assert!(e.to_string().contains("proxies[1].name"), "{e}");
-        let e = load(r#"{"proxies":[]}"#).expect_err("none");
-        assert!(e.to_string().contains("no proxy"), "{e}");
-    }
-
-    #[test]
-    fn relative_record_paths_are_beside_the_config() {
-        let c = load(r#"{"proxies":[{"name":"a","upstream":"x","listen":"l","record":"a.jsonl","region":"etsi"}]}"#)
-            .expect("valid");
-        let r = c.proxies[0].record.as_ref().expect("record");
-        assert!(r.is_absolute() && r.ends_with("a.jsonl"), "{}", r.display());
-        assert_eq!(c.proxies[0].region, Some(Region::Etsi));
-    }
-
-    #[test]
-    fn tls_settings_are_checked_together_and_their_paths_are_beside_the_config() {
-        let c = load(
-            r#"{"proxies":[{"name":"a","upstream":"x","listen":"l","tls_cert":"c.pem","tls_key":"k.pem","upstream_tls":true,"upstream_ca":"ca.pem"}]}"#,
-        )
-        .expect("valid");
-        let p = &c.proxies[0];
-        for f in [&p.tls_cert, &p.tls_key, &p.upstream_ca] {
-            let f = f.as_ref().expect("set");
-            assert!(f.is_absolute(), "{}", f.display());
-        }
-        assert!(p.upstream_tls && !p.upstream_insecure);
-        for (text, field) in [
-            (r#""tls_cert":"c.pem""#, "proxies[0].tls_key"),
-            (r#""tls_key":"k.pem""#, "proxies[0].tls_cert"),
-            (r#""upstream_tls":true"#, "proxies[0].upstream_tls"),
-            (r#""upstream_ca":"ca.pem""#, "proxies[0].upstream_ca"),
-            (
-                r#""upstream_insecure":true"#,
-                "proxies[0].upstream_insecure",
-            ),
-            (
-                r#""upstream_tls":true,"upstream_ca":"ca.pem","upstream_insecure":true"#,
-                "proxies[0].upstream_insecure",
-            ),
-        ] {
-            let e = load(&format!(
-                r#"{{"proxies":[{{"name":"a","upstream":"x","listen":"l",{text}}}]}}"#
-            ))
-            .expect_err(text);
-            assert!(e.to_string().contains(field), "{text}: {e}");
-        }
-    }
-}
+mod tests;
