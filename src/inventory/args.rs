@@ -1,0 +1,244 @@
+//! The command line of `llrp-gateway inventory`: [`InventoryArgs`], its value types and
+//! parsers, and the reader address with its default port ([`reader_address`]).
+
+use std::path::PathBuf;
+
+/// The LLRP port a reader listens on when HOST has none.
+pub const LLRP_PORT: u16 = 5084;
+
+/// Command-line options of `llrp-gateway inventory`.
+#[derive(Clone, Debug, PartialEq, clap::Args)]
+pub struct InventoryArgs {
+    /// The reader: HOST or HOST:PORT (port 5084 when none is given); IPv6 as `[ADDR]:PORT`.
+    pub reader: String,
+    /// Stop after this many seconds (default: run until Ctrl-C or SIGTERM).
+    #[arg(long, value_parser = parse_seconds)]
+    pub seconds: Option<f64>,
+    /// Antenna ports to inventory, comma-separated (default: all the reader has).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u16).range(1..))]
+    pub antennas: Vec<u16>,
+    /// Enable the Impinj extensions and ask for Impinj RF phase, peak RSSI and Doppler.
+    #[arg(long)]
+    pub impinj: bool,
+    /// The reader sends a report every N tag entries (a reader may fold a tag's repeated
+    /// reads into one entry; reads not yet reported come when the inventory stops).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    pub report_every: u16,
+    /// Gen2 session, 0-3 (default: the reader's).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=3))]
+    pub session: Option<u8>,
+    /// Impinj inventory search mode (0 reader selected, 1 single target, 2 dual target,
+    /// 3 single target with suppression, ...; default: the reader's).
+    #[arg(long, value_name = "M")]
+    pub search_mode: Option<u16>,
+    /// RF mode: a ModeIdentifier of the reader's RF mode table (default: the reader's).
+    #[arg(long, value_name = "ID")]
+    pub mode: Option<u16>,
+    /// Write the reads here: a `.jsonl` file (the reads file), a `.csv` file, or `-` for
+    /// JSON Lines on standard output.
+    #[arg(long, value_parser = parse_output)]
+    pub output: Option<Output>,
+    /// Reader name written in each read (default: the reader address as given).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Keepalive interval asked of the reader, ms (0: none). A reader silent for three
+    /// intervals and 5 s more is taken for lost and reconnected.
+    #[arg(long, value_name = "MS", default_value_t = 5000)]
+    pub keepalive_ms: u32,
+    /// Retries after failed connection attempts in a row: a number, or `forever`.
+    #[arg(long, default_value = "5", value_parser = parse_retries)]
+    pub retries: Retries,
+    /// First wait before a retry, ms; it doubles with each failure in a row.
+    #[arg(long, value_name = "MS", default_value_t = 500)]
+    pub backoff_ms: u64,
+    /// Longest wait before a retry, ms.
+    #[arg(long, value_name = "MS", default_value_t = 30_000)]
+    pub backoff_max_ms: u64,
+    /// LLRP over TLS (port 5085 when HOST has none), with --tls-ca or --tls-insecure.
+    #[arg(long)]
+    pub tls: bool,
+    /// With --tls: CA certificates (PEM) the reader's certificate must be issued by.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "tls",
+        conflicts_with = "tls_insecure"
+    )]
+    pub tls_ca: Option<PathBuf>,
+    /// With --tls: accept any reader certificate (encrypted, but not authenticated).
+    #[arg(long, requires = "tls")]
+    pub tls_insecure: bool,
+    /// With --tls: the name the reader's certificate must carry (default: HOST).
+    #[arg(long, value_name = "NAME", requires = "tls")]
+    pub tls_server_name: Option<String>,
+}
+
+/// How many times a failed connection is retried.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Retries {
+    /// At most this many retries after failures in a row.
+    Limit(u32),
+    /// Retry until stopped.
+    Forever,
+}
+
+/// Where the reads go.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Output {
+    /// JSON Lines (the reads file) to this file.
+    Jsonl(PathBuf),
+    /// CSV with a header row to this file.
+    Csv(PathBuf),
+    /// JSON Lines to standard output.
+    Stdout,
+}
+
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() && v < 1e9 => Ok(v),
+        _ => Err(format!("`{s}` is not a positive number of seconds")),
+    }
+}
+
+fn parse_retries(s: &str) -> Result<Retries, String> {
+    if s == "forever" {
+        return Ok(Retries::Forever);
+    }
+    s.parse::<u32>()
+        .map(Retries::Limit)
+        .map_err(|_| format!("`{s}` is neither a number of retries nor `forever`"))
+}
+
+fn parse_output(s: &str) -> Result<Output, String> {
+    if s == "-" {
+        return Ok(Output::Stdout);
+    }
+    let path = PathBuf::from(s);
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("jsonl") | Some("ndjson") => Ok(Output::Jsonl(path)),
+        Some("csv") => Ok(Output::Csv(path)),
+        _ => Err(format!(
+            "`{s}`: the file name must end in .jsonl (reads file) or .csv, or be `-`"
+        )),
+    }
+}
+
+/// `HOST[:PORT]` as a socket address string: port 5084 when none is given.
+pub fn reader_address(reader: &str) -> String {
+    reader_address_on(reader, LLRP_PORT)
+}
+
+/// `HOST[:PORT]` as a socket address string: port `port` when none is given.
+pub fn reader_address_on(reader: &str, port: u16) -> String {
+    if reader.parse::<std::net::SocketAddr>().is_ok() {
+        return reader.to_string();
+    }
+    if let Ok(ip) = reader.parse::<std::net::IpAddr>() {
+        return std::net::SocketAddr::new(ip, port).to_string();
+    }
+    match reader.rsplit_once(':') {
+        Some((host, p)) if !host.contains(':') && p.parse::<u16>().is_ok() => reader.to_string(),
+        _ => format!("{reader}:{port}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: InventoryArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<InventoryArgs, clap::Error> {
+        Cli::try_parse_from(std::iter::once("inventory").chain(args.iter().copied()))
+            .map(|c| c.args)
+    }
+
+    #[test]
+    fn the_antenna_list_is_comma_separated_and_one_based() {
+        let a = parse(&["reader", "--antennas", "1,2,8"]).expect("parses");
+        assert_eq!(a.antennas, [1, 2, 8]);
+        assert!(parse(&["reader"]).expect("parses").antennas.is_empty());
+        assert!(parse(&["reader", "--antennas", "0"]).is_err(), "antenna 0");
+        assert!(
+            parse(&["reader", "--antennas", "1,x"]).is_err(),
+            "not a number"
+        );
+    }
+
+    #[test]
+    fn the_session_is_zero_to_three() {
+        for s in 0..=3u8 {
+            let a = parse(&["r", "--session", &s.to_string()]).expect("parses");
+            assert_eq!(a.session, Some(s));
+        }
+        let e = parse(&["r", "--session", "4"]).expect_err("session 4");
+        assert!(e.to_string().contains("0..=3"), "{e}");
+    }
+
+    #[test]
+    fn every_option_parses_and_bad_values_are_refused() {
+        let a = parse(&[
+            "10.0.0.7:5085",
+            "--seconds",
+            "2.5",
+            "--impinj",
+            "--report-every",
+            "10",
+            "--search-mode",
+            "2",
+            "--mode",
+            "1002",
+            "--output",
+            "reads.csv",
+            "--retries",
+            "forever",
+            "--keepalive-ms",
+            "0",
+        ])
+        .expect("parses");
+        assert_eq!(a.seconds, Some(2.5));
+        assert!(a.impinj);
+        assert_eq!(a.report_every, 10);
+        assert_eq!(a.search_mode, Some(2));
+        assert_eq!(a.mode, Some(1002));
+        assert_eq!(a.output, Some(Output::Csv("reads.csv".into())));
+        assert_eq!(a.retries, Retries::Forever);
+        assert_eq!(a.keepalive_ms, 0);
+        let d = parse(&["r"]).expect("parses");
+        assert_eq!(d.retries, Retries::Limit(5));
+        assert_eq!(d.output, None);
+        assert_eq!(
+            parse(&["r", "--output", "x.jsonl"]).expect("parses").output,
+            Some(Output::Jsonl("x.jsonl".into()))
+        );
+        assert_eq!(
+            parse(&["r", "--output", "-"]).expect("parses").output,
+            Some(Output::Stdout)
+        );
+        for bad in [
+            &["r", "--seconds", "0"][..],
+            &["r", "--seconds", "-1"],
+            &["r", "--seconds", "soon"],
+            &["r", "--output", "reads.txt"],
+            &["r", "--report-every", "0"],
+            &["r", "--retries", "many"],
+        ] {
+            assert!(parse(bad).is_err(), "{bad:?} is refused");
+        }
+    }
+
+    #[test]
+    fn the_port_defaults_to_5084() {
+        assert_eq!(reader_address("reader.local"), "reader.local:5084");
+        assert_eq!(reader_address("reader.local:6000"), "reader.local:6000");
+        assert_eq!(reader_address("10.1.2.3"), "10.1.2.3:5084");
+        assert_eq!(reader_address("10.1.2.3:1"), "10.1.2.3:1");
+        assert_eq!(reader_address("::1"), "[::1]:5084");
+        assert_eq!(reader_address("[::1]:5000"), "[::1]:5000");
+    }
+}

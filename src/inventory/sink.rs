@@ -1,0 +1,67 @@
+//! [`Sink`]: the reads' destination (a reads file, CSV or standard output), written in whole
+//! lines.
+
+use std::fs::File;
+use std::io::{self, Write};
+
+use super::Output;
+use crate::reads::{self, Read};
+
+/// Bytes of whole lines buffered before they are written out.
+const SINK_BUFFER: usize = 64 * 1024;
+
+/// The reads' destination, open. Lines are buffered here and written out whole (when the
+/// buffer fills, and at each flush), so the file never ends in a partial line between
+/// writes: a reader following it live only ever sees whole reads.
+pub(super) struct Sink {
+    out: Option<Box<dyn Write>>,
+    csv: bool,
+    buf: Vec<u8>,
+}
+
+impl Sink {
+    pub(super) fn open(output: &Option<Output>) -> io::Result<Sink> {
+        let (out, csv): (Option<Box<dyn Write>>, bool) = match output {
+            None => (None, false),
+            Some(Output::Stdout) => (Some(Box::new(io::stdout())), false),
+            Some(Output::Jsonl(p)) => (Some(Box::new(File::create(p)?)), false),
+            Some(Output::Csv(p)) => (Some(Box::new(File::create(p)?)), true),
+        };
+        let mut sink = Sink {
+            out,
+            csv,
+            buf: Vec::with_capacity(SINK_BUFFER),
+        };
+        if csv {
+            sink.buf.extend_from_slice(reads::CSV_HEADER.as_bytes());
+            sink.buf.push(b'\n');
+            sink.flush()?;
+        }
+        Ok(sink)
+    }
+
+    pub(super) fn write(&mut self, r: &Read) -> io::Result<()> {
+        if self.out.is_none() {
+            return Ok(());
+        }
+        if self.csv {
+            self.buf.extend_from_slice(r.csv_row().as_bytes());
+            self.buf.push(b'\n');
+        } else {
+            reads::write_jsonl(&mut self.buf, r)?;
+        }
+        if self.buf.len() >= SINK_BUFFER {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn flush(&mut self) -> io::Result<()> {
+        if let Some(out) = &mut self.out {
+            out.write_all(&self.buf)?;
+            out.flush()?;
+        }
+        self.buf.clear();
+        Ok(())
+    }
+}
