@@ -260,35 +260,7 @@ async fn a_simulated_inventory_passes_byte_for_byte_and_is_recorded_and_tapped()
     c.request(ImpinjEnableExtensions::default(), T)
         .await
         .expect("Impinj extensions");
-    let spec = rospec(
-        1,
-        vec![0],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
-    );
-    assert_eq!(
-        request_status(
-            &mut c,
-            AddRospec {
-                ro_spec: spec,
-                ..Default::default()
-            }
-        )
-        .await,
-        StatusCode::M_Success
-    );
-    assert_eq!(
-        request_status(
-            &mut c,
-            EnableRospec {
-                ro_spec_id: 1,
-                ..Default::default()
-            }
-        )
-        .await,
-        StatusCode::M_Success
-    );
+    start_inventory(&mut c).await;
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 50).await;
     assert!(tags.len() >= 50, "only {} reads", tags.len());
     c.request(CloseConnection::default(), T)
@@ -397,29 +369,7 @@ async fn an_unreachable_upstream_gets_the_client_a_failed_connection_attempt_the
 async fn when_the_client_leaves_the_proxy_sends_close_connection_so_the_reader_is_free() {
     let reader = TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let upstream = reader.local_addr().expect("bound").to_string();
-    let reader_task = tokio::spawn(async move {
-        let (s, _) = reader.accept().await.expect("accept");
-        let mut conn = llrp_gateway::net::connection::Connection::new(s);
-        conn.write_message(&Message::new(0, KeepaliveAck::default()))
-            .await
-            .expect("greeting");
-        // Whatever comes, until CLOSE_CONNECTION; answer it and close.
-        loop {
-            match conn.read_frame().await.expect("read") {
-                Some(llrp::Inbound::Frame(f)) => {
-                    let m = Message::decode(&f).expect("decodes");
-                    if let MessageBody::CloseConnection(_) = m.body {
-                        conn.write_message(&Message::new(m.id, CloseConnectionResponse::default()))
-                            .await
-                            .expect("answer");
-                        conn.shutdown().await.expect("close");
-                        return true;
-                    }
-                }
-                _ => return false,
-            }
-        }
-    });
+    let reader_task = tokio::spawn(reader_answering_close(reader));
     let dir = tempfile::tempdir().expect("temp dir");
     let rec = dir.path().join("rec.jsonl");
     let p = proxy(&upstream, Some(&rec), None).await;
@@ -623,29 +573,7 @@ async fn an_overloaded_tap_drops_and_counts_while_forwarding_loses_nothing() {
         .await
         .expect("connects");
     c.recv(T).await.expect("greeting");
-    let spec = rospec(
-        1,
-        vec![0],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
-    );
-    request_status(
-        &mut c,
-        AddRospec {
-            ro_spec: spec,
-            ..Default::default()
-        },
-    )
-    .await;
-    request_status(
-        &mut c,
-        EnableRospec {
-            ro_spec_id: 1,
-            ..Default::default()
-        },
-    )
-    .await;
+    start_inventory(&mut c).await;
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 30).await;
     assert!(tags.len() >= 30);
     c.request(CloseConnection::default(), T)
@@ -710,29 +638,7 @@ async fn the_simulated_reader_records_its_sessions_as_the_proxy_does() {
     c.request(ImpinjEnableExtensions::default(), T)
         .await
         .expect("extensions");
-    let spec = rospec(
-        1,
-        vec![0],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
-    );
-    request_status(
-        &mut c,
-        AddRospec {
-            ro_spec: spec,
-            ..Default::default()
-        },
-    )
-    .await;
-    request_status(
-        &mut c,
-        EnableRospec {
-            ro_spec_id: 1,
-            ..Default::default()
-        },
-    )
-    .await;
+    start_inventory(&mut c).await;
     let (tags, _) = collect_reports(&mut c, Duration::from_secs(20), |t| t.len() >= 10).await;
     assert!(tags.len() >= 10);
     c.request(CloseConnection::default(), T)
@@ -762,24 +668,7 @@ async fn the_simulated_reader_records_its_sessions_as_the_proxy_does() {
 async fn at_shutdown_each_reader_gets_close_connection_and_each_client_is_closed() {
     let reader = TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let upstream = reader.local_addr().expect("bound").to_string();
-    let reader_task = tokio::spawn(async move {
-        let (s, _) = reader.accept().await.expect("accept");
-        let mut conn = llrp_gateway::net::connection::Connection::new(s);
-        conn.write_message(&Message::new(0, KeepaliveAck::default()))
-            .await
-            .expect("greeting");
-        while let Ok(Some(llrp::Inbound::Frame(f))) = conn.read_frame().await {
-            let m = Message::decode(&f).expect("decodes");
-            if let MessageBody::CloseConnection(_) = m.body {
-                conn.write_message(&Message::new(m.id, CloseConnectionResponse::default()))
-                    .await
-                    .expect("answer");
-                conn.shutdown().await.expect("close");
-                return true;
-            }
-        }
-        false
-    });
+    let reader_task = tokio::spawn(reader_answering_close(reader));
     let dir = tempfile::tempdir().expect("temp dir");
     let rec = dir.path().join("rec.jsonl");
     let p = proxy(&upstream, Some(&rec), None).await;
@@ -909,4 +798,47 @@ fn count_kind(stream: &[u8], msg_type: u16) -> u64 {
         rest = &rest[h.length as usize..];
     }
     n
+}
+
+/// Adds and enables an ROSpec on every antenna reporting each read, with every field and the
+/// Impinj ones; both must succeed.
+async fn start_inventory(c: &mut llrp_gateway::net::client::Client) {
+    let spec = rospec(
+        1,
+        vec![0],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
+    let add = AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(request_status(c, add).await, StatusCode::M_Success);
+    let enable = EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(request_status(c, enable).await, StatusCode::M_Success);
+}
+
+/// A scripted reader: greets, takes whatever comes until CLOSE_CONNECTION, answers it and
+/// closes; whether CLOSE_CONNECTION came.
+async fn reader_answering_close(listener: TcpListener) -> bool {
+    let (s, _) = listener.accept().await.expect("accept");
+    let mut conn = llrp_gateway::net::connection::Connection::new(s);
+    conn.write_message(&Message::new(0, KeepaliveAck::default()))
+        .await
+        .expect("greeting");
+    while let Ok(Some(llrp::Inbound::Frame(f))) = conn.read_frame().await {
+        let m = Message::decode(&f).expect("decodes");
+        if let MessageBody::CloseConnection(_) = m.body {
+            conn.write_message(&Message::new(m.id, CloseConnectionResponse::default()))
+                .await
+                .expect("answer");
+            conn.shutdown().await.expect("close");
+            return true;
+        }
+    }
+    false
 }
