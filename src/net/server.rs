@@ -277,8 +277,10 @@ pub async fn serve_tls(
         let may_turn = here.is_some() && streaming && queued < TURN_BYTES;
         tokio::select! {
             biased;
-            _ = shutdown.changed() => {
-                if *shutdown.borrow() {
+            changed = shutdown.changed() => {
+                // A dropped sender can never ask again: taken as the stop (not polled again
+                // and again).
+                if changed.is_err() || *shutdown.borrow() {
                     let mut sim = match (here.take(), away.take()) {
                         (Some(s), _) => s,
                         (None, Some(a)) => home(a).await?,
