@@ -6,7 +6,6 @@ use std::io::{self, BufWriter, Write};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::net::TcpListener;
 use tokio::sync::watch;
@@ -207,10 +206,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     if scenario.readers.is_empty() {
         return Err(SimError::NoReader);
     }
-    let utc0 = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0);
+    let utc0 = crate::net::clock::utc_now_us();
     let truth = match &opts.truth {
         Some(path) => Some(Arc::new(Truth {
             out: Mutex::new(BufWriter::new(File::create(path).map_err(|source| {

@@ -23,8 +23,7 @@ pub use replay::{run_replay, ReplayArgs};
 /// Longest the proxy waits at a stop for its sessions to close.
 const STOP_WAIT: Duration = Duration::from_secs(10);
 
-/// The LLRP port a `HOST` without one means.
-pub const LLRP_PORT: u16 = 5084;
+pub use crate::net::LLRP_PORT;
 
 /// Arguments of `llrp-gateway proxy`.
 #[derive(clap::Args, Debug)]
@@ -293,22 +292,7 @@ pub fn with_default_port(addr: &str) -> String {
     with_port_or(addr, LLRP_PORT)
 }
 
-/// `HOST` → `HOST:PORT` with the given `port`; `HOST:PORT` and `[v6]:PORT` unchanged.
-pub fn with_port_or(addr: &str, port: u16) -> String {
-    let has_port = match addr.rsplit_once(':') {
-        Some((host, port)) => {
-            port.parse::<u16>().is_ok() && (!host.contains(':') || host.ends_with(']'))
-        }
-        None => false,
-    };
-    if has_port {
-        addr.to_string()
-    } else if addr.contains(':') && !addr.starts_with('[') {
-        format!("[{addr}]:{port}")
-    } else {
-        format!("{addr}:{port}")
-    }
-}
+pub use crate::net::with_port_or;
 
 /// Runs `llrp-gateway proxy`.
 pub fn run(args: ProxyArgs) -> ExitCode {

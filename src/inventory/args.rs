@@ -3,8 +3,7 @@
 
 use std::path::PathBuf;
 
-/// The LLRP port a reader listens on when HOST has none.
-pub const LLRP_PORT: u16 = 5084;
+pub use crate::net::LLRP_PORT;
 
 /// Command-line options of `llrp-gateway inventory`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -130,16 +129,7 @@ pub fn reader_address(reader: &str) -> String {
 
 /// `HOST[:PORT]` as a socket address string: port `port` when none is given.
 pub fn reader_address_on(reader: &str, port: u16) -> String {
-    if reader.parse::<std::net::SocketAddr>().is_ok() {
-        return reader.to_string();
-    }
-    if let Ok(ip) = reader.parse::<std::net::IpAddr>() {
-        return std::net::SocketAddr::new(ip, port).to_string();
-    }
-    match reader.rsplit_once(':') {
-        Some((host, p)) if !host.contains(':') && p.parse::<u16>().is_ok() => reader.to_string(),
-        _ => format!("{reader}:{port}"),
-    }
+    crate::net::with_port_or(reader, port)
 }
 
 #[cfg(test)]

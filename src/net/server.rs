@@ -26,7 +26,7 @@ use super::tls;
 use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
-use crate::record::{Direction, Event, Recorder};
+use crate::record::{Direction, Entry, Event, Recorder};
 
 /// Sees the reader after each step (writes ground truth).
 pub type Observer = Box<dyn FnMut(&Reader) + Send>;
@@ -167,17 +167,22 @@ struct Client {
 async fn record_sent(recorder: &Option<Recorder>, conn: u32, bytes: &[u8]) {
     let Some(r) = recorder else { return };
     let at = r.now();
-    let mut rest = bytes;
-    while let Some(h) = llrp::FrameHeader::peek(rest) {
-        let len = (h.length as usize).clamp(llrp::frame::HEADER_LEN, rest.len());
-        let frame = bytes::Bytes::copy_from_slice(&rest[..len]);
-        if r.frame(at, conn, Direction::FromReader, frame)
-            .await
-            .is_err()
-        {
-            return;
-        }
-        rest = &rest[len..];
+    // One copy of the whole output, each frame a slice of it, all in one batch.
+    let all = bytes::Bytes::copy_from_slice(bytes);
+    let mut entries = Vec::new();
+    let mut start = 0;
+    while let Some(h) = llrp::FrameHeader::peek(&all[start..]) {
+        let len = (h.length as usize).clamp(llrp::frame::HEADER_LEN, all.len() - start);
+        entries.push(Entry::Frame {
+            at,
+            conn,
+            dir: Direction::FromReader,
+            frame: all.slice(start..start + len),
+        });
+        start += len;
+    }
+    if !entries.is_empty() {
+        let _ = r.entries(entries).await;
     }
 }
 

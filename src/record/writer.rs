@@ -8,7 +8,7 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use bytes::Bytes;
 use tokio::sync::{mpsc, OwnedSemaphorePermit, Semaphore};
@@ -34,13 +34,7 @@ pub struct RecordOptions {
     pub max_bytes: Option<u64>,
 }
 
-/// The wall clock now, UTC µs since the Unix epoch.
-pub fn utc_now_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0)
-}
+pub use crate::net::clock::utc_now_us;
 
 /// A handle to a running recording; cheap to clone, one per connection.
 #[derive(Clone, Debug)]

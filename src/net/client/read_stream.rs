@@ -1,7 +1,7 @@
 //! [`ReadStream`]: a running inventory on one connection, its reports turned into typed
 //! [`Read`]s, and [`utc_now_us`], the time stamp they get.
 
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use llrp::message::{MessageBody, MessageDef};
 use llrp::Message;
@@ -9,13 +9,7 @@ use llrp::Message;
 use super::{Client, ClientError, InventorySpec};
 use crate::reads::{Read, ReadDecoder};
 
-/// UTC now in µs since the Unix epoch (0 if the clock is before it).
-pub fn utc_now_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0)
-}
+pub use crate::net::clock::utc_now_us;
 
 /// A running inventory on one connection: its reports as typed [`Read`]s, its keepalives
 /// answered, and its channel frequencies from the hop table the reader itself advertises.
