@@ -156,6 +156,9 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
         },
         None => Scenario::default_s1(),
     };
+    for notice in &scenario.notices {
+        tracing::info!("scenario: {notice}");
+    }
     // One async worker: it only moves bytes between the sockets and the readers (whose work
     // runs on the readers' pool and whose look-ahead physics on the physics pool, one thread
     // per core each), so the process has 2 × cores threads plus this one and main.

@@ -21,6 +21,7 @@ use super::geometry::{distance, Vec3};
 use super::multipath::{self, Aim, Channel};
 use super::schedule::{self, Slot};
 use super::{noise, phase, rssi, Model, Read, Want};
+use crate::scenario::RssiModel;
 
 /// Half-interval (µs) of the central difference giving the radial velocity.
 const DOPPLER_STEP_US: u64 = 10_000;
@@ -135,12 +136,16 @@ impl Model {
         reads
     }
 
-    /// The channel from `antenna` aimed as `aim` to a tag at `position` (its delay only if
-    /// `delay`, see [`multipath::channel_of`]) and its forward-link margin over the tag's
+    /// The channel from `antenna` aimed as `aim` to tag `tag` at `position` (its delay only
+    /// if `delay`, see [`multipath::channel_of`]; its `gain_linear` times the tag's
+    /// orientation factor, [`super::tag::TagRadio::gain_factor`], since both links use only
+    /// the product of the two gains) and its forward-link margin over the tag's own
     /// sensitivity (dB).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn margin_with(
         &self,
         antenna: u16,
+        tag: usize,
         aim: &Aim,
         position: Vec3,
         lambda: f64,
@@ -148,7 +153,9 @@ impl Model {
         delay: bool,
     ) -> (Channel, f64) {
         let a = &self.antennas[usize::from(antenna) - 1];
-        let ch = multipath::channel_of(aim, &a.pattern, position, &self.planes, lambda, delay);
+        let mut ch = multipath::channel_of(aim, &a.pattern, position, &self.planes, lambda, delay);
+        let radio = &self.tags[tag].radio;
+        ch.gain_linear *= radio.gain_factor(aim.position, position);
         let p_tag = rssi::tag_power_dbm(
             tx_power_dbm,
             a.spec.cable_loss_db,
@@ -158,7 +165,10 @@ impl Model {
             ch.distance_m,
             ch.multipath_factor,
         );
-        (ch, p_tag - a.spec.tag_sensitivity_dbm)
+        (
+            ch,
+            p_tag - a.spec.tag_sensitivity_dbm - radio.sensitivity_db,
+        )
     }
 
     /// One read attempt on `antenna` on `channel_index` at the slot's instant, on one tag of
@@ -197,17 +207,8 @@ impl Model {
         if rng.gen::<f64>() >= schedule::read_probability(margin_db) {
             return None;
         }
-        let n_rssi = noise::gaussian(&mut rng, spec.rssi_noise);
-        let rssi_dbm = if self.reflectors.is_empty() {
-            rssi::simplified_dbm(
-                tx_power_dbm,
-                spec.cable_loss_db,
-                ch.gain_linear,
-                lambda,
-                ch.distance_m,
-                n_rssi,
-            )
-        } else {
+        let backscatter_db = self.tags[tag].radio.backscatter_db;
+        let rx = |noise| {
             rssi::full_model(
                 tx_power_dbm,
                 spec.cable_loss_db,
@@ -216,29 +217,51 @@ impl Model {
                 lambda,
                 ch.distance_m,
                 ch.multipath_factor,
-                n_rssi,
+                noise,
             )
-        }?;
+            .map(|dbm| dbm + backscatter_db)
+        };
+        // The noise-free level sets the phase and Doppler noise in both models.
+        let (clean_dbm, rssi_dbm) = match spec.rssi_model {
+            RssiModel::Reader => {
+                let clean = rx(0.0)?;
+                let n_db = noise::gaussian(&mut rng, spec.rssi_sigma_db);
+                (
+                    clean,
+                    rssi::reader_dbm(clean, n_db, spec.rssi_resolution_db),
+                )
+            }
+            RssiModel::GazeboEq5 => {
+                let n_rssi = noise::gaussian(&mut rng, spec.eq5_noise());
+                let noisy = rx(n_rssi)?;
+                (rx(0.0).unwrap_or(noisy), noisy)
+            }
+        };
         if rssi_dbm < rssi::READER_SENSITIVITY_DBM {
             return None;
         }
-        // The phase noise comes last from the attempt's generator: leaving it undrawn
-        // changes nothing else.
-        let phase_rad = if want.phase {
-            let mut n_phi = noise::gaussian(&mut rng, spec.phase_noise_rad);
+        // The phase and Doppler draws come last from the attempt's generator, always in the
+        // same order when either is asked for: leaving both undrawn changes nothing else, and
+        // asking for one gives it the same value as asking for both.
+        let (mut phase_rad, mut doppler_hz) = (0.0, 0.0);
+        if want.phase || want.doppler {
+            let scale = noise::weak_signal_scale(clean_dbm, spec.phase_noise_ref_dbm);
+            let mut n_phi = noise::gaussian(&mut rng, spec.phase_noise_rad * scale);
             if let Some(dist) = &spec.extra_phase_noise {
                 n_phi += noise::extra(&mut rng, dist);
             }
-            let phi0 = self.phase_offset(antenna, tag, channel_index);
-            phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi)
-        } else {
-            0.0
-        };
-        let doppler_hz = if want.doppler {
-            self.doppler_hz(antenna, tag, time_us, lambda)
-        } else {
-            0.0
-        };
+            if spec.phase_pi_ambiguity && rng.gen::<bool>() {
+                n_phi += std::f64::consts::PI;
+            }
+            let n_doppler = noise::gaussian(&mut rng, spec.doppler_sigma_hz * scale);
+            if want.phase {
+                let phi0 = self.phase_offset(antenna, tag, channel_index);
+                phase_rad = phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi);
+            }
+            if want.doppler {
+                doppler_hz = self.doppler_hz(antenna, tag, time_us, lambda) + n_doppler;
+            }
+        }
         Some(Read {
             tag,
             antenna,

@@ -24,8 +24,11 @@ pub mod robot;
 pub mod rssi;
 pub mod schedule;
 pub mod seed;
+pub mod tag;
 mod world;
 
+#[cfg(test)]
+mod realism_tests;
 #[cfg(test)]
 mod tests;
 
@@ -33,7 +36,7 @@ pub use world::World;
 
 use crate::scenario::tagmem::{parse_epc, parse_words};
 use crate::scenario::{
-    AntennaSpec, Mount, Pose, PoseSample, Reflector, RobotSpec, Scenario, VerticalAxis,
+    AntennaSpec, Mount, PhaseOffsets, Pose, PoseSample, RobotSpec, Scenario, VerticalAxis,
 };
 use seed::default_tid;
 use std::sync::Arc;
@@ -131,6 +134,9 @@ struct AntennaModel {
     mount_aim: Option<MountAim>,
     /// Bounds on how fast the antenna moves and turns, when known (fixed and robot mounts).
     rates: Option<field::Rates>,
+    /// The structured φ0 without the tag's part, per channel (index 0 = channel 1): the
+    /// scenario's listed offsets, else the reader/antenna part plus the cable's 4π·f·τ.
+    phase_base: Vec<f64>,
 }
 
 /// The constant part of a robot-mounted antenna's boresight.
@@ -149,6 +155,7 @@ struct TagModel {
     tid: Vec<u16>,
     user: Vec<u16>,
     motion: PolylineMotion,
+    radio: tag::TagRadio,
 }
 
 /// The channel model of one reader of a scenario.
@@ -163,7 +170,6 @@ pub struct Model {
     antennas: Vec<AntennaModel>,
     /// The scenario's tags, shared by every reader's model.
     tags: Arc<[TagModel]>,
-    reflectors: Arc<[Reflector]>,
     /// The reflectors with usable normals, prepared for the channel.
     planes: Arc<[Plane]>,
     /// The tag antenna's linear gain, [`rssi::db_to_linear`] of [`rssi::TAG_GAIN_DBI`].
@@ -275,7 +281,27 @@ impl Model {
                     }
                 }),
             };
+            let antenna_phase = std::f64::consts::TAU
+                * seed::unit(seed::mix(&[
+                    scenario.seed,
+                    seed::domain::ANTENNA_PHASE,
+                    reader as u64,
+                    antennas.len() as u64 + 1,
+                ]));
+            let phase_base = table
+                .iter()
+                .enumerate()
+                .map(|(k, &f)| match a.phase_offset_rad.get(k) {
+                    Some(&given) => given,
+                    None => geometry::wrap_2pi(
+                        antenna_phase
+                            + a.phase_sign
+                                * phase::cable_phase(f64::from(f) * 1e3, a.cable_delay_ns * 1e-9),
+                    ),
+                })
+                .collect();
             antennas.push(AntennaModel {
+                phase_base,
                 spec: a.clone(),
                 rates,
                 mount_aim,
@@ -299,7 +325,6 @@ impl Model {
             reads_per_second: spec.map_or(0.0, |r| r.reads_per_second),
             antennas,
             tags: Arc::clone(&world.tags),
-            reflectors: Arc::clone(&world.reflectors),
             planes: Arc::clone(&world.planes),
             tag_gain_linear: rssi::db_to_linear(rssi::TAG_GAIN_DBI),
             robots: Arc::clone(&world.robots),
@@ -384,15 +409,23 @@ impl Model {
     }
 
     /// Phase offset φ0 (rad) of (antenna, tag, channel): the scenario's per-channel value if
-    /// given, otherwise uniform in `[0, 2π)` drawn from the seed.
+    /// listed; otherwise, structured, the reader/antenna part plus the cable's 4π·f·τ plus
+    /// the tag's part, or, when the antenna asks for `random_per_channel`, uniform in
+    /// `[0, 2π)` drawn from the seed for each (antenna, tag, channel).
     pub fn phase_offset(&self, antenna: u16, tag: usize, channel: u16) -> f64 {
-        let given = self
-            .antennas
-            .get(usize::from(antenna.max(1) - 1))
-            .and_then(|a| a.spec.phase_offset_rad.get(usize::from(channel.max(1) - 1)));
-        match given {
-            Some(&phi0) => phi0,
-            None => {
+        let Some(a) = self.antennas.get(usize::from(antenna.max(1) - 1)) else {
+            return 0.0;
+        };
+        let k = usize::from(channel.max(1) - 1);
+        if let Some(&given) = a.spec.phase_offset_rad.get(k) {
+            return given;
+        }
+        match a.spec.phase_offsets {
+            PhaseOffsets::Structured => {
+                let tag_part = self.tags.get(tag).map_or(0.0, |t| t.radio.phase_rad);
+                geometry::wrap_2pi(a.phase_base.get(k).copied().unwrap_or(0.0) + tag_part)
+            }
+            PhaseOffsets::RandomPerChannel => {
                 // seed::mix(&[seed, PHASE_OFFSET, reader, antenna, tag, channel]), its
                 // prefix mixed once.
                 let h = seed::mix_on(

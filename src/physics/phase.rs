@@ -26,6 +26,12 @@ pub fn reported_phase(delay_rad: f64, phi0: f64, sign: f64, noise_rad: f64) -> f
     wrap_2pi(phi0 + sign * delay_rad + noise_rad)
 }
 
+/// Phase (rad) a one-way group delay `delay_s` adds to the round trip at `frequency_hz`:
+/// 4π·f·τ, the phase of a path longer by c·τ each way.
+pub fn cable_phase(frequency_hz: f64, delay_s: f64) -> f64 {
+    4.0 * std::f64::consts::PI * frequency_hz * delay_s
+}
+
 /// Doppler shift f_D = −2·v_r/λ in Hz for a radial velocity `v_r` (m/s, positive when the
 /// tag moves away), so an approaching tag gives a positive shift.
 pub fn doppler_hz(radial_velocity_mps: f64, wavelength_m: f64) -> f64 {

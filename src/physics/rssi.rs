@@ -1,12 +1,14 @@
 //! Received signal strength (\[G\] eqs. 1, 2, 5) and the forward link that powers the tag.
 //!
-//! Both RSSI forms share one absolute scale: RSSI (dBm) = P_tx − 2·L_cable + K_BS +
-//! 40·log10(a + n_RSSI), where `a` is the one-way amplitude gain. In the simplified model
-//! (\[G\] eq. 5) a = G·λ/(4πD), with G the reader antenna's linear gain toward the tag, standing
-//! for both antennas as \[G\] does; in the full model (\[G\] eq. 1) a = √(G_R·G_T)·λ/(4πD)·|1 + Σ H_i|
-//! with the tag's own gain G_T. The noise sits inside the log as in \[G\]: when a + n ≤ 0 the
-//! read fails. With \[G\]'s Table-1 mobile antenna (G = 3) at 30 dBm and 1 dB of cable, a tag at
-//! 3 m reads about −44 dBm and at 7 m about −59 dBm.
+//! Every RSSI form shares one absolute scale and one gain convention: RSSI (dBm) =
+//! P_tx − 2·L_cable + K_BS + 40·log10(a), with the one-way amplitude gain
+//! a = √(G_R·G_T)·λ/(4πD)·|1 + Σ H_i| (\[G\] eq. 1; in free space the sum is 0, so a reflector of
+//! coefficient 0 changes nothing). The reader model ([`reader_dbm`]) adds measurement noise in
+//! dB to that and quantises it as a reader reports it; \[G\] eq. 5 ([`backscatter_dbm`] with a
+//! noise) adds an absolute noise to `a` inside the log, so that when a + n ≤ 0 the read fails
+//! and the relative noise grows with distance. With \[G\]'s Table-1 mobile antenna (G = 3) and a
+//! dipole tag at 30 dBm and 1 dB of cable, a tag at 3 m reads about −49 dBm and at 7 m about
+//! −64 dBm.
 
 /// Tag antenna gain (a half-wave dipole), in dBi.
 pub const TAG_GAIN_DBI: f64 = 2.15;
@@ -34,6 +36,22 @@ pub fn backscatter_dbm(
     }
     let dbm = tx_power_dbm - 2.0 * cable_loss_db + BACKSCATTER_LOSS_DB + 40.0 * log10(arg);
     dbm.is_finite().then_some(dbm)
+}
+
+/// The reader model's RSSI in dBm: the noise-free `clean_dbm` plus `noise_db`, rounded to the
+/// nearest multiple of `resolution_db` (unrounded when it is 0).
+pub fn reader_dbm(clean_dbm: f64, noise_db: f64, resolution_db: f64) -> f64 {
+    quantise(clean_dbm + noise_db, resolution_db)
+}
+
+/// `x` rounded to the nearest multiple of `step` (halves away from zero); `x` when `step` is
+/// not positive.
+pub fn quantise(x: f64, step: f64) -> f64 {
+    if step > 0.0 {
+        (x / step).round() * step
+    } else {
+        x
+    }
 }
 
 /// Simplified model (\[G\] eq. 5) in dBm: 40·log10(G·λ/(4πD) + n) on the absolute scale above.
@@ -107,6 +125,32 @@ mod tests {
     use super::*;
 
     const LAMBDA: f64 = 0.3463;
+
+    #[test]
+    fn reader_model_adds_db_noise_and_quantises() {
+        assert_eq!(reader_dbm(-52.3, 0.0, 0.5), -52.5);
+        assert_eq!(reader_dbm(-52.2, 0.0, 0.5), -52.0);
+        assert_eq!(reader_dbm(-52.2, -1.0, 0.5), -53.0);
+        assert_eq!(reader_dbm(-52.2, 0.0, 0.0), -52.2);
+        assert_eq!(quantise(-61.25, 0.5), -61.5);
+        // The step applies at any level: the noise is in dB, not inside the log.
+        let near = reader_dbm(-30.0, 0.25, 0.5);
+        let far = reader_dbm(-75.0, 0.25, 0.5);
+        assert_eq!(near - far, 45.0);
+    }
+
+    #[test]
+    fn free_space_is_the_full_model_without_paths() {
+        // The simplified model with the geometric mean of the two gains is the full model
+        // with a multipath factor of 1.
+        let g = db_to_linear(TAG_GAIN_DBI);
+        for d in [0.5, 2.0, 6.0] {
+            let simple = simplified_dbm(30.0, 1.0, (3.0 * g).sqrt(), LAMBDA, d, 0.0);
+            let full = full_model(30.0, 1.0, 3.0, g, LAMBDA, d, 1.0, 0.0);
+            let (a, b) = (simple.expect("positive"), full.expect("positive"));
+            assert!((a - b).abs() < 1e-9, "{a} {b}");
+        }
+    }
 
     #[test]
     fn log10_through_ln_matches_the_library() {

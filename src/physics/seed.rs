@@ -90,6 +90,10 @@ pub mod domain {
     pub const ROBOT: u64 = 3;
     /// Default TID serial numbers.
     pub const TID: u64 = 4;
+    /// Per-tag radio variation ([`super::super::tag::TagRadio`]).
+    pub const TAG: u64 = 5;
+    /// The reader/antenna part of the structured phase offset.
+    pub const ANTENNA_PHASE: u64 = 6;
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)

@@ -81,7 +81,7 @@ fn no_reads_beyond_range_and_lower_power_shrinks_the_range() {
     let middle = m.inventory(1, 0, 5_000_000, Some(21.5)).len();
     assert!(middle < strong, "{middle} vs {strong}");
     // Without RSSI noise, RSSI follows the configured power dB for dB.
-    let quiet = serde_json::json!({ "rssi_noise": 0.0 });
+    let quiet = serde_json::json!({ "rssi_sigma_db": 0.0, "rssi_resolution_db": 0.0 });
     let m = Model::new(&fixed_scenario(&[[6.0, 0.0, 1.0]], quiet), 0);
     let at = |p: f64| {
         let r = m.inventory(1, 0, 2_000_000, Some(p));
@@ -212,7 +212,8 @@ fn doppler_of_a_tag_approaching_a_fixed_antenna() {
         "tags": [ { "epc": "E20000000000000000000001", "position": [6, 0, 1],
                     "path": { "waypoints": [[1, 0, 1]], "speed": 1.5 } } ],
         "readers": [ { "name": "r", "region": "etsi", "fixed_channel": 2, "antennas": [
-            { "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } } } ] } ]
+            { "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } },
+              "doppler_sigma_hz": 0 } ] } ]
     });
     let m = Model::new(&Scenario::from_json(&v.to_string()).expect("valid"), 0);
     let reads = m.inventory(1, 200_000, 3_000_000, None);
@@ -266,27 +267,36 @@ fn robot_antenna_pose_odometry_and_doppler() {
 
 #[test]
 fn multipath_changes_rssi_and_phase_consistently() {
-    let base = |reflect: bool| {
+    let base = |coefficient: Option<f64>| {
         let v = serde_json::json!({
             "name": "floor",
             "seed": 9,
             "world": { "min": [-1, -3, 0], "max": [10, 3, 3] },
-            "reflectors": if reflect {
-                serde_json::json!([{ "point": [0, 0, 0], "normal": [0, 0, 1], "coefficient": 0.5 }])
-            } else {
-                serde_json::json!([])
+            "reflectors": match coefficient {
+                Some(c) => serde_json::json!([{ "point": [0, 0, 0], "normal": [0, 0, 1], "coefficient": c }]),
+                None => serde_json::json!([]),
             },
+            "tag_variation": { "sensitivity_sigma_db": 0, "backscatter_sigma_db": 0 },
             "tags": [ { "epc": "E20000000000000000000001", "position": [3, 0, 0.4] } ],
             "readers": [ { "name": "r", "region": { "hop_table_khz": [915000] }, "antennas": [
                 { "mount": { "type": "fixed", "pose": { "position": [0, 0, 1.2] } },
-                  "phase_noise_rad": 0.0, "rssi_noise": 0.0, "phase_offset_rad": [0.0],
-                  "beamwidth_deg": 360, "gain_dbi": 0.0 } ] } ]
+                  "phase_noise_rad": 0.0, "rssi_sigma_db": 0.0, "rssi_resolution_db": 0.0,
+                  "phase_offset_rad": [0.0], "beamwidth_deg": 360, "gain_dbi": 0.0 } ] } ]
         });
         Model::new(&Scenario::from_json(&v.to_string()).expect("valid"), 0)
     };
-    let (free, floor) = (base(false), base(true));
+    let (free, floor, black) = (base(None), base(Some(0.5)), base(Some(0.0)));
     let rf = free.inventory(1, 0, 10_000, None)[0];
     let rm = floor.inventory(1, 0, 10_000, None)[0];
+    // A reflector that reflects nothing changes nothing: one gain convention for both.
+    let rb = black.inventory(1, 0, 10_000, None)[0];
+    assert!(
+        (rb.rssi_dbm - rf.rssi_dbm).abs() < 1e-9,
+        "{} {}",
+        rb.rssi_dbm,
+        rf.rssi_dbm
+    );
+    assert!(angle_diff(rb.phase_rad, rf.phase_rad) < 1e-9);
     let lambda = phase::wavelength_m(915_000);
     let (d, dr) = ((9.0f64 + 0.64).sqrt(), (9.0f64 + 2.56).sqrt());
     let k = TAU / lambda;
@@ -296,6 +306,7 @@ fn multipath_changes_rssi_and_phase_consistently() {
     let factor = h_re.hypot(h_im);
     let g_t = rssi::db_to_linear(rssi::TAG_GAIN_DBI);
     let free_full = rssi::full_model(30.0, 1.0, 1.0, g_t, lambda, d, 1.0, 0.0).expect("positive");
+    assert!((rf.rssi_dbm - free_full).abs() < 1e-9);
     assert!((rm.rssi_dbm - free_full - 40.0 * factor.log10()).abs() < 1e-6);
     assert!(angle_diff(rf.phase_rad, 4.0 * PI * d / lambda) < 1e-9);
     assert!(angle_diff(rm.phase_rad, 4.0 * PI * d / lambda - 2.0 * h_im.atan2(h_re)) < 1e-9);

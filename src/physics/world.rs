@@ -9,7 +9,6 @@ use super::*;
 #[derive(Clone, Debug)]
 pub struct World {
     pub(super) tags: Arc<[TagModel]>,
-    pub(super) reflectors: Arc<[Reflector]>,
     pub(super) planes: Arc<[Plane]>,
     pub(super) robots: Arc<[RobotTrajectory]>,
     /// When the last tag stops moving, µs (`u64::MAX`: never; 0: no tag moves).
@@ -30,7 +29,8 @@ impl World {
         let tags: Vec<TagModel> = scenario
             .tags
             .iter()
-            .map(|t| {
+            .enumerate()
+            .map(|(index, t)| {
                 let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
                 TagModel {
                     epc,
@@ -45,6 +45,7 @@ impl World {
                         .and_then(|h| parse_words(h).ok())
                         .unwrap_or_default(),
                     motion: PolylineMotion::new(t.position, t.path.as_ref()),
+                    radio: tag::TagRadio::new(scenario, index, t),
                 }
             })
             .collect();
@@ -60,7 +61,6 @@ impl World {
             .unwrap_or(0);
         World {
             tags: tags.into(),
-            reflectors: scenario.reflectors.clone().into(),
             planes: multipath::planes(&scenario.reflectors).into(),
             robots: robots.into(),
             tags_rest_us,

@@ -68,6 +68,62 @@ pub struct TagSpec {
     /// User memory as hex (whole 16-bit words); default empty.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub user: Option<String>,
+    /// Axis of the tag's dipole (any length but zero); none: the tag is aligned with every
+    /// antenna (peak dipole gain, no polarisation loss).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<[f64; 3]>,
+    /// This tag's chip sensitivity against the antenna's `tag_sensitivity_dbm` (dB, positive:
+    /// less sensitive); none: drawn from the scenario's `tag_variation`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity_offset_db: Option<f64>,
+    /// This tag's backscatter strength against the nominal (dB); none: drawn from the
+    /// scenario's `tag_variation`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backscatter_offset_db: Option<f64>,
+}
+
+/// Spread of tag-to-tag (chip and inlay) variation, drawn per tag from the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TagVariation {
+    /// Standard deviation of the chip sensitivity across tags (dB).
+    #[serde(default = "default_tag_spread")]
+    pub sensitivity_sigma_db: f64,
+    /// Standard deviation of the backscatter strength across tags (dB).
+    #[serde(default = "default_tag_spread")]
+    pub backscatter_sigma_db: f64,
+}
+
+impl Default for TagVariation {
+    fn default() -> TagVariation {
+        TagVariation {
+            sensitivity_sigma_db: default_tag_spread(),
+            backscatter_sigma_db: default_tag_spread(),
+        }
+    }
+}
+
+/// How an antenna's reported RSSI is made from the channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RssiModel {
+    /// The noise-free channel plus Gaussian measurement noise in dB (`rssi_sigma_db`),
+    /// quantised to `rssi_resolution_db`, as a reader reports it.
+    #[default]
+    Reader,
+    /// \[G\] eq. 5: an absolute noise `rssi_noise` added to the amplitude inside the log.
+    GazeboEq5,
+}
+
+/// Where an antenna's phase offsets φ0 come from when `phase_offset_rad` does not list them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PhaseOffsets {
+    /// φ0 = reader/antenna part + cable delay (linear in frequency) + per-tag part.
+    #[default]
+    Structured,
+    /// An independent uniform φ0 per (antenna, tag, channel), as before the structured model.
+    RandomPerChannel,
 }
 
 /// Frequency plan of a reader.
@@ -287,19 +343,48 @@ pub struct AntennaSpec {
     /// Power a tag chip needs to wake up, in dBm.
     #[serde(default = "default_tag_sensitivity")]
     pub tag_sensitivity_dbm: f64,
-    /// Phase offset φ0 per channel (index 0 = channel 1); missing channels get offsets
-    /// derived from the seed, different per tag.
+    /// Phase offset φ0 per channel (index 0 = channel 1), the same for every tag; missing
+    /// channels get offsets as `phase_offsets` says.
     #[serde(default)]
     pub phase_offset_rad: Vec<f64>,
+    /// How φ0 is made for the channels `phase_offset_rad` does not list.
+    #[serde(default)]
+    pub phase_offsets: PhaseOffsets,
+    /// One-way group delay of the cable and the reader's front end (ns): a phase of
+    /// 4π·f·τ, linear in frequency, in the structured φ0.
+    #[serde(default = "default_cable_delay")]
+    pub cable_delay_ns: f64,
     /// +1: φ = φ0 + 4πD/λ (\[G\] eq. 4); −1: φ = φ0 − 4πD/λ (\[M\] eq. 13).
     #[serde(default = "default_phase_sign")]
     pub phase_sign: f64,
-    /// Standard deviation σ_φ of the Gaussian phase noise (rad).
+    /// Standard deviation σ_φ of the Gaussian phase noise (rad) of a read at or above
+    /// `phase_noise_ref_dbm`; below it σ grows as the backscatter amplitude falls.
     #[serde(default = "default_phase_noise")]
     pub phase_noise_rad: f64,
-    /// Standard deviation of the noise added inside the RSSI log (\[G\] eq. 5).
-    #[serde(default = "default_rssi_noise")]
-    pub rssi_noise: f64,
+    /// RSSI (dBm) down to which the phase and Doppler noise keep their nominal σ.
+    #[serde(default = "default_noise_ref")]
+    pub phase_noise_ref_dbm: f64,
+    /// Report the phase with Impinj's π ambiguity: a read's phase is shifted by π or not,
+    /// at random.
+    #[serde(default)]
+    pub phase_pi_ambiguity: bool,
+    /// Standard deviation of the Doppler measurement noise at or above `phase_noise_ref_dbm`
+    /// (Hz).
+    #[serde(default = "default_doppler_sigma")]
+    pub doppler_sigma_hz: f64,
+    /// How the reported RSSI is made.
+    #[serde(default)]
+    pub rssi_model: RssiModel,
+    /// Standard deviation of the RSSI measurement noise (dB; `rssi_model` "reader").
+    #[serde(default = "default_rssi_sigma")]
+    pub rssi_sigma_db: f64,
+    /// Step the reader reports RSSI in (dB; 0: unquantised; `rssi_model` "reader").
+    #[serde(default = "default_rssi_resolution")]
+    pub rssi_resolution_db: f64,
+    /// Standard deviation of the noise added inside the RSSI log (\[G\] eq. 5; used only with
+    /// `rssi_model` "gazebo_eq5"; default 0.01).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rssi_noise: Option<f64>,
     /// Optional extra phase noise n_opt.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extra_phase_noise: Option<NoiseDist>,
@@ -361,10 +446,35 @@ fn default_phase_sign() -> f64 {
     1.0
 }
 fn default_phase_noise() -> f64 {
-    0.1
+    0.025
 }
-fn default_rssi_noise() -> f64 {
-    0.01
+/// \[G\] Table 1's RSS noise, the default of `rssi_noise`.
+pub const DEFAULT_RSSI_NOISE: f64 = 0.01;
+
+impl AntennaSpec {
+    /// The \[G\] eq. 5 noise σ: `rssi_noise` or its default.
+    pub fn eq5_noise(&self) -> f64 {
+        self.rssi_noise.unwrap_or(DEFAULT_RSSI_NOISE)
+    }
+}
+
+fn default_rssi_sigma() -> f64 {
+    0.4
+}
+fn default_rssi_resolution() -> f64 {
+    0.5
+}
+fn default_noise_ref() -> f64 {
+    -40.0
+}
+fn default_doppler_sigma() -> f64 {
+    5.0
+}
+fn default_cable_delay() -> f64 {
+    15.0
+}
+fn default_tag_spread() -> f64 {
+    1.0
 }
 fn default_range() -> f64 {
     7.0

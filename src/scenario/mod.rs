@@ -11,8 +11,8 @@ mod validate;
 use serde::{Deserialize, Serialize};
 
 pub use format::{
-    AntennaSpec, Mount, NoiseDist, Path, Pose, ReaderSpec, Reflector, Region, RobotSpec, TagSpec,
-    VerticalAxis, WorldBounds,
+    AntennaSpec, Mount, NoiseDist, Path, PhaseOffsets, Pose, ReaderSpec, Reflector, Region,
+    RobotSpec, RssiModel, TagSpec, TagVariation, VerticalAxis, WorldBounds, DEFAULT_RSSI_NOISE,
 };
 pub use recorded::PoseSample;
 
@@ -34,8 +34,15 @@ pub struct Scenario {
     pub reflectors: Vec<Reflector>,
     /// The tags.
     pub tags: Vec<TagSpec>,
+    /// Spread of the tags' sensitivity and backscatter strength.
+    #[serde(default)]
+    pub tag_variation: TagVariation,
     /// The readers.
     pub readers: Vec<ReaderSpec>,
+    /// One line for each field the file gives that the models no longer use, saying what
+    /// replaced it (filled in by loading).
+    #[serde(skip)]
+    pub notices: Vec<String>,
 }
 
 /// Why a scenario could not be loaded. Displays as `<path>: <reason>`.
@@ -123,11 +130,22 @@ impl Scenario {
         Ok(scenario)
     }
 
-    /// Replaces defaults that depend on other fields (the region's dwell time).
+    /// Replaces defaults that depend on other fields (the region's dwell time) and notes the
+    /// fields given that the chosen models do not use.
     fn fill_defaults(&mut self) {
-        for reader in &mut self.readers {
+        for (r, reader) in self.readers.iter_mut().enumerate() {
             if reader.hop_dwell_ms.is_nan() {
                 reader.hop_dwell_ms = reader.region.default_dwell_ms();
+            }
+            for (a, antenna) in reader.antennas.iter().enumerate() {
+                if antenna.rssi_noise.is_some() && antenna.rssi_model == RssiModel::Reader {
+                    self.notices.push(format!(
+                        "readers[{r}].antennas[{a}].rssi_noise is used only with \
+                         \"rssi_model\": \"gazebo_eq5\"; the default reader model takes its \
+                         noise from rssi_sigma_db ({} dB)",
+                        antenna.rssi_sigma_db
+                    ));
+                }
             }
         }
     }

@@ -68,7 +68,7 @@ fn defaults_are_filled_and_round_trip_through_json() {
     let a = &r.antennas[0];
     assert_eq!(
         (a.phase_noise_rad, a.rssi_noise, a.range_m),
-        (0.1, 0.01, 7.0)
+        (0.025, None, 7.0)
     );
     let mut etsi = base();
     etsi["readers"][0]["region"] = "etsi".into();
@@ -253,4 +253,36 @@ fn bad_noise_parameters_are_refused() {
         std: 0.1
     })
     .is_ok());
+}
+
+#[test]
+fn old_fields_load_with_a_notice_naming_what_replaced_them() {
+    // A file written before the reader model: [G]'s RSS noise on the first antenna.
+    let mut old = base();
+    old["readers"][0]["antennas"][0]["rssi_noise"] = serde_json::json!(0.01);
+    let s = Scenario::from_json(&old.to_string()).expect("an old file still loads");
+    assert_eq!(s.notices.len(), 1, "{:?}", s.notices);
+    let n = &s.notices[0];
+    assert!(n.starts_with("readers[0].antennas[0].rssi_noise"), "{n}");
+    assert!(
+        n.contains("gazebo_eq5") && n.contains("rssi_sigma_db"),
+        "{n}"
+    );
+    assert!(!n.contains('\n'));
+    let a = &s.readers[0].antennas[0];
+    assert_eq!((a.rssi_model, a.eq5_noise()), (RssiModel::Reader, 0.01));
+    // With [G] eq. 5 asked for, the field is used and nothing is said.
+    old["readers"][0]["antennas"][0]["rssi_model"] = serde_json::json!("gazebo_eq5");
+    let s = Scenario::from_json(&old.to_string()).expect("loads");
+    assert!(s.notices.is_empty(), "{:?}", s.notices);
+    // The new fields are checked like the old ones.
+    let mut bad = base();
+    bad["readers"][0]["antennas"][0]["rssi_sigma_db"] = serde_json::json!(-1);
+    assert!(error_of(&bad).starts_with("readers[0].antennas[0].rssi_sigma_db: must be in"));
+    let mut bad = base();
+    bad["tags"][0]["orientation"] = serde_json::json!([0, 0, 0]);
+    assert!(error_of(&bad).starts_with("tags[0].orientation: must not be the zero vector"));
+    let mut bad = base();
+    bad["readers"][0]["antennas"][0]["rssi_model"] = serde_json::json!("friis");
+    assert!(error_of(&bad).contains("rssi_model"), "{}", error_of(&bad));
 }

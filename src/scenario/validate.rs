@@ -118,6 +118,18 @@ pub(super) fn validate(s: &Scenario) -> Check {
         in_range(&format!("{p}.coefficient"), r.coefficient, 0.0, 1.0)?;
     }
     validate_tags(s)?;
+    in_range(
+        "tag_variation.sensitivity_sigma_db",
+        s.tag_variation.sensitivity_sigma_db,
+        0.0,
+        6.0,
+    )?;
+    in_range(
+        "tag_variation.backscatter_sigma_db",
+        s.tag_variation.backscatter_sigma_db,
+        0.0,
+        6.0,
+    )?;
     if s.readers.is_empty() {
         return Err(invalid("readers", "must list at least one reader"));
     }
@@ -165,6 +177,23 @@ fn validate_tags(s: &Scenario) -> Check {
         }
         if let Some(user) = &t.user {
             parse_words(user).map_err(|e| invalid(format!("{p}.user"), e))?;
+        }
+        if let Some(axis) = &t.orientation {
+            finite(&format!("{p}.orientation"), axis)?;
+            if axis.iter().all(|&x| x == 0.0) {
+                return Err(invalid(
+                    format!("{p}.orientation"),
+                    "must not be the zero vector (omit it for an aligned tag)",
+                ));
+            }
+        }
+        for (name, v) in [
+            ("sensitivity_offset_db", t.sensitivity_offset_db),
+            ("backscatter_offset_db", t.backscatter_offset_db),
+        ] {
+            if let Some(v) = v {
+                in_range(&format!("{p}.{name}"), v, -20.0, 20.0)?;
+            }
         }
         if let Some(path) = &t.path {
             let pp = format!("{p}.path");
@@ -315,7 +344,32 @@ fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> 
         0.0,
         100.0,
     )?;
-    in_range(&format!("{p}.rssi_noise"), a.rssi_noise, 0.0, 10.0)?;
+    in_range(&format!("{p}.rssi_noise"), a.eq5_noise(), 0.0, 10.0)?;
+    in_range(&format!("{p}.rssi_sigma_db"), a.rssi_sigma_db, 0.0, 20.0)?;
+    in_range(
+        &format!("{p}.rssi_resolution_db"),
+        a.rssi_resolution_db,
+        0.0,
+        10.0,
+    )?;
+    in_range(
+        &format!("{p}.phase_noise_ref_dbm"),
+        a.phase_noise_ref_dbm,
+        -150.0,
+        30.0,
+    )?;
+    in_range(
+        &format!("{p}.doppler_sigma_hz"),
+        a.doppler_sigma_hz,
+        0.0,
+        1000.0,
+    )?;
+    in_range(
+        &format!("{p}.cable_delay_ns"),
+        a.cable_delay_ns,
+        0.0,
+        10_000.0,
+    )?;
     if let Some(d) = &a.extra_phase_noise {
         check_noise(d).map_err(|e| invalid(format!("{p}.extra_phase_noise"), e))?;
     }

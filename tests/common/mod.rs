@@ -153,6 +153,7 @@ pub fn line_scenario(distances: &[f64]) -> Scenario {
   "seed": 5,
   "world": {{ "min": [-5, -5, 0], "max": [60, 5, 3] }},
   "tags": [{tags}],
+  "tag_variation": {{ "sensitivity_sigma_db": 0, "backscatter_sigma_db": 0 }},
   "readers": [{{
     "name": "r",
     "listen": "127.0.0.1:0",
@@ -168,7 +169,9 @@ pub fn line_scenario(distances: &[f64]) -> Scenario {
       "phase_offset_rad": [0, 0, 0, 0],
       "phase_sign": 1,
       "phase_noise_rad": 0,
-      "rssi_noise": 0,
+      "rssi_sigma_db": 0,
+      "rssi_resolution_db": 0,
+      "doppler_sigma_hz": 0,
       "range_m": 7,
       "range_sigma": 0
     }}]

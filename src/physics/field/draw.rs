@@ -140,7 +140,7 @@ impl Model {
         let compute = |delay| {
             let aim = self.aim(antenna, t_us);
             let position = self.tag_position(tag, t_us);
-            self.margin_with(antenna, &aim, position, lambda, tx_power_dbm, delay)
+            self.margin_with(antenna, tag, &aim, position, lambda, tx_power_dbm, delay)
         };
         // A kept link serves every later request, so it has its delay.
         let cached = bucket.rest.as_ref().and_then(|c| {
@@ -203,10 +203,24 @@ impl Model {
         if dist > bucket.reach {
             return false;
         }
+        let radio = &self.tags[tag].radio;
+        let scale = radio.amplitude_scale;
+        if radio.axis.is_some() {
+            // An oriented tag's own pattern is outside the bounds: always the exact sum.
+            let gain = power_gain_with(
+                &aim,
+                &a.pattern,
+                position,
+                &self.planes,
+                bucket.wavelength_m,
+            );
+            return gain * radio.gain_factor(aim.position, position)
+                >= bucket.threshold * scale * scale;
+        }
         if let Some((known, margin)) =
             bucket
                 .near
-                .decide(&a.gains, position, dist, bucket.amplitude)
+                .decide(&a.gains, position, dist, bucket.amplitude * scale)
         {
             if let (Some(rates), Some(k)) = (a.rates, bucket.memo.kept.get_mut(tag)) {
                 let tag_speed = self.tags[tag].motion.speed();
@@ -236,6 +250,6 @@ impl Model {
             position,
             &self.planes,
             bucket.wavelength_m,
-        ) >= bucket.threshold
+        ) >= bucket.threshold * scale * scale
     }
 }

@@ -143,7 +143,10 @@ impl Around<'_> {
     /// With a₀ = √g₀/D and aᵢ = Γᵢ·√gᵢ/dᵢ, the forward link powers the tag when
     /// A = |a₀ + Σ aᵢ·e^{jφᵢ}| reaches the threshold (the channel of
     /// [`crate::physics::multipath::channel`]: √g₀·|1 + Σ Hᵢ|/D = A).
-    fn status(&self, q: Vec3, moves: f64) -> Status {
+    ///
+    /// `scales` are the bounds on the tag's own factor on the threshold
+    /// ([`crate::physics::tag::TagRadio::threshold_scales`]).
+    fn status(&self, q: Vec3, moves: f64, scales: (f64, f64)) -> Status {
         let p = self.aim.position;
         let (b, bn) = (self.aim.boresight, self.aim.boresight_norm);
         let moved = self.moved;
@@ -180,9 +183,9 @@ impl Around<'_> {
             reflected += m.plane.coefficient.abs() * self.gains.above(c_up) / l_min;
         }
         let (a_hi, a_lo) = (direct_hi + reflected, direct_lo - reflected);
-        if a_hi < self.threshold_low {
+        if a_hi < self.threshold_low * scales.0 {
             Status::Out
-        } else if within && a_lo > self.threshold_high {
+        } else if within && a_lo > self.threshold_high * scales.1 {
             Status::In
         } else {
             Status::Undecided
@@ -284,7 +287,8 @@ impl Model {
         };
         for (k, tag) in self.tags.iter().enumerate() {
             let q = tag.motion.position(crate::physics::seconds(t0_us));
-            match around.status(q, tag.motion.speed() * seconds) {
+            let scales = tag.radio.threshold_scales();
+            match around.status(q, tag.motion.speed() * seconds, scales) {
                 Status::In => c.inside.push(k),
                 Status::Undecided => c.undecided.push(k),
                 Status::Out => {}

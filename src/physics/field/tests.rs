@@ -15,7 +15,9 @@ fn exact(m: &Model, antenna: u16, tx: f64, t_us: u64, lambda: f64, tag: usize) -
     let aim = Aim::new(&m.antenna_pose(antenna, t_us));
     let position = m.tag_position(tag, t_us);
     let by_margin = distance(aim.position, position) <= reach_m(spec)
-        && m.margin_with(antenna, &aim, position, lambda, tx, true).1 >= 0.0;
+        && m.margin_with(antenna, tag, &aim, position, lambda, tx, true)
+            .1
+            >= 0.0;
     let mut b = Bucket {
         antenna,
         t_us,
@@ -119,8 +121,15 @@ fn fields_at_rest_are_exact() {
             for tag in 0..m.tag_count() {
                 for t in [late + 1234, 2 * late] {
                     let aim = Aim::new(&m.antenna_pose(antenna, t));
-                    let fresh =
-                        m.margin_with(antenna, &aim, m.tag_position(tag, t), lambda, 27.0, true);
+                    let fresh = m.margin_with(
+                        antenna,
+                        tag,
+                        &aim,
+                        m.tag_position(tag, t),
+                        lambda,
+                        27.0,
+                        true,
+                    );
                     assert_eq!(m.link(&bucket, antenna, tag, t, 1, 27.0, true), fresh);
                 }
                 // The Doppler shortcut gives what the central difference gives.
@@ -181,6 +190,13 @@ fn everything_moves() -> Scenario {
                                     "speed": 0.3, "loop_path": true })
             } else {
                 serde_json::Value::Null
+            },
+            // Every fifth tag oriented (its own pattern, never bounded in), others with
+            // the scenario's sensitivity spread.
+            "orientation": if i % 5 == 0 {
+                serde_json::json!([f64::from(i % 3), 1.0, f64::from(i % 2)])
+            } else {
+                serde_json::Value::Null
             }
         }));
     }
@@ -209,6 +225,7 @@ fn everything_moves() -> Scenario {
             { "point": [10, 0, 0], "normal": [-1, 0, 0], "coefficient": 0.4 }
         ],
         "tags": tags,
+        "tag_variation": { "sensitivity_sigma_db": 2.0 },
         "readers": [ { "name": "r", "region": "fcc", "antennas": [
             antenna(90.0, 0.0, 65.0), antenna(45.0, 20.0, 240.0), antenna(-30.0, -15.0, 30.0)
         ] } ]

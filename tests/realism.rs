@@ -1,0 +1,193 @@
+//! The simulated reader's measurements look like an Impinj reader's, seen over loopback with
+//! the project's client: consecutive same-channel reads of a tag differ by well under 1 dB
+//! (docs/simulator.md, "Measurement model"), a static tag's RSSI, phase and Doppler scatter
+//! with the documented σ, weaker reads are noisier, and \[G\] eq. 5 (`gazebo_eq5`) still gives
+//! the old, distance-growing RSSI noise.
+
+mod common;
+
+use std::collections::HashMap;
+use std::f64::consts::TAU;
+
+use common::*;
+use llrp_gateway::net::clock::Speed;
+use llrp_gateway::physics::noise::weak_signal_scale;
+use llrp_gateway::scenario::{RssiModel, Scenario};
+
+/// One read as the client decodes it.
+#[derive(Clone, Copy, Debug)]
+struct Seen {
+    tag: u8,
+    channel: u16,
+    t_us: u64,
+    rssi_dbm: f64,
+    phase_rad: f64,
+    doppler_hz: f64,
+}
+
+/// Inventories every antenna of `scenario` at `--speed max` with a report per read and the
+/// Impinj RSSI, phase and Doppler, until `n` reads.
+async fn reads(scenario: &Scenario, n: usize) -> Vec<Seen> {
+    let sim = start(scenario, Speed::Max).await;
+    let mut c = connect(&sim).await;
+    c.enable_impinj_extensions(T).await.expect("extensions");
+    let spec = rospec(
+        1,
+        vec![0],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
+    c.add_rospec(spec, T).await.expect("ADD_ROSPEC");
+    c.enable_rospec(1, T).await.expect("ENABLE_ROSPEC");
+    let (tags, _) = collect_reports(&mut c, T * 6, |t| t.len() >= n).await;
+    sim.shutdown().await;
+    assert!(tags.len() >= n, "only {} reads", tags.len());
+    tags.iter()
+        .map(|t| Seen {
+            tag: *t.epc_bytes().last().expect("an EPC"),
+            channel: t.channel_index.map_or(0, |c| c.0),
+            t_us: t.first_seen_timestamp_utc.map_or(0, |u| u.0),
+            rssi_dbm: f64::from(t.impinj_peak_rssi().expect("ImpinjPeakRSSI")) / 100.0,
+            phase_rad: f64::from(t.impinj_phase_angle().expect("phase")) * TAU / 4096.0,
+            doppler_hz: f64::from(t.impinj_doppler().expect("Doppler")) / 16.0,
+        })
+        .collect()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    assert!(!v.is_empty(), "no values");
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// |a − b| on the circle.
+fn angle(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(TAU);
+    d.min(TAU - d)
+}
+
+/// |ΔRSSI| of consecutive reads of one tag on one channel at most 20 ms apart.
+fn consecutive_rssi_steps(seen: &[Seen]) -> Vec<f64> {
+    let mut last: HashMap<(u8, u16), Seen> = HashMap::new();
+    let mut steps = Vec::new();
+    for s in seen {
+        if let Some(p) = last.insert((s.tag, s.channel), *s) {
+            if s.t_us.saturating_sub(p.t_us) <= 20_000 {
+                steps.push((s.rssi_dbm - p.rssi_dbm).abs());
+            }
+        }
+    }
+    steps
+}
+
+#[tokio::test]
+async fn default_scenario_rssi_steps_are_under_a_decibel() {
+    let seen = reads(&s1(), 3000).await;
+    let steps = consecutive_rssi_steps(&seen);
+    assert!(steps.len() > 1000, "{} pairs", steps.len());
+    let m = median(steps.clone());
+    assert!(m <= 1.0, "median |ΔRSSI| {m} dB");
+    // Not noise-free either: a real reader's RSSI moves between reads.
+    assert!(steps.iter().any(|&d| d > 0.0), "every pair identical");
+    // Reported in Impinj's 0.5 dB steps.
+    assert!(seen
+        .iter()
+        .all(|s| (s.rssi_dbm * 2.0 - (s.rssi_dbm * 2.0).round()).abs() < 1e-9));
+}
+
+#[tokio::test]
+async fn gazebo_eq5_keeps_the_distance_growing_noise() {
+    let mut s = s1();
+    for a in &mut s.readers[0].antennas {
+        a.rssi_model = RssiModel::GazeboEq5;
+        a.rssi_noise = Some(0.01);
+    }
+    let steps = consecutive_rssi_steps(&reads(&s, 3000).await);
+    assert!(steps.len() > 1000, "{} pairs", steps.len());
+    let m = median(steps);
+    // [G] eq. 5 at S1's 1.6–3.5 m from the path: several dB between consecutive reads.
+    assert!(m >= 2.0, "median |ΔRSSI| {m} dB");
+}
+
+/// Tags at 1.5, 3 and 5 m on the boresight of a fixed antenna, on one channel, with every
+/// measurement default of the reader model.
+fn static_scenario() -> Scenario {
+    let json = r#"{
+      "name": "static",
+      "seed": 11,
+      "world": { "min": [-2, -2, 0], "max": [10, 2, 3] },
+      "tags": [
+        { "epc": "E20000000000000000000001", "position": [1.5, 0, 1] },
+        { "epc": "E20000000000000000000002", "position": [3.0, 0.3, 1] },
+        { "epc": "E20000000000000000000003", "position": [5.0, -0.3, 1] }
+      ],
+      "readers": [{
+        "name": "r", "listen": "127.0.0.1:0", "region": "fcc", "fixed_channel": 7,
+        "antennas": [{ "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } } }]
+      }]
+    }"#;
+    Scenario::from_json(json).expect("static scenario is valid")
+}
+
+#[tokio::test]
+async fn static_tags_scatter_with_the_documented_sigmas() {
+    let scenario = static_scenario();
+    let spec = scenario.readers[0].antennas[0].clone();
+    let seen = reads(&scenario, 3000).await;
+    let t0 = seen.first().map_or(0, |s| s.t_us);
+    let mut phase_sigmas = Vec::new();
+    for tag in 1..=3u8 {
+        // One simulated second of the tag.
+        let mine: Vec<&Seen> = seen
+            .iter()
+            .filter(|s| s.tag == tag && s.t_us < t0 + 1_000_000)
+            .collect();
+        assert!(mine.len() >= 50, "tag {tag}: {} reads", mine.len());
+        let n = mine.len() as f64;
+        let mean = mine.iter().map(|s| s.rssi_dbm).sum::<f64>() / n;
+        let var = mine
+            .iter()
+            .map(|s| (s.rssi_dbm - mean).powi(2))
+            .sum::<f64>()
+            / n;
+        // σ of the noise plus the 0.5 dB step's own (step²/12), with room for the estimate.
+        let expected = (spec.rssi_sigma_db.powi(2) + 0.25 / 12.0).sqrt();
+        let sd = var.sqrt();
+        assert!(
+            sd > 0.7 * expected && sd < 1.3 * expected,
+            "tag {tag}: RSSI σ {sd:.3} dB, expected {expected:.3}"
+        );
+        // Phase: circular spread about the mean, against the documented σ at this level.
+        let (c, s) = mine.iter().fold((0.0, 0.0), |(c, s), r| {
+            (c + r.phase_rad.cos(), s + r.phase_rad.sin())
+        });
+        let centre = s.atan2(c);
+        let phase_sd = (mine
+            .iter()
+            .map(|r| angle(r.phase_rad, centre).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        let sigma = spec.phase_noise_rad * weak_signal_scale(mean, spec.phase_noise_ref_dbm);
+        // The 12-bit phase field adds (2π/4096)²/12.
+        let sigma = (sigma.powi(2) + (TAU / 4096.0).powi(2) / 12.0).sqrt();
+        assert!(
+            phase_sd > 0.75 * sigma && phase_sd < 1.25 * sigma,
+            "tag {tag} at {mean:.1} dBm: phase σ {phase_sd:.4} rad, expected {sigma:.4}"
+        );
+        phase_sigmas.push(phase_sd);
+        // Doppler of a static tag: centred on 0, never exactly 0 throughout.
+        let dopplers: Vec<f64> = mine.iter().map(|r| r.doppler_hz).collect();
+        let d_mean = dopplers.iter().sum::<f64>() / n;
+        let d_sd = (dopplers.iter().map(|d| (d - d_mean).powi(2)).sum::<f64>() / n).sqrt();
+        let d_sigma = spec.doppler_sigma_hz * weak_signal_scale(mean, spec.phase_noise_ref_dbm);
+        assert!(
+            d_sd > 0.75 * d_sigma && d_sd < 1.25 * d_sigma,
+            "tag {tag}: Doppler σ {d_sd:.2} Hz, expected {d_sigma:.2}"
+        );
+        assert!(d_mean.abs() < 4.0 * d_sigma / n.sqrt() + 0.1, "{d_mean}");
+    }
+    // The far tag is noisier than the near one.
+    assert!(phase_sigmas[2] > 1.5 * phase_sigmas[0], "{phase_sigmas:?}");
+}
