@@ -11,6 +11,7 @@
 pub mod antenna;
 pub mod fastmath;
 mod field;
+pub mod gen2;
 pub mod geometry;
 pub mod hopping;
 mod inventory;

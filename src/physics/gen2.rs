@@ -1,0 +1,274 @@
+//! The EPC Gen2 air interface as a reader runs it: link timing from an RF mode, and
+//! slotted-ALOHA inventory rounds under the Q algorithm, with the capture effect.
+//!
+//! Timing (GS1 EPC UHF Gen2 air interface, v2.0.0, §6.3.1; command and reply lengths as
+//! reproduced in docs/measurement.md): reader symbols data-0 = Tari and data-1 = PIE·Tari
+//! (an average bit of (1 + PIE)/2·Tari), RTcal = data-0 + data-1, TRcal = DR/BLF with
+//! DR = 64/3; a Query is preceded by a preamble (delimiter 12.5 µs, data-0, RTcal, TRcal), every
+//! other command by a frame-sync (delimiter, data-0, RTcal). Tag bits last M/BLF (M = 1 for FM0,
+//! 2/4/8 for Miller); a reply carries a preamble (FM0 6 bits, Miller 10; 12 and 16 pilot bits more
+//! with TRext) and a dummy bit. T1 = max(RTcal, 10/BLF), T2 = 10/BLF (the middle of 3–20),
+//! T3 = max(0, 2·RTcal − T1). Slots: empty = QueryRep + T1 + T3; collided = QueryRep + T1 +
+//! RN16 + T2; successful = QueryRep + T1 + RN16 + T2 + ACK + T1 + PC/EPC/CRC + T2.
+//!
+//! Q algorithm (the standard's Annex D): Qfp ∈ [0, 15], −C after an empty slot, +C after a
+//! collision, unchanged after a single reply; when round(Qfp) changes the reader sends a
+//! QueryAdjust and the tags not yet read draw new slots among 2^Q.
+
+use rand::Rng;
+
+/// Bits of a Query command.
+pub const QUERY_BITS: u32 = 22;
+/// Bits of a QueryRep command.
+pub const QUERY_REP_BITS: u32 = 4;
+/// Bits of a QueryAdjust command.
+pub const QUERY_ADJUST_BITS: u32 = 9;
+/// Bits of an ACK command.
+pub const ACK_BITS: u32 = 18;
+/// Bits of the RN16 reply.
+pub const RN16_BITS: u32 = 16;
+/// Delimiter before every reader command (µs).
+pub const DELIMITER_US: f64 = 12.5;
+/// Divide ratio DR of TRcal (64/3, as every Impinj mode uses).
+pub const DIVIDE_RATIO: f64 = 64.0 / 3.0;
+/// The Q algorithm's step C (Annex D gives 0.1 < C < 0.5).
+pub const Q_STEP: f64 = 0.3;
+/// Largest Q.
+pub const MAX_Q: u8 = 15;
+/// A colliding reply this many dB above every other reply in its slot is decoded anyway (the
+/// capture effect; ours).
+pub const CAPTURE_MARGIN_DB: f64 = 6.0;
+
+/// Most frames (Query or QueryAdjust) one round runs.
+pub const MAX_FRAMES: u64 = 1 << 12;
+
+/// An RF mode's air-interface parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RfMode {
+    /// Reader data-0 symbol (µs).
+    pub tari_us: f64,
+    /// data-1 / data-0 (1.5–2.0).
+    pub pie: f64,
+    /// Backscatter link frequency (kHz).
+    pub blf_khz: f64,
+    /// Symbols per tag bit: 1 (FM0), 2, 4 or 8 (Miller).
+    pub miller: u8,
+    /// Extended (pilot) preamble on tag replies.
+    pub trext: bool,
+}
+
+/// Durations (µs) of the parts of an inventory round in one RF mode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlotTimes {
+    /// The Query that opens a round, with its preamble, up to the end of the first slot's T1.
+    pub query_extra_us: f64,
+    /// A QueryAdjust's extra time over a QueryRep.
+    pub adjust_extra_us: f64,
+    /// A slot nobody answers.
+    pub empty_us: f64,
+    /// A slot two or more tags answer and nobody is decoded.
+    pub collided_us: f64,
+    /// A slot that ends with a tag's EPC read.
+    pub success_us: f64,
+}
+
+impl RfMode {
+    /// Impinj's Mode 2 (Dense Reader M4) as a real R220 advertises it: Miller 4, BLF 274 kHz,
+    /// Tari 20 µs, PIE 2.0 (sllurp `examples/caps.txt`).
+    pub const IMPINJ_MODE_2: RfMode = RfMode {
+        tari_us: 20.0,
+        pie: 2.0,
+        blf_khz: 274.0,
+        miller: 4,
+        trext: false,
+    };
+
+    /// Impinj's Mode 0 (Max Throughput) as an FCC R420 advertises it: FM0, BLF 640 kHz,
+    /// Tari 7.14 µs, PIE 1.5.
+    pub const IMPINJ_MODE_0: RfMode = RfMode {
+        tari_us: 7.14,
+        pie: 1.5,
+        blf_khz: 640.0,
+        miller: 1,
+        trext: false,
+    };
+
+    /// The durations of an inventory round's parts, for tags with `epc_bits` of EPC.
+    pub fn slot_times(&self, epc_bits: u32) -> SlotTimes {
+        let data0 = self.tari_us;
+        let data1 = self.pie * self.tari_us;
+        let rtcal = data0 + data1;
+        let trcal = DIVIDE_RATIO / self.blf_khz * 1e3;
+        let reader_bit = (data0 + data1) / 2.0;
+        let frame_sync = DELIMITER_US + data0 + rtcal;
+        let command = |bits: u32| frame_sync + f64::from(bits) * reader_bit;
+        let tpri = 1e3 / self.blf_khz;
+        let tag_bit = f64::from(self.miller.max(1)) * tpri;
+        let preamble_bits = match (self.miller <= 1, self.trext) {
+            (true, false) => 6.0,
+            (true, true) => 18.0,
+            (false, false) => 10.0,
+            (false, true) => 26.0,
+        };
+        let reply = |bits: u32| (preamble_bits + f64::from(bits) + 1.0) * tag_bit;
+        let t1 = rtcal.max(10.0 * tpri);
+        let t2 = 10.0 * tpri;
+        let t3 = (2.0 * rtcal - t1).max(0.0);
+        let query_rep = command(QUERY_REP_BITS);
+        let rn16 = reply(RN16_BITS);
+        let epc_reply = reply(16 + epc_bits + 16);
+        SlotTimes {
+            query_extra_us: command(QUERY_BITS) + trcal - query_rep,
+            adjust_extra_us: command(QUERY_ADJUST_BITS) - query_rep,
+            empty_us: query_rep + t1 + t3,
+            collided_us: query_rep + t1 + rn16 + t2,
+            success_us: query_rep + t1 + rn16 + t2 + command(ACK_BITS) + t1 + epc_reply + t2,
+        }
+    }
+}
+
+/// A tag taking part in a round.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contender {
+    /// The caller's name for the tag.
+    pub tag: usize,
+    /// Its reply's level at the reader (dBm), for the capture effect.
+    pub rssi_dbm: f64,
+    /// Whether the reader decodes its reply when it answers alone.
+    pub decodes: bool,
+}
+
+/// What one inventory round gave.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Round {
+    /// Each tag read, with the time (µs from the round's start) its EPC was received.
+    pub reads: Vec<(f64, usize)>,
+    /// Duration of the round (µs).
+    pub duration_us: f64,
+    /// Qfp at the end of the round.
+    pub qfp: f64,
+    /// Slots by outcome: empty, collided (capture included), single replies.
+    pub slots: [u32; 3],
+}
+
+/// Runs one inventory round over `tags` starting at Qfp `qfp`, until every tag has been
+/// read or a full frame passes with no tag left to read, or `budget_us` is spent (the round is
+/// cut there, as when the reader leaves the antenna). Each tag is read at most once.
+pub fn round<R: Rng + ?Sized>(
+    rng: &mut R,
+    times: &SlotTimes,
+    tags: &[Contender],
+    qfp: f64,
+    budget_us: f64,
+) -> Round {
+    let mut out = Round {
+        qfp: qfp.clamp(0.0, f64::from(MAX_Q)),
+        ..Round::default()
+    };
+    let mut waiting: Vec<Contender> = tags.to_vec();
+    let mut t = times.query_extra_us;
+    let mut slots: Vec<(u32, usize)> = Vec::with_capacity(waiting.len());
+    let mut spent = 0u64;
+    'frames: loop {
+        // However the tags answer, a round ends (a frame of 2^15 slots at most per pass).
+        spent += 1;
+        if spent > MAX_FRAMES {
+            break;
+        }
+        let q = out.qfp.round() as u32;
+        let frame = 1u32 << q;
+        slots.clear();
+        slots.extend(
+            waiting
+                .iter()
+                .enumerate()
+                .map(|(i, _)| (rng.gen_range(0..frame), i)),
+        );
+        slots.sort_unstable();
+        let mut next = 0;
+        let mut read_now = Vec::new();
+        let mut collided = false;
+        for slot in 0..frame {
+            let first = next;
+            while next < slots.len() && slots[next].0 == slot {
+                next += 1;
+            }
+            // Outcome index: 0 empty, 1 collided, 2 a single reply.
+            let (dt, outcome, read) = match &slots[first..next] {
+                [] => (times.empty_us, 0, None),
+                [(_, i)] if waiting[*i].decodes => (times.success_us, 2, Some(*i)),
+                [_] => (times.collided_us, 2, None),
+                many => match captured(&waiting, many) {
+                    Some(i) => (times.success_us, 1, Some(i)),
+                    None => (times.collided_us, 1, None),
+                },
+            };
+            if t + dt > budget_us {
+                out.duration_us = t;
+                return out;
+            }
+            t += dt;
+            out.slots[outcome] += 1;
+            collided |= outcome == 1;
+            if let Some(i) = read {
+                read_now.push(i);
+                out.reads.push((t, waiting[i].tag));
+            }
+            match outcome {
+                0 => out.qfp = (out.qfp - Q_STEP).max(0.0),
+                1 => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
+                _ => {}
+            }
+            if out.qfp.round() as u32 != q && slot + 1 < frame {
+                // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
+                t += times.adjust_extra_us;
+                remove_read(&mut waiting, &mut read_now);
+                if waiting.is_empty() {
+                    break 'frames;
+                }
+                continue 'frames;
+            }
+        }
+        let progressed = !read_now.is_empty();
+        remove_read(&mut waiting, &mut read_now);
+        // Done when every tag is read, or a frame neither read nor heard a collision (the
+        // tags left never decode).
+        if waiting.is_empty() || !(progressed || collided) {
+            break;
+        }
+    }
+    out.duration_us = t;
+    out
+}
+
+/// Drops the tags read in this frame from `waiting` (indices into it).
+fn remove_read(waiting: &mut Vec<Contender>, read: &mut Vec<usize>) {
+    read.sort_unstable();
+    for &i in read.iter().rev() {
+        waiting.swap_remove(i);
+    }
+    read.clear();
+}
+
+/// The index (into `waiting`) of the reply the reader decodes in a collided slot: the
+/// strongest, if it decodes alone and stands [`CAPTURE_MARGIN_DB`] above all others.
+fn captured(waiting: &[Contender], answering: &[(u32, usize)]) -> Option<usize> {
+    let mut best: Option<(f64, usize)> = None;
+    let mut second = f64::NEG_INFINITY;
+    for &(_, i) in answering {
+        let r = waiting[i].rssi_dbm;
+        match best {
+            Some((b, _)) if r <= b => second = second.max(r),
+            Some((b, _)) => {
+                second = second.max(b);
+                best = Some((r, i));
+            }
+            None => best = Some((r, i)),
+        }
+    }
+    let (b, i) = best?;
+    (waiting[i].decodes && b - second >= CAPTURE_MARGIN_DB).then_some(i)
+}
+
+#[cfg(test)]
+mod tests;
