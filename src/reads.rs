@@ -337,6 +337,35 @@ mod tests {
     }
 
     #[test]
+    fn an_epc_of_other_than_96_bits_is_read_from_epc_data() {
+        use llrp::codec::BitVec;
+        use llrp::message::RoAccessReport;
+        use llrp::params::{Epc, EpcData, TagReportData};
+        let epc128: Vec<u8> = (1..=16).collect();
+        let data = |bytes: &[u8]| TagReportData {
+            epc: Epc::EpcData(EpcData {
+                epc: BitVec::from_bytes(bytes),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let frame = Message::new(
+            1,
+            RoAccessReport {
+                tag_report_data: vec![data(&epc128), data(&[0xE2, 0x00, 0xAB, 0xCD])],
+                ..Default::default()
+            },
+        )
+        .to_bytes();
+        let mut out = Vec::new();
+        ReadDecoder::new(None)
+            .frame(&frame, 0, &mut out)
+            .expect("decodes");
+        let epcs: Vec<&str> = out.iter().map(|r| r.epc.as_str()).collect();
+        assert_eq!(epcs, ["0102030405060708090A0B0C0D0E0F10", "E200ABCD"]);
+    }
+
+    #[test]
     fn optional_fields_may_be_absent_and_a_bad_field_is_named() {
         let ok = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":-60}"#;
         let r = read_jsonl(&ok[..]).expect("parses");

@@ -187,7 +187,7 @@ fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64
             };
             let tags: Vec<_> = tags
                 .into_iter()
-                .map(|k| serde_json::json!({"epc": hex(&m.tag_epc(k)), "position": m.tag_position(k, t)}))
+                .map(|k| serde_json::json!({"epc": hex(m.tag_epc(k).as_bytes()), "position": m.tag_position(k, t)}))
                 .collect();
             truth.line(&serde_json::json!({
                 "reader": name,

@@ -152,7 +152,7 @@ struct MountAim {
 
 #[derive(Clone, Debug)]
 struct TagModel {
-    epc: [u8; 12],
+    epc: crate::scenario::tagmem::TagEpc,
     tid: Vec<u16>,
     user: Vec<u16>,
     motion: PolylineMotion,
@@ -394,9 +394,9 @@ impl Model {
         self.tags.len()
     }
 
-    /// EPC-96 of tag `tag` (zeros for an unknown tag).
-    pub fn tag_epc(&self, tag: usize) -> [u8; 12] {
-        self.tags.get(tag).map_or([0; 12], |t| t.epc)
+    /// EPC of tag `tag` (an all-zero EPC-96 for an unknown tag).
+    pub fn tag_epc(&self, tag: usize) -> crate::scenario::tagmem::TagEpc {
+        self.tags.get(tag).map_or([0; 12].into(), |t| t.epc)
     }
 
     /// TID memory of tag `tag` as 16-bit words.

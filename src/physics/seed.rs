@@ -97,9 +97,16 @@ pub mod domain {
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)
-/// followed by a 64-bit serial derived from the EPC.
-pub fn default_tid(epc: &[u8; 12]) -> Vec<u16> {
+/// followed by a 64-bit serial derived from the EPC's bytes.
+///
+/// The EPC's length enters the serial except for an EPC-96 (whose TIDs predate other
+/// lengths and stay as they were), so that EPCs such as `3000` and `30000000` get
+/// different TIDs.
+pub fn default_tid(epc: &[u8]) -> Vec<u16> {
     let mut h = domain::TID;
+    if epc.len() != 12 {
+        h = mix(&[h, epc.len() as u64]);
+    }
     for chunk in epc.chunks(4) {
         let word = chunk.iter().fold(0u64, |a, &b| (a << 8) | u64::from(b));
         h = mix(&[h, word]);
@@ -152,12 +159,20 @@ mod tests {
 
     #[test]
     fn default_tid_is_stable_and_distinct() {
-        let a = crate::scenario::tagmem::parse_epc("300833B2DDD9014000000001").expect("valid EPC");
-        let b = crate::scenario::tagmem::parse_epc("300833B2DDD9014000000002").expect("valid EPC");
-        let ta = default_tid(&a);
+        let parse = |h| crate::scenario::tagmem::parse_epc(h).expect("valid EPC");
+        let a = parse("300833B2DDD9014000000001");
+        let b = parse("300833B2DDD9014000000002");
+        let ta = default_tid(a.as_bytes());
         assert_eq!(ta.len(), 6);
         assert_eq!(&ta[..2], &[0xE280, 0x1160]);
-        assert_eq!(ta, default_tid(&a));
-        assert_ne!(ta, default_tid(&b));
+        assert_eq!(ta, default_tid(a.as_bytes()));
+        assert_ne!(ta, default_tid(b.as_bytes()));
+        // An EPC-96's TID is what it was when EPCs were 96 bits only (the value the code
+        // before other lengths gave).
+        assert_eq!(ta, vec![0xE280, 0x1160, 0xA610, 0xCBB9, 0xC631, 0xFE90]);
+        // Zero EPCs of other lengths get TIDs of their own.
+        let short = default_tid(parse("3000").as_bytes());
+        assert_ne!(short, default_tid(parse("30000000").as_bytes()));
+        assert_ne!(short, default_tid(&[0x30, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]));
     }
 }

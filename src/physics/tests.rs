@@ -332,8 +332,8 @@ fn scenario_fixtures_produce_reads() {
 fn tag_memory_and_bad_indices() {
     let m = Model::new(&Scenario::default_s1(), 0);
     assert_eq!(m.antenna_count(), 1);
-    assert_eq!(m.tag_epc(0)[11], 0x01);
-    assert_eq!(m.tag_epc(99), [0; 12]);
+    assert_eq!(m.tag_epc(0).as_bytes()[11], 0x01);
+    assert_eq!(m.tag_epc(99).as_bytes(), [0; 12]);
     assert!(m.inventory(0, 0, 1_000_000, None).is_empty());
     assert!(m.inventory(2, 0, 1_000_000, None).is_empty());
     let none = Model::new(&Scenario::default_s1(), 5);

@@ -31,14 +31,14 @@ impl World {
             .iter()
             .enumerate()
             .map(|(index, t)| {
-                let epc = parse_epc(&t.epc).unwrap_or([0; 12]);
+                let epc = parse_epc(&t.epc).unwrap_or_else(|_| [0; 12].into());
                 TagModel {
                     epc,
                     tid: t
                         .tid
                         .as_deref()
                         .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_else(|| default_tid(&epc)),
+                        .unwrap_or_else(|| default_tid(epc.as_bytes())),
                     user: t
                         .user
                         .as_deref()

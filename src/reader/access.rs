@@ -9,6 +9,7 @@ use llrp::StatusCode;
 use super::config::param_field_error;
 use super::{field_error, ReaderProfile, MAX_ACCESS_SPECS};
 use crate::physics::Model;
+use crate::scenario::tagmem::TagEpc;
 
 /// C1G2ReadOpSpecResult result: success.
 const READ_SUCCESS: u8 = 0;
@@ -207,13 +208,14 @@ impl AccessSpecs {
 }
 
 /// Memory bank contents as 16-bit words: 1 EPC (CRC, PC, EPC), 2 TID, 3 user.
-fn bank(model: &Model, tag: usize, epc: &[u8; 12], mb: u8) -> Vec<u16> {
+fn bank(model: &Model, tag: usize, epc: &TagEpc, mb: u8) -> Vec<u16> {
     match mb {
         1 => {
-            let pc = super::report::PC_EPC96;
-            let mut w = vec![super::report::gen2_crc(pc, epc), pc];
+            let pc = epc.pc();
+            let mut w = vec![super::report::gen2_crc(pc, epc.as_bytes()), pc];
             w.extend(
-                epc.chunks_exact(2)
+                epc.as_bytes()
+                    .chunks_exact(2)
                     .map(|c| u16::from_be_bytes([c[0], c[1]])),
             );
             w
@@ -224,7 +226,7 @@ fn bank(model: &Model, tag: usize, epc: &[u8; 12], mb: u8) -> Vec<u16> {
     }
 }
 
-fn read(model: &Model, tag: usize, epc: &[u8; 12], r: &C1g2Read) -> C1g2ReadOpSpecResult {
+fn read(model: &Model, tag: usize, epc: &TagEpc, r: &C1g2Read) -> C1g2ReadOpSpecResult {
     let words = bank(model, tag, epc, r.mb);
     let start = usize::from(r.word_pointer);
     // WordCount 0 reads to the end of the bank.
@@ -250,7 +252,7 @@ fn read(model: &Model, tag: usize, epc: &[u8; 12], r: &C1g2Read) -> C1g2ReadOpSp
 }
 
 /// Whether a tag satisfies a C1G2TagSpec (first target tag; the second, if any, must too).
-fn tag_matches(spec: &C1g2TagSpec, model: &Model, tag: usize, epc: &[u8; 12]) -> bool {
+fn tag_matches(spec: &C1g2TagSpec, model: &Model, tag: usize, epc: &TagEpc) -> bool {
     spec.c1g2_target_tag.iter().all(|t| {
         let words = bank(model, tag, epc, t.mb);
         let bits: Vec<bool> = words

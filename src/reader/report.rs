@@ -4,14 +4,17 @@
 use std::collections::hash_map::{Entry, HashMap};
 use std::hash::{BuildHasherDefault, Hash, Hasher};
 
+use llrp::codec::BitVec;
 use llrp::params::*;
 use llrp::units;
+
+use crate::scenario::tagmem::TagEpc;
 
 /// One tag read as the reader saw it (the physics read plus LLRP context).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Observation {
-    /// EPC-96 of the tag.
-    pub epc: [u8; 12],
+    /// EPC of the tag.
+    pub epc: TagEpc,
     /// ROSpec that produced the read.
     pub ro_spec_id: u32,
     /// 1-based index of the AISpec in its ROSpec.
@@ -98,8 +101,17 @@ pub fn gen2_crc(pc: u16, epc: &[u8]) -> u16 {
     !crc
 }
 
-/// PC word of a tag with a 96-bit EPC (length 6 words, no user memory indicator, no XPC).
-pub const PC_EPC96: u16 = 0x3000;
+/// The EPC parameter of a TagReportData: EPC-96 for a 96-bit EPC (as readers send it),
+/// EPCData of the EPC's bit count otherwise.
+pub fn epc_parameter(epc: &TagEpc) -> Epc {
+    match epc.as_epc96() {
+        Some(bytes) => Epc::Epc96(Epc96(bytes)),
+        None => Epc::EpcData(EpcData {
+            epc: BitVec::from_bytes(epc.as_bytes()),
+            ..Default::default()
+        }),
+    }
+}
 
 /// What one TagReportData carries: the standard selector and the Impinj one.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -115,6 +127,8 @@ pub struct Content {
 pub struct ReportBuffer {
     entries: Vec<TagReportData>,
     index: HashMap<Key, usize, BuildHasherDefault<FxHasher>>,
+    /// EPCs longer than 96 bits in `index`, numbered in order: a Key carries the number.
+    long_epcs: HashMap<TagEpc, u64, BuildHasherDefault<FxHasher>>,
     /// How many entries a report is expected to hold (see [`ReportBuffer::expect`]).
     expect: usize,
 }
@@ -187,11 +201,19 @@ impl Hasher for FxHasher {
 struct Key([u64; 4]);
 
 impl Key {
-    /// The key of observation `o` under selector `s`.
-    fn new(o: &Observation, s: &TagReportContentSelector) -> Key {
-        let [e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11] = o.epc;
-        let head = u64::from_le_bytes([e0, e1, e2, e3, e4, e5, e6, e7]);
-        let tail = u64::from(u32::from_le_bytes([e8, e9, e10, e11]));
+    /// The key of observation `o` under selector `s`; `long_id` numbers `o`'s EPC if it is
+    /// longer than 96 bits.
+    fn new(o: &Observation, s: &TagReportContentSelector, long_id: u64) -> Key {
+        // An EPC of up to 96 bits is its (zero-padded) bytes, a longer one its number; the
+        // length in bytes, in the second word, keeps the two kinds and the lengths apart.
+        let len = o.epc.as_bytes().len();
+        let [e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11, ..] = *o.epc.padded();
+        let (head, tail) = if len <= 12 {
+            let head = u64::from_le_bytes([e0, e1, e2, e3, e4, e5, e6, e7]);
+            (head, u64::from(u32::from_le_bytes([e8, e9, e10, e11])))
+        } else {
+            (long_id, 0)
+        };
         let field = |on: bool, bit: u32, v: u64| (u64::from(on) << bit, if on { v } else { 0 });
         let (f0, ro) = field(s.enable_ro_spec_id, 32, u64::from(o.ro_spec_id));
         let (f1, si) = field(s.enable_spec_index, 33, u64::from(o.spec_index));
@@ -205,7 +227,7 @@ impl Key {
         let (f5, acc) = field(s.enable_access_spec_id, 37, u64::from(o.access_spec_id));
         Key([
             head,
-            tail | f0 | f1 | f2 | f3 | f4 | f5,
+            tail | f0 | f1 | f2 | f3 | f4 | f5 | (len as u64) << 40,
             ro | si << 32 | ips << 48,
             ant | ch << 16 | acc << 32,
         ])
@@ -241,7 +263,13 @@ impl ReportBuffer {
     /// `aggregate` false (report every read) keeps each read separate.
     pub fn add(&mut self, o: &Observation, c: &Content, aggregate: bool) {
         if aggregate && o.op_spec_results.is_empty() {
-            match self.index.entry(Key::new(o, &c.selector)) {
+            let long_id = if o.epc.as_bytes().len() > 12 {
+                let next = self.long_epcs.len() as u64;
+                *self.long_epcs.entry(o.epc).or_insert(next)
+            } else {
+                0
+            };
+            match self.index.entry(Key::new(o, &c.selector, long_id)) {
                 Entry::Occupied(e) => {
                     merge(&mut self.entries[*e.get()], o, c);
                     return;
@@ -264,6 +292,7 @@ impl ReportBuffer {
     /// Takes everything waiting, in the order first seen.
     pub fn take(&mut self) -> Vec<TagReportData> {
         self.index.clear();
+        self.long_epcs.clear();
         std::mem::take(&mut self.entries)
     }
 }
@@ -272,7 +301,7 @@ impl ReportBuffer {
 pub fn build(o: &Observation, c: &Content) -> TagReportData {
     let s = &c.selector;
     let mut t = TagReportData {
-        epc: Epc::Epc96(Epc96(o.epc)),
+        epc: epc_parameter(&o.epc),
         ..Default::default()
     };
     if s.enable_ro_spec_id {
@@ -306,12 +335,13 @@ pub fn build(o: &Observation, c: &Content) -> TagReportData {
     for m in &s.air_protocol_epc_memory_selector {
         if m.enable_pc_bits {
             t.air_protocol_tag_data
-                .push(AirProtocolTagData::C1g2Pc(C1g2Pc(PC_EPC96)));
+                .push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.epc.pc())));
         }
         if m.enable_crc {
             t.air_protocol_tag_data
                 .push(AirProtocolTagData::C1g2Crc(C1g2Crc(gen2_crc(
-                    PC_EPC96, &o.epc,
+                    o.epc.pc(),
+                    o.epc.as_bytes(),
                 ))));
         }
     }
@@ -386,7 +416,7 @@ mod tests {
         let mut epc = [0u8; 12];
         epc[0] = epc0;
         Observation {
-            epc,
+            epc: epc.into(),
             ro_spec_id: 1,
             spec_index: 1,
             inventory_parameter_spec_id: 1,
@@ -459,6 +489,54 @@ mod tests {
         assert_eq!(b.len(), 1);
         b.add(&obs(1, 2, -60.0, 12), &c2, false);
         assert_eq!(b.len(), 2);
+    }
+
+    #[test]
+    fn aggregation_tells_epcs_of_every_length_apart() {
+        let c = Content {
+            selector: TagReportContentSelector {
+                enable_tag_seen_count: true,
+                ..Default::default()
+            },
+            impinj: ImpinjContent::default(),
+        };
+        let with = |bytes: &[u8]| Observation {
+            epc: TagEpc::from_bytes(bytes).expect("whole words"),
+            ..obs(0, 1, -60.0, 10)
+        };
+        let mut long = [0xE2u8; 16];
+        let a128 = with(&long);
+        long[15] = 0x01;
+        let b128 = with(&long);
+        // The same leading bytes, then zeros, at 64, 96 and 496 bits.
+        let a64 = with(&[0xE2; 8]);
+        let mut e96 = [0u8; 12];
+        e96[..8].copy_from_slice(&[0xE2; 8]);
+        let a96 = with(&e96);
+        let mut e496 = [0u8; 62];
+        e496[..8].copy_from_slice(&[0xE2; 8]);
+        let a496 = with(&e496);
+        let mut b = ReportBuffer::default();
+        for o in [&a128, &b128, &a64, &a96, &a496, &a128, &a64, &a496, &b128] {
+            b.add(o, &c, true);
+        }
+        let r = b.take();
+        let seen: Vec<(usize, Option<TagSeenCount>)> = r
+            .iter()
+            .map(|t| (t.epc_bytes().len(), t.tag_seen_count))
+            .collect();
+        let n = |k| Some(TagSeenCount(k));
+        assert_eq!(
+            seen,
+            [(16, n(2)), (16, n(2)), (8, n(2)), (12, n(1)), (62, n(2))]
+        );
+        assert_eq!(r[1].epc_bytes(), long);
+        // After a report, a long EPC is new again.
+        b.add(&b128, &c, true);
+        b.add(&a128, &c, true);
+        let r = b.take();
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0].epc_bytes(), long);
     }
 
     #[test]

@@ -47,11 +47,11 @@ pub struct Path {
     pub loop_path: bool,
 }
 
-/// One EPC-96 tag.
+/// One tag.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TagSpec {
-    /// EPC-96 as 24 hex digits.
+    /// EPC as hex: 1 to 31 whole 16-bit words (24 digits for the common EPC-96).
     pub epc: String,
     /// Position at time 0 (metres).
     pub position: [f64; 3],

@@ -97,7 +97,17 @@ fn errors_name_the_field_path_and_the_reason() {
         ),
         (
             Box::new(|v| v["tags"][0]["epc"] = "300833B2DDD90140000000".into()),
-            "tags[0].epc: must be 24 hex digits (EPC-96), got 22 characters",
+            "tags[0].epc: must be whole 16-bit words (a multiple of 4 hex digits), got 22 digits",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["epc"] = "".into()),
+            "tags[0].epc: must not be empty",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["epc"] = "ABCD".repeat(32).into()),
+            "tags[0].epc: must be at most 31 16-bit words (496 bits), got 32 words",
             "",
         ),
         (
