@@ -276,3 +276,26 @@ async fn sllurp_sees_rssi_fall_40_db_per_decade() {
         );
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn sllurp_reads_a_128_bit_epc_through_epcdata() {
+    let mut s = line_scenario(&[1.5, 2.5]);
+    s.tags[0].epc = "E2000000000000000000000000000001".into();
+    let long = s.tags[0].epc.to_lowercase();
+    let short = s.tags[1].epc.to_lowercase();
+    let s = Scenario::from_json(&serde_json::to_string(&s).expect("serialises"))
+        .expect("a 128-bit EPC is valid");
+    let (_, reports, log) = with_scenario(s, &["-a", "1", "-n", "1"], 40).await;
+    // sllurp 2.0.1 names an EPCData's bytes "EPC", and an EPC-96 both "EPC" and "EPC-96".
+    let mut seen = std::collections::BTreeSet::new();
+    for tag in reports.iter().flatten() {
+        let epc = tag["EPC"].as_str().expect("EPC").to_string();
+        match tag.get("EPC-96").and_then(Value::as_str) {
+            Some(e96) => assert_eq!((e96, epc.as_str()), (short.as_str(), short.as_str())),
+            None => assert_eq!(epc, long, "{tag}"),
+        }
+        seen.insert(epc);
+    }
+    assert_eq!(seen.len(), 2, "both tags: {seen:?}\n{log}");
+}
