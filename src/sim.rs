@@ -14,7 +14,7 @@ use tokio::task::JoinHandle;
 use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve_tls, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
-use crate::physics::{Model, World};
+use crate::physics::{AntennaPose, Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
@@ -163,8 +163,24 @@ fn hex(epc: &[u8]) -> String {
     epc.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// The observer that writes reader `name`'s antenna poses (true and odometry) and the
-/// tags' positions every [`TRUTH_INTERVAL_US`] of simulated time.
+/// `pose` of antenna `antenna` of reader `reader` at `t_us` as a pose-file record (keys
+/// `t_us, reader, antenna, x, y, z, yaw_deg, pitch_deg`).
+fn pose_record(t_us: u64, reader: &str, antenna: u16, pose: &AntennaPose) -> serde_json::Value {
+    let [x, y, z] = pose.position;
+    serde_json::json!({
+        "t_us": t_us,
+        "reader": reader,
+        "antenna": antenna,
+        "x": x,
+        "y": y,
+        "z": z,
+        "yaw_deg": pose.yaw_rad.to_degrees(),
+        "pitch_deg": pose.pitch_rad.to_degrees(),
+    })
+}
+
+/// The observer that writes reader `name`'s antenna poses (true, estimated and odometry) and
+/// the tags' positions every [`TRUTH_INTERVAL_US`] of simulated time.
 fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64) -> Observer {
     let mut next = 0u64;
     Box::new(move |r: &Reader| {
@@ -173,9 +189,12 @@ fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64
             let t = next;
             let antennas: Vec<_> = (1..=m.antenna_count())
                 .map(|a| {
+                    let true_pose = m.antenna_pose(a, t);
                     serde_json::json!({
                         "antenna": a,
-                        "pose": m.antenna_pose(a, t),
+                        "true": pose_record(t, &name, a, &true_pose),
+                        "estimated": pose_record(t, &name, a, &m.estimated_pose(a, t)),
+                        "pose": true_pose,
                         "odometry": m.odometry_pose(a, t),
                     })
                 })

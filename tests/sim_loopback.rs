@@ -8,6 +8,7 @@ use llrp::message::*;
 use llrp::params::*;
 use llrp_gateway::net::client::Client;
 use llrp_gateway::net::clock::Speed;
+use llrp_gateway::scenario::{Mount, PoseEstimate, PoseEstimateKind, Scenario};
 use llrp_gateway::sim::{self, SimOptions};
 
 /// ENABLE_ROSPEC `id`, which must succeed.
@@ -93,6 +94,108 @@ async fn ground_truth_is_written_as_jsonl() {
     // S1's antenna rides a robot: its true pose changes over time.
     let pos = |l: &serde_json::Value| l["antennas"][0]["pose"]["position"].clone();
     assert_ne!(pos(&lines[0]), pos(lines.last().expect("lines")));
+}
+
+/// The ground truth `sim` writes for `scenario` while one ROSpec of `span_ms` (simulated)
+/// runs to its end, at `--speed max`.
+async fn truth_of_one_rospec(scenario: &Scenario, span_ms: u32) -> Vec<serde_json::Value> {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("truth.jsonl");
+    let opts = SimOptions {
+        speed: Speed::Max,
+        truth: Some(path.clone()),
+        ..Default::default()
+    };
+    let sim = sim::start(scenario, &opts).await.expect("starts");
+    let mut c = connect(&sim).await;
+    let report = full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0);
+    add(
+        &mut c,
+        rospec(1, vec![0], ro_duration(span_ms), ai_null(), report),
+    )
+    .await;
+    enable(&mut c, 1).await;
+    // The ROSpec's report comes when it ends.
+    let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
+    assert!(!tags.is_empty(), "the ROSpec reported at its end");
+    c.close(T).await.expect("the reader closes too");
+    sim.shutdown().await;
+    let text = std::fs::read_to_string(&path).expect("truth written");
+    text.lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect()
+}
+
+/// Standard deviation of `v`.
+fn std_dev(v: &[f64]) -> f64 {
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+#[tokio::test]
+async fn ground_truth_carries_true_and_estimated_poses_with_the_pose_file_keys() {
+    // S1's robot localized with a large, nearly white error (τ far below the 100 ms between
+    // truth lines), so 20 s of truth give 200 nearly independent errors: σ within about 5 %.
+    let (sigma, heading_deg) = (0.05, 2.0);
+    let mut scenario = s1();
+    let Mount::Robot { robot, .. } = &mut scenario.readers[0].antennas[0].mount else {
+        panic!("S1's antenna rides a robot");
+    };
+    robot.pose_estimate = PoseEstimate {
+        kind: PoseEstimateKind::Localized,
+        position_sigma_m: sigma,
+        heading_sigma_deg: heading_deg,
+        correlation_s: 0.01,
+    };
+    let lines = truth_of_one_rospec(&scenario, 20_000).await;
+    let last = lines.last().and_then(|l| l["t_us"].as_u64()).unwrap_or(0);
+    assert!(last >= 19_900_000, "truth up to {last} µs");
+    let mut keys = [
+        "t_us",
+        "reader",
+        "antenna",
+        "x",
+        "y",
+        "z",
+        "yaw_deg",
+        "pitch_deg",
+    ];
+    keys.sort_unstable();
+    let mut errors: [Vec<f64>; 3] = Default::default();
+    for line in &lines {
+        for a in line["antennas"].as_array().expect("antennas") {
+            for kind in ["true", "estimated"] {
+                let pose = a[kind].as_object().expect("a pose object");
+                let mut got: Vec<&str> = pose.keys().map(String::as_str).collect();
+                got.sort_unstable();
+                assert_eq!(got, keys, "{kind}");
+                assert_eq!(pose["t_us"], line["t_us"]);
+                assert_eq!(pose["reader"], line["reader"]);
+                assert_eq!(pose["antenna"], a["antenna"]);
+            }
+            let (t, e) = (&a["true"], &a["estimated"]);
+            let position: Vec<f64> =
+                serde_json::from_value(a["pose"]["position"].clone()).expect("position");
+            let at = |p: &serde_json::Value, k: &str| p[k].as_f64().expect("a number");
+            assert_eq!([at(t, "x"), at(t, "y"), at(t, "z")].to_vec(), position);
+            let yaw = at(&a["pose"], "yaw_rad").to_degrees();
+            assert!((at(t, "yaw_deg") - yaw).abs() < 1e-9);
+            assert_eq!(at(e, "z"), at(t, "z"));
+            let dyaw = (at(e, "yaw_deg") - at(t, "yaw_deg") + 180.0).rem_euclid(360.0) - 180.0;
+            errors[0].push(at(e, "x") - at(t, "x"));
+            errors[1].push(at(e, "y") - at(t, "y"));
+            errors[2].push(dyaw);
+        }
+    }
+    assert!(errors[0].len() >= 200, "{} poses", errors[0].len());
+    // The heading error swings the antenna's 0.2 m arm too: σ 7 mm beside 50 mm, +1 % on x.
+    for (axis, want) in [sigma, sigma, heading_deg].into_iter().enumerate() {
+        let got = std_dev(&errors[axis]);
+        assert!(
+            (got / want - 1.0).abs() < 0.2,
+            "axis {axis}: σ {got} vs {want}"
+        );
+    }
 }
 
 #[tokio::test]

@@ -51,7 +51,7 @@ use multipath::{Aim, Plane};
 use robot::RobotTrajectory;
 
 /// Position and boresight of an antenna at one instant.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct AntennaPose {
     /// Position (m).
     pub position: [f64; 3],
@@ -380,13 +380,19 @@ impl Model {
     /// True pose of antenna `antenna` (1-based) at `t_us` (ground truth; the origin for an
     /// unknown antenna).
     pub fn antenna_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
-        self.pose(antenna, t_us, false)
+        self.pose(antenna, t_us, RobotTrajectory::true_pose)
     }
 
-    /// Pose of antenna `antenna` as dead-reckoned from wheel odometry (what the robot
-    /// believes); the true pose for fixed and recorded antennas.
+    /// Pose of antenna `antenna` as dead-reckoned from wheel odometry; the true pose for
+    /// fixed and recorded antennas.
     pub fn odometry_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
-        self.pose(antenna, t_us, true)
+        self.pose(antenna, t_us, RobotTrajectory::odometry_pose)
+    }
+
+    /// Pose of antenna `antenna` as its robot estimates it (per its `pose_estimate`), what it
+    /// would hand a localizer; the true pose for fixed and recorded antennas.
+    pub fn estimated_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
+        self.pose(antenna, t_us, RobotTrajectory::estimated_pose)
     }
 
     /// Number of tags.
@@ -462,7 +468,7 @@ impl Model {
                 let (c, s) = fastmath::cis(theta);
                 motion::mounted_position([x, y], (c, s), offset.position, vertical.as_ref(), t)
             }
-            _ => self.pose(antenna, t_us, false).position,
+            _ => self.antenna_pose(antenna, t_us).position,
         }
     }
 
@@ -506,12 +512,9 @@ impl Model {
         }
     }
 
-    fn pose(&self, antenna: u16, t_us: u64, odometry: bool) -> AntennaPose {
-        let origin = AntennaPose {
-            position: [0.0; 3],
-            yaw_rad: 0.0,
-            pitch_rad: 0.0,
-        };
+    /// The pose of `antenna`, a robot mount's robot at `robot_pose` of its trajectory.
+    fn pose(&self, antenna: u16, t_us: u64, robot_pose: robot::PoseOf) -> AntennaPose {
+        let origin = AntennaPose::default();
         let Some(a) = usize::from(antenna)
             .checked_sub(1)
             .and_then(|i| self.antennas.get(i))
@@ -537,11 +540,7 @@ impl Model {
                 let Some(trajectory) = self.robots.get(*robot) else {
                     return origin;
                 };
-                let [x, y, theta] = if odometry {
-                    trajectory.odometry_pose(t)
-                } else {
-                    trajectory.true_pose(t)
-                };
+                let [x, y, theta] = robot_pose(trajectory, t);
                 let (s, c) = theta.sin_cos();
                 AntennaPose {
                     position: motion::mounted_position(

@@ -473,3 +473,78 @@ fn readers_in_one_world_share_its_data_and_read_the_same() {
         assert_eq!(reads, run(&alone), "reader {reader}");
     }
 }
+
+#[test]
+fn pose_estimates_change_neither_odometry_nor_reads() {
+    let localized = Scenario::default_s1();
+    let mut odometry = localized.clone();
+    let Mount::Robot { robot, .. } = &mut odometry.readers[0].antennas[0].mount else {
+        panic!("S1's antenna rides a robot");
+    };
+    assert_eq!(
+        robot.pose_estimate.kind,
+        crate::scenario::PoseEstimateKind::Localized
+    );
+    robot.pose_estimate = crate::scenario::PoseEstimate::default();
+    let (ml, mo) = (Model::new(&localized, 0), Model::new(&odometry, 0));
+    // S1's odometry (position, yaw) before pose estimates existed, same seed.
+    let before: [(u64, [f64; 2], f64); 3] = [
+        (
+            10_000_000,
+            [5.996485266262976, 5.196826997277829],
+            1.5778700312235368,
+        ),
+        (
+            44_000_000,
+            [22.817212849864447, 4.975067304790823],
+            1.5517057116800277,
+        ),
+        (
+            200_000_000,
+            [22.949126698155528, 4.973007710581807],
+            1.5580416955600724,
+        ),
+    ];
+    for (t, xy, yaw) in before {
+        for m in [&ml, &mo] {
+            let p = m.odometry_pose(1, t);
+            assert!((p.position[0] - xy[0]).abs() < 1e-9, "{t}: {p:?}");
+            assert!((p.position[1] - xy[1]).abs() < 1e-9, "{t}: {p:?}");
+            assert!((p.yaw_rad - yaw).abs() < 1e-9, "{t}: {p:?}");
+        }
+        assert_eq!(mo.estimated_pose(1, t), mo.odometry_pose(1, t));
+    }
+    // Localized: within 4σ of the truth (plus the heading error's swing of the 0.2 m arm).
+    let (sigma, heading) = (0.015, 0.5f64.to_radians());
+    let reach = 4.0 * sigma + 0.2 * 4.0 * heading + 1e-9;
+    for t in (0..500).map(|i| i * 100_000) {
+        let (p, e) = (ml.antenna_pose(1, t), ml.estimated_pose(1, t));
+        assert_eq!(p, mo.antenna_pose(1, t));
+        assert!(
+            (e.position[0] - p.position[0]).abs() <= reach,
+            "{t}: {e:?} {p:?}"
+        );
+        assert!(
+            (e.position[1] - p.position[1]).abs() <= reach,
+            "{t}: {e:?} {p:?}"
+        );
+        assert_eq!((e.position[2], e.pitch_rad), (p.position[2], p.pitch_rad));
+        assert!(
+            angle_diff(e.yaw_rad, p.yaw_rad) <= 4.0 * heading + 1e-9,
+            "{t}"
+        );
+    }
+    assert_ne!(ml.estimated_pose(1, 0), ml.antenna_pose(1, 0));
+    // What is read depends on the true pose only.
+    let reads = |m: &Model| m.inventory(1, 0, 20_000_000, None);
+    assert!(!reads(&ml).is_empty());
+    assert_eq!(reads(&ml), reads(&mo));
+}
+
+#[test]
+fn fixed_antennas_estimate_their_true_pose() {
+    let s = fixed_scenario(&[[3.0, 0.0, 1.0]], serde_json::json!({}));
+    let m = Model::new(&s, 0);
+    assert_eq!(m.estimated_pose(1, 5_000_000), m.antenna_pose(1, 5_000_000));
+    assert_eq!(m.estimated_pose(1, 0).position, [0.0, 0.0, 1.0]);
+}

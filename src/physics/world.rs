@@ -22,8 +22,11 @@ impl World {
             .into_iter()
             .enumerate()
             .map(|(global, robot)| {
-                let mut rng = seed::rng(&[scenario.seed, seed::domain::ROBOT, global as u64]);
-                RobotTrajectory::simulate(robot, &mut rng)
+                let id = [scenario.seed, seed::domain::ROBOT, global as u64];
+                // The localization error's stream: the odometry's words and one more.
+                let error_id = [id[0], id[1], id[2], robot::ESTIMATE_STREAM];
+                RobotTrajectory::simulate(robot, &mut seed::rng(&id))
+                    .with_estimate(&robot.pose_estimate, &mut seed::rng(&error_id))
             })
             .collect();
         let tags: Vec<TagModel> = scenario

@@ -14,6 +14,7 @@ pub use format::{
     AntennaSpec, Mount, NoiseDist, Path, PhaseOffsets, Pose, ReaderSpec, Reflector, Region,
     RobotSpec, RssiModel, TagSpec, TagVariation, VerticalAxis, WorldBounds, DEFAULT_RSSI_NOISE,
 };
+pub use format::{PoseEstimate, PoseEstimateKind};
 pub use recorded::PoseSample;
 
 /// A complete simulation scenario.

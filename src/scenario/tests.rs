@@ -296,3 +296,61 @@ fn old_fields_load_with_a_notice_naming_what_replaced_them() {
     bad["readers"][0]["antennas"][0]["rssi_model"] = serde_json::json!("friis");
     assert!(error_of(&bad).contains("rssi_model"), "{}", error_of(&bad));
 }
+
+#[test]
+fn pose_estimate_defaults_and_errors_name_the_field() {
+    let robot = |s: &Scenario| match &s.readers[0].antennas[1].mount {
+        Mount::Robot { robot, .. } => robot.pose_estimate.clone(),
+        other => panic!("antenna 2 of the base rides a robot, got {other:?}"),
+    };
+    let s = Scenario::from_json(&base().to_string()).expect("base is valid");
+    assert_eq!(robot(&s), PoseEstimate::default());
+    assert_eq!(robot(&s).kind, PoseEstimateKind::Odometry);
+    let with = |estimate: serde_json::Value| {
+        let mut v = base();
+        v["readers"][0]["antennas"][1]["mount"]["robot"]["pose_estimate"] = estimate;
+        v
+    };
+    let localized = with(serde_json::json!({ "kind": "localized" }));
+    let s = Scenario::from_json(&localized.to_string()).expect("valid");
+    let e = robot(&s);
+    assert_eq!(e.kind, PoseEstimateKind::Localized);
+    assert_eq!(
+        (e.position_sigma_m, e.heading_sigma_deg, e.correlation_s),
+        (0.015, 0.5, 2.0)
+    );
+    let p = "readers[0].antennas[1].mount.robot.pose_estimate";
+    let cases = [
+        (
+            serde_json::json!({ "kind": "localized", "position_sigma_m": -0.01 }),
+            format!("{p}.position_sigma_m: must be finite and >= 0, got -0.01"),
+        ),
+        (
+            serde_json::json!({ "kind": "localized", "heading_sigma_deg": -1 }),
+            format!("{p}.heading_sigma_deg: must be finite and >= 0, got -1"),
+        ),
+        (
+            serde_json::json!({ "kind": "localized", "correlation_s": 0 }),
+            format!("{p}.correlation_s: must be finite and > 0, got 0"),
+        ),
+        (
+            serde_json::json!({ "kind": "gps" }),
+            format!("{p}.kind: unknown variant `gps`"),
+        ),
+        (
+            serde_json::json!({ "position_sigma_m": 0.01 }),
+            format!("{p}: missing field `kind`"),
+        ),
+        (
+            serde_json::json!({ "kind": "localized", "sigma": 0.01 }),
+            format!("{p}.sigma: unknown field `sigma`"),
+        ),
+    ];
+    for (estimate, prefix) in cases {
+        let msg = error_of(&with(estimate));
+        assert!(
+            msg.starts_with(&prefix),
+            "expected `{prefix}…`, got `{msg}`"
+        );
+    }
+}

@@ -408,6 +408,21 @@ fn validate_robot(s: &Scenario, p: &str, r: &RobotSpec) -> Check {
     positive(&format!("{p}.k_v"), r.k_v, 100.0)?;
     positive(&format!("{p}.k_omega"), r.k_omega, 100.0)?;
     positive(&format!("{p}.tolerance_m"), r.tolerance_m, 10.0)?;
+    let e = &r.pose_estimate;
+    non_negative(
+        &format!("{p}.pose_estimate.position_sigma_m"),
+        e.position_sigma_m,
+    )?;
+    non_negative(
+        &format!("{p}.pose_estimate.heading_sigma_deg"),
+        e.heading_sigma_deg,
+    )?;
+    if !(e.correlation_s.is_finite() && e.correlation_s > 0.0) {
+        return Err(invalid(
+            format!("{p}.pose_estimate.correlation_s"),
+            format!("must be finite and > 0, got {}", e.correlation_s),
+        ));
+    }
     if let Some(v) = &r.vertical {
         let vp = format!("{p}.vertical");
         in_range(
