@@ -21,6 +21,7 @@ pub mod multipath;
 pub mod noise;
 pub mod phase;
 pub mod pool;
+mod pose;
 pub mod robot;
 pub mod rssi;
 pub mod schedule;
@@ -47,7 +48,7 @@ use field::{FieldCache, GainTable};
 use geometry::wrap_pi;
 use hopping::HopSchedule;
 use motion::PolylineMotion;
-use multipath::{Aim, Plane};
+use multipath::Plane;
 use robot::RobotTrajectory;
 
 /// Position and boresight of an antenna at one instant.
@@ -440,119 +441,6 @@ impl Model {
                     &[u64::from(antenna), tag as u64, u64::from(channel)],
                 );
                 std::f64::consts::TAU * seed::unit(h)
-            }
-        }
-    }
-
-    /// True position of antenna `antenna` at `t_us` (that of [`Model::antenna_pose`] up to
-    /// rounding, the heading's sine and cosine through [`fastmath::cis`], without working out
-    /// the boresight).
-    pub fn antenna_position(&self, antenna: u16, t_us: u64) -> [f64; 3] {
-        let Some(a) = usize::from(antenna)
-            .checked_sub(1)
-            .and_then(|i| self.antennas.get(i))
-        else {
-            return [0.0; 3];
-        };
-        match &a.mover {
-            Mover::Robot {
-                robot,
-                offset,
-                vertical,
-            } => {
-                let Some(trajectory) = self.robots.get(*robot) else {
-                    return [0.0; 3];
-                };
-                let t = seconds(t_us);
-                let [x, y, theta] = trajectory.true_pose(t);
-                let (c, s) = fastmath::cis(theta);
-                motion::mounted_position([x, y], (c, s), offset.position, vertical.as_ref(), t)
-            }
-            _ => self.antenna_pose(antenna, t_us).position,
-        }
-    }
-
-    /// The [`Aim`] of the true pose of antenna `antenna` at `t_us`: `Aim::new` of
-    /// [`Model::antenna_pose`] up to rounding, with a robot mount's constant trigonometry
-    /// taken from [`MountAim`], the heading's through [`fastmath::cis`] and the boresight's
-    /// azimuth by the angle-sum formulas (within 1e-15 of each component).
-    pub(super) fn aim(&self, antenna: u16, t_us: u64) -> Aim {
-        let robot_mount = usize::from(antenna)
-            .checked_sub(1)
-            .and_then(|i| self.antennas.get(i))
-            .and_then(|a| match (&a.mover, a.mount_aim) {
-                (
-                    Mover::Robot {
-                        robot,
-                        offset,
-                        vertical,
-                    },
-                    Some(m),
-                ) => Some((self.robots.get(*robot)?, offset, vertical, m)),
-                _ => None,
-            });
-        let Some((trajectory, offset, vertical, m)) = robot_mount else {
-            return Aim::new(&self.antenna_pose(antenna, t_us));
-        };
-        let t = seconds(t_us);
-        let [x, y, theta] = trajectory.true_pose(t);
-        let (c, s) = fastmath::cis(theta);
-        let (yaw_cos, yaw_sin) = (c * m.yaw_cos - s * m.yaw_sin, s * m.yaw_cos + c * m.yaw_sin);
-        let boresight = [m.pitch_cos * yaw_cos, m.pitch_cos * yaw_sin, m.pitch_sin];
-        Aim {
-            position: motion::mounted_position(
-                [x, y],
-                (c, s),
-                offset.position,
-                vertical.as_ref(),
-                t,
-            ),
-            boresight,
-            boresight_norm: geometry::norm(boresight),
-        }
-    }
-
-    /// The pose of `antenna`, a robot mount's robot at `robot_pose` of its trajectory.
-    fn pose(&self, antenna: u16, t_us: u64, robot_pose: robot::PoseOf) -> AntennaPose {
-        let origin = AntennaPose::default();
-        let Some(a) = usize::from(antenna)
-            .checked_sub(1)
-            .and_then(|i| self.antennas.get(i))
-        else {
-            return origin;
-        };
-        let t = seconds(t_us);
-        match &a.mover {
-            Mover::Fixed(pose) => *pose,
-            Mover::Recorded(poses) => {
-                let p = motion::recorded_pose(poses, t);
-                AntennaPose {
-                    position: [p[0], p[1], p[2]],
-                    yaw_rad: p[3],
-                    pitch_rad: p[4],
-                }
-            }
-            Mover::Robot {
-                robot,
-                offset,
-                vertical,
-            } => {
-                let Some(trajectory) = self.robots.get(*robot) else {
-                    return origin;
-                };
-                let [x, y, theta] = robot_pose(trajectory, t);
-                let (s, c) = theta.sin_cos();
-                AntennaPose {
-                    position: motion::mounted_position(
-                        [x, y],
-                        (c, s),
-                        offset.position,
-                        vertical.as_ref(),
-                        t,
-                    ),
-                    yaw_rad: wrap_pi(theta + offset.yaw_deg.to_radians()),
-                    pitch_rad: offset.pitch_deg.to_radians(),
-                }
             }
         }
     }
