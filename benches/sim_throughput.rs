@@ -171,7 +171,15 @@ fn physics(arg: Option<&str>) -> ExitCode {
         while t < S2_END_US {
             let antenna = (slot % antennas) as u16 + 1;
             reads += model
-                .inventory_with(antenna, t, t + ANTENNA_DWELL_US, None, None, want)
+                .inventory_with(
+                    antenna,
+                    t,
+                    t + ANTENNA_DWELL_US,
+                    None,
+                    None,
+                    want,
+                    &Default::default(),
+                )
                 .len();
             t += ANTENNA_DWELL_US;
             slot += 1;

@@ -57,6 +57,46 @@ pub struct RfMode {
     pub trext: bool,
 }
 
+/// Which inventoried flag the reader singulates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Target {
+    /// A to B, then B to A, and so on: every tag is read in every round.
+    #[default]
+    Dual,
+    /// A only: a tag read goes to B and is not read again until its flag persistence ends.
+    Single,
+}
+
+/// How the reader inventories on an antenna: RF mode, session and search target.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Air {
+    /// The RF mode's link parameters.
+    pub mode: RfMode,
+    /// Gen2 session, 0–3.
+    pub session: u8,
+    /// Search target.
+    pub target: Target,
+}
+
+impl Default for Air {
+    /// The reader's defaults: mode 1000 (AutoSet, as advertised), session 2, dual target.
+    fn default() -> Air {
+        Air {
+            mode: RfMode::impinj(1000).unwrap_or(RfMode::IMPINJ_MODE_2),
+            session: 2,
+            target: Target::Dual,
+        }
+    }
+}
+
+impl Air {
+    /// Whether a tag read once keeps out of later rounds (single target in sessions 1–3; a
+    /// session-0 flag reverts as soon as the tag is read again, so session 0 rereads).
+    pub fn suppresses(&self) -> bool {
+        self.target == Target::Single && self.session != 0
+    }
+}
+
 /// Durations (µs) of the parts of an inventory round in one RF mode.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlotTimes {
@@ -93,6 +133,27 @@ impl RfMode {
         trext: false,
     };
 
+    /// The RF mode the simulated reader advertises under ModeIdentifier `id` (its C1G2 UHF
+    /// RF mode table): 0 FM0 at 640 kHz, 1 Miller 2 at 640 kHz, 2 Miller 4 at 274 kHz, 3 Miller 8
+    /// at 170.6 kHz, 1000 (AutoSet) Miller 4 at 250 kHz; `None` for another.
+    pub fn impinj(id: u32) -> Option<RfMode> {
+        let (miller, blf_khz, pie, tari_us) = match id {
+            0 => (1, 640.0, 1.5, 7.14),
+            1 => (2, 640.0, 1.5, 7.14),
+            2 => (4, 274.0, 2.0, 20.0),
+            3 => (8, 170.6, 2.0, 20.0),
+            1000 => (4, 250.0, 2.0, 20.0),
+            _ => return None,
+        };
+        Some(RfMode {
+            tari_us,
+            pie,
+            blf_khz,
+            miller,
+            trext: false,
+        })
+    }
+
     /// The durations of an inventory round's parts, for tags with `epc_bits` of EPC.
     pub fn slot_times(&self, epc_bits: u32) -> SlotTimes {
         let data0 = self.tari_us;
@@ -127,15 +188,14 @@ impl RfMode {
     }
 }
 
-/// A tag taking part in a round.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Contender {
-    /// The caller's name for the tag.
-    pub tag: usize,
-    /// Its reply's level at the reader (dBm), for the capture effect.
-    pub rssi_dbm: f64,
-    /// Whether the reader decodes its reply when it answers alone.
-    pub decodes: bool,
+/// What a round asks of the channel: how strong a tag's reply is, and whether the reader
+/// decodes it (the caller computes the read then, at that instant).
+pub trait Radio {
+    /// Level (dBm) of `tag`'s reply at `t_us` µs into the round, for the capture effect.
+    fn level(&mut self, tag: usize, t_us: f64) -> f64;
+    /// Whether the reader decodes `tag`'s EPC reply ending at `t_us` µs into the round
+    /// (false: it is not powered, out of reach, or too weak; the reader hears nothing).
+    fn reply(&mut self, tag: usize, t_us: f64) -> bool;
 }
 
 /// What one inventory round gave.
@@ -147,76 +207,83 @@ pub struct Round {
     pub duration_us: f64,
     /// Qfp at the end of the round.
     pub qfp: f64,
-    /// Slots by outcome: empty, collided (capture included), single replies.
+    /// Slots by outcome: empty (or not decoded), collided, read.
     pub slots: [u32; 3],
 }
 
-/// Runs one inventory round over `tags` starting at Qfp `qfp`, until every tag has been
-/// read or a full frame passes with no tag left to read, or `budget_us` is spent (the round is
-/// cut there, as when the reader leaves the antenna). Each tag is read at most once.
+/// The Qfp a reader settles on for `n` tags: log2 n (a frame as long as the population,
+/// where framed ALOHA reads most per slot).
+pub fn settled_qfp(n: usize) -> f64 {
+    (n.max(1) as f64).log2().min(f64::from(MAX_Q))
+}
+
+/// Runs one inventory round over `tags` from Qfp `qfp`, until every tag has been read, a frame
+/// passes with nothing read and no collision (the tags left do not answer), or `budget_us` is
+/// spent (the round is cut there, as when the reader leaves the antenna). Each tag is read at
+/// most once. A collided slot is read anyway when one reply stands [`CAPTURE_MARGIN_DB`] above
+/// every other (capture effect).
 pub fn round<R: Rng + ?Sized>(
     rng: &mut R,
     times: &SlotTimes,
-    tags: &[Contender],
+    tags: &[usize],
     qfp: f64,
     budget_us: f64,
+    radio: &mut impl Radio,
 ) -> Round {
     let mut out = Round {
         qfp: qfp.clamp(0.0, f64::from(MAX_Q)),
         ..Round::default()
     };
-    let mut waiting: Vec<Contender> = tags.to_vec();
+    let mut waiting: Vec<usize> = tags.to_vec();
     let mut t = times.query_extra_us;
     let mut slots: Vec<(u32, usize)> = Vec::with_capacity(waiting.len());
-    let mut spent = 0u64;
-    'frames: loop {
-        // However the tags answer, a round ends (a frame of 2^15 slots at most per pass).
-        spent += 1;
-        if spent > MAX_FRAMES {
-            break;
-        }
+    let mut read_now: Vec<usize> = Vec::new();
+    let mut frames = 0u64;
+    'frames: while frames < MAX_FRAMES {
+        frames += 1;
         let q = out.qfp.round() as u32;
         let frame = 1u32 << q;
         slots.clear();
-        slots.extend(
-            waiting
-                .iter()
-                .enumerate()
-                .map(|(i, _)| (rng.gen_range(0..frame), i)),
-        );
+        slots.extend((0..waiting.len()).map(|i| (rng.gen_range(0..frame), i)));
         slots.sort_unstable();
         let mut next = 0;
-        let mut read_now = Vec::new();
+        let mut progressed = false;
         let mut collided = false;
         for slot in 0..frame {
             let first = next;
             while next < slots.len() && slots[next].0 == slot {
                 next += 1;
             }
-            // Outcome index: 0 empty, 1 collided, 2 a single reply.
-            let (dt, outcome, read) = match &slots[first..next] {
-                [] => (times.empty_us, 0, None),
-                [(_, i)] if waiting[*i].decodes => (times.success_us, 2, Some(*i)),
-                [_] => (times.collided_us, 2, None),
-                many => match captured(&waiting, many) {
-                    Some(i) => (times.success_us, 1, Some(i)),
-                    None => (times.collided_us, 1, None),
-                },
+            let answering = &slots[first..next];
+            // The reply the reader may decode: a lone one, or a captured one.
+            let (candidate, collision) = match answering {
+                [] => (None, false),
+                [(_, i)] => (Some(*i), false),
+                many => (captured(&waiting, many, t, radio), true),
+            };
+            let decoded = candidate
+                .filter(|_| t + times.success_us <= budget_us)
+                .filter(|&i| radio.reply(waiting[i], t + times.success_us));
+            // Outcome index: 0 nothing heard, 1 collided, 2 read.
+            let (dt, outcome) = match (decoded, collision) {
+                (Some(_), _) => (times.success_us, 2),
+                (None, true) => (times.collided_us, 1),
+                (None, false) => (times.empty_us, 0),
             };
             if t + dt > budget_us {
-                out.duration_us = t;
-                return out;
+                break 'frames;
             }
             t += dt;
             out.slots[outcome] += 1;
-            collided |= outcome == 1;
-            if let Some(i) = read {
+            collided |= collision;
+            if let Some(i) = decoded {
                 read_now.push(i);
-                out.reads.push((t, waiting[i].tag));
+                progressed = true;
+                out.reads.push((t, waiting[i]));
             }
             match outcome {
                 0 => out.qfp = (out.qfp - Q_STEP).max(0.0),
-                1 => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
+                1 if decoded.is_none() => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
                 _ => {}
             }
             if out.qfp.round() as u32 != q && slot + 1 < frame {
@@ -229,20 +296,17 @@ pub fn round<R: Rng + ?Sized>(
                 continue 'frames;
             }
         }
-        let progressed = !read_now.is_empty();
         remove_read(&mut waiting, &mut read_now);
-        // Done when every tag is read, or a frame neither read nor heard a collision (the
-        // tags left never decode).
         if waiting.is_empty() || !(progressed || collided) {
             break;
         }
     }
-    out.duration_us = t;
+    out.duration_us = t.min(budget_us.max(0.0));
     out
 }
 
 /// Drops the tags read in this frame from `waiting` (indices into it).
-fn remove_read(waiting: &mut Vec<Contender>, read: &mut Vec<usize>) {
+fn remove_read(waiting: &mut Vec<usize>, read: &mut Vec<usize>) {
     read.sort_unstable();
     for &i in read.iter().rev() {
         waiting.swap_remove(i);
@@ -250,13 +314,18 @@ fn remove_read(waiting: &mut Vec<Contender>, read: &mut Vec<usize>) {
     read.clear();
 }
 
-/// The index (into `waiting`) of the reply the reader decodes in a collided slot: the
-/// strongest, if it decodes alone and stands [`CAPTURE_MARGIN_DB`] above all others.
-fn captured(waiting: &[Contender], answering: &[(u32, usize)]) -> Option<usize> {
+/// The index (into `waiting`) of the reply the reader may decode in a collided slot: the
+/// strongest, if it stands [`CAPTURE_MARGIN_DB`] above all others.
+fn captured(
+    waiting: &[usize],
+    answering: &[(u32, usize)],
+    t_us: f64,
+    radio: &mut impl Radio,
+) -> Option<usize> {
     let mut best: Option<(f64, usize)> = None;
     let mut second = f64::NEG_INFINITY;
     for &(_, i) in answering {
-        let r = waiting[i].rssi_dbm;
+        let r = radio.level(waiting[i], t_us);
         match best {
             Some((b, _)) if r <= b => second = second.max(r),
             Some((b, _)) => {
@@ -267,7 +336,7 @@ fn captured(waiting: &[Contender], answering: &[(u32, usize)]) -> Option<usize> 
         }
     }
     let (b, i) = best?;
-    (waiting[i].decodes && b - second >= CAPTURE_MARGIN_DB).then_some(i)
+    (b - second >= CAPTURE_MARGIN_DB).then_some(i)
 }
 
 #[cfg(test)]

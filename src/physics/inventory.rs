@@ -1,25 +1,26 @@
 //! Inventory: turning an antenna's share of the reader's time into tag reads.
 //!
-//! Each attempt slot (see [`super::schedule`]) happens at one instant on the channel of that
-//! instant. The tags in the field are those within r·(1 + 4σ_r) whose forward link powers the
-//! chip (P_tag ≥ tag sensitivity, with multipath when the scenario has reflectors), evaluated
-//! every 25 ms of absolute time (the reader's antenna dwell); the attempt picks one of them
-//! uniformly at random (drawn as [`super::field`] describes, without evaluating every tag),
-//! computes its channel at the attempt's instant, and becomes a read only if
-//! 1. D ≤ r̃ = r·|1 + n_r|, n_r ~ N(0, σ_r²) drawn for this attempt (\[G\]);
+//! The reader runs Gen2 inventory rounds ([`super::rounds`]); each reply a round hears is
+//! worked out here at its instant, on the channel of that instant. The tags in the field are
+//! those within r·(1 + 4σ_r) whose forward link powers the chip (P_tag ≥ the tag's own
+//! sensitivity, with multipath when the scenario has reflectors), evaluated at the start of
+//! each 25 ms epoch; a reply becomes a read only if
+//! 1. D ≤ r̃ = r·|1 + n_r|, n_r ~ N(0, σ_r²) drawn for this reply (\[G\]);
 //! 2. a uniform draw falls below the edge probability of the forward-link margin (0 when the
 //!    tag is not powered);
-//! 3. the noisy RSSI log argument is positive and the RSSI reaches the reader's sensitivity.
+//! 3. the RSSI (docs/measurement.md) reaches the reader's sensitivity.
 //!
-//! Free space uses \[G\] eq. 5 for RSSI and 4πD/λ for phase; with reflectors both come from the
-//! summed image paths (\[G\] eq. 1).
+//! Free space and multipath share one gain convention; the phase comes from the direct path
+//! or the summed image paths (\[G\] eq. 1).
 
 use rand::Rng;
 
 use super::field::Bucket;
+use super::gen2::Air;
 use super::geometry::{distance, Vec3};
 use super::multipath::{self, Aim, Channel};
-use super::schedule::{self, Slot};
+use super::schedule;
+use super::seed::Stream;
 use super::{noise, phase, rssi, Model, Read, Want};
 use crate::scenario::RssiModel;
 
@@ -38,11 +39,11 @@ pub(super) const FIELD_BUCKET_US: u64 = 25_000;
 
 impl Model {
     /// Reads made on antenna `antenna` (1-based) during simulated time `[t0_us, t1_us)`, in
-    /// time order. `tx_power_dbm` is the power the client configured (`None`: the scenario's
-    /// value); it sets the read range and the RSSI. The window is entirely this antenna's: it
-    /// gets `reads_per_second · (t1 − t0)` attempts. Deterministic: each attempt's draws are
-    /// seeded by (seed, reader, antenna, slot), so the same window always gives the same
-    /// reads and a split window gives the same reads as the whole.
+    /// time order, under the reader's default [`Air`]. `tx_power_dbm` is the power the client
+    /// configured (`None`: the scenario's value); it sets the read range and the RSSI. The
+    /// window is entirely this antenna's. Deterministic: every draw is seeded by (seed,
+    /// reader, antenna, epoch, reply), so the same window always gives the same reads and a
+    /// split window gives the same reads as the whole.
     pub fn inventory(
         &self,
         antenna: u16,
@@ -64,11 +65,21 @@ impl Model {
         tx_power_dbm: Option<f64>,
         channel: Option<u16>,
     ) -> Vec<Read> {
-        self.inventory_with(antenna, t0_us, t1_us, tx_power_dbm, channel, Want::ALL)
+        let air = Air::default();
+        self.inventory_with(
+            antenna,
+            t0_us,
+            t1_us,
+            tx_power_dbm,
+            channel,
+            Want::ALL,
+            &air,
+        )
     }
 
-    /// As [`Model::inventory_on`], working out only the optional values `want` asks for (the
-    /// same reads, with the others 0).
+    /// As [`Model::inventory_on`], under `air` (RF mode, session, target), working out only
+    /// the optional values `want` asks for (the same reads, with the others 0).
+    #[allow(clippy::too_many_arguments)]
     pub fn inventory_with(
         &self,
         antenna: u16,
@@ -77,6 +88,7 @@ impl Model {
         tx_power_dbm: Option<f64>,
         channel: Option<u16>,
         want: Want,
+        air: &Air,
     ) -> Vec<Read> {
         let Some(a) = usize::from(antenna)
             .checked_sub(1)
@@ -88,50 +100,11 @@ impl Model {
             .filter(|p| p.is_finite())
             .unwrap_or(a.spec.tx_power_dbm);
         let pinned = channel.filter(|c| (1..=self.table.len()).contains(&usize::from(*c)));
-        let key = [self.seed, self.reader as u64, u64::from(antenna)];
-        let mut classified = None;
-        let mut bucket_now = u64::MAX;
-        // The antenna's draw state from its last window: its kept decisions and buffers.
+        // The antenna's field state from its last window: its kept decisions and buffers.
         let index = usize::from(antenna) - 1;
         let mut bucket = self.field_cache.take_bucket(index);
         bucket.memo.fit(self.tags.len(), tx);
-        let mut slots = schedule::slot_iter(key, self.reads_per_second, t0_us, t1_us);
-        // At most one read per slot: room for the rest of them at the first read (a window
-        // without reads allocates nothing; a long one grows the vector as it goes).
-        let mut reads = Vec::new();
-        // The dwell [start, end) of the last channel looked up, and that channel: a new one
-        // (a 64-bit division) only when the time leaves it.
-        let mut dwell = (1, 0, 1);
-        let mut channel_at = |t: u64| {
-            if let Some(c) = pinned {
-                return c;
-            }
-            if !(dwell.0 <= t && t < dwell.1) {
-                let start = self.hops.dwell_start(t);
-                dwell = (
-                    start,
-                    start.saturating_add(self.hops.dwell_us),
-                    self.channel_at(t),
-                );
-            }
-            dwell.2
-        };
-        while let Some(slot) = slots.next() {
-            let b = slot.time_us / FIELD_BUCKET_US;
-            if bucket_now != b {
-                let start = b * FIELD_BUCKET_US;
-                let ch = channel_at(start);
-                self.open_bucket(antenna, tx, start, ch, &mut classified, &mut bucket);
-                bucket_now = b;
-            }
-            let ch = channel_at(slot.time_us);
-            if let Some(read) = self.attempt(antenna, tx, ch, slot, &mut bucket, want) {
-                if reads.capacity() == 0 {
-                    reads.reserve(slots.size_hint().1.unwrap_or(0).min(1 << 12) + 1);
-                }
-                reads.push(read);
-            }
-        }
+        let reads = self.rounds(antenna, t0_us, t1_us, tx, pinned, want, air, &mut bucket);
         self.field_cache.put_bucket(index, bucket);
         reads
     }
@@ -171,21 +144,20 @@ impl Model {
         )
     }
 
-    /// One read attempt on `antenna` on `channel_index` at the slot's instant, on one tag of
-    /// `field`.
-    fn attempt(
+    /// The read `tag` makes answering `antenna` on `channel_index` at `time_us`, if the
+    /// reader decodes it, with every draw from `rng`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn reply_at(
         &self,
         antenna: u16,
         tx_power_dbm: f64,
         channel_index: u16,
-        slot: Slot,
+        tag: usize,
+        time_us: u64,
+        rng: &mut Stream,
         bucket: &mut Bucket,
         want: Want,
     ) -> Option<Read> {
-        let Slot {
-            time_us, mut rng, ..
-        } = slot;
-        let tag = self.draw(bucket, &mut rng)?;
         let spec = &self.antennas[usize::from(antenna) - 1].spec;
         let frequency_khz = *self.table.get(usize::from(channel_index) - 1)?;
         let lambda = self.wavelength_m(channel_index);
@@ -199,8 +171,7 @@ impl Model {
             want.phase,
         );
 
-        let perturbed_range =
-            spec.range_m * (1.0 + noise::gaussian(&mut rng, spec.range_sigma)).abs();
+        let perturbed_range = spec.range_m * (1.0 + noise::gaussian(rng, spec.range_sigma)).abs();
         if ch.distance_m > perturbed_range {
             return None;
         }
@@ -225,14 +196,14 @@ impl Model {
         let (clean_dbm, rssi_dbm) = match spec.rssi_model {
             RssiModel::Reader => {
                 let clean = rx(0.0)?;
-                let n_db = noise::gaussian(&mut rng, spec.rssi_sigma_db);
+                let n_db = noise::gaussian(rng, spec.rssi_sigma_db);
                 (
                     clean,
                     rssi::reader_dbm(clean, n_db, spec.rssi_resolution_db),
                 )
             }
             RssiModel::GazeboEq5 => {
-                let n_rssi = noise::gaussian(&mut rng, spec.eq5_noise());
+                let n_rssi = noise::gaussian(rng, spec.eq5_noise());
                 let noisy = rx(n_rssi)?;
                 (rx(0.0).unwrap_or(noisy), noisy)
             }
@@ -246,14 +217,14 @@ impl Model {
         let (mut phase_rad, mut doppler_hz) = (0.0, 0.0);
         if want.phase || want.doppler {
             let scale = noise::weak_signal_scale(clean_dbm, spec.phase_noise_ref_dbm);
-            let mut n_phi = noise::gaussian(&mut rng, spec.phase_noise_rad * scale);
+            let mut n_phi = noise::gaussian(rng, spec.phase_noise_rad * scale);
             if let Some(dist) = &spec.extra_phase_noise {
-                n_phi += noise::extra(&mut rng, dist);
+                n_phi += noise::extra(rng, dist);
             }
             if spec.phase_pi_ambiguity && rng.gen::<bool>() {
                 n_phi += std::f64::consts::PI;
             }
-            let n_doppler = noise::gaussian(&mut rng, spec.doppler_sigma_hz * scale);
+            let n_doppler = noise::gaussian(rng, spec.doppler_sigma_hz * scale);
             if want.phase {
                 let phi0 = self.phase_offset(antenna, tag, channel_index);
                 phase_rad = phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi);

@@ -16,6 +16,7 @@ use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 
+use super::gen2::Air;
 use super::pool::Pool;
 use super::{Model, Read, Want};
 
@@ -32,6 +33,8 @@ pub struct Slice {
     pub t1_us: u64,
     /// The optional values of the reads the AISpec reports.
     pub want: Want,
+    /// RF mode, session and target the AISpec inventories with on this antenna.
+    pub air: Air,
 }
 
 impl Slice {
@@ -44,6 +47,7 @@ impl Slice {
             self.power_dbm,
             None,
             self.want,
+            &self.air,
         )
     }
 }
@@ -231,6 +235,7 @@ impl Lookahead {
             w.slice.antenna == slice.antenna
                 && same_power(w.slice.power_dbm, slice.power_dbm)
                 && w.slice.want.covers(slice.want)
+                && w.slice.air == slice.air
                 && w.slice.t0_us <= slice.t0_us
                 && slice.t1_us <= w.slice.t1_us
         })?;
@@ -418,6 +423,7 @@ mod tests {
                 t0_us: t0_us + k * 25_000,
                 t1_us: t0_us + (k + 1) * 25_000,
                 want: Want::ALL,
+                air: Air::default(),
             })
             .collect()
     }

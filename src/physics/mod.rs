@@ -23,6 +23,7 @@ pub mod phase;
 pub mod pool;
 mod pose;
 pub mod robot;
+pub mod rounds;
 pub mod rssi;
 pub mod schedule;
 pub mod seed;
@@ -168,7 +169,6 @@ pub struct Model {
     table: Vec<u32>,
     wavelengths: Vec<f64>,
     hops: HopSchedule,
-    reads_per_second: f64,
     antennas: Vec<AntennaModel>,
     /// The scenario's tags, shared by every reader's model.
     tags: Arc<[TagModel]>,
@@ -324,7 +324,6 @@ impl Model {
             table,
             wavelengths,
             hops,
-            reads_per_second: spec.map_or(0.0, |r| r.reads_per_second),
             antennas,
             tags: Arc::clone(&world.tags),
             planes: Arc::clone(&world.planes),
@@ -354,11 +353,6 @@ impl Model {
     /// The reader's hop schedule (channel count, dwell, pinned channel).
     pub fn hop_schedule(&self) -> HopSchedule {
         self.hops
-    }
-
-    /// The reader's read-attempt budget per second.
-    pub fn reads_per_second(&self) -> f64 {
-        self.reads_per_second
     }
 
     /// Wavelength (m) of channel `channel` (1-based); that of channel 1 if out of range.

@@ -102,10 +102,10 @@ fn pi_ambiguity_flips_about_half_of_the_reads() {
         scene(serde_json::json!([tag(1, [2.0, 0.0, 1.0])]), a, 0.0)
     };
     let (plain, flipped) = (make(false), make(true));
-    let a = plain.inventory_on(1, 0, 2_000_000, None, Some(1));
-    let b = flipped.inventory_on(1, 0, 2_000_000, None, Some(1));
+    let a = plain.inventory_on(1, 0, 4_000_000, None, Some(1));
+    let b = flipped.inventory_on(1, 0, 4_000_000, None, Some(1));
     assert_eq!(a.len(), b.len());
-    assert!(a.len() > 500);
+    assert!(a.len() > 500, "{}", a.len());
     let mut shifted = 0;
     for (x, y) in a.iter().zip(&b) {
         let d = (y.phase_rad - x.phase_rad).rem_euclid(TAU);

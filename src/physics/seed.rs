@@ -94,6 +94,8 @@ pub mod domain {
     pub const TAG: u64 = 5;
     /// The reader/antenna part of the structured phase offset.
     pub const ANTENNA_PHASE: u64 = 6;
+    /// Gen2 inventory rounds and their replies.
+    pub const GEN2: u64 = 7;
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)

@@ -23,7 +23,7 @@ fn fixed_scenario(tags: &[[f64; 3]], antenna: serde_json::Value) -> Scenario {
         "seed": 42,
         "world": { "min": [-20, -20, 0], "max": [20, 20, 5] },
         "tags": tags,
-        "readers": [ { "name": "r", "region": "fcc", "reads_per_second": 500, "antennas": [a] } ]
+        "readers": [ { "name": "r", "region": "fcc", "antennas": [a] } ]
     });
     Scenario::from_json(&v.to_string()).expect("test scenario is valid")
 }
@@ -34,7 +34,7 @@ fn angle_diff(a: f64, b: f64) -> f64 {
 }
 
 #[test]
-fn total_reads_match_the_budget_when_tags_are_in_range() {
+fn total_reads_follow_the_air_interface_when_tags_are_in_range() {
     let tags = [
         [2.0, 0.0, 1.0],
         [2.5, 0.5, 1.0],
@@ -43,12 +43,12 @@ fn total_reads_match_the_budget_when_tags_are_in_range() {
     ];
     let m = Model::new(&fixed_scenario(&tags, serde_json::json!({})), 0);
     let reads = m.inventory(1, 0, 10_000_000, None);
-    let expected = 500.0 * 10.0;
+    // At most one read per successful slot of the reader's default mode, and most of the
+    // time spent reading: four tags in a frame of four slots.
+    let slot = gen2::Air::default().mode.slot_times(96).success_us;
+    let most = 10e6 / slot;
     let n = reads.len() as f64;
-    assert!(
-        (n - expected).abs() <= 0.1 * expected,
-        "{n} reads, expected ≈ {expected}"
-    );
+    assert!(n <= most && n >= 0.6 * most, "{n} reads, at most {most}");
     // Every tag gets a fair share.
     for t in 0..tags.len() {
         let k = reads.iter().filter(|r| r.tag == t).count() as f64;
@@ -75,7 +75,7 @@ fn no_reads_beyond_range_and_lower_power_shrinks_the_range() {
     );
     let strong = m.inventory(1, 0, 5_000_000, Some(30.0)).len();
     let weak = m.inventory(1, 0, 5_000_000, Some(15.0)).len();
-    assert!(strong > 1000, "{strong}");
+    assert!(strong > 500, "{strong}");
     assert_eq!(weak, 0);
     // Reads near the power edge are fewer than well inside it.
     let middle = m.inventory(1, 0, 5_000_000, Some(21.5)).len();
@@ -425,7 +425,15 @@ fn leaving_out_phase_and_doppler_changes_nothing_else() {
                 doppler: true,
             },
         ] {
-            let some = m.inventory_with(antenna, 60_000_000, 70_000_000, None, None, want);
+            let some = m.inventory_with(
+                antenna,
+                60_000_000,
+                70_000_000,
+                None,
+                None,
+                want,
+                &Default::default(),
+            );
             assert_eq!(some.len(), all.len(), "antenna {antenna}, {want:?}");
             for (a, b) in all.iter().zip(&some) {
                 let expect = Read {
@@ -467,7 +475,9 @@ fn readers_in_one_world_share_its_data_and_read_the_same() {
     for reader in [0, 1] {
         let shared = Model::in_world(&world, &s, reader);
         let alone = Model::new(&s, reader);
-        let run = |m: &Model| m.inventory_with(1, 0, 5_000_000, None, None, Want::ALL);
+        let run = |m: &Model| {
+            m.inventory_with(1, 0, 5_000_000, None, None, Want::ALL, &Default::default())
+        };
         let reads = run(&shared);
         assert!(!reads.is_empty(), "S1's robot passes its tags in 5 s");
         assert_eq!(reads, run(&alone), "reader {reader}");

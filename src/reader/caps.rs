@@ -96,14 +96,22 @@ fn llrp_caps() -> LlrpCapabilities {
 }
 
 fn rf_mode(id: u32) -> C1g2UhfRfModeTableEntry {
-    // (DR 64/3?, M, forward modulation, spectral mask, BLF Hz, PIE ×1000, Tari min/max/step ns)
-    let (dr, m, fwd, mask, bdr, pie, tmin, tmax) = match id {
-        0 => (true, 0, 2, 2, 640_000, 1500, 6250, 6250),
-        1 => (true, 1, 2, 2, 640_000, 1500, 6250, 6250),
-        2 => (true, 2, 0, 3, 274_000, 2000, 20000, 20000),
-        3 => (true, 3, 0, 3, 170_600, 2000, 20000, 20000),
-        _ => (true, 2, 0, 3, 250_000, 2000, 20000, 25000),
+    // The link parameters the physics runs each mode with; the forward link modulation
+    // (0 PR-ASK, 2 DSB-ASK) and spectral mask (2 multi-interrogator, 3 dense) as Impinj's.
+    let mode = crate::physics::gen2::RfMode::impinj(id)
+        .unwrap_or(crate::physics::gen2::RfMode::IMPINJ_MODE_2);
+    let m = match mode.miller {
+        1 => 0,
+        2 => 1,
+        4 => 2,
+        _ => 3,
     };
+    let (fwd, mask) = if mode.miller <= 2 { (2, 2) } else { (0, 3) };
+    let dr = true;
+    let bdr = (mode.blf_khz * 1e3).round() as u32;
+    let pie = (mode.pie * 1e3).round() as u32;
+    let tmin = (mode.tari_us * 1e3).round() as u32;
+    let tmax = if id == 1000 { 25_000 } else { tmin };
     C1g2UhfRfModeTableEntry {
         mode_identifier: id,
         dr_value: dr,

@@ -159,9 +159,9 @@ pub struct ReaderSpec {
     /// Stay on this channel (1-based index into the table) instead of rotating.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixed_channel: Option<u16>,
-    /// The reader's total read-attempt budget per second, shared by its antennas in time.
-    #[serde(default = "default_reads_per_second")]
-    pub reads_per_second: f64,
+    /// Accepted from older files and unused: the Gen2 inventory model sets the read rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reads_per_second: Option<f64>,
     /// With ROReportTrigger 1 (N tags or end of AISpec) and N = 0, an inventory nothing can
     /// end (Null stop triggers on AISpec and ROSpec) sends what it has read every this many ms,
     /// as Impinj readers do; 0 holds the reads until the ROSpec ends, the letter of LLRP.
@@ -457,9 +457,6 @@ fn default_listen() -> String {
 /// Marks a field whose default depends on other fields; replaced before validation.
 fn unset_f64() -> f64 {
     f64::NAN
-}
-fn default_reads_per_second() -> f64 {
-    1000.0
 }
 fn default_report_interval_ms() -> u32 {
     1000

@@ -138,6 +138,12 @@ impl Scenario {
             if reader.hop_dwell_ms.is_nan() {
                 reader.hop_dwell_ms = reader.region.default_dwell_ms();
             }
+            if let Some(rate) = reader.reads_per_second {
+                self.notices.push(format!(
+                    "readers[{r}].reads_per_second ({rate}) no longer sets anything: the Gen2 \
+                     inventory model (RF mode, Q algorithm, sessions) sets the read rate"
+                ));
+            }
             for (a, antenna) in reader.antennas.iter().enumerate() {
                 if antenna.rssi_noise.is_some() && antenna.rssi_model == RssiModel::Reader {
                     self.notices.push(format!(

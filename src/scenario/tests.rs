@@ -63,7 +63,7 @@ fn defaults_are_filled_and_round_trip_through_json() {
     let r = &s.readers[0];
     assert_eq!(r.listen, "127.0.0.1:5084");
     assert_eq!(r.hop_dwell_ms, 400.0);
-    assert_eq!(r.reads_per_second, 1000.0);
+    assert_eq!(r.reads_per_second, None);
     assert_eq!(r.report_interval_ms, 1000);
     let a = &r.antennas[0];
     assert_eq!(
@@ -270,9 +270,19 @@ fn old_fields_load_with_a_notice_naming_what_replaced_them() {
     // A file written before the reader model: [G]'s RSS noise on the first antenna.
     let mut old = base();
     old["readers"][0]["antennas"][0]["rssi_noise"] = serde_json::json!(0.01);
+    old["readers"][0]["reads_per_second"] = serde_json::json!(750);
     let s = Scenario::from_json(&old.to_string()).expect("an old file still loads");
-    assert_eq!(s.notices.len(), 1, "{:?}", s.notices);
-    let n = &s.notices[0];
+    assert_eq!(s.notices.len(), 2, "{:?}", s.notices);
+    let rate = &s.notices[0];
+    assert!(
+        rate.starts_with("readers[0].reads_per_second (750)"),
+        "{rate}"
+    );
+    assert!(rate.contains("Gen2"), "{rate}");
+    old["readers"][0]
+        .as_object_mut()
+        .map(|r| r.remove("reads_per_second"));
+    let n = &s.notices[1];
     assert!(n.starts_with("readers[0].antennas[0].rssi_noise"), "{n}");
     assert!(
         n.contains("gazebo_eq5") && n.contains("rssi_sigma_db"),

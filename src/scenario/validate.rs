@@ -257,11 +257,9 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
             ));
         }
     }
-    positive(
-        &format!("{p}.reads_per_second"),
-        r.reads_per_second,
-        MAX_READS_PER_SECOND,
-    )?;
+    if let Some(rate) = r.reads_per_second {
+        positive(&format!("{p}.reads_per_second"), rate, MAX_READS_PER_SECOND)?;
+    }
     if r.report_interval_ms > MAX_REPORT_INTERVAL_MS {
         return Err(invalid(
             format!("{p}.report_interval_ms"),

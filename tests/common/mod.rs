@@ -159,7 +159,6 @@ pub fn line_scenario(distances: &[f64]) -> Scenario {
     "listen": "127.0.0.1:0",
     "region": "etsi",
     "fixed_channel": 1,
-    "reads_per_second": 600,
     "antennas": [{{
       "mount": {{ "type": "fixed", "pose": {{ "position": [0, 0, 1], "yaw_deg": 0, "pitch_deg": 0 }} }},
       "gain_dbi": 6,

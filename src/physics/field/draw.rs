@@ -4,8 +4,6 @@
 
 use std::sync::Arc;
 
-use rand::Rng;
-
 use super::cache::{Kept, Memo};
 use super::grid::Classified;
 use super::near::Near;
@@ -154,29 +152,29 @@ impl Model {
         cached.unwrap_or_else(|| compute(delay))
     }
 
-    /// A tag drawn uniformly from the field of the bucket, or `None` when it is empty.
-    pub(in crate::physics) fn draw<R: Rng + ?Sized>(
-        &self,
-        bucket: &mut Bucket,
-        rng: &mut R,
-    ) -> Option<usize> {
-        while bucket.out < bucket.pool.len() {
-            let i = rng.gen_range(0..bucket.pool.len());
-            let (tag, known) = bucket.pool[i];
-            match known {
-                Known::In => return Some(tag),
-                Known::Out => {}
-                Known::Unknown => {
-                    if self.in_field(bucket, tag) {
-                        bucket.pool[i].1 = Known::In;
-                        return Some(tag);
-                    }
+    /// How many candidates `bucket` has.
+    pub(in crate::physics) fn candidates(bucket: &Bucket) -> usize {
+        bucket.pool.len()
+    }
+
+    /// The tag of candidate `i` of the bucket if it is in the field (an undecided one is
+    /// settled and remembered as a draw would).
+    pub(in crate::physics) fn settle(&self, bucket: &mut Bucket, i: usize) -> Option<usize> {
+        let (tag, known) = *bucket.pool.get(i)?;
+        match known {
+            Known::In => Some(tag),
+            Known::Out => None,
+            Known::Unknown => {
+                if self.in_field(bucket, tag) {
+                    bucket.pool[i].1 = Known::In;
+                    Some(tag)
+                } else {
                     bucket.pool[i].1 = Known::Out;
                     bucket.out += 1;
+                    None
                 }
             }
         }
-        None
     }
 
     /// Whether `tag` is in the field at the bucket start: within reach and powered.

@@ -1,5 +1,5 @@
 //! Which tags are in an antenna's field — within reach and powered by the forward link — at
-//! the start of a 25 ms bucket ([`super::inventory`]), and a uniform draw among them, without
+//! the start of a 25 ms bucket (an epoch of inventory rounds, [`super::rounds`]), without
 //! evaluating the full channel of every tag in every bucket.
 //!
 //! Time is cut into intervals on a fixed grid ([`MAX_SPAN_US`] long, halved while the antenna
@@ -23,13 +23,11 @@
 //! amplitude can change (from the antenna's and the tag's top speeds and the boresight's turn
 //! rate) proves that it still holds ([`Near::steady`](near::Near::steady)).
 //!
-//! A draw picks uniformly among the bucket's in and undecided tags and draws again while it
-//! hits one that is not powered (rejection sampling): every tag of the field is equally likely,
-//! as when the field is listed in full, and the draw depends only on the attempt's generator
-//! and the bucket's candidates (fixed by its interval of the grid), never on earlier draws. The bounds keep margins far above rounding errors,
-//! so they never change which tags are in the field (unit tests check every decision, and
-//! every kept decision up to its expiry, against the exact evaluation on the fixtures and on a
-//! scenario where everything moves).
+//! An epoch's rounds take every in and every undecided tag that the exact evaluation puts in
+//! the field (`Model::settle`). The bounds keep margins far above
+//! rounding errors, so they never change which tags are in the field (unit tests check every
+//! decision, and every kept decision up to its expiry, against the exact evaluation on the
+//! fixtures and on a scenario where everything moves).
 
 mod cache;
 mod draw;
@@ -42,6 +40,7 @@ mod tests;
 pub(super) use cache::{FieldCache, Rates};
 pub(super) use draw::Bucket;
 pub(super) use gains::GainTable;
+pub(super) use grid::Classified;
 pub use grid::MAX_SPAN_US;
 
 use super::rssi;

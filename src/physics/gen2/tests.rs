@@ -3,14 +3,27 @@
 use super::*;
 use crate::physics::seed;
 
-fn tags(n: usize) -> Vec<Contender> {
-    (0..n)
-        .map(|tag| Contender {
-            tag,
-            rssi_dbm: -50.0 - (tag % 7) as f64,
-            decodes: true,
-        })
-        .collect()
+fn tags(n: usize) -> Vec<usize> {
+    (0..n).collect()
+}
+
+/// A channel where tag k's reply is at `levels[k]` dBm (−50 when not listed) and decodes
+/// unless `deaf`; counts the replies asked about.
+#[derive(Default)]
+struct Fixed {
+    levels: Vec<f64>,
+    deaf: bool,
+    asked: usize,
+}
+
+impl Radio for Fixed {
+    fn level(&mut self, tag: usize, _t_us: f64) -> f64 {
+        self.levels.get(tag).copied().unwrap_or(-50.0)
+    }
+    fn reply(&mut self, _tag: usize, _t_us: f64) -> bool {
+        self.asked += 1;
+        !self.deaf
+    }
 }
 
 #[test]
@@ -41,12 +54,26 @@ fn mode_2_slot_times_follow_the_standard() {
 fn a_lone_tag_is_read_in_one_slot() {
     let times = RfMode::IMPINJ_MODE_2.slot_times(96);
     let mut rng = seed::stream(&[1]);
-    let r = round(&mut rng, &times, &tags(1), 0.0, f64::INFINITY);
+    let r = round(
+        &mut rng,
+        &times,
+        &tags(1),
+        0.0,
+        f64::INFINITY,
+        &mut Fixed::default(),
+    );
     assert_eq!(r.reads.len(), 1);
     assert_eq!(r.slots, [0, 0, 1]);
     assert!((r.duration_us - (times.query_extra_us + times.success_us)).abs() < 1e-9);
     // No tag: one empty slot, and Q stays at 0.
-    let r = round(&mut rng, &times, &[], 0.0, f64::INFINITY);
+    let r = round(
+        &mut rng,
+        &times,
+        &[],
+        0.0,
+        f64::INFINITY,
+        &mut Fixed::default(),
+    );
     assert_eq!((r.reads.len(), r.slots), (0, [1, 0, 0]));
     assert_eq!(r.qfp, 0.0);
 }
@@ -58,7 +85,14 @@ fn every_tag_is_read_once_at_about_e_slots_per_tag() {
     let mut total = [0u32; 3];
     for k in 0..20 {
         let mut rng = seed::stream(&[2, k]);
-        let r = round(&mut rng, &times, &tags(n), (n as f64).log2(), f64::INFINITY);
+        let r = round(
+            &mut rng,
+            &times,
+            &tags(n),
+            settled_qfp(n),
+            f64::INFINITY,
+            &mut Fixed::default(),
+        );
         let mut seen: Vec<usize> = r.reads.iter().map(|&(_, t)| t).collect();
         seen.sort_unstable();
         assert_eq!(seen, (0..n).collect::<Vec<_>>(), "every tag once");
@@ -76,35 +110,20 @@ fn every_tag_is_read_once_at_about_e_slots_per_tag() {
 #[test]
 fn the_strongest_of_colliding_tags_is_captured_only_well_above_the_rest() {
     let times = RfMode::IMPINJ_MODE_2.slot_times(96);
-    let pair = |gap: f64| {
-        [
-            Contender {
-                tag: 0,
-                rssi_dbm: -40.0,
-                decodes: true,
-            },
-            Contender {
-                tag: 1,
-                rssi_dbm: -40.0 - gap,
-                decodes: true,
-            },
-        ]
+    let pair = |gap: f64| Fixed {
+        levels: vec![-40.0, -40.0 - gap],
+        ..Fixed::default()
     };
     // Q = 0: one slot, both answer in it; a budget of one slot.
     let budget = times.query_extra_us + times.success_us;
     let mut rng = seed::stream(&[3]);
-    let strong = round(&mut rng, &times, &pair(10.0), 0.0, budget);
+    let strong = round(&mut rng, &times, &tags(2), 0.0, budget, &mut pair(10.0));
     assert_eq!(strong.reads.len(), 1);
     assert_eq!(strong.reads[0].1, 0);
-    assert_eq!(strong.slots, [0, 1, 0]);
+    assert_eq!(strong.slots, [0, 0, 1]);
     // Room for one collided slot only.
-    let close = round(
-        &mut rng,
-        &times,
-        &pair(3.0),
-        0.0,
-        times.query_extra_us + times.collided_us,
-    );
+    let budget = times.query_extra_us + times.collided_us;
+    let close = round(&mut rng, &times, &tags(2), 0.0, budget, &mut pair(3.0));
     assert!(close.reads.is_empty());
     assert_eq!(close.slots, [0, 1, 0]);
     assert!(close.qfp > 0.0, "a collision raises Q");
@@ -113,16 +132,26 @@ fn the_strongest_of_colliding_tags_is_captured_only_well_above_the_rest() {
 #[test]
 fn tags_that_never_decode_end_the_round_unread() {
     let times = RfMode::IMPINJ_MODE_2.slot_times(96);
-    let mut deaf = tags(5);
-    for t in &mut deaf {
-        t.decodes = false;
-    }
+    let mut deaf = Fixed {
+        deaf: true,
+        ..Fixed::default()
+    };
     let mut rng = seed::stream(&[4]);
-    let r = round(&mut rng, &times, &deaf, 2.0, f64::INFINITY);
+    let r = round(&mut rng, &times, &tags(5), 2.0, f64::INFINITY, &mut deaf);
     assert!(r.reads.is_empty());
+    assert!(deaf.asked >= 1);
     assert!(r.duration_us.is_finite() && r.duration_us > 0.0);
+    // A reply the reader does not decode is a slot it hears nothing in.
+    assert_eq!(r.slots[2], 0);
     // A cut round stops within its budget.
-    let r = round(&mut rng, &times, &tags(50), 5.6, 20_000.0);
+    let r = round(
+        &mut rng,
+        &times,
+        &tags(50),
+        5.6,
+        20_000.0,
+        &mut Fixed::default(),
+    );
     assert!(r.duration_us <= 20_000.0);
     assert!(!r.reads.is_empty() && r.reads.len() < 50);
 }
@@ -137,6 +166,7 @@ fn rounds_are_deterministic_for_a_seed() {
             &tags(30),
             4.0,
             f64::INFINITY,
+            &mut Fixed::default(),
         )
     };
     assert_eq!(run(9), run(9));
@@ -151,7 +181,14 @@ fn read_rate(mode: RfMode, n: usize) -> (f64, f64) {
     let (mut t, mut reads, mut qfp) = (0.0, 0usize, 4.0);
     let population = tags(n);
     while t < 1e6 {
-        let r = round(&mut rng, &times, &population, qfp, 1e6 - t);
+        let r = round(
+            &mut rng,
+            &times,
+            &population,
+            qfp,
+            1e6 - t,
+            &mut Fixed::default(),
+        );
         if r.duration_us <= 0.0 {
             break;
         }

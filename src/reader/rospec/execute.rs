@@ -180,17 +180,19 @@ impl Specs {
                 phase: content.impinj.phase,
                 doppler: content.impinj.doppler,
             };
+            let air = super::air::air_for(ips, ctx.config, antenna);
             let slice = Slice {
                 antenna,
                 power_dbm: power,
                 t0_us: t,
                 t1_us: end,
                 want,
+                air,
             };
             let reads = match channel {
                 Some(_) => ctx
                     .model
-                    .inventory_with(antenna, t, end, power, channel, want),
+                    .inventory_with(antenna, t, end, power, channel, want, &air),
                 None => {
                     let until = [ai_end, ro_end].into_iter().flatten().min();
                     self.prefetched(ctx, &slice, &run, &antennas, ips, until)
@@ -249,7 +251,7 @@ impl Specs {
             if run.antenna_pos % antennas.len().max(1) == 0 {
                 run.rounds += 1;
             }
-            run.slice_end_us = reached + ANTENNA_DWELL_US;
+            run.slice_end_us = dwell_end(reached);
         }
         if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
             && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
@@ -282,7 +284,7 @@ impl Specs {
             run.rounds = 0;
             run.last_report_us = reached;
             run.antenna_pos = 0;
-            run.slice_end_us = reached + ANTENNA_DWELL_US;
+            run.slice_end_us = dwell_end(reached);
             if run.spec_idx >= s.spec.specs.len() {
                 self.finish_ro(a, reached, report_spec, out);
             }
@@ -323,6 +325,7 @@ impl Specs {
             })
             .map(move |(antenna, t0_us)| Slice {
                 antenna,
+                air: super::air::air_for(ips, config, antenna),
                 power_dbm: antenna_power(ips, config, antenna),
                 want: slice.want,
                 t0_us,

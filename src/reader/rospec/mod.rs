@@ -5,6 +5,7 @@
 //! `schedule` when a spec starts and what is next due; `execute` running the active spec over
 //! simulated time; `validate` what ADD_ROSPEC accepts.
 
+mod air;
 mod execute;
 mod schedule;
 mod validate;
@@ -28,6 +29,12 @@ use crate::physics::{Model, Read, Want};
 
 /// Simulated time each antenna of an AISpec gets before the reader moves to the next, µs.
 pub const ANTENNA_DWELL_US: u64 = 25_000;
+
+/// End of the antenna dwell that starts at `t_us`: the next point of the fixed dwell grid
+/// (the physics' epoch grid, so that a dwell is one epoch of inventory rounds).
+pub fn dwell_end(t_us: u64) -> u64 {
+    (t_us / ANTENNA_DWELL_US + 1).saturating_mul(ANTENNA_DWELL_US)
+}
 /// Earliest restart of an Immediate ROSpec after its previous run began, µs (so a spec that
 /// completes at once cannot spin).
 const MIN_RESTART_US: u64 = 1_000;
@@ -450,7 +457,7 @@ impl Specs {
             spec_idx: 0,
             spec_started_us: now,
             antenna_pos: 0,
-            slice_end_us: now + ANTENNA_DWELL_US,
+            slice_end_us: dwell_end(now),
             seen: TagSet::default(),
             last_new_us: now,
             rounds: 0,

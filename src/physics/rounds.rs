@@ -1,0 +1,212 @@
+//! Inventory as a Gen2 reader runs it ([`super::gen2`]): each antenna's time is cut into
+//! epochs on a fixed 25 ms grid of absolute time (`FIELD_BUCKET_US`, one antenna dwell); in
+//! each, the tags in the antenna's field at the epoch's start take part in back-to-back
+//! inventory rounds under the Q algorithm, from a Qfp settled on their number, and each tag
+//! that answers alone (or is captured) becomes a read if the channel at that instant lets the
+//! reader decode it (`Model::reply_at`).
+//!
+//! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), so
+//! the reads of a window are those of the epochs it overlaps that fall inside it: a window
+//! split in two gives the same reads as the whole, and windows may be computed in any order
+//! and on any thread.
+
+use super::field::{Bucket, Classified};
+use super::gen2::{self, Air, Radio};
+use super::geometry::distance;
+use super::inventory::FIELD_BUCKET_US;
+use super::seed::{self, Stream};
+use super::{Model, Read, Want};
+use std::sync::Arc;
+
+/// Most epochs one window covers (a longer one is cut short: about seven hours).
+pub const MAX_EPOCHS: u64 = 1 << 20;
+
+/// EPC length the slot durations are worked out for (the common 96 bits).
+const EPC_BITS: u32 = 96;
+
+/// The channel of each instant, looked up again only when the time leaves the hop dwell.
+pub(super) struct ChannelClock {
+    pinned: Option<u16>,
+    /// The dwell [start, end) last looked up, and its channel.
+    dwell: (u64, u64, u16),
+}
+
+impl ChannelClock {
+    /// A clock on `pinned` for every instant when given, else on the hop schedule.
+    pub(super) fn new(pinned: Option<u16>) -> ChannelClock {
+        ChannelClock {
+            pinned,
+            dwell: (1, 0, 1),
+        }
+    }
+
+    /// The channel (1-based) at `t_us`.
+    pub(super) fn at(&mut self, model: &Model, t_us: u64) -> u16 {
+        if let Some(c) = self.pinned {
+            return c;
+        }
+        if !(self.dwell.0 <= t_us && t_us < self.dwell.1) {
+            let start = model.hops.dwell_start(t_us);
+            self.dwell = (
+                start,
+                start.saturating_add(model.hops.dwell_us),
+                model.channel_at(t_us),
+            );
+        }
+        self.dwell.2
+    }
+}
+
+/// What one epoch's rounds need of the channel: the [`Radio`] of an antenna from an instant.
+struct EpochRadio<'a> {
+    model: &'a Model,
+    antenna: u16,
+    tx_power_dbm: f64,
+    want: Want,
+    /// Absolute start of the current round (µs, fractional).
+    round_start_us: f64,
+    bucket: &'a mut Bucket,
+    clock: &'a mut ChannelClock,
+    /// Seed prefix of the replies' streams, and the epoch.
+    prefix: u64,
+    epoch: u64,
+    /// Replies asked for so far in the epoch (names each reply's stream).
+    replies: u64,
+    /// Reads of the epoch inside [from, until).
+    from_us: u64,
+    until_us: u64,
+    out: &'a mut Vec<Read>,
+}
+
+impl EpochRadio<'_> {
+    fn instant(&self, t_us: f64) -> u64 {
+        let t = self.round_start_us + t_us;
+        if t.is_finite() && t > 0.0 {
+            t as u64
+        } else {
+            0
+        }
+    }
+}
+
+impl Radio for EpochRadio<'_> {
+    fn level(&mut self, tag: usize, t_us: f64) -> f64 {
+        // Free-space level for the capture test: −40 dB a decade and the tag's own strength.
+        let t = self.instant(t_us);
+        let d = distance(
+            self.model.antenna_position(self.antenna, t),
+            self.model.tag_position(tag, t),
+        )
+        .max(0.01);
+        -40.0 * d.log10() + self.model.tags[tag].radio.backscatter_db
+    }
+
+    fn reply(&mut self, tag: usize, t_us: f64) -> bool {
+        let t = self.instant(t_us);
+        let mut rng: Stream = seed::stream_on(self.prefix, &[self.epoch, self.replies]);
+        self.replies += 1;
+        let channel = self.clock.at(self.model, t);
+        let read = self.model.reply_at(
+            self.antenna,
+            self.tx_power_dbm,
+            channel,
+            tag,
+            t,
+            &mut rng,
+            self.bucket,
+            self.want,
+        );
+        match read {
+            Some(r) => {
+                if (self.from_us..self.until_us).contains(&r.time_us) {
+                    self.out.push(r);
+                }
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+impl Model {
+    /// The reads of `antenna` in `[t0_us, t1_us)` at power `tx` (dBm) on the pinned channel
+    /// if any, under `air`: those of every epoch the window overlaps that fall in it.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn rounds(
+        &self,
+        antenna: u16,
+        t0_us: u64,
+        t1_us: u64,
+        tx: f64,
+        pinned: Option<u16>,
+        want: Want,
+        air: &Air,
+        bucket: &mut Bucket,
+    ) -> Vec<Read> {
+        let mut reads = Vec::new();
+        if t1_us <= t0_us {
+            return reads;
+        }
+        let times = air.mode.slot_times(EPC_BITS);
+        let prefix = seed::mix(&[
+            self.seed,
+            seed::domain::GEN2,
+            self.reader as u64,
+            u64::from(antenna),
+        ]);
+        let mut clock = ChannelClock::new(pinned);
+        let mut classified: Option<Arc<Classified>> = None;
+        let first = t0_us / FIELD_BUCKET_US;
+        let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
+        let mut field = Vec::new();
+        for epoch in first..=last {
+            let start = epoch * FIELD_BUCKET_US;
+            let ch = clock.at(self, start);
+            self.open_bucket(antenna, tx, start, ch, &mut classified, bucket);
+            self.field_of(bucket, &mut field);
+            if field.is_empty() {
+                continue;
+            }
+            let mut rng = seed::stream_on(prefix, &[epoch]);
+            let mut radio = EpochRadio {
+                model: self,
+                antenna,
+                tx_power_dbm: tx,
+                want,
+                round_start_us: start as f64,
+                bucket: &mut *bucket,
+                clock: &mut clock,
+                prefix,
+                epoch,
+                replies: 0,
+                from_us: t0_us,
+                until_us: t1_us,
+                out: &mut reads,
+            };
+            let mut qfp = gen2::settled_qfp(field.len());
+            let mut spent = 0.0;
+            let length = FIELD_BUCKET_US as f64;
+            while spent < length {
+                radio.round_start_us = start as f64 + spent;
+                let r = gen2::round(&mut rng, &times, &field, qfp, length - spent, &mut radio);
+                if r.duration_us <= 0.0 {
+                    break;
+                }
+                spent += r.duration_us;
+                qfp = r.qfp;
+            }
+        }
+        reads
+    }
+
+    /// Every tag of `bucket`'s field, in tag order, into `field` (settling each undecided
+    /// candidate).
+    fn field_of(&self, bucket: &mut Bucket, field: &mut Vec<usize>) {
+        field.clear();
+        for i in 0..Model::candidates(bucket) {
+            if let Some(tag) = self.settle(bucket, i) {
+                field.push(tag);
+            }
+        }
+    }
+}
