@@ -15,7 +15,7 @@
 //! collision, unchanged after a single reply; when round(Qfp) changes the reader sends a
 //! QueryAdjust and the tags not yet read draw new slots among 2^Q.
 
-use rand::Rng;
+use rand::RngCore;
 
 /// Bits of a Query command.
 pub const QUERY_BITS: u32 = 22;
@@ -222,7 +222,7 @@ pub fn settled_qfp(n: usize) -> f64 {
 /// spent (the round is cut there, as when the reader leaves the antenna). Each tag is read at
 /// most once. A collided slot is read anyway when one reply stands [`CAPTURE_MARGIN_DB`] above
 /// every other (capture effect).
-pub fn round<R: Rng + ?Sized>(
+pub fn round<R: RngCore + ?Sized>(
     rng: &mut R,
     times: &SlotTimes,
     tags: &[usize],
@@ -230,36 +230,100 @@ pub fn round<R: Rng + ?Sized>(
     budget_us: f64,
     radio: &mut impl Radio,
 ) -> Round {
+    round_in(
+        rng,
+        times,
+        tags,
+        qfp,
+        budget_us,
+        radio,
+        &mut Scratch::default(),
+    )
+}
+
+/// Buffers [`round_in`] reuses from round to round.
+#[derive(Clone, Debug, Default)]
+pub struct Scratch {
+    waiting: Vec<usize>,
+    /// Each waiting tag's slot, then the waiting tags in slot order.
+    slot_of: Vec<u32>,
+    order: Vec<usize>,
+    /// Start of each slot's run in `order` (frame + 1 entries).
+    starts: Vec<u32>,
+    read_now: Vec<usize>,
+}
+
+/// [`round`] with the caller's buffers.
+pub fn round_in<R: RngCore + ?Sized>(
+    rng: &mut R,
+    times: &SlotTimes,
+    tags: &[usize],
+    qfp: f64,
+    budget_us: f64,
+    radio: &mut impl Radio,
+    scratch: &mut Scratch,
+) -> Round {
     let mut out = Round {
         qfp: qfp.clamp(0.0, f64::from(MAX_Q)),
         ..Round::default()
     };
-    let mut waiting: Vec<usize> = tags.to_vec();
+    let Scratch {
+        waiting,
+        slot_of,
+        order,
+        starts,
+        read_now,
+    } = scratch;
+    waiting.clear();
+    waiting.extend_from_slice(tags);
+    read_now.clear();
     let mut t = times.query_extra_us;
-    let mut slots: Vec<(u32, usize)> = Vec::with_capacity(waiting.len());
-    let mut read_now: Vec<usize> = Vec::new();
     let mut frames = 0u64;
     'frames: while frames < MAX_FRAMES {
         frames += 1;
         let q = out.qfp.round() as u32;
-        let frame = 1u32 << q;
-        slots.clear();
-        slots.extend((0..waiting.len()).map(|i| (rng.gen_range(0..frame), i)));
-        slots.sort_unstable();
-        let mut next = 0;
+        let frame = 1usize << q;
+        // Each tag draws its slot among 2^Q (the top Q bits of one draw: exactly uniform),
+        // then a counting sort puts them in slot order.
+        slot_of.clear();
+        slot_of.extend(waiting.iter().map(|_| {
+            if q == 0 {
+                0
+            } else {
+                (rng.next_u64() >> (64 - q)) as u32
+            }
+        }));
+        starts.clear();
+        starts.resize(frame + 1, 0);
+        for &s in slot_of.iter() {
+            starts[s as usize + 1] += 1;
+        }
+        for k in 0..frame {
+            starts[k + 1] += starts[k];
+        }
+        order.clear();
+        order.resize(waiting.len(), 0);
+        // Each slot's entry moves from its run's start to its end as the run fills, so
+        // afterwards run k is [starts[k − 1], starts[k]).
+        for (i, &s) in slot_of.iter().enumerate() {
+            let c = &mut starts[s as usize];
+            order[*c as usize] = i;
+            *c += 1;
+        }
         let mut progressed = false;
         let mut collided = false;
         for slot in 0..frame {
-            let first = next;
-            while next < slots.len() && slots[next].0 == slot {
-                next += 1;
-            }
-            let answering = &slots[first..next];
+            let from = if slot == 0 {
+                0
+            } else {
+                starts[slot - 1] as usize
+            };
+            let answering = &order[from..starts[slot] as usize];
             // The reply the reader may decode: a lone one, or a captured one.
             let (candidate, collision) = match answering {
                 [] => (None, false),
-                [(_, i)] => (Some(*i), false),
-                many => (captured(&waiting, many, t, radio), true),
+                [i] => (Some(*i), false),
+                many => (captured(waiting, many, t, radio), true),
             };
             let decoded = candidate
                 .filter(|_| t + times.success_us <= budget_us)
@@ -289,14 +353,14 @@ pub fn round<R: Rng + ?Sized>(
             if out.qfp.round() as u32 != q && slot + 1 < frame {
                 // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
                 t += times.adjust_extra_us;
-                remove_read(&mut waiting, &mut read_now);
+                remove_read(waiting, read_now);
                 if waiting.is_empty() {
                     break 'frames;
                 }
                 continue 'frames;
             }
         }
-        remove_read(&mut waiting, &mut read_now);
+        remove_read(waiting, read_now);
         if waiting.is_empty() || !(progressed || collided) {
             break;
         }
@@ -318,13 +382,13 @@ fn remove_read(waiting: &mut Vec<usize>, read: &mut Vec<usize>) {
 /// strongest, if it stands [`CAPTURE_MARGIN_DB`] above all others.
 fn captured(
     waiting: &[usize],
-    answering: &[(u32, usize)],
+    answering: &[usize],
     t_us: f64,
     radio: &mut impl Radio,
 ) -> Option<usize> {
     let mut best: Option<(f64, usize)> = None;
     let mut second = f64::NEG_INFINITY;
-    for &(_, i) in answering {
+    for &i in answering {
         let r = radio.level(waiting[i], t_us);
         match best {
             Some((b, _)) if r <= b => second = second.max(r),
