@@ -16,6 +16,7 @@
 use rand::Rng;
 
 use super::field::Bucket;
+use super::flags::Flags;
 use super::gen2::Air;
 use super::geometry::{distance, Vec3};
 use super::multipath::{self, Aim, Channel};
@@ -78,7 +79,8 @@ impl Model {
     }
 
     /// As [`Model::inventory_on`], under `air` (RF mode, session, target), working out only
-    /// the optional values `want` asks for (the same reads, with the others 0).
+    /// the optional values `want` asks for (the same reads, with the others 0). Every tag
+    /// takes part in every round (session 0, dual target); see [`Model::inventory_flagged`].
     #[allow(clippy::too_many_arguments)]
     pub fn inventory_with(
         &self,
@@ -89,6 +91,58 @@ impl Model {
         channel: Option<u16>,
         want: Want,
         air: &Air,
+    ) -> Vec<Read> {
+        self.inventory_in(
+            antenna,
+            t0_us,
+            t1_us,
+            tx_power_dbm,
+            channel,
+            want,
+            air,
+            None,
+        )
+    }
+
+    /// As [`Model::inventory_with`] for a single-target inventory in session 1–3: only the
+    /// tags whose flag in `flags` is A take part, and each read sends its tag to B (the
+    /// reader's flags, carried from window to window in time order).
+    #[allow(clippy::too_many_arguments)]
+    pub fn inventory_flagged(
+        &self,
+        antenna: u16,
+        t0_us: u64,
+        t1_us: u64,
+        tx_power_dbm: Option<f64>,
+        channel: Option<u16>,
+        want: Want,
+        air: &Air,
+        flags: &mut Flags,
+    ) -> Vec<Read> {
+        let flags = air.suppresses().then_some(flags);
+        self.inventory_in(
+            antenna,
+            t0_us,
+            t1_us,
+            tx_power_dbm,
+            channel,
+            want,
+            air,
+            flags,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn inventory_in(
+        &self,
+        antenna: u16,
+        t0_us: u64,
+        t1_us: u64,
+        tx_power_dbm: Option<f64>,
+        channel: Option<u16>,
+        want: Want,
+        air: &Air,
+        flags: Option<&mut Flags>,
     ) -> Vec<Read> {
         let Some(a) = usize::from(antenna)
             .checked_sub(1)
@@ -104,7 +158,17 @@ impl Model {
         let index = usize::from(antenna) - 1;
         let mut bucket = self.field_cache.take_bucket(index);
         bucket.memo.fit(self.tags.len(), tx);
-        let reads = self.rounds(antenna, t0_us, t1_us, tx, pinned, want, air, &mut bucket);
+        let reads = self.rounds(
+            antenna,
+            t0_us,
+            t1_us,
+            tx,
+            pinned,
+            want,
+            air,
+            &mut bucket,
+            flags,
+        );
         self.field_cache.put_bucket(index, bucket);
         reads
     }

@@ -11,6 +11,7 @@
 pub mod antenna;
 pub mod fastmath;
 mod field;
+pub mod flags;
 pub mod gen2;
 pub mod geometry;
 pub mod hopping;
@@ -388,6 +389,11 @@ impl Model {
     /// would hand a localizer; the true pose for fixed and recorded antennas.
     pub fn estimated_pose(&self, antenna: u16, t_us: u64) -> AntennaPose {
         self.pose(antenna, t_us, RobotTrajectory::estimated_pose)
+    }
+
+    /// Inventoried flags for this scenario's tags, every one in state A.
+    pub fn new_flags(&self) -> flags::Flags {
+        flags::Flags::new(self.seed, self.tags.len())
     }
 
     /// Number of tags.

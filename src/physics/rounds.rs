@@ -11,6 +11,7 @@
 //! and on any thread.
 
 use super::field::{Bucket, Classified};
+use super::flags::Flags;
 use super::gen2::{self, Air, Radio};
 use super::geometry::distance;
 use super::inventory::FIELD_BUCKET_US;
@@ -70,10 +71,15 @@ struct EpochRadio<'a> {
     /// Seed prefix of the replies' streams, and the epoch.
     prefix: u64,
     epoch: u64,
+    /// Where in the epoch its rounds began (µs; the epoch's start unless a single-target
+    /// window began later).
+    from_epoch_us: u64,
     /// Replies asked for so far in the epoch (names each reply's stream).
     replies: u64,
     /// Each field tag's free-space level at the epoch's start (dBm up to a constant), by tag.
     levels: &'a [f64],
+    /// The reader's inventoried flags and the session, when the inventory is single-target.
+    flags: Option<(&'a mut Flags, u8)>,
     /// Reads of the epoch inside [from, until).
     from_us: u64,
     until_us: u64,
@@ -100,7 +106,8 @@ impl Radio for EpochRadio<'_> {
 
     fn reply(&mut self, tag: usize, t_us: f64) -> bool {
         let t = self.instant(t_us);
-        let mut rng: Stream = seed::stream_on(self.prefix, &[self.epoch, self.replies]);
+        let mut rng: Stream =
+            seed::stream_on(self.prefix, &[self.epoch, self.from_epoch_us, self.replies]);
         self.replies += 1;
         let channel = self.clock.at(self.model, t);
         let read = self.model.reply_at(
@@ -118,6 +125,9 @@ impl Radio for EpochRadio<'_> {
                 if (self.from_us..self.until_us).contains(&r.time_us) {
                     self.out.push(r);
                 }
+                if let Some((flags, session)) = self.flags.as_mut() {
+                    flags.read(tag, *session, r.time_us);
+                }
                 true
             }
             None => false,
@@ -127,7 +137,9 @@ impl Radio for EpochRadio<'_> {
 
 impl Model {
     /// The reads of `antenna` in `[t0_us, t1_us)` at power `tx` (dBm) on the pinned channel
-    /// if any, under `air`: those of every epoch the window overlaps that fall in it.
+    /// if any, under `air`: those of every epoch the window overlaps that fall in it. With
+    /// `flags` (a single-target inventory in session 1–3, [`Air::suppresses`]) only tags in
+    /// state A take part, a read sends its tag to B, and every tag in the field is energised.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn rounds(
         &self,
@@ -139,6 +151,7 @@ impl Model {
         want: Want,
         air: &Air,
         bucket: &mut Bucket,
+        mut flags: Option<&mut Flags>,
     ) -> Vec<Read> {
         let mut reads = Vec::new();
         if t1_us <= t0_us {
@@ -172,7 +185,14 @@ impl Model {
                 let d = distance(here, self.tag_position(tag, start)).max(0.01);
                 levels[tag] = -40.0 * d.log10() + self.tags[tag].radio.backscatter_db;
             }
-            let mut rng = seed::stream_on(prefix, &[epoch]);
+            let session = air.session;
+            let mut taking_part = Vec::new();
+            if let Some(f) = flags.as_deref_mut() {
+                for &tag in &field {
+                    f.settle(tag, session, start);
+                    f.energise(tag, start);
+                }
+            }
             let mut radio = EpochRadio {
                 model: self,
                 antenna,
@@ -183,21 +203,46 @@ impl Model {
                 clock: &mut clock,
                 prefix,
                 epoch,
+                from_epoch_us: 0,
                 replies: 0,
                 levels: &levels,
+                flags: flags.as_deref_mut().map(|f| (f, session)),
                 from_us: t0_us,
                 until_us: t1_us,
                 out: &mut reads,
             };
             let mut qfp = gen2::settled_qfp(field.len());
+            // Pure epochs run whole (their reads are filtered to the window); a single-target
+            // inventory, which carries flags from call to call, runs only inside the window,
+            // so that no read outside it changes a flag.
+            let (from, to) = if radio.flags.is_some() {
+                (start.max(t0_us), (start + FIELD_BUCKET_US).min(t1_us))
+            } else {
+                (start, start + FIELD_BUCKET_US)
+            };
+            let length = to.saturating_sub(from) as f64;
+            radio.from_epoch_us = from - start;
+            let mut rng = seed::stream_on(prefix, &[epoch, from - start]);
             let mut spent = 0.0;
-            let length = FIELD_BUCKET_US as f64;
             while spent < length {
-                radio.round_start_us = start as f64 + spent;
+                radio.round_start_us = from as f64 + spent;
+                // Single target: only the tags still in A at the round's start answer.
+                let part: &[usize] = match radio.flags.as_ref() {
+                    Some((f, s)) => {
+                        let now = radio.instant(0.0);
+                        taking_part.clear();
+                        taking_part.extend(field.iter().copied().filter(|&t| f.is_a(t, *s, now)));
+                        if taking_part.is_empty() {
+                            break;
+                        }
+                        &taking_part
+                    }
+                    None => &field,
+                };
                 let r = gen2::round_in(
                     &mut rng,
                     &times,
-                    &field,
+                    part,
                     qfp,
                     length - spent,
                     &mut radio,

@@ -96,6 +96,8 @@ pub mod domain {
     pub const ANTENNA_PHASE: u64 = 6;
     /// Gen2 inventory rounds and their replies.
     pub const GEN2: u64 = 7;
+    /// Inventoried-flag persistence times.
+    pub const FLAGS: u64 = 8;
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)

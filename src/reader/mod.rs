@@ -129,6 +129,8 @@ pub struct Reader {
     config: ReaderConfig,
     specs: rospec::Specs,
     access: access::AccessSpecs,
+    /// The tags' inventoried flags in sessions 1–3 as this reader left them.
+    flags: crate::physics::flags::Flags,
     /// Wall-clock ms of the next keepalive, and how many went unanswered.
     keepalive_due_ms: Option<u64>,
     keepalive_unanswered: u32,
@@ -138,7 +140,9 @@ impl Reader {
     /// A reader for `model` (its scenario reader), with UTC `utc_epoch_us` at simulated time 0.
     pub fn new(profile: ReaderProfile, model: Arc<Model>, utc_epoch_us: u64) -> Self {
         let config = ReaderConfig::factory(&profile);
+        let flags = model.new_flags();
         Reader {
+            flags,
             profile,
             model,
             utc_epoch_us,
@@ -307,6 +311,7 @@ impl Reader {
                 profile: &self.profile,
                 config: &self.config,
                 access: &mut self.access,
+                flags: &mut self.flags,
                 utc_epoch_us: self.utc_epoch_us,
                 impinj: self.impinj,
             };

@@ -190,6 +190,11 @@ impl Specs {
                 air,
             };
             let reads = match channel {
+                // A single-target inventory carries the reader's flags from slice to slice,
+                // so it runs here, in time order.
+                _ if air.suppresses() => ctx
+                    .model
+                    .inventory_flagged(antenna, t, end, power, channel, want, &air, ctx.flags),
                 Some(_) => ctx
                     .model
                     .inventory_with(antenna, t, end, power, channel, want, &air),
@@ -322,6 +327,7 @@ impl Specs {
             .take_while(move |&(antenna, t0)| {
                 !until.is_some_and(|u| t0 >= u)
                     && fixed_channel_list(ips, config, antenna).is_empty()
+                    && !super::air::air_for(ips, config, antenna).suppresses()
             })
             .map(move |(antenna, t0_us)| Slice {
                 antenna,

@@ -119,6 +119,8 @@ pub struct RunContext<'a> {
     pub config: &'a ReaderConfig,
     /// AccessSpecs to apply to each read.
     pub access: &'a mut AccessSpecs,
+    /// The reader's inventoried flags (single-target inventories in sessions 1–3).
+    pub flags: &'a mut crate::physics::flags::Flags,
     /// UTC of simulated time 0, µs.
     pub utc_epoch_us: u64,
     /// Impinj extensions enabled on the connection.

@@ -1,0 +1,188 @@
+//! Gen2 sessions, search targets, RF modes and tag population as the simulated reader honours
+//! them (docs/measurement.md, "Read rate"): driven in process with a virtual clock, with the
+//! ROSpecs the project's client builds (`InventorySpec`).
+
+mod common;
+
+use std::collections::BTreeMap;
+
+use common::virtual_reader::VirtualReader;
+use common::*;
+use llrp::message::*;
+use llrp_gateway::net::client::InventorySpec;
+use llrp_gateway::scenario::Scenario;
+
+/// `n` static tags on a 1 m grid facing one fixed antenna, 2–4 m out.
+fn field(n: usize) -> Scenario {
+    let tags: Vec<String> = (0..n)
+        .map(|i| {
+            let (x, y, z) = (
+                2.0 + (i % 3) as f64 * 0.6,
+                -1.0 + ((i / 3) % 5) as f64 * 0.5,
+                0.6 + (i / 15) as f64 * 0.02,
+            );
+            format!(r#"{{"epc": "E2000000000000000000{i:04X}", "position": [{x}, {y}, {z}]}}"#)
+        })
+        .collect();
+    let json = format!(
+        r#"{{
+      "name": "field", "seed": 4,
+      "world": {{ "min": [-2, -5, 0], "max": [10, 5, 3] }},
+      "tags": [{}],
+      "readers": [{{ "name": "r", "listen": "127.0.0.1:0", "region": "etsi",
+        "antennas": [{{ "mount": {{ "type": "fixed", "pose": {{ "position": [0, 0, 1] }} }},
+                       "beamwidth_deg": 120 }}] }}]
+    }}"#,
+        tags.join(",")
+    );
+    Scenario::from_json(&json).expect("field scenario is valid")
+}
+
+/// Per tag (EPC's last two bytes), the FirstSeenTimestampUTC of every read of an inventory
+/// with `spec` over `seconds` of simulated time.
+fn reads(scenario: &Scenario, spec: InventorySpec, seconds: u64) -> BTreeMap<u16, Vec<u64>> {
+    let mut v = VirtualReader::new(scenario);
+    let rospec = spec.rospec(1);
+    let id = rospec.ro_spec_id;
+    let add = AddRospec {
+        ro_spec: rospec,
+        ..Default::default()
+    };
+    assert_eq!(v.status(add), StatusCode::M_Success);
+    for body in [
+        MessageBody::from(EnableRospec {
+            ro_spec_id: id,
+            ..Default::default()
+        }),
+        MessageBody::from(StartRospec {
+            ro_spec_id: id,
+            ..Default::default()
+        }),
+    ] {
+        assert_eq!(v.status(body), StatusCode::M_Success);
+    }
+    let (tags, _) = v.collect_reports(seconds * 1_000_000, |_| false);
+    let mut per: BTreeMap<u16, Vec<u64>> = BTreeMap::new();
+    for t in &tags {
+        let e = t.epc_bytes();
+        let key = u16::from_be_bytes([e[e.len() - 2], e[e.len() - 1]]);
+        per.entry(key)
+            .or_default()
+            .push(t.first_seen_timestamp_utc.expect("timestamp").0);
+    }
+    per
+}
+
+fn spec(session: u8, search_mode: Option<u16>, mode: Option<u16>) -> InventorySpec {
+    InventorySpec {
+        session: Some(session),
+        search_mode,
+        mode,
+        report_every: 1,
+        keepalive_ms: 0,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn session_2_single_target_reads_each_tag_once_while_it_stays_powered() {
+    let per = reads(&field(6), spec(2, Some(1), None), 60);
+    assert_eq!(per.len(), 6, "every tag read: {per:?}");
+    assert!(per.values().all(|v| v.len() == 1), "{per:?}");
+}
+
+#[test]
+fn session_1_single_target_rereads_after_the_persistence() {
+    let per = reads(&field(3), spec(1, Some(1), None), 60);
+    assert_eq!(per.len(), 3);
+    for (tag, times) in &per {
+        assert!(
+            times.len() >= 10,
+            "tag {tag}: {} reads in 60 s",
+            times.len()
+        );
+        for w in times.windows(2) {
+            let gap = w[1] - w[0];
+            // Gen2 session 1: 0.5 s < persistence < 5 s (plus up to an epoch to be read).
+            assert!(
+                (500_000..=5_100_000).contains(&gap),
+                "tag {tag}: reads {gap} µs apart"
+            );
+        }
+    }
+}
+
+#[test]
+fn dual_target_session_0_and_the_readers_own_choice_stream() {
+    for (session, search) in [(2, Some(2)), (2, None), (0, Some(1)), (1, Some(0))] {
+        let per = reads(&field(3), spec(session, search, None), 5);
+        assert_eq!(per.len(), 3, "session {session} {search:?}");
+        for (tag, times) in &per {
+            assert!(
+                times.len() >= 100,
+                "session {session} {search:?}, tag {tag}: {} reads in 5 s",
+                times.len()
+            );
+        }
+    }
+}
+
+#[test]
+fn a_faster_rf_mode_reads_more() {
+    let total = |mode| -> usize {
+        reads(&field(10), spec(0, None, Some(mode)), 3)
+            .values()
+            .map(Vec::len)
+            .sum()
+    };
+    let (fm0, m4, m8) = (total(0), total(2), total(3));
+    assert!(fm0 > 3 * m4, "mode 0 {fm0}, mode 2 {m4}");
+    assert!(m4 > m8, "mode 2 {m4}, mode 3 {m8}");
+}
+
+#[test]
+fn reads_per_second_follow_the_documented_population_curve() {
+    // docs/measurement.md, Mode 2: 244 reads/s for one tag, 215–220 for 10 and 100 tags;
+    // per tag 1/n of that. One antenna, so the reader's time is all this antenna's.
+    for (n, documented) in [(1usize, 244.0), (10, 215.0), (100, 216.0)] {
+        let seconds = 10;
+        let per = reads(&field(n), spec(0, None, Some(2)), seconds);
+        assert_eq!(per.len(), n, "{n} tags: every tag read");
+        let total: usize = per.values().map(Vec::len).sum();
+        let rate = total as f64 / seconds as f64;
+        assert!(
+            (rate - documented).abs() < 0.1 * documented,
+            "{n} tags: {rate} reads/s, documented {documented}"
+        );
+        let fewest = per.values().map(Vec::len).min().unwrap_or(0) as f64 / seconds as f64;
+        // Each 25 ms dwell reads a few of 100 tags: per tag about Poisson, so the fewest
+        // gets well under the mean, yet nobody is starved.
+        assert!(
+            fewest > 0.3 * rate / n as f64,
+            "{n} tags: fewest {fewest}/s"
+        );
+    }
+}
+
+#[test]
+fn session_2_single_target_reads_a_tag_again_after_it_was_away() {
+    // A tag on a conveyor loop: in the field for a few seconds, then 20 m away and back.
+    let json = r#"{
+      "name": "loop", "seed": 5,
+      "world": { "min": [-2, -5, 0], "max": [30, 5, 3] },
+      "tags": [ { "epc": "E20000000000000000000001", "position": [2, 0, 1],
+                  "path": { "waypoints": [[2, 0, 1], [25, 0, 1], [2, 0, 1]], "speed": 2.0,
+                            "loop_path": true } } ],
+      "readers": [{ "name": "r", "listen": "127.0.0.1:0", "region": "etsi",
+        "antennas": [{ "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } } }] }]
+    }"#;
+    let s = Scenario::from_json(json).expect("valid");
+    let per = reads(&s, spec(2, Some(1), None), 60);
+    let times = &per[&1];
+    // One lap is 23 s: read once per visit, not on every round while it stays in the field.
+    assert!((2..=4).contains(&times.len()), "{times:?}");
+    assert!(
+        times.windows(2).all(|w| w[1] - w[0] > 10_000_000),
+        "{times:?}"
+    );
+}
