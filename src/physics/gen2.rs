@@ -95,6 +95,13 @@ impl Air {
     pub fn suppresses(&self) -> bool {
         self.target == Target::Single && self.session != 0
     }
+
+    /// A round nobody answers (a Query and one empty slot at Q = 0), in whole µs: what an
+    /// antenna facing no tag costs before the reader moves on.
+    pub fn empty_round_us(&self) -> u64 {
+        let times = self.mode.slot_times(96);
+        (times.query_extra_us + times.empty_us).ceil().max(1.0) as u64
+    }
 }
 
 /// Durations (µs) of the parts of an inventory round in one RF mode.

@@ -258,6 +258,35 @@ impl Model {
         reads
     }
 
+    /// How long `antenna` spends on the epoch holding `t_us` when no tag can be in its field at
+    /// power `tx_power_dbm` (`None`: the scenario's) on the pinned channel if any: one round
+    /// with one empty slot, after which the reader moves on (µs); `None` when a tag is or may
+    /// be in it (the field's bounds, without settling undecided tags: exact once nothing
+    /// moves).
+    pub fn idle_us(
+        &self,
+        antenna: u16,
+        t_us: u64,
+        tx_power_dbm: Option<f64>,
+        channel: Option<u16>,
+        air: &Air,
+    ) -> Option<u64> {
+        let a = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))?;
+        let tx = tx_power_dbm
+            .filter(|p| p.is_finite())
+            .unwrap_or(a.spec.tx_power_dbm);
+        let pinned = channel.filter(|c| (1..=self.table.len()).contains(&usize::from(*c)));
+        let start = t_us / FIELD_BUCKET_US * FIELD_BUCKET_US;
+        let ch = ChannelClock::new(pinned).at(self, start);
+        let occupied = self.may_be_occupied(antenna, tx, start, ch);
+        if occupied {
+            return None;
+        }
+        Some(air.empty_round_us())
+    }
+
     /// Every tag of `bucket`'s field, in tag order, into `field` (settling each undecided
     /// candidate).
     fn field_of(&self, bucket: &mut Bucket, field: &mut Vec<usize>) {

@@ -12,6 +12,9 @@ use super::grid::Classified;
 #[derive(Debug, Default)]
 pub(in crate::physics) struct FieldCache {
     classified: Vec<Mutex<Option<Arc<Classified>>>>,
+    /// Per antenna, the classification the reader's idle checks use (kept apart from the
+    /// inventories', which run ahead of them on other threads).
+    idle: Vec<Mutex<Option<Arc<Classified>>>>,
     /// Per antenna, the draw state of its last inventory: the decisions kept from earlier
     /// buckets, and buffers to reuse.
     buckets: Vec<Mutex<Bucket>>,
@@ -28,6 +31,7 @@ impl FieldCache {
     pub(in crate::physics) fn new(antennas: usize) -> FieldCache {
         FieldCache {
             classified: (0..antennas).map(|_| Mutex::new(None)).collect(),
+            idle: (0..antennas).map(|_| Mutex::new(None)).collect(),
             buckets: (0..antennas)
                 .map(|_| Mutex::new(Bucket::default()))
                 .collect(),
@@ -53,9 +57,21 @@ impl FieldCache {
 
     /// The classification slot of antenna index `i` (0-based), if there is such an antenna.
     pub(super) fn slot(&self, i: usize) -> Option<MutexGuard<'_, Option<Arc<Classified>>>> {
+        Self::lock(&self.classified, i)
+    }
+
+    /// The idle checks' classification slot of antenna index `i`.
+    pub(super) fn idle_slot(&self, i: usize) -> Option<MutexGuard<'_, Option<Arc<Classified>>>> {
+        Self::lock(&self.idle, i)
+    }
+
+    fn lock(
+        slots: &[Mutex<Option<Arc<Classified>>>],
+        i: usize,
+    ) -> Option<MutexGuard<'_, Option<Arc<Classified>>>> {
         // A panic while holding the lock leaves at worst a stale entry, which is checked for
         // validity before use; the cache can always be rebuilt.
-        self.classified
+        slots
             .get(i)
             .map(|m| m.lock().unwrap_or_else(|e| e.into_inner()))
     }

@@ -215,6 +215,37 @@ impl Model {
         c
     }
 
+    /// Whether a tag may be in the field of `antenna` at bucket start `t_us` on `channel` by
+    /// the classification's bounds alone (exact once nothing moves), from a cache of its own.
+    pub(in crate::physics) fn may_be_occupied(
+        &self,
+        antenna: u16,
+        tx_power_dbm: f64,
+        t_us: u64,
+        channel: u16,
+    ) -> bool {
+        let i = usize::from(antenna).saturating_sub(1);
+        let cached = self
+            .field_cache
+            .idle_slot(i)
+            .and_then(|s| s.clone())
+            .filter(|c| c.holds(t_us, tx_power_dbm));
+        let c = match cached {
+            Some(c) => c,
+            None => {
+                let c = Arc::new(self.classify(antenna, tx_power_dbm, t_us));
+                if let Some(mut s) = self.field_cache.idle_slot(i) {
+                    *s = Some(c.clone());
+                }
+                c
+            }
+        };
+        match c.at_rest.get(usize::from(channel).wrapping_sub(1)) {
+            Some(field) => !field.is_empty(),
+            None => !c.pool.is_empty(),
+        }
+    }
+
     /// Classifies every tag for `antenna` over the grid interval holding bucket start `t_us`.
     pub(super) fn classify(&self, antenna: u16, tx_power_dbm: f64, t_us: u64) -> Classified {
         let bucket = crate::physics::inventory::FIELD_BUCKET_US;

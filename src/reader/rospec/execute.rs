@@ -174,7 +174,24 @@ impl Specs {
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
-        if end > t {
+        // An antenna facing no tag: one empty round, then the next antenna.
+        let idle = if run.slice_checked || end <= t {
+            None
+        } else {
+            run.slice_checked = true;
+            let air = super::air::air_for(ips, ctx.config, antenna);
+            let idle = ctx.model.idle_us(antenna, t, power, channel, &air);
+            let port = usize::from(antenna);
+            if self.idle_antennas.len() <= port {
+                self.idle_antennas.resize(port + 1, false);
+            }
+            self.idle_antennas[port] = idle.is_some();
+            idle
+        };
+        if let Some(idle) = idle {
+            reached = (t + idle).clamp(t + 1, end);
+            run.slice_end_us = reached;
+        } else if end > t {
             // Phase and Doppler are worked out only when reported.
             let want = Want {
                 phase: content.impinj.phase,
@@ -257,6 +274,7 @@ impl Specs {
                 run.rounds += 1;
             }
             run.slice_end_us = dwell_end(reached);
+            run.slice_checked = false;
         }
         if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
             && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
@@ -290,6 +308,7 @@ impl Specs {
             run.last_report_us = reached;
             run.antenna_pos = 0;
             run.slice_end_us = dwell_end(reached);
+            run.slice_checked = false;
             if run.spec_idx >= s.spec.specs.len() {
                 self.finish_ro(a, reached, report_spec, out);
             }
@@ -318,25 +337,42 @@ impl Specs {
             ..*slice
         };
         let config = ctx.config;
-        let upcoming = (1..)
-            .map(move |k: u64| {
-                let antenna = antennas[(run.antenna_pos + k as usize) % antennas.len().max(1)];
-                let t0_us = dwell.t1_us + (k - 1) * ANTENNA_DWELL_US;
-                (antenna, t0_us)
-            })
-            .take_while(move |&(antenna, t0)| {
-                !until.is_some_and(|u| t0 >= u)
-                    && fixed_channel_list(ips, config, antenna).is_empty()
-                    && !super::air::air_for(ips, config, antenna).suppresses()
-            })
-            .map(move |(antenna, t0_us)| Slice {
-                antenna,
-                air: super::air::air_for(ips, config, antenna),
-                power_dbm: antenna_power(ips, config, antenna),
-                want: slice.want,
-                t0_us,
-                t1_us: t0_us + ANTENNA_DWELL_US,
-            });
+        let idle = &self.idle_antennas;
+        // The antennas in turn from the one after this, a dwell each, except those whose
+        // field was empty when last looked at: one empty round, then the next.
+        let mut k = run.antenna_pos;
+        let mut t0_us = dwell.t1_us;
+        let upcoming = std::iter::from_fn(move || {
+            let n = antennas.len().max(1);
+            for _ in 0..n {
+                k += 1;
+                let antenna = antennas[k % n];
+                if until.is_some_and(|u| t0_us >= u)
+                    || !fixed_channel_list(ips, config, antenna).is_empty()
+                {
+                    return None;
+                }
+                let air = super::air::air_for(ips, config, antenna);
+                if air.suppresses() {
+                    return None;
+                }
+                if idle.get(usize::from(antenna)).copied().unwrap_or(false) {
+                    t0_us += air.empty_round_us();
+                    continue;
+                }
+                let s = Slice {
+                    antenna,
+                    air,
+                    power_dbm: antenna_power(ips, config, antenna),
+                    want: slice.want,
+                    t0_us,
+                    t1_us: dwell_end(t0_us),
+                };
+                t0_us = s.t1_us;
+                return Some(s);
+            }
+            None
+        });
         self.prefetch.reads(ctx.model, slice, dwell, upcoming)
     }
 

@@ -146,6 +146,8 @@ struct Run {
     spec_started_us: u64,
     antenna_pos: usize,
     slice_end_us: u64,
+    /// Whether the current antenna's field has been looked at since the reader moved to it.
+    slice_checked: bool,
     seen: TagSet,
     last_new_us: u64,
     rounds: u32,
@@ -196,6 +198,9 @@ pub struct Specs {
     prefetch: Lookahead,
     /// Computes every slice on the spot (tests compare both ways).
     no_prefetch: bool,
+    /// Per antenna port, whether its field was empty when last looked at: the look-ahead
+    /// plans it as one empty round.
+    idle_antennas: Vec<bool>,
 }
 
 impl Specs {
@@ -460,6 +465,7 @@ impl Specs {
             spec_started_us: now,
             antenna_pos: 0,
             slice_end_us: dwell_end(now),
+            slice_checked: false,
             seen: TagSet::default(),
             last_new_us: now,
             rounds: 0,
