@@ -167,7 +167,19 @@ async fn with_scenario(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn impinj_reports_all_antennas_every_tag() {
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-n", "1"], 3).await;
+    let (s, reports, log) = with_sim(
+        &[
+            "--impinj-reports",
+            "--impinj-search-mode",
+            "2",
+            "-a",
+            "0",
+            "-n",
+            "1",
+        ],
+        3,
+    )
+    .await;
     assert!(
         log.contains("Impinj"),
         "sllurp enabled the extensions:\n{log}"
@@ -183,7 +195,7 @@ async fn impinj_reports_all_antennas_every_tag() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn plain_reports_one_antenna_every_tag() {
-    let (s, reports, log) = with_sim(&["-a", "1", "-n", "1"], 3).await;
+    let (s, reports, log) = with_sim(&["--impinj-search-mode", "2", "-a", "1", "-n", "1"], 3).await;
     assert!(reports.len() >= 2, "got {} reports:\n{log}", reports.len());
     assert!(check_tags(&s, &reports, false) >= 2);
 }
@@ -192,7 +204,19 @@ async fn plain_reports_one_antenna_every_tag() {
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn default_reporting_with_a_duration() {
     // Report trigger "end of AISpec" with a 2 s AISpec: one aggregated report per run.
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0", "-t", "2"], 1).await;
+    let (s, reports, log) = with_sim(
+        &[
+            "--impinj-reports",
+            "--impinj-search-mode",
+            "2",
+            "-a",
+            "0",
+            "-t",
+            "2",
+        ],
+        1,
+    )
+    .await;
     assert!(
         !reports.is_empty(),
         "no report at the end of the AISpec:\n{log}"
@@ -212,7 +236,7 @@ async fn default_reporting_with_a_duration() {
 async fn default_reporting_one_antenna_short_duration() {
     // Without -n the reader reports at the end of the AISpec (N = 0): with -t 1 that is one
     // report after a second.
-    let (s, reports, log) = with_sim(&["-a", "1", "-t", "1"], 1).await;
+    let (s, reports, log) = with_sim(&["--impinj-search-mode", "2", "-a", "1", "-t", "1"], 1).await;
     assert!(
         !reports.is_empty(),
         "no report at the end of the AISpec:\n{log}"
@@ -223,10 +247,15 @@ async fn default_reporting_one_antenna_short_duration() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
 async fn the_readme_command_shows_live_reads() {
-    // `sllurp inventory --impinj-reports -a 0 HOST` with nothing else: Null stop triggers and
-    // ROReportTrigger 1 with N = 0. Like an Impinj reader, the simulator reports the running
-    // AISpec every second (the scenario's report_interval_ms), aggregated per tag.
-    let (s, reports, log) = with_sim(&["--impinj-reports", "-a", "0"], 2).await;
+    // The README's `sllurp inventory --impinj-reports --impinj-search-mode 2 -a 0 HOST`: Null
+    // stop triggers and ROReportTrigger 1 with N = 0, session 2 dual target. Like an Impinj
+    // reader, the simulator reports the running AISpec every second (the scenario's
+    // report_interval_ms), aggregated per tag.
+    let (s, reports, log) = with_sim(
+        &["--impinj-reports", "--impinj-search-mode", "2", "-a", "0"],
+        2,
+    )
+    .await;
     assert!(
         reports.len() >= 2,
         "a report every second while inventory runs (got {}):\n{log}",
@@ -247,7 +276,15 @@ async fn the_readme_command_shows_live_reads() {
 async fn sllurp_sees_rssi_fall_40_db_per_decade() {
     let (s, reports, log) = with_scenario(
         line_scenario(&[1.0, 2.0, 4.0]),
-        &["--impinj-reports", "-a", "1", "-n", "1"],
+        &[
+            "--impinj-reports",
+            "--impinj-search-mode",
+            "2",
+            "-a",
+            "1",
+            "-n",
+            "1",
+        ],
         60,
     )
     .await;
@@ -286,7 +323,8 @@ async fn sllurp_reads_a_128_bit_epc_through_epcdata() {
     let short = s.tags[1].epc.to_lowercase();
     let s = Scenario::from_json(&serde_json::to_string(&s).expect("serialises"))
         .expect("a 128-bit EPC is valid");
-    let (_, reports, log) = with_scenario(s, &["-a", "1", "-n", "1"], 40).await;
+    let (_, reports, log) =
+        with_scenario(s, &["--impinj-search-mode", "2", "-a", "1", "-n", "1"], 40).await;
     // sllurp 2.0.1 names an EPCData's bytes "EPC", and an EPC-96 both "EPC" and "EPC-96".
     let mut seen = std::collections::BTreeSet::new();
     for tag in reports.iter().flatten() {
@@ -298,4 +336,26 @@ async fn sllurp_reads_a_128_bit_epc_through_epcdata() {
         seen.insert(epc);
     }
     assert_eq!(seen.len(), 2, "both tags: {seen:?}\n{log}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn single_target_in_session_2_reports_each_static_tag_once() {
+    // sllurp's defaults (session 2, a report each second aggregated per tag) with Impinj's
+    // single-target search: a tag read goes to B and stays there while it is powered, so the
+    // first second's report counts each static tag once (dual target: about 200 times).
+    let s = line_scenario(&[1.5, 2.0, 2.5]);
+    let (_, reports, log) = with_scenario(s, &["--impinj-search-mode", "1", "-a", "1"], 1).await;
+    let first = reports.first().expect("a report");
+    let counts: std::collections::BTreeMap<String, u64> = first
+        .iter()
+        .map(|tag| {
+            (
+                tag["EPC-96"].as_str().expect("EPC-96").to_string(),
+                tag["TagSeenCount"].as_u64().expect("TagSeenCount"),
+            )
+        })
+        .collect();
+    assert_eq!(counts.len(), 3, "every tag: {counts:?}\n{log}");
+    assert!(counts.values().all(|&n| n == 1), "{counts:?}");
 }
