@@ -252,11 +252,8 @@ pub fn round<R: RngCore + ?Sized>(
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     waiting: Vec<usize>,
-    /// Each waiting tag's slot, then the waiting tags in slot order.
-    slot_of: Vec<u32>,
-    order: Vec<usize>,
-    /// Start of each slot's run in `order` (frame + 1 entries).
-    starts: Vec<u32>,
+    /// The waiting tags in slot order: slot << 32 | index into `waiting`.
+    order: Vec<u64>,
     read_now: Vec<usize>,
 }
 
@@ -276,9 +273,7 @@ pub fn round_in<R: RngCore + ?Sized>(
     };
     let Scratch {
         waiting,
-        slot_of,
         order,
-        starts,
         read_now,
     } = scratch;
     waiting.clear();
@@ -290,46 +285,32 @@ pub fn round_in<R: RngCore + ?Sized>(
         frames += 1;
         let q = out.qfp.round() as u32;
         let frame = 1usize << q;
-        // Each tag draws its slot among 2^Q (the top Q bits of one draw: exactly uniform),
-        // then a counting sort puts them in slot order.
-        slot_of.clear();
-        slot_of.extend(waiting.iter().map(|_| {
-            if q == 0 {
+        // Each tag draws its slot among 2^Q (the top Q bits of one draw: exactly uniform);
+        // (slot, tag) packed in one word and sorted, so a frame costs its tags, not its
+        // slots (a frame often ends at a QueryAdjust a few slots in).
+        order.clear();
+        order.extend(waiting.iter().enumerate().map(|(i, _)| {
+            let slot = if q == 0 {
                 0
             } else {
-                (rng.next_u64() >> (64 - q)) as u32
-            }
+                rng.next_u64() >> (64 - q)
+            };
+            (slot << 32) | i as u64
         }));
-        starts.clear();
-        starts.resize(frame + 1, 0);
-        for &s in slot_of.iter() {
-            starts[s as usize + 1] += 1;
-        }
-        for k in 0..frame {
-            starts[k + 1] += starts[k];
-        }
-        order.clear();
-        order.resize(waiting.len(), 0);
-        // Each slot's entry moves from its run's start to its end as the run fills, so
-        // afterwards run k is [starts[k − 1], starts[k]).
-        for (i, &s) in slot_of.iter().enumerate() {
-            let c = &mut starts[s as usize];
-            order[*c as usize] = i;
-            *c += 1;
-        }
+        order.sort_unstable();
+        let mut next = 0;
         let mut progressed = false;
         let mut collided = false;
-        for slot in 0..frame {
-            let from = if slot == 0 {
-                0
-            } else {
-                starts[slot - 1] as usize
-            };
-            let answering = &order[from..starts[slot] as usize];
+        for slot in 0..frame as u64 {
+            let from = next;
+            while next < order.len() && order[next] >> 32 == slot {
+                next += 1;
+            }
+            let answering = &order[from..next];
             // The reply the reader may decode: a lone one, or a captured one.
             let (candidate, collision) = match answering {
                 [] => (None, false),
-                [i] => (Some(*i), false),
+                [packed] => (Some((packed & 0xFFFF_FFFF) as usize), false),
                 many => (captured(waiting, many, t, radio), true),
             };
             let decoded = candidate
@@ -357,7 +338,7 @@ pub fn round_in<R: RngCore + ?Sized>(
                 1 if decoded.is_none() => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
                 _ => {}
             }
-            if out.qfp.round() as u32 != q && slot + 1 < frame {
+            if out.qfp.round() as u32 != q && slot + 1 < frame as u64 {
                 // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
                 t += times.adjust_extra_us;
                 remove_read(waiting, read_now);
@@ -389,13 +370,14 @@ fn remove_read(waiting: &mut Vec<usize>, read: &mut Vec<usize>) {
 /// strongest, if it stands [`CAPTURE_MARGIN_DB`] above all others.
 fn captured(
     waiting: &[usize],
-    answering: &[usize],
+    answering: &[u64],
     t_us: f64,
     radio: &mut impl Radio,
 ) -> Option<usize> {
     let mut best: Option<(f64, usize)> = None;
     let mut second = f64::NEG_INFINITY;
-    for &i in answering {
+    for &packed in answering {
+        let i = (packed & 0xFFFF_FFFF) as usize;
         let r = radio.level(waiting[i], t_us);
         match best {
             Some((b, _)) if r <= b => second = second.max(r),

@@ -3,7 +3,7 @@
 //!
 //! [`Model`] is built once per reader from a [`Scenario`]; it precomputes robot drives and
 //! answers queries by simulated time (µs since scenario start). Every random draw is seeded
-//! from the scenario seed and the identity of the draw (reader, antenna, attempt slot), so the
+//! from the scenario seed and the identity of the draw (reader, antenna, epoch, reply), so the
 //! answers never depend on call order. The building blocks are public for testing against
 //! closed forms: [`phase`], [`rssi`], [`multipath`], [`antenna`], [`hopping`], [`schedule`],
 //! [`robot`], [`motion`], [`noise`], [`fastmath`].

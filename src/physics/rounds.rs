@@ -76,8 +76,11 @@ struct EpochRadio<'a> {
     from_epoch_us: u64,
     /// Replies asked for so far in the epoch (names each reply's stream).
     replies: u64,
-    /// Each field tag's free-space level at the epoch's start (dBm up to a constant), by tag.
-    levels: &'a [f64],
+    /// Each field tag's free-space level at the epoch's start (dBm up to a constant), by tag;
+    /// NaN until a collision needs it.
+    levels: &'a mut [f64],
+    /// Start of the epoch (µs).
+    epoch_start_us: u64,
     /// The reader's inventoried flags and the session, when the inventory is single-target.
     flags: Option<(&'a mut Flags, u8)>,
     /// Reads of the epoch inside [from, until).
@@ -99,9 +102,18 @@ impl EpochRadio<'_> {
 
 impl Radio for EpochRadio<'_> {
     fn level(&mut self, tag: usize, _t_us: f64) -> f64 {
-        // Taken at the epoch's start: within 25 ms a level changes by far less than the
-        // capture margin.
-        self.levels.get(tag).copied().unwrap_or(f64::NEG_INFINITY)
+        // Taken at the epoch's start (within 25 ms a level changes by far less than the
+        // capture margin): −40 dB a decade and the tag's own strength.
+        let Some(slot) = self.levels.get_mut(tag) else {
+            return f64::NEG_INFINITY;
+        };
+        if slot.is_nan() {
+            let t = self.epoch_start_us;
+            let here = self.model.antenna_position(self.antenna, t);
+            let d = distance(here, self.model.tag_position(tag, t)).max(0.01);
+            *slot = -40.0 * d.log10() + self.model.tags[tag].radio.backscatter_db;
+        }
+        *slot
     }
 
     fn reply(&mut self, tag: usize, t_us: f64) -> bool {
@@ -169,7 +181,7 @@ impl Model {
         let first = t0_us / FIELD_BUCKET_US;
         let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
         let mut field = Vec::new();
-        let mut levels = vec![f64::NEG_INFINITY; self.tags.len()];
+        let mut levels = vec![f64::NAN; self.tags.len()];
         let mut scratch = gen2::Scratch::default();
         for epoch in first..=last {
             let start = epoch * FIELD_BUCKET_US;
@@ -179,11 +191,8 @@ impl Model {
             if field.is_empty() {
                 continue;
             }
-            // Free-space level for the capture test: −40 dB a decade and the tag's own strength.
-            let here = self.antenna_position(antenna, start);
             for &tag in &field {
-                let d = distance(here, self.tag_position(tag, start)).max(0.01);
-                levels[tag] = -40.0 * d.log10() + self.tags[tag].radio.backscatter_db;
+                levels[tag] = f64::NAN;
             }
             let session = air.session;
             let mut taking_part = Vec::new();
@@ -205,7 +214,8 @@ impl Model {
                 epoch,
                 from_epoch_us: 0,
                 replies: 0,
-                levels: &levels,
+                levels: &mut levels,
+                epoch_start_us: start,
                 flags: flags.as_deref_mut().map(|f| (f, session)),
                 from_us: t0_us,
                 until_us: t1_us,
