@@ -15,6 +15,9 @@
 //! collision, unchanged after a single reply; when round(Qfp) changes the reader sends a
 //! QueryAdjust and the tags not yet read draw new slots among 2^Q.
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
 use rand::RngCore;
 
 /// Bits of a Query command.
@@ -252,8 +255,10 @@ pub fn round<R: RngCore + ?Sized>(
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     waiting: Vec<usize>,
-    /// The waiting tags in slot order: slot << 32 | index into `waiting`.
-    order: Vec<u64>,
+    /// The waiting tags by slot (a min-heap's storage): slot << 32 | index into `waiting`.
+    order: Vec<Reverse<u64>>,
+    /// The replies in the current slot.
+    answering: Vec<u64>,
     read_now: Vec<usize>,
 }
 
@@ -274,6 +279,7 @@ pub fn round_in<R: RngCore + ?Sized>(
     let Scratch {
         waiting,
         order,
+        answering,
         read_now,
     } = scratch;
     waiting.clear();
@@ -286,8 +292,8 @@ pub fn round_in<R: RngCore + ?Sized>(
         let q = out.qfp.round() as u32;
         let frame = 1usize << q;
         // Each tag draws its slot among 2^Q (the top Q bits of one draw: exactly uniform);
-        // (slot, tag) packed in one word and sorted, so a frame costs its tags, not its
-        // slots (a frame often ends at a QueryAdjust a few slots in).
+        // (slot, tag) packed in one word in a min-heap, so a frame costs its tags plus the
+        // slots it gets through (a frame often ends at a QueryAdjust a few slots in).
         order.clear();
         order.extend(waiting.iter().enumerate().map(|(i, _)| {
             let slot = if q == 0 {
@@ -295,18 +301,21 @@ pub fn round_in<R: RngCore + ?Sized>(
             } else {
                 rng.next_u64() >> (64 - q)
             };
-            (slot << 32) | i as u64
+            Reverse((slot << 32) | i as u64)
         }));
-        order.sort_unstable();
-        let mut next = 0;
+        let mut heap = BinaryHeap::from(std::mem::take(order));
         let mut progressed = false;
         let mut collided = false;
         for slot in 0..frame as u64 {
-            let from = next;
-            while next < order.len() && order[next] >> 32 == slot {
-                next += 1;
+            answering.clear();
+            while let Some(&Reverse(top)) = heap.peek() {
+                if top >> 32 != slot {
+                    break;
+                }
+                answering.push(top);
+                heap.pop();
             }
-            let answering = &order[from..next];
+            let answering = &answering[..];
             // The reply the reader may decode: a lone one, or a captured one.
             let (candidate, collision) = match answering {
                 [] => (None, false),
@@ -341,6 +350,7 @@ pub fn round_in<R: RngCore + ?Sized>(
             if out.qfp.round() as u32 != q && slot + 1 < frame as u64 {
                 // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
                 t += times.adjust_extra_us;
+                *order = heap.into_vec();
                 remove_read(waiting, read_now);
                 if waiting.is_empty() {
                     break 'frames;
@@ -348,6 +358,7 @@ pub fn round_in<R: RngCore + ?Sized>(
                 continue 'frames;
             }
         }
+        *order = heap.into_vec();
         remove_read(waiting, read_now);
         if waiting.is_empty() || !(progressed || collided) {
             break;
