@@ -266,6 +266,40 @@ fn bad_noise_parameters_are_refused() {
 }
 
 #[test]
+fn s2_configurations_hold_44_references_and_their_tags_on_the_antennas_side() {
+    // [A]'s two layouts: one straight drive, every antenna facing left of it (robot frame y is
+    // left), every tag other than a reference left of the path.
+    for name in ["s2-side-by-side.json", "s2-back-to-back.json"] {
+        let s = Scenario::load(&std::path::Path::new(FIXTURES).join(name)).expect("loads");
+        assert_eq!(s.tags.len(), 100, "{name}");
+        assert_eq!(s.tags.iter().filter(|t| t.reference).count(), 44, "{name}");
+        let antennas = &s.readers[0].antennas;
+        assert_eq!(antennas.len(), 4, "{name}");
+        for antenna in antennas {
+            let Mount::Robot { robot, offset } = &antenna.mount else {
+                panic!("{name}: an antenna not on the robot");
+            };
+            assert_eq!(robot.waypoints.len(), 1, "{name}: not one straight drive");
+            let (a, b) = (robot.start, robot.waypoints[0]);
+            let along = (b[1] - a[1]).atan2(b[0] - a[0]);
+            assert!(
+                (along - a[2]).cos() > 0.99,
+                "{name}: robot not heading along the drive"
+            );
+            assert!(
+                offset.yaw_deg.to_radians().sin() > 0.5,
+                "{name}: antenna not facing left"
+            );
+            for t in s.tags.iter().filter(|t| !t.reference) {
+                let p = t.position;
+                let left = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+                assert!(left > 0.0, "{name}: {} is not left of the path", t.epc);
+            }
+        }
+    }
+}
+
+#[test]
 fn old_fields_load_with_a_notice_naming_what_replaced_them() {
     // A file written before the reader model: [G]'s RSS noise on the first antenna.
     let mut old = base();
