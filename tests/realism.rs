@@ -97,6 +97,49 @@ async fn default_scenario_rssi_steps_are_under_a_decibel() {
 }
 
 #[tokio::test]
+async fn default_scenario_phase_steps_are_about_the_documented_sigma() {
+    // The robot moves, so the phase of a tag drifts between reads; over three consecutive
+    // same-channel reads a few ms apart that drift is linear in time, and what is left after
+    // extrapolating from the first two is noise: σ·√(1 + (1 + r)² + r²), r the ratio of the
+    // two gaps.
+    let scenario = s1();
+    let spec = scenario.readers[0].antennas[0].clone();
+    let sigma_at =
+        |rssi: f64| spec.phase_noise_rad * weak_signal_scale(rssi, spec.phase_noise_ref_dbm);
+    let seen = reads(&scenario, 4000).await;
+    let mut by_tag: HashMap<(u8, u16), Vec<Seen>> = HashMap::new();
+    for s in &seen {
+        by_tag.entry((s.tag, s.channel)).or_default().push(*s);
+    }
+    let mut ratios = Vec::new();
+    for series in by_tag.values() {
+        for w in series.windows(3) {
+            let (g1, g2) = (w[1].t_us - w[0].t_us, w[2].t_us - w[1].t_us);
+            if g1 == 0 || g2 == 0 || g1 + g2 > 40_000 {
+                continue;
+            }
+            let r = g2 as f64 / g1 as f64;
+            let step = (w[1].phase_rad - w[0].phase_rad + std::f64::consts::PI).rem_euclid(TAU)
+                - std::f64::consts::PI;
+            let predicted = w[1].phase_rad + step * r;
+            let residual = angle(w[2].phase_rad, predicted);
+            let s0 = sigma_at(w[0].rssi_dbm);
+            let s1 = sigma_at(w[1].rssi_dbm);
+            let s2 = sigma_at(w[2].rssi_dbm);
+            let expected = (s2.powi(2) + ((1.0 + r) * s1).powi(2) + (r * s0).powi(2)).sqrt();
+            ratios.push(residual / expected);
+        }
+    }
+    assert!(ratios.len() > 500, "{} triples", ratios.len());
+    // For Gaussian noise the median of |x|/σ is 0.674.
+    let m = median(ratios);
+    assert!(
+        (0.674 * 0.75..0.674 * 1.3).contains(&m),
+        "median residual {m} σ"
+    );
+}
+
+#[tokio::test]
 async fn gazebo_eq5_keeps_the_distance_growing_noise() {
     let mut s = s1();
     for a in &mut s.readers[0].antennas {
