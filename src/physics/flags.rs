@@ -21,33 +21,35 @@ struct Flag {
     energised_until: u64,
 }
 
-/// The inventoried flags of every tag in sessions 1–3, for one reader.
+/// The inventoried flags of every tag in sessions 1–3, for one reader (stored only once a
+/// single-target inventory has touched them: a reader that never runs one holds nothing).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Flags {
-    /// `flags[tag][session - 1]`.
+    seed: u64,
+    tags: usize,
+    /// `flags[tag][session - 1]`, grown toward `tags` as tags are touched.
     flags: Vec<[Flag; 3]>,
-    /// Per tag: session-1 persistence and sessions 2–3 persistence after power loss (µs).
-    persistence: Vec<(u64, u64)>,
 }
 
 impl Flags {
     /// Every tag of a scenario with `tags` tags in state A; persistence times seeded by `seed`.
     pub fn new(seed: u64, tags: usize) -> Flags {
-        let persistence = (0..tags)
-            .map(|t| {
-                let h = seed::mix(&[seed, seed::domain::FLAGS, t as u64]);
-                let u1 = seed::unit(h);
-                let u2 = seed::unit(seed::splitmix64(h));
-                (
-                    (500_000.0 + 4_500_000.0 * u1) as u64,
-                    (2_000_000.0 + 3_000_000.0 * u2) as u64,
-                )
-            })
-            .collect();
         Flags {
-            flags: vec![[Flag::default(); 3]; tags],
-            persistence,
+            seed,
+            tags,
+            flags: Vec::new(),
         }
+    }
+
+    /// `tag`'s session-1 persistence and its sessions-2/3 persistence after power loss (µs).
+    fn persistence(&self, tag: usize) -> (u64, u64) {
+        let h = seed::mix(&[self.seed, seed::domain::FLAGS, tag as u64]);
+        let u1 = seed::unit(h);
+        let u2 = seed::unit(seed::splitmix64(h));
+        (
+            (500_000.0 + 4_500_000.0 * u1) as u64,
+            (2_000_000.0 + 3_000_000.0 * u2) as u64,
+        )
     }
 
     /// Whether `tag` is in state A in `session` (1–3) at `t_us` (session 0, and an unknown
@@ -59,7 +61,7 @@ impl Flags {
         let Some(since) = f.b_since else {
             return true;
         };
-        let (p1, p23) = self.persistence[tag];
+        let (p1, p23) = self.persistence(tag);
         match session {
             1 => t_us >= since.saturating_add(p1),
             _ => t_us >= since.max(f.energised_until).saturating_add(p23),
@@ -76,6 +78,7 @@ impl Flags {
     /// `tag` is energised during the epoch starting at `t_us`, in every session.
     pub fn energise(&mut self, tag: usize, t_us: u64) {
         let until = t_us.saturating_add(FIELD_BUCKET_US);
+        self.grow(tag);
         if let Some(fs) = self.flags.get_mut(tag) {
             for f in fs {
                 f.energised_until = f.energised_until.max(until);
@@ -100,7 +103,15 @@ impl Flags {
 
     fn flag_mut(&mut self, tag: usize, session: u8) -> Option<&mut Flag> {
         let s = usize::from(session).checked_sub(1).filter(|&s| s < 3)?;
+        self.grow(tag);
         self.flags.get_mut(tag).map(|f| &mut f[s])
+    }
+
+    /// Makes room for `tag` (a tag of the scenario) and every tag before it.
+    fn grow(&mut self, tag: usize) {
+        if tag < self.tags && self.flags.len() <= tag {
+            self.flags.resize(tag + 1, [Flag::default(); 3]);
+        }
     }
 }
 
@@ -111,7 +122,7 @@ mod tests {
     #[test]
     fn session_1_reverts_after_its_persistence_powered_or_not() {
         let mut f = Flags::new(1, 3);
-        let (p1, _) = f.persistence[0];
+        let (p1, _) = f.persistence(0);
         assert!((500_000..5_000_000).contains(&p1));
         assert!(f.is_a(0, 1, 0));
         f.read(0, 1, 1_000_000);
@@ -127,7 +138,7 @@ mod tests {
     #[test]
     fn sessions_2_and_3_hold_while_energised_and_2_s_after() {
         let mut f = Flags::new(2, 1);
-        let (_, p) = f.persistence[0];
+        let (_, p) = f.persistence(0);
         assert!((2_000_000..5_000_000).contains(&p));
         f.read(0, 2, 0);
         // Energised for a minute: still B throughout.
@@ -144,9 +155,17 @@ mod tests {
 
     #[test]
     fn persistence_times_are_seeded_per_tag() {
-        let a = Flags::new(7, 50);
-        assert_eq!(a, Flags::new(7, 50));
-        assert_ne!(a.persistence, Flags::new(8, 50).persistence);
-        assert!(a.persistence.windows(2).any(|w| w[0] != w[1]));
+        let (a, b) = (Flags::new(7, 50), Flags::new(8, 50));
+        let times = |f: &Flags| (0..50).map(|t| f.persistence(t)).collect::<Vec<_>>();
+        assert_eq!(times(&a), times(&Flags::new(7, 50)));
+        assert_ne!(times(&a), times(&b));
+        assert!(times(&a).windows(2).any(|w| w[0] != w[1]));
+        // Nothing is stored until a flag is touched, and never beyond the scenario's tags.
+        let mut c = Flags::new(7, 50);
+        assert!(c.flags.is_empty());
+        c.read(60, 2, 0);
+        assert!(c.flags.is_empty());
+        c.read(3, 2, 0);
+        assert_eq!(c.flags.len(), 4);
     }
 }

@@ -76,8 +76,9 @@ struct EpochRadio<'a> {
     from_epoch_us: u64,
     /// Replies asked for so far in the epoch (names each reply's stream).
     replies: u64,
-    /// Each field tag's free-space level at the epoch's start (dBm up to a constant), by tag;
-    /// NaN until a collision needs it.
+    /// The epoch's field (tags in order) and each one's free-space level at the epoch's start
+    /// (dBm up to a constant), NaN until a collision needs it.
+    field: &'a [usize],
     levels: &'a mut [f64],
     /// Start of the epoch (µs).
     epoch_start_us: u64,
@@ -104,7 +105,12 @@ impl Radio for EpochRadio<'_> {
     fn level(&mut self, tag: usize, _t_us: f64) -> f64 {
         // Taken at the epoch's start (within 25 ms a level changes by far less than the
         // capture margin): −40 dB a decade and the tag's own strength.
-        let Some(slot) = self.levels.get_mut(tag) else {
+        let Some(slot) = self
+            .field
+            .binary_search(&tag)
+            .ok()
+            .and_then(|i| self.levels.get_mut(i))
+        else {
             return f64::NEG_INFINITY;
         };
         if slot.is_nan() {
@@ -181,7 +187,7 @@ impl Model {
         let first = t0_us / FIELD_BUCKET_US;
         let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
         let mut field = Vec::new();
-        let mut levels = vec![f64::NAN; self.tags.len()];
+        let mut levels = Vec::new();
         let mut scratch = gen2::Scratch::default();
         for epoch in first..=last {
             let start = epoch * FIELD_BUCKET_US;
@@ -191,9 +197,8 @@ impl Model {
             if field.is_empty() {
                 continue;
             }
-            for &tag in &field {
-                levels[tag] = f64::NAN;
-            }
+            levels.clear();
+            levels.resize(field.len(), f64::NAN);
             let session = air.session;
             let mut taking_part = Vec::new();
             if let Some(f) = flags.as_deref_mut() {
@@ -214,6 +219,7 @@ impl Model {
                 epoch,
                 from_epoch_us: 0,
                 replies: 0,
+                field: &field,
                 levels: &mut levels,
                 epoch_start_us: start,
                 flags: flags.as_deref_mut().map(|f| (f, session)),
