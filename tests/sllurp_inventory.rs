@@ -357,5 +357,7 @@ async fn single_target_in_session_2_reports_each_static_tag_once() {
         })
         .collect();
     assert_eq!(counts.len(), 3, "every tag: {counts:?}\n{log}");
+    // One TagReportData per tag (a reread on another channel would be another).
+    assert_eq!(first.len(), 3, "{first:?}");
     assert!(counts.values().all(|&n| n == 1), "{counts:?}");
 }

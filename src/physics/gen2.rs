@@ -93,8 +93,9 @@ impl Default for Air {
 }
 
 impl Air {
-    /// Whether a tag read once keeps out of later rounds (single target in sessions 1–3; a
-    /// session-0 flag reverts as soon as the tag is read again, so session 0 rereads).
+    /// Whether a tag read once keeps out of later rounds: single target in sessions 1–3 (a
+    /// session-0 flag reverts as soon as the tag loses power, which it does between rounds
+    /// on an Impinj reader, so session 0 rereads: our reading).
     pub fn suppresses(&self) -> bool {
         self.target == Target::Single && self.session != 0
     }
@@ -144,12 +145,13 @@ impl RfMode {
     };
 
     /// The RF mode the simulated reader advertises under ModeIdentifier `id` (its C1G2 UHF
-    /// RF mode table): 0 FM0 at 640 kHz, 1 Miller 2 at 640 kHz, 2 Miller 4 at 274 kHz, 3 Miller 8
-    /// at 170.6 kHz, 1000 (AutoSet) Miller 4 at 250 kHz; `None` for another.
+    /// RF mode table): 0 FM0 at 640 kHz (Tari 7.14 µs, as an FCC R420), 1 Miller 2 at 640 kHz
+    /// (Tari 6.25 µs, as an R420 in sllurp issue #19), 2 Miller 4 at 274 kHz and 3 Miller 8 at
+    /// 170.6 kHz (as an R220), 1000 (AutoSet) Miller 4 at 250 kHz; `None` for another.
     pub fn impinj(id: u32) -> Option<RfMode> {
         let (miller, blf_khz, pie, tari_us) = match id {
             0 => (1, 640.0, 1.5, 7.14),
-            1 => (2, 640.0, 1.5, 7.14),
+            1 => (2, 640.0, 1.5, 6.25),
             2 => (4, 274.0, 2.0, 20.0),
             3 => (8, 170.6, 2.0, 20.0),
             1000 => (4, 250.0, 2.0, 20.0),
@@ -363,6 +365,8 @@ pub fn round_in<R: RngCore + ?Sized>(
         if waiting.is_empty() || !(progressed || collided) {
             break;
         }
+        // The next frame opens with a QueryAdjust (the tags left wait at 7FFFh for it).
+        t += times.adjust_extra_us;
     }
     out.duration_us = t.min(budget_us.max(0.0));
     out

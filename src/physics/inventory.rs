@@ -31,8 +31,8 @@ const DOPPLER_STEP_US: u64 = 10_000;
 /// Number of σ_r beyond the nominal range still considered in the field.
 pub(super) const RANGE_SIGMAS: f64 = 4.0;
 
-/// The field (which tags an attempt may pick) is recomputed every this many µs of absolute
-/// time; the picked tag's channel is then computed at the attempt's exact instant. One antenna
+/// The field (which tags take part in an epoch's rounds) is recomputed every this many µs of
+/// absolute time; a reply's channel is then computed at its exact instant. One antenna
 /// dwell of the reader's rotation (`reader::rospec::ANTENNA_DWELL_US`), so a slice that starts
 /// on the grid sees one field, as the tags energised at the start of an inventory round take
 /// part in it.
@@ -92,6 +92,7 @@ impl Model {
         want: Want,
         air: &Air,
     ) -> Vec<Read> {
+        let none = None;
         self.inventory_in(
             antenna,
             t0_us,
@@ -100,13 +101,15 @@ impl Model {
             channel,
             want,
             air,
-            None,
+            none,
         )
+        .0
     }
 
-    /// As [`Model::inventory_with`] for a single-target inventory in session 1–3: only the
-    /// tags whose flag in `flags` is A take part, and each read sends its tag to B (the
-    /// reader's flags, carried from window to window in time order).
+    /// As [`Model::inventory_with`] for a single-target inventory in session 1–3
+    /// ([`Air::suppresses`]), with rounds from `t0_us` on: only the tags whose flag in `flags` is A
+    /// take part, each at most once; the caller sends a tag to B when it reports its read
+    /// ([`Flags::read`]). Also says whether no tag was in A when the first round began.
     #[allow(clippy::too_many_arguments)]
     pub fn inventory_flagged(
         &self,
@@ -118,7 +121,7 @@ impl Model {
         want: Want,
         air: &Air,
         flags: &mut Flags,
-    ) -> Vec<Read> {
+    ) -> (Vec<Read>, bool) {
         let flags = air.suppresses().then_some(flags);
         self.inventory_in(
             antenna,
@@ -143,12 +146,12 @@ impl Model {
         want: Want,
         air: &Air,
         flags: Option<&mut Flags>,
-    ) -> Vec<Read> {
+    ) -> (Vec<Read>, bool) {
         let Some(a) = usize::from(antenna)
             .checked_sub(1)
             .and_then(|i| self.antennas.get(i))
         else {
-            return Vec::new();
+            return (Vec::new(), flags.is_some());
         };
         let tx = tx_power_dbm
             .filter(|p| p.is_finite())
@@ -275,7 +278,7 @@ impl Model {
         if rssi_dbm < rssi::READER_SENSITIVITY_DBM {
             return None;
         }
-        // The phase and Doppler draws come last from the attempt's generator, always in the
+        // The phase and Doppler draws come last from the reply's generator, always in the
         // same order when either is asked for: leaving both undrawn changes nothing else, and
         // asking for one gives it the same value as asking for both.
         let (mut phase_rad, mut doppler_hz) = (0.0, 0.0);

@@ -53,6 +53,11 @@ use motion::PolylineMotion;
 use multipath::Plane;
 use robot::RobotTrajectory;
 
+/// Length of an inventory epoch (one antenna dwell on the fixed grid), µs.
+pub fn inventory_epoch_us() -> u64 {
+    inventory::FIELD_BUCKET_US
+}
+
 /// Position and boresight of an antenna at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct AntennaPose {

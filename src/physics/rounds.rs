@@ -8,7 +8,9 @@
 //! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), so
 //! the reads of a window are those of the epochs it overlaps that fall inside it: a window
 //! split in two gives the same reads as the whole, and windows may be computed in any order
-//! and on any thread.
+//! and on any thread. A single-target inventory (sessions 1–3) is the exception: it depends on
+//! the reader's flags, so the reader runs each of its epochs once, in time order, from when the
+//! antenna gets the carrier (`reader::rospec`), never through the look-ahead.
 
 use super::field::{Bucket, Classified};
 use super::flags::Flags;
@@ -82,8 +84,9 @@ struct EpochRadio<'a> {
     levels: &'a mut [f64],
     /// Start of the epoch (µs).
     epoch_start_us: u64,
-    /// The reader's inventoried flags and the session, when the inventory is single-target.
-    flags: Option<(&'a mut Flags, u8)>,
+    /// The tags read so far in a single-target inventory (they sit out later rounds; the
+    /// caller sends them to B as it reports them).
+    read_here: Option<&'a mut Vec<usize>>,
     /// Reads of the epoch inside [from, until).
     from_us: u64,
     until_us: u64,
@@ -143,8 +146,8 @@ impl Radio for EpochRadio<'_> {
                 if (self.from_us..self.until_us).contains(&r.time_us) {
                     self.out.push(r);
                 }
-                if let Some((flags, session)) = self.flags.as_mut() {
-                    flags.read(tag, *session, r.time_us);
+                if let Some(read) = self.read_here.as_mut() {
+                    read.push(tag);
                 }
                 true
             }
@@ -156,8 +159,10 @@ impl Radio for EpochRadio<'_> {
 impl Model {
     /// The reads of `antenna` in `[t0_us, t1_us)` at power `tx` (dBm) on the pinned channel
     /// if any, under `air`: those of every epoch the window overlaps that fall in it. With
-    /// `flags` (a single-target inventory in session 1–3, [`Air::suppresses`]) only tags in
-    /// state A take part, a read sends its tag to B, and every tag in the field is energised.
+    /// `flags` (a single-target inventory in session 1–3, [`Air::suppresses`]) rounds start at
+    /// `t0_us` rather than at the epoch's start, only tags in state A take part (each read at
+    /// most once in the call), and every tag in the field is energised; the flag is left to
+    /// the caller. The second value says that no tag was in A when the first round began.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn rounds(
         &self,
@@ -170,10 +175,13 @@ impl Model {
         air: &Air,
         bucket: &mut Bucket,
         mut flags: Option<&mut Flags>,
-    ) -> Vec<Read> {
+    ) -> (Vec<Read>, bool) {
         let mut reads = Vec::new();
+        let mut none_in_a = flags.is_some();
+        let mut first_round = true;
+        let mut read_here = Vec::new();
         if t1_us <= t0_us {
-            return reads;
+            return (reads, none_in_a);
         }
         let times = air.mode.slot_times(EPC_BITS);
         let prefix = seed::mix(&[
@@ -195,6 +203,7 @@ impl Model {
             self.open_bucket(antenna, tx, start, ch, &mut classified, bucket);
             self.field_of(bucket, &mut field);
             if field.is_empty() {
+                first_round = false;
                 continue;
             }
             levels.clear();
@@ -222,7 +231,7 @@ impl Model {
                 field: &field,
                 levels: &mut levels,
                 epoch_start_us: start,
-                flags: flags.as_deref_mut().map(|f| (f, session)),
+                read_here: flags.is_some().then_some(&mut read_here),
                 from_us: t0_us,
                 until_us: t1_us,
                 out: &mut reads,
@@ -231,7 +240,8 @@ impl Model {
             // Pure epochs run whole (their reads are filtered to the window); a single-target
             // inventory, which carries flags from call to call, runs only inside the window,
             // so that no read outside it changes a flag.
-            let (from, to) = if radio.flags.is_some() {
+            let flagged = flags.as_deref();
+            let (from, to) = if flagged.is_some() {
                 (start.max(t0_us), (start + FIELD_BUCKET_US).min(t1_us))
             } else {
                 (start, start + FIELD_BUCKET_US)
@@ -243,17 +253,27 @@ impl Model {
             while spent < length {
                 radio.round_start_us = from as f64 + spent;
                 // Single target: only the tags still in A at the round's start answer.
-                let part: &[usize] = match radio.flags.as_ref() {
-                    Some((f, s)) => {
+                let part: &[usize] = match (flagged, radio.read_here.as_deref()) {
+                    (Some(f), Some(done)) => {
                         let now = radio.instant(0.0);
                         taking_part.clear();
-                        taking_part.extend(field.iter().copied().filter(|&t| f.is_a(t, *s, now)));
+                        taking_part.extend(
+                            field
+                                .iter()
+                                .copied()
+                                .filter(|&t| f.is_a(t, session, now) && !done.contains(&t)),
+                        );
+                        if first_round {
+                            none_in_a = taking_part.is_empty();
+                            qfp = gen2::settled_qfp(taking_part.len());
+                        }
+                        first_round = false;
                         if taking_part.is_empty() {
                             break;
                         }
                         &taking_part
                     }
-                    None => &field,
+                    _ => &field,
                 };
                 let r = gen2::round_in(
                     &mut rng,
@@ -271,7 +291,7 @@ impl Model {
                 qfp = r.qfp;
             }
         }
-        reads
+        (reads, none_in_a)
     }
 
     /// How long `antenna` spends on the epoch holding `t_us` when no tag can be in its field at

@@ -37,7 +37,7 @@ pub fn rng(words: &[u64]) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(mix(words))
 }
 
-/// A SplitMix64 stream seeded from the mixed words: the generator of one read attempt, which
+/// A SplitMix64 stream seeded from the mixed words: the generator of one reply, which
 /// draws a handful of numbers (ChaCha8 would spend most of its time setting up).
 pub fn stream(words: &[u64]) -> Stream {
     Stream { state: mix(words) }
@@ -82,7 +82,8 @@ impl RngCore for Stream {
 
 /// Domain tags keeping the different kinds of draws apart.
 pub mod domain {
-    /// Per-slot read attempts.
+    /// Per-slot read attempts (the scheduler before the Gen2 model; kept so other domains
+    /// keep their values).
     pub const SLOT: u64 = 1;
     /// Phase offsets φ0.
     pub const PHASE_OFFSET: u64 = 2;

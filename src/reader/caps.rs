@@ -95,6 +95,14 @@ fn llrp_caps() -> LlrpCapabilities {
     }
 }
 
+/// The Tari range (ns) mode `id` of the RF mode table allows.
+pub fn tari_range_ns(id: u32) -> (u32, u32) {
+    let mode = crate::physics::gen2::RfMode::impinj(id)
+        .unwrap_or(crate::physics::gen2::RfMode::IMPINJ_MODE_2);
+    let min = (mode.tari_us * 1e3).round() as u32;
+    (min, if id == 1000 { 25_000 } else { min })
+}
+
 fn rf_mode(id: u32) -> C1g2UhfRfModeTableEntry {
     // The link parameters the physics runs each mode with; the forward link modulation
     // (0 PR-ASK, 2 DSB-ASK) and spectral mask (2 multi-interrogator, 3 dense) as Impinj's.
@@ -110,8 +118,7 @@ fn rf_mode(id: u32) -> C1g2UhfRfModeTableEntry {
     let dr = true;
     let bdr = (mode.blf_khz * 1e3).round() as u32;
     let pie = (mode.pie * 1e3).round() as u32;
-    let tmin = (mode.tari_us * 1e3).round() as u32;
-    let tmax = if id == 1000 { 25_000 } else { tmin };
+    let (tmin, tmax) = tari_range_ns(id);
     C1g2UhfRfModeTableEntry {
         mode_identifier: id,
         dr_value: dr,

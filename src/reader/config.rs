@@ -366,6 +366,17 @@ pub fn validate_antenna_config(
             if !caps::RF_MODES.contains(&u32::from(rf.mode_index)) {
                 return Err(param_field_error(330, 335, 0, StatusCode::A_OutOfRange));
             }
+            // Tari 0 asks for the mode's own; another must lie in the mode's Tari range.
+            let (min, max) = caps::tari_range_ns(u32::from(rf.mode_index));
+            let tari = u32::from(rf.tari);
+            if tari != 0 && !(min..=max).contains(&tari) {
+                let mut e = param_field_error(330, 335, 1, StatusCode::A_OutOfRange);
+                e.error_description = format!(
+                    "C1G2RFControl: Tari {tari} ns outside mode {}'s {min}..={max} ns",
+                    rf.mode_index
+                );
+                return Err(e);
+            }
         }
     }
     Ok(())

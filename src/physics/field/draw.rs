@@ -44,7 +44,7 @@ pub(in crate::physics) struct Bucket {
     pub(super) aim: Option<Aim>,
     /// The same, prepared for the fast field test (valid while `aim` is set).
     pub(super) near: Near,
-    /// The classification when nothing moves any more (its links serve the attempts).
+    /// The classification when nothing moves any more (its links serve the replies).
     pub(super) rest: Option<Arc<Classified>>,
     /// The antenna, power bits and [`amplitude_threshold`] of the last bucket prepared (its
     /// `powf` once per antenna and power rather than once per bucket).

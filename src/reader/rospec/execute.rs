@@ -174,30 +174,39 @@ impl Specs {
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
-        // An antenna facing no tag: one empty round, then the next antenna.
-        let idle = if run.slice_checked || end <= t {
-            None
-        } else {
+        let air = super::air::air_for(ips, ctx.config, antenna);
+        let want = Want {
+            phase: content.impinj.phase,
+            doppler: content.impinj.doppler,
+        };
+        // An antenna facing no tag (by the field's bounds, or in a single-target inventory
+        // with no tag left in A) gets one empty round, then the reader moves to the next.
+        let fresh = !run.slice_checked && end > t;
+        let mut idle = None;
+        if fresh {
             run.slice_checked = true;
-            let air = super::air::air_for(ips, ctx.config, antenna);
-            let idle = ctx.model.idle_us(antenna, t, power, channel, &air);
+            idle = ctx.model.idle_us(antenna, t, power, channel, &air);
             let port = usize::from(antenna);
             if self.idle_antennas.len() <= port {
                 self.idle_antennas.resize(port + 1, false);
             }
             self.idle_antennas[port] = idle.is_some();
-            idle
-        };
+        }
+        if air.suppresses() && end > t && idle.is_none() && !run.slice_idle {
+            let none_in_a = self.flagged_epoch(ctx, antenna, t, power, channel, want, &air);
+            if fresh && none_in_a {
+                idle = Some(air.empty_round_us());
+            }
+        }
         if let Some(idle) = idle {
-            reached = (t + idle).clamp(t + 1, end);
-            run.slice_end_us = reached;
+            // The dwell ends after the empty round whatever the caller's steps are.
+            run.slice_end_us = t + idle;
+            run.slice_idle = true;
+            reached = (t + idle).min(end);
+        } else if run.slice_idle {
+            // The rest of an empty round.
         } else if end > t {
             // Phase and Doppler are worked out only when reported.
-            let want = Want {
-                phase: content.impinj.phase,
-                doppler: content.impinj.doppler,
-            };
-            let air = super::air::air_for(ips, ctx.config, antenna);
             let slice = Slice {
                 antenna,
                 power_dbm: power,
@@ -207,11 +216,9 @@ impl Specs {
                 air,
             };
             let reads = match channel {
-                // A single-target inventory carries the reader's flags from slice to slice,
-                // so it runs here, in time order.
-                _ if air.suppresses() => ctx
-                    .model
-                    .inventory_flagged(antenna, t, end, power, channel, want, &air, ctx.flags),
+                // A single-target inventory carries the reader's flags from epoch to epoch,
+                // so it runs here, in time order, an epoch at a time.
+                _ if air.suppresses() => self.take_flagged(antenna, end),
                 Some(_) => ctx
                     .model
                     .inventory_with(antenna, t, end, power, channel, want, &air),
@@ -221,6 +228,10 @@ impl Specs {
                 }
             };
             for r in reads {
+                if air.suppresses() {
+                    // Reported, so in B now (a read the stop trigger cuts off stays A).
+                    ctx.flags.read(r.tag, air.session, r.time_us);
+                }
                 let (op_spec_results, access_spec_id) =
                     ctx.access.apply(ctx.model, r.tag, antenna, ro_id);
                 let o = Observation {
@@ -275,6 +286,7 @@ impl Specs {
             }
             run.slice_end_us = dwell_end(reached);
             run.slice_checked = false;
+            run.slice_idle = false;
         }
         if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
             && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
@@ -309,6 +321,7 @@ impl Specs {
             run.antenna_pos = 0;
             run.slice_end_us = dwell_end(reached);
             run.slice_checked = false;
+            run.slice_idle = false;
             if run.spec_idx >= s.spec.specs.len() {
                 self.finish_ro(a, reached, report_spec, out);
             }

@@ -7,6 +7,7 @@
 
 mod air;
 mod execute;
+mod flagged;
 mod schedule;
 mod validate;
 
@@ -148,6 +149,8 @@ struct Run {
     slice_end_us: u64,
     /// Whether the current antenna's field has been looked at since the reader moved to it.
     slice_checked: bool,
+    /// Whether the current antenna found no tag to read: it spends one empty round.
+    slice_idle: bool,
     seen: TagSet,
     last_new_us: u64,
     rounds: u32,
@@ -201,6 +204,8 @@ pub struct Specs {
     /// Per antenna port, whether its field was empty when last looked at: the look-ahead
     /// plans it as one empty round.
     idle_antennas: Vec<bool>,
+    /// Per antenna port, the current epoch of a single-target inventory.
+    flagged: Vec<Option<flagged::FlaggedEpoch>>,
 }
 
 impl Specs {
@@ -466,6 +471,7 @@ impl Specs {
             antenna_pos: 0,
             slice_end_us: dwell_end(now),
             slice_checked: false,
+            slice_idle: false,
             seen: TagSet::default(),
             last_new_us: now,
             rounds: 0,
