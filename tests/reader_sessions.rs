@@ -38,11 +38,11 @@ fn field(n: usize) -> Scenario {
     Scenario::from_json(&json).expect("field scenario is valid")
 }
 
-/// Per tag (EPC's last two bytes), the FirstSeenTimestampUTC of every read of an inventory
-/// with `spec` over `seconds` of simulated time.
-fn reads(scenario: &Scenario, spec: InventorySpec, seconds: u64) -> BTreeMap<u16, Vec<u64>> {
+/// A virtual reader running an inventory with `spec` (ADD, ENABLE and START_ROSPEC, each
+/// answered with Success), `antennas` antennas for its antenna configuration.
+fn started(scenario: &Scenario, spec: InventorySpec, antennas: u16) -> VirtualReader {
     let mut v = VirtualReader::new(scenario);
-    let rospec = spec.rospec(1);
+    let rospec = spec.rospec(antennas);
     let id = rospec.ro_spec_id;
     let add = AddRospec {
         ro_spec: rospec,
@@ -61,6 +61,13 @@ fn reads(scenario: &Scenario, spec: InventorySpec, seconds: u64) -> BTreeMap<u16
     ] {
         assert_eq!(v.status(body), StatusCode::M_Success);
     }
+    v
+}
+
+/// Per tag (EPC's last two bytes), the FirstSeenTimestampUTC of every read of an inventory
+/// with `spec` over `seconds` of simulated time.
+fn reads(scenario: &Scenario, spec: InventorySpec, seconds: u64) -> BTreeMap<u16, Vec<u64>> {
+    let mut v = started(scenario, spec, 1);
     let (tags, _) = v.collect_reports(seconds * 1_000_000, |_| false);
     let mut per: BTreeMap<u16, Vec<u64>> = BTreeMap::new();
     for t in &tags {
@@ -249,26 +256,7 @@ fn a_tari_outside_the_modes_range_is_refused() {
 /// Every read (EPC's last byte, antenna, first-seen µs) of 4 s of inventory with `spec` on a
 /// reader advanced in steps of `step_us` of simulated time.
 fn stepped(s: &Scenario, spec: InventorySpec, step_us: u64) -> Vec<(u8, u16, u64)> {
-    let mut v = VirtualReader::new(s);
-    let rospec = spec.rospec(2);
-    let id = rospec.ro_spec_id;
-    let add = AddRospec {
-        ro_spec: rospec,
-        ..Default::default()
-    };
-    assert_eq!(v.status(add), StatusCode::M_Success);
-    for body in [
-        MessageBody::from(EnableRospec {
-            ro_spec_id: id,
-            ..Default::default()
-        }),
-        MessageBody::from(StartRospec {
-            ro_spec_id: id,
-            ..Default::default()
-        }),
-    ] {
-        assert_eq!(v.status(body), StatusCode::M_Success);
-    }
+    let mut v = started(s, spec, 2);
     let end = v.now_us() + 4_000_000;
     while v.now_us() < end {
         v.run_for(step_us.min(end - v.now_us()));
