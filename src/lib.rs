@@ -4,6 +4,7 @@
 pub mod decode;
 pub mod gateway;
 pub mod inventory;
+pub mod localize;
 pub mod net;
 pub mod physics;
 pub mod reader;

@@ -1,0 +1,8 @@
+//! The localizer's inputs (issue 18, in progress): antenna poses from a pose file, interpolated
+//! to each read's time ([`poses`]), and per (reader, antenna, tag, channel) phase series,
+//! unwrapped with the λ/4 motion check ([`series`]). It sees only reads and poses, never
+//! simulator internals, so it works the same on a real reader's data. The estimators and the
+//! HTTP API are still to come.
+
+pub mod poses;
+pub mod series;

@@ -1,0 +1,324 @@
+//! Antenna poses as the localizer receives them: the pose file (JSON Lines or CSV with the keys
+//! `t_us, reader, antenna, x, y, z, yaw_deg, pitch_deg`, the keys `sim --truth` writes), one
+//! track per (reader, antenna), interpolated to a read's timestamp.
+//!
+//! A read takes the pose of its reader's antenna at its own time plus the reader's clock
+//! offset (reader time − robot time, configurable per reader). Between two samples the position
+//! is interpolated linearly and the yaw along the shorter way round; a read before the first
+//! sample, after the last, or between two samples further apart than the reach has no pose
+//! ([`Poses::at`] gives `None`): it is set aside and counted, never guessed.
+
+use std::collections::HashMap;
+use std::io::BufRead;
+
+use serde::{Deserialize, Serialize};
+
+/// One pose sample: a line of the pose file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSample {
+    /// Robot (or site) time, µs.
+    pub t_us: u64,
+    /// Reader name.
+    #[serde(default)]
+    pub reader: String,
+    /// Antenna port, 1-based.
+    pub antenna: u16,
+    /// Position (m).
+    pub x: f64,
+    /// Position (m).
+    pub y: f64,
+    /// Position (m).
+    pub z: f64,
+    /// Boresight azimuth about +z (degrees, 0 = +x).
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Boresight elevation (degrees, positive up).
+    #[serde(default)]
+    pub pitch_deg: f64,
+}
+
+/// Why a pose file could not be read: the line and the reason, naming the field.
+#[derive(Debug, thiserror::Error)]
+pub enum PoseError {
+    /// The file could not be read.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    /// A line is not a valid pose.
+    #[error("line {line}: {reason}")]
+    Line {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong, naming the field.
+        reason: String,
+    },
+}
+
+/// The CSV header the pose file's CSV form must start with.
+pub const CSV_HEADER: &str = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg";
+
+/// Every antenna's pose track, and the readers' clock offsets.
+#[derive(Clone, Debug, Default)]
+pub struct Poses {
+    /// Per (reader, antenna), samples in time order.
+    tracks: HashMap<(String, u16), Vec<PoseSample>>,
+    /// Per reader, reader time − robot time (µs).
+    offsets: HashMap<String, i64>,
+    /// Longest gap between two samples a read may fall in (µs).
+    reach_us: u64,
+}
+
+/// Default reach: a read between two samples at most this far apart gets a pose (µs).
+pub const DEFAULT_REACH_US: u64 = 500_000;
+
+impl Poses {
+    /// No poses yet, with the default reach.
+    pub fn new() -> Poses {
+        Poses {
+            reach_us: DEFAULT_REACH_US,
+            ..Poses::default()
+        }
+    }
+
+    /// Sets the longest gap between samples a read may be interpolated in.
+    pub fn with_reach(mut self, reach_us: u64) -> Poses {
+        self.reach_us = reach_us;
+        self
+    }
+
+    /// Sets `reader`'s clock offset: reader time − robot time, µs.
+    pub fn set_offset(&mut self, reader: &str, offset_us: i64) {
+        self.offsets.insert(reader.to_string(), offset_us);
+    }
+
+    /// Adds a sample (kept in time order; a sample at a time already held replaces it).
+    pub fn add(&mut self, p: PoseSample) {
+        let track = self
+            .tracks
+            .entry((p.reader.clone(), p.antenna))
+            .or_default();
+        match track.binary_search_by_key(&p.t_us, |s| s.t_us) {
+            Ok(i) => track[i] = p,
+            Err(i) => track.insert(i, p),
+        }
+    }
+
+    /// Number of samples held.
+    pub fn len(&self) -> usize {
+        self.tracks.values().map(Vec::len).sum()
+    }
+
+    /// Whether no sample is held.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Reads a pose file, JSON Lines or CSV (told apart by its first line).
+    pub fn read(input: impl BufRead) -> Result<Poses, PoseError> {
+        let mut poses = Poses::new();
+        let mut csv: Option<Vec<String>> = None;
+        for (i, line) in input.lines().enumerate() {
+            let line = line?;
+            let n = i + 1;
+            let text = line.trim();
+            if text.is_empty() {
+                continue;
+            }
+            if n == 1 && !text.starts_with('{') {
+                let columns: Vec<String> = text.split(',').map(|c| c.trim().to_string()).collect();
+                for key in CSV_HEADER.split(',') {
+                    if !columns.iter().any(|c| c == key) {
+                        return Err(PoseError::Line {
+                            line: n,
+                            reason: format!("CSV header lacks the column {key:?}"),
+                        });
+                    }
+                }
+                csv = Some(columns);
+                continue;
+            }
+            let sample = match &csv {
+                Some(columns) => csv_sample(columns, text),
+                None => serde_json::from_str::<PoseSample>(text).map_err(|e| e.to_string()),
+            }
+            .and_then(check)
+            .map_err(|reason| PoseError::Line { line: n, reason })?;
+            poses.add(sample);
+        }
+        Ok(poses)
+    }
+
+    /// The pose of `reader`'s `antenna` at reader time `t_us`: interpolated between the
+    /// samples around it when they are at most the reach apart (or exactly at a sample);
+    /// `None` otherwise.
+    pub fn at(&self, reader: &str, antenna: u16, t_us: u64) -> Option<PoseSample> {
+        let track = self.tracks.get(&(reader.to_string(), antenna))?;
+        let offset = self.offsets.get(reader).copied().unwrap_or(0);
+        let t = i128::from(t_us) - i128::from(offset);
+        let t = u64::try_from(t).ok()?;
+        let i = track.partition_point(|s| s.t_us <= t);
+        // `i` samples are at or before `t`.
+        let before = track.get(i.checked_sub(1)?)?;
+        if before.t_us == t {
+            return Some(before.clone());
+        }
+        let after = track.get(i)?;
+        if after.t_us - before.t_us > self.reach_us {
+            return None;
+        }
+        let f = (t - before.t_us) as f64 / (after.t_us - before.t_us) as f64;
+        let lerp = |a: f64, b: f64| a + (b - a) * f;
+        let turn = (after.yaw_deg - before.yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
+        Some(PoseSample {
+            t_us: t,
+            reader: before.reader.clone(),
+            antenna,
+            x: lerp(before.x, after.x),
+            y: lerp(before.y, after.y),
+            z: lerp(before.z, after.z),
+            yaw_deg: (before.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0,
+            pitch_deg: lerp(before.pitch_deg, after.pitch_deg),
+        })
+    }
+}
+
+/// A CSV row under `columns` as a sample.
+fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
+    let cells: Vec<&str> = text.split(',').map(str::trim).collect();
+    if cells.len() != columns.len() {
+        return Err(format!(
+            "has {} fields, the header {}",
+            cells.len(),
+            columns.len()
+        ));
+    }
+    let cell = |key: &str| -> &str {
+        columns
+            .iter()
+            .position(|c| c == key)
+            .and_then(|i| cells.get(i).copied())
+            .unwrap_or("")
+    };
+    let number = |key: &str| -> Result<f64, String> {
+        let v = cell(key);
+        v.parse::<f64>()
+            .map_err(|_| format!("{key}: not a number: {v:?}"))
+    };
+    Ok(PoseSample {
+        t_us: cell("t_us")
+            .parse()
+            .map_err(|_| format!("t_us: not a whole number of µs: {:?}", cell("t_us")))?,
+        reader: cell("reader").to_string(),
+        antenna: cell("antenna")
+            .parse()
+            .map_err(|_| format!("antenna: not a port number: {:?}", cell("antenna")))?,
+        x: number("x")?,
+        y: number("y")?,
+        z: number("z")?,
+        yaw_deg: number("yaw_deg")?,
+        pitch_deg: number("pitch_deg")?,
+    })
+}
+
+/// A sample whose numbers are all finite and whose antenna is a port.
+fn check(p: PoseSample) -> Result<PoseSample, String> {
+    for (key, v) in [
+        ("x", p.x),
+        ("y", p.y),
+        ("z", p.z),
+        ("yaw_deg", p.yaw_deg),
+        ("pitch_deg", p.pitch_deg),
+    ] {
+        if !v.is_finite() {
+            return Err(format!("{key}: must be finite, got {v}"));
+        }
+    }
+    if p.antenna == 0 {
+        return Err("antenna: must be a port number from 1".into());
+    }
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(t_us: u64, x: f64, yaw_deg: f64) -> PoseSample {
+        PoseSample {
+            t_us,
+            reader: "r".into(),
+            antenna: 1,
+            x,
+            y: 2.0,
+            z: 0.5,
+            yaw_deg,
+            pitch_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn interpolates_between_samples_and_the_short_way_round() {
+        let mut p = Poses::new();
+        p.add(sample(1_000_000, 0.0, 170.0));
+        p.add(sample(1_100_000, 1.0, -170.0));
+        let mid = p.at("r", 1, 1_050_000).expect("between two samples");
+        assert!((mid.x - 0.5).abs() < 1e-12);
+        // 170° to −170° is 20° through 180°, not 340° back through 0°.
+        assert!((mid.yaw_deg.abs() - 180.0).abs() < 1e-9, "{}", mid.yaw_deg);
+        assert_eq!(p.at("r", 1, 1_000_000).map(|s| s.x), Some(0.0));
+        // Outside the track, another antenna or reader: no pose.
+        assert!(p.at("r", 1, 999_999).is_none());
+        assert!(p.at("r", 1, 1_100_001).is_none());
+        assert!(p.at("r", 2, 1_050_000).is_none());
+        assert!(p.at("q", 1, 1_050_000).is_none());
+    }
+
+    #[test]
+    fn a_gap_beyond_the_reach_is_no_pose_and_offsets_shift_the_clock() {
+        let mut p = Poses::new().with_reach(200_000);
+        p.add(sample(0, 0.0, 0.0));
+        p.add(sample(100_000, 1.0, 0.0));
+        p.add(sample(1_000_000, 2.0, 0.0));
+        assert!(p.at("r", 1, 50_000).is_some());
+        assert!(p.at("r", 1, 500_000).is_none(), "900 ms between samples");
+        // The reader's clock runs 30 ms ahead of the robot's.
+        p.set_offset("r", 30_000);
+        let shifted = p.at("r", 1, 80_000).expect("robot time 50 ms");
+        assert!((shifted.x - 0.5).abs() < 1e-12);
+        assert!(
+            p.at("r", 1, 10_000).is_none(),
+            "before the robot's first sample"
+        );
+    }
+
+    #[test]
+    fn reads_jsonl_and_csv_alike_and_names_bad_fields() {
+        let jsonl = concat!(
+            r#"{"t_us": 0, "reader": "r", "antenna": 1, "x": 0, "y": 2, "z": 0.5, "yaw_deg": 0, "pitch_deg": 0}"#,
+            "\n",
+            r#"{"t_us": 100000, "reader": "r", "antenna": 1, "x": 1, "y": 2, "z": 0.5, "yaw_deg": 0, "pitch_deg": 0}"#,
+            "\n"
+        );
+        let csv = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\n0,r,1,0,2,0.5,0,0\n100000,r,1,1,2,0.5,0,0\n";
+        let a = Poses::read(jsonl.as_bytes()).expect("JSON Lines");
+        let b = Poses::read(csv.as_bytes()).expect("CSV");
+        assert_eq!(a.len(), 2);
+        assert_eq!(a.at("r", 1, 25_000), b.at("r", 1, 25_000));
+        let bad = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\n0,r,1,0,two,0.5,0,0\n";
+        let e = Poses::read(bad.as_bytes()).expect_err("y is not a number");
+        assert_eq!(e.to_string(), "line 2: y: not a number: \"two\"");
+        let e = Poses::read("t_us,reader,x\n".as_bytes()).expect_err("columns missing");
+        assert!(e
+            .to_string()
+            .starts_with("line 1: CSV header lacks the column \"antenna\""));
+        let e = Poses::read(r#"{"t_us": 0, "antenna": 1, "x": 0, "y": 0}"#.as_bytes())
+            .expect_err("z missing");
+        assert!(e.to_string().contains("z"), "{e}");
+        let e = Poses::read(r#"{"t_us": 0, "antenna": 0, "x": 0, "y": 0, "z": 0}"#.as_bytes())
+            .expect_err("port 0");
+        assert_eq!(
+            e.to_string(),
+            "line 1: antenna: must be a port number from 1"
+        );
+    }
+}

@@ -1,0 +1,231 @@
+//! Phase series: the reads of one (reader, antenna, tag, channel), unwrapped.
+//!
+//! Consecutive reported phases are unwrapped by adding ±2π whenever they jump by more than π
+//! (\[G\]'s "Shannon theorem"), which is right only while the antenna moves less than λ/4
+//! between two reads of the tag (the round trip then changes by less than λ/2, the phase by
+//! less than π). A read after a larger move starts a new segment, counted, since the turns in
+//! between cannot be known; so does a read after a gap in time longer than the series allows.
+//! A reader with Impinj's π ambiguity reports φ or φ + π at random: its phases are folded onto
+//! [0, π) and unwrapped by ±π, which follows φ itself up to a constant, and the motion limit
+//! halves to λ/8. A series never crosses
+//! channels: each channel has its own λ and φ0.
+
+use crate::physics::geometry::{distance, Vec3};
+
+/// How a reader's phase is ambiguous.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Ambiguity {
+    /// The reported phase is the phase (mod 2π).
+    #[default]
+    None,
+    /// The reported phase is the phase or the phase + π (Impinj's π ambiguity).
+    Pi,
+}
+
+impl Ambiguity {
+    /// The period the phase is known modulo.
+    pub fn period(self) -> f64 {
+        match self {
+            Ambiguity::None => std::f64::consts::TAU,
+            Ambiguity::Pi => std::f64::consts::PI,
+        }
+    }
+}
+
+/// One unwrapped sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Read time, µs.
+    pub t_us: u64,
+    /// Unwrapped phase (rad; continuous within a segment, offset arbitrary).
+    pub phase_rad: f64,
+    /// Antenna position at the read (m).
+    pub antenna: Vec3,
+}
+
+/// The segments of one (reader, antenna, tag, channel) series.
+#[derive(Clone, Debug)]
+pub struct Series {
+    wavelength_m: f64,
+    ambiguity: Ambiguity,
+    /// Longest time between two reads of one segment (µs).
+    max_gap_us: u64,
+    /// Segments in time order; the last is being extended.
+    segments: Vec<Vec<Sample>>,
+    /// Segments started because the antenna moved too far between two reads.
+    splits_motion: u64,
+    /// Segments started because too long passed between two reads.
+    splits_gap: u64,
+}
+
+impl Series {
+    /// An empty series on a channel of wavelength `wavelength_m`.
+    pub fn new(wavelength_m: f64, ambiguity: Ambiguity, max_gap_us: u64) -> Series {
+        Series {
+            wavelength_m,
+            ambiguity,
+            max_gap_us,
+            segments: Vec::new(),
+            splits_motion: 0,
+            splits_gap: 0,
+        }
+    }
+
+    /// Largest antenna displacement between two reads that unwrapping can follow (m): λ/4,
+    /// or λ/8 with the π ambiguity.
+    pub fn motion_limit_m(&self) -> f64 {
+        self.wavelength_m / 4.0 * self.ambiguity.period() / std::f64::consts::TAU
+    }
+
+    /// Adds a read (in time order) of reported phase `phase_rad` with the antenna at
+    /// `antenna`.
+    pub fn push(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3) {
+        let period = self.ambiguity.period();
+        let folded = phase_rad.rem_euclid(period);
+        let limit = self.motion_limit_m();
+        let last = self.segments.last().and_then(|s| s.last()).copied();
+        let sample = match last {
+            Some(prev) if t_us >= prev.t_us => {
+                let moved = distance(prev.antenna, antenna);
+                let gap = t_us - prev.t_us;
+                if moved >= limit {
+                    self.splits_motion += 1;
+                    None
+                } else if gap > self.max_gap_us {
+                    self.splits_gap += 1;
+                    None
+                } else {
+                    // The nearest turn of `folded` to the previous unwrapped phase.
+                    let step =
+                        (folded - prev.phase_rad + period / 2.0).rem_euclid(period) - period / 2.0;
+                    Some(Sample {
+                        t_us,
+                        phase_rad: prev.phase_rad + step,
+                        antenna,
+                    })
+                }
+            }
+            _ => None,
+        };
+        match sample {
+            Some(s) => {
+                if let Some(seg) = self.segments.last_mut() {
+                    seg.push(s);
+                }
+            }
+            None => self.segments.push(vec![Sample {
+                t_us,
+                phase_rad: folded,
+                antenna,
+            }]),
+        }
+    }
+
+    /// The segments, oldest first.
+    pub fn segments(&self) -> &[Vec<Sample>] {
+        &self.segments
+    }
+
+    /// Segments started because the antenna moved λ/4 (λ/8) or more between two reads, and
+    /// because more than the gap passed.
+    pub fn splits(&self) -> (u64, u64) {
+        (self.splits_motion, self.splits_gap)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{PI, TAU};
+
+    const LAMBDA: f64 = 0.3276;
+
+    /// The reported phase of a tag at the origin from an antenna at `a`.
+    fn reported(a: Vec3, phi0: f64) -> f64 {
+        (phi0 + 4.0 * PI * distance(a, [0.0; 3]) / LAMBDA).rem_euclid(TAU)
+    }
+
+    #[test]
+    fn unwrapping_recovers_the_distance_along_a_slow_path() {
+        let mut s = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
+        // The antenna passes the tag 1 m away at 0.5 m/s, a read every 20 ms (1 cm).
+        let path: Vec<Vec3> = (0..400)
+            .map(|k| [-2.0 + 0.01 * k as f64, 1.0, 0.0])
+            .collect();
+        for (k, a) in path.iter().enumerate() {
+            s.push(k as u64 * 20_000, reported(*a, 1.3), *a);
+        }
+        assert_eq!(s.segments().len(), 1);
+        assert_eq!(s.splits(), (0, 0));
+        let seg = &s.segments()[0];
+        let d0 = distance(path[0], [0.0; 3]);
+        for (smp, a) in seg.iter().zip(&path) {
+            let d = distance(*a, [0.0; 3]);
+            let from_phase = (smp.phase_rad - seg[0].phase_rad) * LAMBDA / (4.0 * PI);
+            assert!(
+                (from_phase - (d - d0)).abs() < 1e-9,
+                "{from_phase} vs {}",
+                d - d0
+            );
+        }
+    }
+
+    #[test]
+    fn a_move_of_a_quarter_wavelength_or_a_long_gap_starts_a_new_segment() {
+        let mut s = Series::new(LAMBDA, Ambiguity::None, 100_000);
+        s.push(0, 0.1, [0.0, 1.0, 0.0]);
+        s.push(10_000, 0.2, [LAMBDA / 4.0 * 0.99, 1.0, 0.0]);
+        s.push(20_000, 0.3, [LAMBDA / 4.0 * 1.99, 1.0, 0.0]);
+        assert_eq!(s.segments().len(), 1);
+        s.push(30_000, 0.4, [LAMBDA / 4.0 * 3.0, 1.0, 0.0]);
+        assert_eq!(s.splits(), (1, 0));
+        s.push(200_000, 0.5, [LAMBDA / 4.0 * 3.0, 1.0, 0.0]);
+        assert_eq!(s.splits(), (1, 1));
+        assert_eq!(
+            s.segments().iter().map(Vec::len).collect::<Vec<_>>(),
+            vec![3, 1, 1]
+        );
+    }
+
+    #[test]
+    fn wrap_edges_unwrap_both_ways() {
+        let mut s = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
+        let a = [0.0; 3];
+        for (k, phi) in [6.2, 0.05, 6.25, 0.1, 3.3].iter().enumerate() {
+            s.push(k as u64, *phi, a);
+        }
+        let got: Vec<f64> = s.segments()[0].iter().map(|x| x.phase_rad).collect();
+        let want = [6.2, TAU + 0.05, 6.25, TAU + 0.1, 3.3];
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-12, "{got:?}");
+        }
+    }
+
+    #[test]
+    fn with_the_pi_ambiguity_random_flips_vanish_and_the_limit_halves() {
+        let mut plain = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
+        let mut folded = Series::new(LAMBDA, Ambiguity::Pi, 1_000_000);
+        assert!((folded.motion_limit_m() - LAMBDA / 8.0).abs() < 1e-15);
+        for k in 0..200u64 {
+            let a = [-1.0 + 0.005 * k as f64, 1.0, 0.0];
+            let true_phase = reported(a, 0.4);
+            // Every third read flipped by π.
+            let flipped = if k % 3 == 0 {
+                true_phase + PI
+            } else {
+                true_phase
+            };
+            plain.push(k * 10_000, true_phase, a);
+            folded.push(k * 10_000, flipped, a);
+        }
+        let p = &plain.segments()[0];
+        let f = &folded.segments()[0];
+        assert_eq!(folded.segments().len(), 1);
+        // Folded and unwrapped by π, the flipped series changes exactly as the true one.
+        for (x, y) in p.iter().zip(f) {
+            let dp = x.phase_rad - p[0].phase_rad;
+            let df = y.phase_rad - f[0].phase_rad;
+            assert!((dp - df).abs() < 1e-9, "{dp} vs {df}");
+        }
+    }
+}
