@@ -1,8 +1,10 @@
 //! The localizer's inputs (issue 18, in progress): antenna poses from a pose file, interpolated
-//! to each read's time ([`poses`]), and per (reader, antenna, tag, channel) phase series,
-//! unwrapped with the λ/4 motion check ([`series`]). It sees only reads and poses, never
+//! to each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series,
+//! unwrapped with the λ/4 motion check ([`series`]), and reads filed into them or set aside by
+//! reason ([`ingest`]). It sees only reads and poses, never
 //! simulator internals, so it works the same on a real reader's data. The estimators and the
 //! HTTP API are still to come.
 
+pub mod ingest;
 pub mod poses;
 pub mod series;

@@ -1,0 +1,173 @@
+//! Reads into phase series: each read of the reads file (or the gateway's [`Read`]) joined with
+//! its antenna's pose and filed under its (reader, antenna, tag, channel) series.
+//!
+//! A read's pose is its own `antenna_pose` when the source gave one, else the pose file's at
+//! its time ([`Poses::at`]). Reads without a phase, a channel frequency or a pose are set aside
+//! and counted by reason, never guessed.
+
+use std::collections::BTreeMap;
+
+use super::poses::Poses;
+use super::series::{Ambiguity, Series};
+use crate::reads::Read;
+
+/// Speed of light (m/s), for a channel's wavelength.
+const SPEED_OF_LIGHT: f64 = 299_792_458.0;
+
+/// The series key: reader, antenna port, EPC (upper-case hex), channel frequency (Hz).
+pub type Key = (String, u16, String, u64);
+
+/// Reads set aside, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SetAside {
+    /// The read carried no phase.
+    pub no_phase: u64,
+    /// The read's channel frequency is unknown.
+    pub no_frequency: u64,
+    /// No pose within reach of the read's time.
+    pub no_pose: u64,
+}
+
+/// Every series of the reads taken in so far.
+#[derive(Clone, Debug)]
+pub struct Ingest {
+    poses: Poses,
+    ambiguity: Ambiguity,
+    max_gap_us: u64,
+    series: BTreeMap<Key, Series>,
+    set_aside: SetAside,
+    taken: u64,
+}
+
+impl Ingest {
+    /// Series of reads whose poses come from `poses` (or the reads themselves), unwrapped
+    /// with `ambiguity`, a segment broken by more than `max_gap_us` between two reads.
+    pub fn new(poses: Poses, ambiguity: Ambiguity, max_gap_us: u64) -> Ingest {
+        Ingest {
+            poses,
+            ambiguity,
+            max_gap_us,
+            series: BTreeMap::new(),
+            set_aside: SetAside::default(),
+            taken: 0,
+        }
+    }
+
+    /// Takes one read (reads of one series in time order).
+    pub fn push(&mut self, read: &Read) {
+        let Some(phase) = read.phase_rad else {
+            self.set_aside.no_phase += 1;
+            return;
+        };
+        let Some(f_hz) = read.channel_frequency_hz.filter(|&f| f > 0) else {
+            self.set_aside.no_frequency += 1;
+            return;
+        };
+        let reader = read.reader.clone().unwrap_or_default();
+        let position = match &read.antenna_pose {
+            Some(p) => Some(p.position),
+            None => self
+                .poses
+                .at(&reader, read.antenna, read.t_us)
+                .map(|p| [p.x, p.y, p.z]),
+        };
+        let Some(position) = position else {
+            self.set_aside.no_pose += 1;
+            return;
+        };
+        let (ambiguity, max_gap) = (self.ambiguity, self.max_gap_us);
+        self.series
+            .entry((reader, read.antenna, read.epc.clone(), f_hz))
+            .or_insert_with(|| Series::new(SPEED_OF_LIGHT / f_hz as f64, ambiguity, max_gap))
+            .push(read.t_us, phase, position);
+        self.taken += 1;
+    }
+
+    /// The series, by key.
+    pub fn series(&self) -> &BTreeMap<Key, Series> {
+        &self.series
+    }
+
+    /// Reads filed into a series.
+    pub fn taken(&self) -> u64 {
+        self.taken
+    }
+
+    /// Reads set aside, by reason.
+    pub fn set_aside(&self) -> SetAside {
+        self.set_aside
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::localize::poses::PoseSample;
+    use crate::scenario::Pose;
+
+    fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
+        Read {
+            epc: epc.into(),
+            reader: Some("r".into()),
+            antenna: 1,
+            t_us,
+            phase_rad: phase,
+            rssi_dbm: Some(-50.0),
+            channel_index: Some(1),
+            channel_frequency_hz: f,
+            doppler_hz: None,
+            antenna_pose: None,
+            last_seen_us: None,
+        }
+    }
+
+    #[test]
+    fn reads_are_filed_by_series_or_set_aside_by_reason() {
+        let mut poses = Poses::new();
+        for (t, x) in [(0, 0.0), (100_000, 0.01), (200_000, 0.02)] {
+            poses.add(PoseSample {
+                t_us: t,
+                reader: "r".into(),
+                antenna: 1,
+                x,
+                y: 1.0,
+                z: 0.5,
+                yaw_deg: 0.0,
+                pitch_deg: 0.0,
+            });
+        }
+        let mut ingest = Ingest::new(poses, Ambiguity::None, 1_000_000);
+        ingest.push(&read("A1", 50_000, Some(1.0), Some(915_250_000)));
+        ingest.push(&read("A1", 150_000, Some(1.1), Some(915_250_000)));
+        ingest.push(&read("A1", 160_000, Some(2.0), Some(902_750_000)));
+        ingest.push(&read("B2", 60_000, Some(0.3), Some(915_250_000)));
+        ingest.push(&read("B2", 70_000, None, Some(915_250_000)));
+        ingest.push(&read("B2", 80_000, Some(0.3), None));
+        ingest.push(&read("B2", 900_000, Some(0.3), Some(915_250_000)));
+        // A read carrying its own pose needs no pose file.
+        let mut own = read("C3", 5_000_000, Some(0.5), Some(915_250_000));
+        own.antenna_pose = Some(Pose {
+            position: [3.0, 0.0, 1.0],
+            yaw_deg: 0.0,
+            pitch_deg: 0.0,
+        });
+        ingest.push(&own);
+        assert_eq!(ingest.taken(), 5);
+        assert_eq!(
+            ingest.set_aside(),
+            SetAside {
+                no_phase: 1,
+                no_frequency: 1,
+                no_pose: 1
+            }
+        );
+        // A1 on two channels: two series; B2 and C3 one each.
+        assert_eq!(ingest.series().len(), 4);
+        let a1 = &ingest.series()[&("r".to_string(), 1, "A1".to_string(), 915_250_000)];
+        let seg = &a1.segments()[0];
+        assert_eq!(seg.len(), 2);
+        // The antenna position interpolated at each read: x = 0.005 and 0.015.
+        assert!((seg[0].antenna[0] - 0.005).abs() < 1e-12);
+        assert!((seg[1].antenna[0] - 0.015).abs() < 1e-12);
+    }
+}
