@@ -15,8 +15,6 @@ use llrp::units::{self, HopTable};
 use llrp::Message;
 use serde::{Deserialize, Serialize};
 
-use crate::scenario::Pose;
-
 /// One tag read (one TagReportData), in SI units; a line of the reads file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Read {
@@ -45,12 +43,32 @@ pub struct Read {
     /// Doppler frequency in Hz (ImpinjRFDopplerFrequency).
     #[serde(default)]
     pub doppler_hz: Option<f64>,
-    /// Pose of the antenna at the read, where the source knows it.
+    /// Pose of the antenna at the read, where the source knows it (stands in for a pose
+    /// file).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub antenna_pose: Option<Pose>,
+    pub antenna_pose: Option<AntennaPose>,
     /// Last-seen time, UTC µs (not a reads-file field: the CSV output carries it).
     #[serde(skip)]
     pub last_seen_us: Option<u64>,
+}
+
+/// The antenna's pose at a read, in the reads file: `{"x", "y", "z"[, "yaw_deg", "pitch_deg"]}`
+/// (metres, degrees).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AntennaPose {
+    /// Position (m).
+    pub x: f64,
+    /// Position (m).
+    pub y: f64,
+    /// Position (m).
+    pub z: f64,
+    /// Boresight azimuth about +z (degrees, 0 = +x).
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Boresight elevation (degrees, positive up).
+    #[serde(default)]
+    pub pitch_deg: f64,
 }
 
 /// The columns of the CSV output, in order.
@@ -376,5 +394,23 @@ mod tests {
         let e = read_jsonl(&bad[..]).expect_err("antenna is a string");
         assert_eq!(e.line, 2);
         assert!(e.message.starts_with("antenna:"), "{}", e.message);
+    }
+
+    #[test]
+    fn an_antenna_pose_stands_in_for_a_pose_file() {
+        let line = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":null,"antenna_pose":{"x":1,"y":2,"z":0.5,"yaw_deg":90}}"#;
+        let r = read_jsonl(&line[..]).expect("parses");
+        let p = r[0].antenna_pose.expect("a pose");
+        assert_eq!(
+            (p.x, p.y, p.z, p.yaw_deg, p.pitch_deg),
+            (1.0, 2.0, 0.5, 90.0, 0.0)
+        );
+        let bad = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":null,"antenna_pose":{"x":1,"y":2}}"#;
+        let e = read_jsonl(&bad[..]).expect_err("z missing");
+        assert!(
+            e.message.contains("antenna_pose") && e.message.contains('z'),
+            "{}",
+            e.message
+        );
     }
 }

@@ -65,7 +65,7 @@ impl Ingest {
         };
         let reader = read.reader.clone().unwrap_or_default();
         let position = match &read.antenna_pose {
-            Some(p) => Some(p.position),
+            Some(p) => Some([p.x, p.y, p.z]),
             None => self
                 .poses
                 .at(&reader, read.antenna, read.t_us)
@@ -103,7 +103,7 @@ impl Ingest {
 mod tests {
     use super::*;
     use crate::localize::poses::PoseSample;
-    use crate::scenario::Pose;
+    use crate::reads::AntennaPose;
 
     fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
         Read {
@@ -146,8 +146,10 @@ mod tests {
         ingest.push(&read("B2", 900_000, Some(0.3), Some(915_250_000)));
         // A read carrying its own pose needs no pose file.
         let mut own = read("C3", 5_000_000, Some(0.5), Some(915_250_000));
-        own.antenna_pose = Some(Pose {
-            position: [3.0, 0.0, 1.0],
+        own.antenna_pose = Some(AntennaPose {
+            x: 3.0,
+            y: 0.0,
+            z: 1.0,
             yaw_deg: 0.0,
             pitch_deg: 0.0,
         });
