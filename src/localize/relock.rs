@@ -1,7 +1,7 @@
 //! Phase ReLock (\[A\] §III-A1) in 2D: the tag position (x, y) and one phase offset per segment
 //! that best explain the unwrapped phases, θ_i ≈ s·4π·d_i/λ_i + c_k, by Levenberg–Marquardt
 //! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a coarse
-//! grid on the side the antenna faces (the mirror image about a straight path explains the
+//! grid (5 cm, on up to 200 of the phases) on the side the antenna faces (the mirror image about a straight path explains the
 //! phases as well).
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -145,6 +145,9 @@ pub fn locate(
         ((max[0] - min[0] + 2.0 * reach_m) / step) as i64,
         ((max[1] - min[1] + 2.0 * reach_m) / step) as i64,
     );
+    // The grid looks at up to 200 phases evenly spread (LM then uses all of them).
+    let stride = obs.len().div_ceil(200).max(1);
+    let coarse: Vec<Obs> = obs.iter().step_by(stride).copied().collect();
     let mut best = (f64::INFINITY, mid[0], mid[1]);
     for i in 0..=nx {
         for j in 0..=ny {
@@ -155,7 +158,7 @@ pub fn locate(
             if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
                 continue;
             }
-            let c = cost(obs, segments, z, sign, x, y);
+            let c = cost(&coarse, segments, z, sign, x, y);
             if c < best.0 {
                 best = (c, x, y);
             }
