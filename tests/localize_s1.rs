@@ -1,17 +1,17 @@
 //! The localizer's pieces end to end on the default scenario S1, as a user would run them: the
 //! simulator streams to the project's client over loopback and writes its ground truth; the
 //! reads and the true antenna poses (the truth file, as a pose file) go through
-//! `localize::ingest` and `localize::relock`, and every tag's estimate is compared with the
-//! truth.
+//! `localize::ingest` and `localize::estimate` (Phase ReLock), and every tag's estimate is
+//! compared with the truth.
 
 mod common;
 
 use std::io::BufRead;
 
 use common::*;
+use llrp_gateway::localize::estimate;
 use llrp_gateway::localize::ingest::Ingest;
 use llrp_gateway::localize::poses::{PoseSample, Poses};
-use llrp_gateway::localize::relock::{self, Obs};
 use llrp_gateway::localize::series::Ambiguity;
 use llrp_gateway::net::clock::Speed;
 use llrp_gateway::reads::Read;
@@ -105,33 +105,20 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
     }
     assert_eq!(ingest.set_aside().no_pose, 0, "{:?}", ingest.set_aside());
 
+    // S1's antenna faces the racks (+y); tags and antenna at z = 0.5 m.
+    let estimates = estimate::relock_all(&ingest, 0.5, 1.0, [0.0, 1.0], 4.0);
+    assert_eq!(estimates.len(), 10);
     let mut errors = Vec::new();
     for (epc, truth) in &positions {
-        let obs: Vec<Obs> = ingest
-            .series()
+        let e = estimates
             .iter()
-            .filter(|(k, _)| &k.2 == epc)
-            .flat_map(|(k, s)| {
-                let lambda = 299_792_458.0 / k.3 as f64;
-                s.segments()
-                    .iter()
-                    .enumerate()
-                    .flat_map(move |(i, seg)| {
-                        seg.iter().map(move |x| Obs {
-                            phase_rad: x.phase_rad,
-                            antenna: x.antenna,
-                            wavelength_m: lambda,
-                            segment: i,
-                        })
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        // S1's antenna faces the racks (+y); tags and antenna at z = 0.5 m.
-        let fix = relock::locate(&obs, 0.5, 1.0, [0.0, 1.0], 4.0)
-            .unwrap_or_else(|e| panic!("{epc}: {e:?} from {} phases", obs.len()));
-        let err = (fix.position[0] - truth[0]).hypot(fix.position[1] - truth[1]);
-        errors.push(err);
+            .find(|e| &e.epc == epc)
+            .unwrap_or_else(|| panic!("no estimate for {epc}"));
+        let p = e
+            .estimate
+            .unwrap_or_else(|| panic!("{epc}: {:?} from {} phases", e.state, e.samples));
+        assert_eq!(e.state, estimate::State::Converged, "{e:?}");
+        errors.push((p[0] - truth[0]).hypot(p[1] - truth[1]));
     }
     let mean = errors.iter().sum::<f64>() / errors.len() as f64;
     let max = errors.iter().copied().fold(0.0, f64::max);

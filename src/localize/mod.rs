@@ -1,10 +1,12 @@
 //! The localizer's inputs (issue 18, in progress): antenna poses from a pose file, interpolated
 //! to each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series,
 //! unwrapped with the λ/4 motion check ([`series`]), and reads filed into them or set aside by
-//! reason ([`ingest`]); and the first estimator, Phase ReLock in 2D ([`relock`]). It sees only
+//! reason ([`ingest`]); the first estimator, Phase ReLock in 2D ([`relock`]); and estimates
+//! with covariance and state ([`estimate`]). It sees only
 //! reads and poses, never simulator internals, so it works the same on a real reader's data.
 //! The other estimators, the `localize` command and the HTTP API are still to come.
 
+pub mod estimate;
 pub mod ingest;
 pub mod poses;
 pub mod relock;
