@@ -172,20 +172,7 @@ fn read_epc_bank(s: &Scenario, target: C1g2TargetTag) -> (TagReportData, Vec<Tag
         },
         ..Default::default()
     };
-    assert_eq!(
-        v.status(AddAccessspec {
-            access_spec: access,
-            ..Default::default()
-        }),
-        StatusCode::M_Success
-    );
-    assert_eq!(
-        v.status(EnableAccessspec {
-            access_spec_id: 9,
-            ..Default::default()
-        }),
-        StatusCode::M_Success
-    );
+    v.add_access_spec(access);
     start_inventory(&mut v, TagReportContentSelector::all());
     let (tags, _) = v.collect_reports(600_000_000, |t| {
         seen_all(t) && t.iter().any(|r| !r.op_spec_results.is_empty())

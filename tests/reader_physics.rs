@@ -404,20 +404,7 @@ fn read_by_access_spec(s: &Scenario, mb: u8, word_count: u16) -> TagReportData {
         },
         ..Default::default()
     };
-    assert_eq!(
-        v.status(AddAccessspec {
-            access_spec: access,
-            ..Default::default()
-        }),
-        StatusCode::M_Success
-    );
-    assert_eq!(
-        v.status(EnableAccessspec {
-            access_spec_id: 9,
-            ..Default::default()
-        }),
-        StatusCode::M_Success
-    );
+    v.add_access_spec(access);
     let spec = rospec(
         1,
         vec![1],

@@ -6,9 +6,6 @@ use serde::Serialize;
 use super::ingest::Ingest;
 use super::relock::{self, Obs};
 
-/// Speed of light (m/s).
-const SPEED_OF_LIGHT: f64 = 299_792_458.0;
-
 /// Position standard deviation (m) at or under which an estimate counts as converged.
 pub const CONVERGED_SIGMA_M: f64 = 0.01;
 
@@ -55,7 +52,7 @@ pub fn relock_all(
 ) -> Vec<Estimate> {
     let mut by_tag: std::collections::BTreeMap<&str, (Vec<Obs>, u64)> = Default::default();
     for (key, series) in ingest.series() {
-        let lambda = SPEED_OF_LIGHT / key.3 as f64;
+        let lambda = series.wavelength_m();
         let entry = by_tag.entry(key.2.as_str()).or_default();
         for seg in series.segments() {
             let segment = entry.0.last().map_or(0, |o| o.segment + 1);
@@ -112,7 +109,7 @@ mod tests {
 
     fn read(epc: &str, t_us: u64, x: f64, tag: [f64; 2]) -> Read {
         let f = 865_700_000u64;
-        let lambda = SPEED_OF_LIGHT / f as f64;
+        let lambda = crate::localize::SPEED_OF_LIGHT / f as f64;
         let d = ((tag[0] - x).powi(2) + tag[1].powi(2)).sqrt();
         Read {
             epc: epc.into(),

@@ -9,10 +9,8 @@ use std::collections::BTreeMap;
 
 use super::poses::Poses;
 use super::series::{Ambiguity, Series};
+use super::SPEED_OF_LIGHT;
 use crate::reads::Read;
-
-/// Speed of light (m/s), for a channel's wavelength.
-const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 
 /// The series key: reader, antenna port, EPC (upper-case hex), channel frequency (Hz).
 pub type Key = (String, u16, String, u64);

@@ -11,3 +11,6 @@ pub mod ingest;
 pub mod poses;
 pub mod relock;
 pub mod series;
+
+/// Speed of light (m/s), for a channel's wavelength.
+pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;

@@ -71,6 +71,11 @@ impl Series {
         }
     }
 
+    /// The channel's wavelength (m).
+    pub fn wavelength_m(&self) -> f64 {
+        self.wavelength_m
+    }
+
     /// Largest antenna displacement between two reads that unwrapping can follow (m): λ/4,
     /// or λ/8 with the π ambiguity.
     pub fn motion_limit_m(&self) -> f64 {

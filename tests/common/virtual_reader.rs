@@ -122,6 +122,21 @@ impl VirtualReader {
             .status_code
     }
 
+    /// ADD_ACCESSSPEC then ENABLE_ACCESSSPEC of `access`, each of which must succeed.
+    pub fn add_access_spec(&mut self, access: llrp::params::AccessSpec) {
+        let id = access.access_spec_id;
+        let add = llrp::message::AddAccessspec {
+            access_spec: access,
+            ..Default::default()
+        };
+        assert_eq!(self.status(add), StatusCode::M_Success);
+        let enable = llrp::message::EnableAccessspec {
+            access_spec_id: id,
+            ..Default::default()
+        };
+        assert_eq!(self.status(enable), StatusCode::M_Success);
+    }
+
     /// Lets `us` of simulated time pass (wall clock alike), running the reader at each of
     /// its deadlines on the way, as the socket layer does.
     pub fn run_for(&mut self, us: u64) {
