@@ -106,7 +106,13 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
     assert_eq!(ingest.set_aside().no_pose, 0, "{:?}", ingest.set_aside());
 
     // S1's antenna faces the racks (+y); tags and antenna at z = 0.5 m.
-    let estimates = estimate::relock_all(&ingest, 0.5, 1.0, [0.0, 1.0], 4.0);
+    let geometry = estimate::Geometry {
+        tag_height_m: 0.5,
+        phase_sign: 1.0,
+        facing: [0.0, 1.0],
+        reach_m: 4.0,
+    };
+    let estimates = estimate::estimate_all(&ingest, estimate::Estimator::Relock, &geometry);
     assert_eq!(estimates.len(), 10);
     let mut errors = Vec::new();
     for (epc, truth) in &positions {

@@ -41,24 +41,74 @@ pub struct Estimate {
     pub last_update_us: u64,
 }
 
-/// Phase ReLock in 2D for every tag of `ingest`, at tag height `z` with phase sign `sign`,
-/// searching the side `facing` points to within `reach_m` (see [`relock::locate`]).
-pub fn relock_all(
-    ingest: &Ingest,
-    z: f64,
-    sign: f64,
-    facing: [f64; 2],
-    reach_m: f64,
-) -> Vec<Estimate> {
-    let mut by_tag: std::collections::BTreeMap<&str, (Vec<Obs>, u64)> = Default::default();
-    for (key, series) in ingest.series() {
+/// The estimators the localizer offers, by the names the API and the command line use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimator {
+    /// Phase ReLock by Levenberg–Marquardt (\[A\] §III-A1), in 2D at the tag height assumed.
+    Relock,
+}
+
+impl Estimator {
+    /// Every estimator, in the order the docs list them.
+    pub const ALL: &'static [Estimator] = &[Estimator::Relock];
+
+    /// The estimator's name (`relock`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Estimator::Relock => "relock",
+        }
+    }
+}
+
+impl std::fmt::Display for Estimator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Estimator {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Estimator::ALL
+            .iter()
+            .copied()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Estimator::ALL.iter().map(|e| e.name()).collect();
+                format!("unknown estimator {s:?}; one of: {}", names.join(", "))
+            })
+    }
+}
+
+/// What an estimator is told beside the reads: the per-reader settings (from the scenario in
+/// simulation, from a settings file for a real reader).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geometry {
+    /// Height assumed for the tags by the 2D estimators (m).
+    pub tag_height_m: f64,
+    /// Phase sign s of φ = s·4πd/λ + φ0: +1, or −1 for a reader that reports it negated.
+    pub phase_sign: f64,
+    /// The side the antennas face (a horizontal direction; only its sign against the path
+    /// matters): a straight path cannot tell a tag from its mirror image.
+    pub facing: [f64; 2],
+    /// Farthest a tag is searched for from the path (m).
+    pub reach_m: f64,
+}
+
+/// One tag's observations for the phase estimators: every unwrapped phase of its series,
+/// one segment number per (series, segment), and the time of the newest.
+pub fn observations(ingest: &Ingest, epc: &str) -> (Vec<Obs>, u64) {
+    let mut obs: Vec<Obs> = Vec::new();
+    let mut last = 0;
+    for (_, series) in ingest.tag_series(epc) {
         let lambda = series.wavelength_m();
-        let entry = by_tag.entry(key.2.as_str()).or_default();
         for seg in series.segments() {
-            let segment = entry.0.last().map_or(0, |o| o.segment + 1);
+            let segment = obs.last().map_or(0, |o| o.segment + 1);
             for s in seg {
-                entry.1 = entry.1.max(s.t_us);
-                entry.0.push(Obs {
+                last = last.max(s.t_us);
+                obs.push(Obs {
                     phase_rad: s.phase_rad,
                     antenna: s.antenna,
                     wavelength_m: lambda,
@@ -67,36 +117,60 @@ pub fn relock_all(
             }
         }
     }
-    by_tag
-        .into_iter()
-        .map(|(epc, (obs, last))| {
-            let base = Estimate {
-                epc: epc.to_string(),
-                estimator: "relock",
-                estimate: None,
-                covariance: None,
-                samples: obs.len(),
-                state: State::InsufficientGeometry,
-                last_update_us: last,
-            };
-            match relock::locate(&obs, z, sign, facing, reach_m) {
-                Ok(fix) => {
-                    let [a, b, c, d] = fix.covariance;
-                    let worse = a.max(d).max(0.0).sqrt();
-                    Estimate {
-                        estimate: Some(fix.position),
-                        covariance: Some([a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0]),
-                        state: if worse <= CONVERGED_SIGMA_M {
-                            State::Converged
-                        } else {
-                            State::Converging
-                        },
-                        ..base
-                    }
-                }
-                Err(relock::NoFix::InsufficientGeometry) => base,
+    (obs, last)
+}
+
+/// Tag `epc`'s estimate by `estimator` from the reads of `ingest`.
+pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geometry) -> Estimate {
+    let (obs, last) = observations(ingest, epc);
+    let base = Estimate {
+        epc: epc.to_string(),
+        estimator: estimator.name(),
+        estimate: None,
+        covariance: None,
+        samples: obs.len(),
+        state: State::InsufficientGeometry,
+        last_update_us: last,
+    };
+    let fix = match estimator {
+        Estimator::Relock => {
+            relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m)
+        }
+    };
+    match fix {
+        Ok(fix) => {
+            let [a, b, c, d] = fix.covariance;
+            Estimate {
+                estimate: Some(fix.position),
+                covariance: Some([a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0]),
+                state: state_of(&[a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0]),
+                ..base
             }
-        })
+        }
+        Err(relock::NoFix::InsufficientGeometry) => base,
+    }
+}
+
+/// `converged` when the σ along the worst axis (bounded by the largest diagonal term of the
+/// covariance) is at most [`CONVERGED_SIGMA_M`], else `converging`.
+pub fn state_of(covariance: &[f64; 9]) -> State {
+    let worse = covariance[0]
+        .max(covariance[4])
+        .max(covariance[8])
+        .max(0.0)
+        .sqrt();
+    if worse <= CONVERGED_SIGMA_M {
+        State::Converged
+    } else {
+        State::Converging
+    }
+}
+
+/// Every tag's estimate by `estimator`, in EPC order.
+pub fn estimate_all(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Vec<Estimate> {
+    ingest
+        .tags()
+        .map(|epc| estimate_tag(ingest, epc, estimator, g))
         .collect()
 }
 
@@ -143,7 +217,13 @@ mod tests {
         }
         ingest.push(&read("BB", 0, 0.0, [1.0, 2.0]));
         ingest.push(&read("BB", 10_000, 0.01, [1.0, 2.0]));
-        let all = relock_all(&ingest, 0.5, 1.0, [0.0, 1.0], 3.0);
+        let g = Geometry {
+            tag_height_m: 0.5,
+            phase_sign: 1.0,
+            facing: [0.0, 1.0],
+            reach_m: 3.0,
+        };
+        let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);
         let a = &all[0];
         assert_eq!(

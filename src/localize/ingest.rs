@@ -12,8 +12,9 @@ use super::series::{Ambiguity, Series};
 use super::SPEED_OF_LIGHT;
 use crate::reads::Read;
 
-/// The series key: reader, antenna port, EPC (upper-case hex), channel frequency (Hz).
-pub type Key = (String, u16, String, u64);
+/// The series key: EPC (hex as the reads give it), reader, antenna port, channel frequency
+/// (Hz). The EPC comes first so that one tag's series are next to each other.
+pub type Key = (String, String, u16, u64);
 
 /// Reads set aside, by reason.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -75,7 +76,7 @@ impl Ingest {
         };
         let (ambiguity, max_gap) = (self.ambiguity, self.max_gap_us);
         self.series
-            .entry((reader, read.antenna, read.epc.clone(), f_hz))
+            .entry((read.epc.clone(), reader, read.antenna, f_hz))
             .or_insert_with(|| Series::new(SPEED_OF_LIGHT / f_hz as f64, ambiguity, max_gap))
             .push(read.t_us, phase, position);
         self.taken += 1;
@@ -84,6 +85,25 @@ impl Ingest {
     /// The series, by key.
     pub fn series(&self) -> &BTreeMap<Key, Series> {
         &self.series
+    }
+
+    /// The series of tag `epc`, by key.
+    pub fn tag_series<'a>(&'a self, epc: &'a str) -> impl Iterator<Item = (&'a Key, &'a Series)> {
+        self.series
+            .range((epc.to_string(), String::new(), 0, 0)..)
+            .take_while(move |(k, _)| k.0 == epc)
+    }
+
+    /// The tags with at least one series, in EPC order.
+    pub fn tags(&self) -> impl Iterator<Item = &str> {
+        let mut last: Option<&str> = None;
+        self.series.keys().filter_map(move |k| {
+            let epc = k.0.as_str();
+            (last != Some(epc)).then(|| {
+                last = Some(epc);
+                epc
+            })
+        })
     }
 
     /// Reads filed into a series.
@@ -163,7 +183,7 @@ mod tests {
         );
         // A1 on two channels: two series; B2 and C3 one each.
         assert_eq!(ingest.series().len(), 4);
-        let a1 = &ingest.series()[&("r".to_string(), 1, "A1".to_string(), 915_250_000)];
+        let a1 = &ingest.series()[&("A1".to_string(), "r".to_string(), 1, 915_250_000)];
         let seg = &a1.segments()[0];
         assert_eq!(seg.len(), 2);
         // The antenna position interpolated at each read: x = 0.005 and 0.015.
