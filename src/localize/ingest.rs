@@ -106,6 +106,31 @@ impl Ingest {
         })
     }
 
+    /// The pose tracks reads are joined with.
+    pub fn poses(&self) -> &Poses {
+        &self.poses
+    }
+
+    /// The pose tracks, to add samples as they arrive.
+    pub fn poses_mut(&mut self) -> &mut Poses {
+        &mut self.poses
+    }
+
+    /// Phases held for tag `epc`.
+    pub fn tag_samples(&self, epc: &str) -> usize {
+        self.tag_series(epc).map(|(_, s)| s.len()).sum()
+    }
+
+    /// Halves the phases held for tag `epc` ([`Series::thin`] on each of its series).
+    pub fn thin_tag(&mut self, epc: &str) {
+        let keys: Vec<Key> = self.tag_series(epc).map(|(k, _)| k.clone()).collect();
+        for k in keys {
+            if let Some(s) = self.series.get_mut(&k) {
+                s.thin();
+            }
+        }
+    }
+
     /// Reads filed into a series.
     pub fn taken(&self) -> u64 {
         self.taken

@@ -8,9 +8,11 @@
 
 pub mod estimate;
 pub mod ingest;
+pub mod live;
 pub mod poses;
 pub mod relock;
 pub mod series;
+pub mod shared;
 
 /// Speed of light (m/s), for a channel's wavelength.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;

@@ -68,6 +68,9 @@ pub struct Poses {
     reach_us: u64,
 }
 
+/// Most samples kept per antenna track; beyond it the older half is dropped.
+pub const MAX_TRACK: usize = 65_536;
+
 /// Default reach: a read between two samples at most this far apart gets a pose (µs).
 pub const DEFAULT_REACH_US: u64 = 500_000;
 
@@ -101,6 +104,16 @@ impl Poses {
             Ok(i) => track[i] = p,
             Err(i) => track.insert(i, p),
         }
+        if track.len() > MAX_TRACK {
+            track.drain(..MAX_TRACK / 2);
+        }
+    }
+
+    /// Reader time (µs) of the newest sample of `reader`'s `antenna`, if any.
+    pub fn newest(&self, reader: &str, antenna: u16) -> Option<u64> {
+        let last = self.tracks.get(&(reader.to_string(), antenna))?.last()?;
+        let offset = self.offsets.get(reader).copied().unwrap_or(0);
+        u64::try_from(i128::from(last.t_us) + i128::from(offset)).ok()
     }
 
     /// Number of samples held.

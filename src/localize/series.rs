@@ -126,6 +126,30 @@ impl Series {
         }
     }
 
+    /// Phases held, over all segments.
+    pub fn len(&self) -> usize {
+        self.segments.iter().map(Vec::len).sum()
+    }
+
+    /// Whether no phase is held.
+    pub fn is_empty(&self) -> bool {
+        self.segments.is_empty()
+    }
+
+    /// Keeps every other phase of each segment, and each segment's last (which the next read
+    /// is unwrapped against): the aperture stays, the density halves.
+    pub fn thin(&mut self) {
+        for seg in &mut self.segments {
+            let n = seg.len();
+            let mut i = 0;
+            seg.retain(|_| {
+                let keep = i % 2 == 0 || i + 1 == n;
+                i += 1;
+                keep
+            });
+        }
+    }
+
     /// The segments, oldest first.
     pub fn segments(&self) -> &[Vec<Sample>] {
         &self.segments

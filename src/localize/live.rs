@@ -1,0 +1,509 @@
+//! The live localizer: a worker thread that takes LLRP frames, reads and antenna poses through
+//! a bounded [`Tap`] (which never waits: what does not fit is dropped and counted), files the
+//! reads into phase series, re-estimates the tags whose series changed and publishes the
+//! estimates to [`Shared`].
+//!
+//! A read whose antenna has no pose at or after the read's time yet waits (a robot's pose
+//! may arrive after the reads it explains) until one comes, until its reader's reads are a
+//! pose reach past it, or until [`MAX_WAITING`] reads wait; then it is filed or set aside.
+//!
+//! Memory is bounded per tag: when a tag holds more than [`Settings::max_samples_per_tag`]
+//! phases, every series of it is thinned to every other sample (the newest kept), so the
+//! aperture stays and the density falls off with age.
+
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use bytes::Bytes;
+use llrp::units::HopTable;
+
+use super::estimate::{self, Estimate, Estimator, Geometry, State};
+use super::ingest::Ingest;
+use super::poses::{PoseSample, Poses};
+use super::series::Ambiguity;
+use super::shared::{AntennaView, Shared, TagView, RECENT_READS};
+use crate::reads::{Read, ReadDecoder};
+
+/// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
+pub const MAX_WAITING: usize = 100_000;
+
+/// Reader time over which read rates are counted (µs).
+const RATE_WINDOW_US: u64 = 2_000_000;
+
+/// How the live localizer works.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// The estimator run on every tag.
+    pub estimator: Estimator,
+    /// The per-reader settings the estimator is told.
+    pub geometry: Geometry,
+    /// Whether the readers report phase with Impinj's π ambiguity.
+    pub ambiguity: Ambiguity,
+    /// Longest gap between two reads of one series segment (µs).
+    pub max_gap_us: u64,
+    /// Longest gap between two pose samples a read may be interpolated in (µs).
+    pub pose_reach_us: u64,
+    /// A tag is re-estimated at most this often.
+    pub min_interval: Duration,
+    /// Longest the worker computes estimates before it takes in input again.
+    pub compute_budget: Duration,
+    /// Inputs the tap holds before it drops.
+    pub tap_capacity: usize,
+    /// Phases kept per tag (see the module's documentation).
+    pub max_samples_per_tag: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            estimator: Estimator::Relock,
+            geometry: Geometry {
+                tag_height_m: 0.5,
+                phase_sign: 1.0,
+                facing: [0.0, 1.0],
+                reach_m: 4.0,
+            },
+            ambiguity: Ambiguity::None,
+            max_gap_us: 1_000_000,
+            pose_reach_us: super::poses::DEFAULT_REACH_US,
+            min_interval: Duration::from_millis(50),
+            compute_budget: Duration::from_millis(50),
+            tap_capacity: 4096,
+            max_samples_per_tag: 4096,
+        }
+    }
+}
+
+/// What goes into the localizer.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// A reader is known by this name; its reads' channels are looked up in `hop_table`
+    /// until its own capabilities response is seen.
+    Reader {
+        /// The reader's name.
+        name: String,
+        /// The hop table the reader advertises, when known beforehand.
+        hop_table: Option<HopTable>,
+        /// Its antenna ports.
+        antennas: Vec<u16>,
+        /// Reader time − robot time for its poses (µs).
+        clock_offset_us: i64,
+    },
+    /// Whole LLRP frames reader `reader` sent to its client.
+    Frames {
+        /// The reader's name.
+        reader: String,
+        /// The frames, back to back.
+        bytes: Bytes,
+        /// Arrival time to stamp reads that carry no timestamp (UTC µs).
+        now_utc_us: u64,
+    },
+    /// Reads already decoded (a proxy's tap, a recording, a reads file).
+    Reads(Vec<Read>),
+    /// Antenna pose samples (a simulator, a pose file, `POST /api/poses`).
+    Poses(Vec<PoseSample>),
+}
+
+impl Input {
+    /// How many reads or poses the input counts for when dropped.
+    fn weight(&self) -> u64 {
+        match self {
+            Input::Reads(r) => r.len() as u64,
+            Input::Poses(p) => p.len() as u64,
+            _ => 1,
+        }
+    }
+}
+
+/// The sending side of the localizer: never waits.
+#[derive(Clone, Debug)]
+pub struct Tap {
+    tx: SyncSender<Input>,
+    shared: Arc<Shared>,
+}
+
+impl Tap {
+    /// Hands `input` to the localizer; `false` (and counted) when it is behind or gone.
+    pub fn offer(&self, input: Input) -> bool {
+        let weight = input.weight();
+        match self.tx.try_send(input) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.shared.metrics.dropped_taps.inc_by(weight);
+                false
+            }
+        }
+    }
+
+    /// The localizer's published state.
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+}
+
+/// A running live localizer.
+pub struct Live {
+    /// Where to send its input.
+    pub tap: Tap,
+    /// What it publishes.
+    pub shared: Arc<Shared>,
+    worker: Option<JoinHandle<()>>,
+}
+
+impl Live {
+    /// Starts the worker thread.
+    pub fn start(settings: Settings) -> std::io::Result<Live> {
+        let shared = Arc::new(Shared::new());
+        let (tx, rx) = mpsc::sync_channel(settings.tap_capacity.max(1));
+        let worker = Worker::new(settings, shared.clone());
+        let handle = std::thread::Builder::new()
+            .name("localizer".into())
+            .spawn(move || worker.run(rx))?;
+        Ok(Live {
+            tap: Tap {
+                tx,
+                shared: shared.clone(),
+            },
+            shared,
+            worker: Some(handle),
+        })
+    }
+
+    /// Stops taking input, lets the worker finish what it holds, and waits for it.
+    pub fn stop(mut self) {
+        let handle = self.worker.take();
+        drop(self);
+        if let Some(h) = handle {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Per-tag bookkeeping of the worker.
+#[derive(Default)]
+struct TagState {
+    /// A read came since the last estimate; with its arrival time.
+    dirty_since: Option<Instant>,
+    last_estimate: Option<Instant>,
+    rate_start_us: u64,
+    rate_count: u64,
+}
+
+struct Worker {
+    settings: Settings,
+    shared: Arc<Shared>,
+    ingest: Ingest,
+    decoders: HashMap<String, ReadDecoder>,
+    waiting: VecDeque<Read>,
+    /// Per reader, the newest read time seen.
+    newest_read: HashMap<String, u64>,
+    reader_rates: HashMap<String, (u64, u64)>,
+    tags: BTreeMap<String, TagState>,
+    set_aside_seen: u64,
+}
+
+impl Worker {
+    fn new(settings: Settings, shared: Arc<Shared>) -> Worker {
+        let poses = Poses::new().with_reach(settings.pose_reach_us);
+        Worker {
+            ingest: Ingest::new(poses, settings.ambiguity, settings.max_gap_us),
+            settings,
+            shared,
+            decoders: HashMap::new(),
+            waiting: VecDeque::new(),
+            newest_read: HashMap::new(),
+            reader_rates: HashMap::new(),
+            tags: BTreeMap::new(),
+            set_aside_seen: 0,
+        }
+    }
+
+    fn run(mut self, rx: Receiver<Input>) {
+        loop {
+            let wait = if self.any_dirty() {
+                Duration::from_millis(5)
+            } else {
+                Duration::from_millis(200)
+            };
+            match rx.recv_timeout(wait) {
+                Ok(input) => {
+                    self.take(input);
+                    // Everything that is there already, then estimates.
+                    let started = Instant::now();
+                    while let Ok(input) = rx.try_recv() {
+                        self.take(input);
+                        if started.elapsed() >= self.settings.compute_budget {
+                            break;
+                        }
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    self.flush_waiting(true);
+                    self.estimate(Duration::MAX, true);
+                    return;
+                }
+            }
+            self.flush_waiting(false);
+            self.estimate(self.settings.compute_budget, false);
+        }
+    }
+
+    fn any_dirty(&self) -> bool {
+        self.tags.values().any(|t| t.dirty_since.is_some())
+    }
+
+    fn take(&mut self, input: Input) {
+        match input {
+            Input::Reader {
+                name,
+                hop_table,
+                antennas,
+                clock_offset_us,
+            } => {
+                let decoder = self
+                    .decoders
+                    .remove(&name)
+                    .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
+                    .with_fallback_table(hop_table);
+                self.decoders.insert(name.clone(), decoder);
+                self.ingest.poses_mut().set_offset(&name, clock_offset_us);
+                self.shared.update_reader(&name, |v| {
+                    for a in antennas {
+                        if !v.antennas.iter().any(|x| x.antenna == a) {
+                            v.antennas.push(AntennaView {
+                                antenna: a,
+                                pose: None,
+                            });
+                        }
+                    }
+                    v.antennas.sort_by_key(|a| a.antenna);
+                });
+            }
+            Input::Frames {
+                reader,
+                bytes,
+                now_utc_us,
+            } => {
+                let decoder = self
+                    .decoders
+                    .entry(reader.clone())
+                    .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
+                let mut reads = Vec::new();
+                let mut at = 0;
+                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
+                    let len = h.length as usize;
+                    if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
+                        self.shared.metrics.decode_errors.inc();
+                        break;
+                    }
+                    self.shared.metrics.frames_out.inc();
+                    if decoder
+                        .frame(&bytes[at..at + len], now_utc_us, &mut reads)
+                        .is_err()
+                    {
+                        self.shared.metrics.decode_errors.inc();
+                    }
+                    at += len;
+                }
+                self.reads(reads);
+            }
+            Input::Reads(reads) => self.reads(reads),
+            Input::Poses(poses) => {
+                self.shared.metrics.poses.inc_by(poses.len() as u64);
+                let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
+                for p in poses {
+                    newest.insert((p.reader.clone(), p.antenna), p.clone());
+                    self.ingest.poses_mut().add(p);
+                }
+                for ((reader, antenna), p) in newest {
+                    self.shared.update_reader(&reader, |v| {
+                        match v.antennas.iter_mut().find(|a| a.antenna == antenna) {
+                            Some(a) => a.pose = Some(p),
+                            None => {
+                                v.antennas.push(AntennaView {
+                                    antenna,
+                                    pose: Some(p),
+                                });
+                                v.antennas.sort_by_key(|a| a.antenna);
+                            }
+                        }
+                    });
+                }
+            }
+        }
+    }
+
+    fn reads(&mut self, reads: Vec<Read>) {
+        self.shared.metrics.reads.inc_by(reads.len() as u64);
+        for r in reads {
+            let reader = r.reader.clone().unwrap_or_default();
+            let newest = self.newest_read.entry(reader).or_default();
+            *newest = (*newest).max(r.t_us);
+            self.waiting.push_back(r);
+        }
+        while self.waiting.len() > MAX_WAITING {
+            if let Some(r) = self.waiting.pop_front() {
+                self.file(r);
+            }
+        }
+    }
+
+    /// Files the waiting reads that have a pose now, or will never get one.
+    fn flush_waiting(&mut self, all: bool) {
+        let reach = self.settings.pose_reach_us;
+        let mut keep = VecDeque::new();
+        while let Some(r) = self.waiting.pop_front() {
+            let reader = r.reader.clone().unwrap_or_default();
+            let ready = all
+                || r.antenna_pose.is_some()
+                || r.phase_rad.is_none()
+                || self
+                    .ingest
+                    .poses()
+                    .newest(&reader, r.antenna)
+                    .is_some_and(|t| t >= r.t_us)
+                || self
+                    .newest_read
+                    .get(&reader)
+                    .is_some_and(|&t| t > r.t_us.saturating_add(reach));
+            if ready {
+                self.file(r);
+            } else {
+                keep.push_back(r);
+            }
+        }
+        self.waiting = keep;
+    }
+
+    fn file(&mut self, r: Read) {
+        let now = Instant::now();
+        let before = self.ingest.taken();
+        self.ingest.push(&r);
+        let aside = self.ingest.set_aside();
+        let aside = aside.no_phase + aside.no_frequency + aside.no_pose;
+        if aside > self.set_aside_seen {
+            self.shared
+                .metrics
+                .set_aside
+                .inc_by(aside - self.set_aside_seen);
+            self.set_aside_seen = aside;
+        }
+        let reader = r.reader.clone().unwrap_or_default();
+        let rate = self
+            .reader_rates
+            .entry(reader.clone())
+            .or_insert((r.t_us, 0));
+        rate.1 += 1;
+        let reader_rate = rolled(rate, r.t_us);
+        self.shared.update_reader(&reader, |v| {
+            v.reads += 1;
+            if let Some(x) = reader_rate {
+                v.reads_per_s = x;
+            }
+        });
+        let state = self.tags.entry(r.epc.clone()).or_insert_with(|| TagState {
+            rate_start_us: r.t_us,
+            ..TagState::default()
+        });
+        if self.ingest.taken() > before && state.dirty_since.is_none() {
+            state.dirty_since = Some(now);
+        }
+        let mut window = (state.rate_start_us, state.rate_count + 1);
+        let tag_rate = rolled(&mut window, r.t_us);
+        (state.rate_start_us, state.rate_count) = window;
+        let estimator = self.settings.estimator.name();
+        let epc = r.epc.clone();
+        self.shared.update_tag(
+            &epc,
+            || TagView {
+                estimate: Estimate {
+                    epc: epc.clone(),
+                    estimator,
+                    estimate: None,
+                    covariance: None,
+                    samples: 0,
+                    state: State::InsufficientGeometry,
+                    last_update_us: 0,
+                },
+                last_seen_us: 0,
+                reads: 0,
+                reads_per_s: 0.0,
+                recent: VecDeque::new(),
+            },
+            |v| {
+                v.reads += 1;
+                v.last_seen_us = v.last_seen_us.max(r.t_us);
+                if let Some(x) = tag_rate {
+                    v.reads_per_s = x;
+                }
+                if v.recent.len() == RECENT_READS {
+                    v.recent.pop_front();
+                }
+                v.recent.push_back(r);
+            },
+        );
+    }
+
+    /// Re-estimates dirty tags (longest waiting first) for at most `budget`.
+    fn estimate(&mut self, budget: Duration, all: bool) {
+        let started = Instant::now();
+        let now = Instant::now();
+        let mut due: Vec<(Instant, String)> = self
+            .tags
+            .iter()
+            .filter_map(|(epc, t)| {
+                let since = t.dirty_since?;
+                let rested = t.last_estimate.map_or(true, |l| {
+                    now.duration_since(l) >= self.settings.min_interval
+                });
+                (all || rested).then(|| (since, epc.clone()))
+            })
+            .collect();
+        due.sort();
+        for (since, epc) in due {
+            if started.elapsed() >= budget {
+                break;
+            }
+            if self.ingest.tag_samples(&epc) > self.settings.max_samples_per_tag {
+                self.ingest.thin_tag(&epc);
+            }
+            let t0 = Instant::now();
+            let e = estimate::estimate_tag(
+                &self.ingest,
+                &epc,
+                self.settings.estimator,
+                &self.settings.geometry,
+            );
+            let done = Instant::now();
+            self.shared
+                .metrics
+                .estimator_seconds
+                .observe(done.duration_since(t0).as_secs_f64());
+            self.shared
+                .metrics
+                .update_latency_seconds
+                .observe(done.duration_since(since).as_secs_f64());
+            if let Some(t) = self.tags.get_mut(&epc) {
+                t.dirty_since = None;
+                t.last_estimate = Some(done);
+            }
+            self.shared.publish(e);
+        }
+    }
+}
+
+/// Counts one read at `t_us` into a rate window `(start, count)`; the rate (per second)
+/// once the window spans [`RATE_WINDOW_US`], which then starts again.
+fn rolled(window: &mut (u64, u64), t_us: u64) -> Option<f64> {
+    let span = t_us.saturating_sub(window.0);
+    if span < RATE_WINDOW_US {
+        return None;
+    }
+    let rate = window.1 as f64 / (span as f64 / 1e6);
+    *window = (t_us, 0);
+    Some(rate)
+}

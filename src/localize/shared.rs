@@ -1,0 +1,376 @@
+//! What the live localizer publishes for the HTTP API and anyone else who asks: every tag's
+//! latest estimate with its read statistics, every reader's status and antenna poses, the
+//! simulation's ground truth when there is one, a stream of estimate updates, and counters.
+//!
+//! The localizer's worker writes it; readers take short read locks and copy what they need.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::histogram::Histogram;
+use prometheus_client::registry::Registry;
+use serde::Serialize;
+use tokio::sync::broadcast;
+
+use super::estimate::{Estimate, State};
+use super::poses::PoseSample;
+use crate::reads::Read;
+
+/// Recent reads kept per tag for its detail view.
+pub const RECENT_READS: usize = 32;
+
+/// Estimate updates buffered for a slow event-stream subscriber before it misses some.
+pub const EVENT_BUFFER: usize = 1024;
+
+/// One tag as the API shows it.
+#[derive(Clone, Debug, Serialize)]
+pub struct TagView {
+    /// The latest estimate.
+    #[serde(flatten)]
+    pub estimate: Estimate,
+    /// Time of the tag's newest read (µs, the reads' clock).
+    pub last_seen_us: u64,
+    /// Reads of the tag taken in.
+    pub reads: u64,
+    /// Reads per second of reader time over the last rate window.
+    pub reads_per_s: f64,
+    /// The newest reads, oldest first (at most [`RECENT_READS`]).
+    #[serde(skip)]
+    pub recent: VecDeque<Read>,
+}
+
+/// One antenna of a reader and its newest pose.
+#[derive(Clone, Debug, Serialize)]
+pub struct AntennaView {
+    /// Antenna port.
+    pub antenna: u16,
+    /// The newest pose sample, if any came.
+    pub pose: Option<PoseSample>,
+}
+
+/// One reader as the API shows it.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ReaderView {
+    /// The reader's name.
+    pub name: String,
+    /// Whether an LLRP client is connected (for a simulated reader; a proxied reader's
+    /// upstream connection).
+    pub connected: bool,
+    /// The connected peer, if any.
+    pub peer: Option<String>,
+    /// Whether an inventory runs, and who runs it: `client`, `self` (the simulator's own
+    /// inventory while no client is connected) or `idle`.
+    pub inventory: String,
+    /// Reads taken in from this reader.
+    pub reads: u64,
+    /// Reads per second of reader time over the last rate window.
+    pub reads_per_s: f64,
+    /// Antennas, by port.
+    pub antennas: Vec<AntennaView>,
+}
+
+/// Ground truth of a simulation, for `GET /api/truth`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Truth {
+    /// Every tag's true position.
+    pub tags: Vec<TruthTag>,
+    /// Every antenna's true pose now.
+    pub antennas: Vec<PoseSample>,
+}
+
+/// One tag's true position.
+#[derive(Clone, Debug, Serialize)]
+pub struct TruthTag {
+    /// EPC, upper-case hex.
+    pub epc: String,
+    /// Position (m).
+    pub position: [f64; 3],
+    /// A reference tag (its position is known to the localizer).
+    pub reference: bool,
+}
+
+/// The localizer's counters, exported as Prometheus text by `GET /metrics`.
+#[derive(Debug)]
+pub struct Metrics {
+    /// LLRP frames clients sent to the readers.
+    pub frames_in: Counter,
+    /// LLRP frames the readers sent to their clients.
+    pub frames_out: Counter,
+    /// Tag reads taken in.
+    pub reads: Counter,
+    /// Frames from a reader that did not decode.
+    pub decode_errors: Counter,
+    /// Inputs (reads or poses, counted one by one) the tap dropped because the localizer
+    /// was behind.
+    pub dropped_taps: Counter,
+    /// Reads set aside: no phase, no channel frequency, or no pose within reach.
+    pub set_aside: Counter,
+    /// Pose samples taken in.
+    pub poses: Counter,
+    /// Compute time of one tag's estimate (s).
+    pub estimator_seconds: Histogram,
+    /// From a read's arrival at the localizer to its tag's updated estimate (s).
+    pub update_latency_seconds: Histogram,
+    registry: Registry,
+}
+
+impl Metrics {
+    fn new() -> Metrics {
+        let buckets = || {
+            Histogram::new(
+                [
+                    0.0001, 0.0002, 0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5,
+                    1.0, 2.0, 5.0,
+                ]
+                .into_iter(),
+            )
+        };
+        let m = Metrics {
+            frames_in: Counter::default(),
+            frames_out: Counter::default(),
+            reads: Counter::default(),
+            decode_errors: Counter::default(),
+            dropped_taps: Counter::default(),
+            set_aside: Counter::default(),
+            poses: Counter::default(),
+            estimator_seconds: buckets(),
+            update_latency_seconds: buckets(),
+            registry: Registry::with_prefix("llrp_gateway"),
+        };
+        let mut registry = Registry::with_prefix("llrp_gateway");
+        // (The metrics are handles: the clones registered count with the fields.)
+        registry.register(
+            "frames_in",
+            "LLRP frames clients sent to the readers",
+            m.frames_in.clone(),
+        );
+        registry.register(
+            "frames_out",
+            "LLRP frames the readers sent to their clients",
+            m.frames_out.clone(),
+        );
+        registry.register("reads", "Tag reads taken in", m.reads.clone());
+        registry.register(
+            "decode_errors",
+            "Frames from a reader that did not decode",
+            m.decode_errors.clone(),
+        );
+        registry.register(
+            "dropped_taps",
+            "Reads and poses the localizer's tap dropped because the localizer was behind",
+            m.dropped_taps.clone(),
+        );
+        registry.register(
+            "reads_set_aside",
+            "Reads without a phase, a channel frequency or a pose within reach",
+            m.set_aside.clone(),
+        );
+        registry.register("poses", "Pose samples taken in", m.poses.clone());
+        registry.register(
+            "estimator_seconds",
+            "Compute time of one tag's estimate",
+            m.estimator_seconds.clone(),
+        );
+        registry.register(
+            "update_latency_seconds",
+            "From a read's arrival at the localizer to its tag's updated estimate",
+            m.update_latency_seconds.clone(),
+        );
+        Metrics { registry, ..m }
+    }
+
+    /// The counters in the Prometheus text exposition format.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        // Writing into a String cannot fail.
+        let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
+        out
+    }
+}
+
+/// The localizer's published state (see the module's documentation).
+#[derive(Debug)]
+pub struct Shared {
+    tags: RwLock<BTreeMap<String, TagView>>,
+    readers: RwLock<BTreeMap<String, ReaderView>>,
+    truth: RwLock<Option<Truth>>,
+    events: broadcast::Sender<Arc<TagView>>,
+    /// Counters for `/metrics`.
+    pub metrics: Metrics,
+    generation: AtomicU64,
+}
+
+impl Default for Shared {
+    fn default() -> Self {
+        Shared::new()
+    }
+}
+
+fn read<T>(lock: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    // A writer that panicked leaves the views as they were: still worth showing.
+    lock.read().unwrap_or_else(|e| e.into_inner())
+}
+
+fn write<T>(lock: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
+    lock.write().unwrap_or_else(|e| e.into_inner())
+}
+
+impl Shared {
+    /// Nothing known yet.
+    pub fn new() -> Shared {
+        Shared {
+            tags: RwLock::default(),
+            readers: RwLock::default(),
+            truth: RwLock::default(),
+            events: broadcast::channel(EVENT_BUFFER).0,
+            metrics: Metrics::new(),
+            generation: AtomicU64::new(0),
+        }
+    }
+
+    /// Every tag, in EPC order.
+    pub fn tags(&self) -> Vec<TagView> {
+        read(&self.tags).values().cloned().collect()
+    }
+
+    /// The tag of EPC `epc` (hex, any case), if it was read.
+    pub fn tag(&self, epc: &str) -> Option<TagView> {
+        read(&self.tags).get(&epc.to_ascii_uppercase()).cloned()
+    }
+
+    /// Every reader, by name.
+    pub fn readers(&self) -> Vec<ReaderView> {
+        read(&self.readers).values().cloned().collect()
+    }
+
+    /// The simulation's ground truth; `None` for a real reader.
+    pub fn truth(&self) -> Option<Truth> {
+        read(&self.truth).clone()
+    }
+
+    /// Estimate updates from now on (a subscriber too slow for [`EVENT_BUFFER`] of them
+    /// is told how many it missed).
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<TagView>> {
+        self.events.subscribe()
+    }
+
+    /// How many times the tags changed (for pollers).
+    pub fn generation(&self) -> u64 {
+        self.generation.load(Ordering::Relaxed)
+    }
+
+    /// Sets the ground truth (simulation only).
+    pub fn set_truth(&self, truth: Truth) {
+        *write(&self.truth) = Some(truth);
+    }
+
+    /// Changes reader `name`'s view (created empty if new).
+    pub fn update_reader(&self, name: &str, f: impl FnOnce(&mut ReaderView)) {
+        let mut readers = write(&self.readers);
+        let view = readers
+            .entry(name.to_string())
+            .or_insert_with(|| ReaderView {
+                name: name.to_string(),
+                inventory: "idle".into(),
+                ..ReaderView::default()
+            });
+        f(view);
+    }
+
+    /// Changes tag `epc`'s view with `f` (creating it from `new` if it is not there yet).
+    pub(crate) fn update_tag(
+        &self,
+        epc: &str,
+        new: impl FnOnce() -> TagView,
+        f: impl FnOnce(&mut TagView),
+    ) {
+        let mut tags = write(&self.tags);
+        let view = tags.entry(epc.to_string()).or_insert_with(new);
+        f(view);
+    }
+
+    /// Publishes tag `epc`'s new estimate to the views and the event stream.
+    pub(crate) fn publish(&self, estimate: Estimate) {
+        let epc = estimate.epc.clone();
+        let snapshot = {
+            let mut tags = write(&self.tags);
+            let Some(view) = tags.get_mut(&epc) else {
+                return;
+            };
+            view.estimate = estimate;
+            Arc::new(view.clone())
+        };
+        self.generation.fetch_add(1, Ordering::Relaxed);
+        // No subscriber is not an error.
+        let _ = self.events.send(snapshot);
+    }
+}
+
+/// A position as the API writes it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Point {
+    /// x (m).
+    pub x: f64,
+    /// y (m).
+    pub y: f64,
+    /// z (m).
+    pub z: f64,
+}
+
+impl From<[f64; 3]> for Point {
+    fn from([x, y, z]: [f64; 3]) -> Point {
+        Point { x, y, z }
+    }
+}
+
+/// One tag in `GET /api/tags` and in `localize --output`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TagJson {
+    /// EPC, upper-case hex.
+    pub epc: String,
+    /// The estimated position; `null` with insufficient geometry.
+    pub estimate: Option<Point>,
+    /// Covariance of the estimate, 3×3 row-major (m²); `null` without an estimate.
+    pub covariance: Option<[f64; 9]>,
+    /// Estimator name.
+    pub estimator: &'static str,
+    /// `converging`, `converged` or `insufficient_geometry`.
+    pub state: State,
+    /// Phases the estimate rests on.
+    pub samples: usize,
+    /// Time of the newest read (µs, the reads' clock: UTC for LLRP readers).
+    pub last_seen: u64,
+    /// Reads per second over the last rate window (reader time).
+    pub reads_per_s: f64,
+}
+
+impl TagJson {
+    /// The API's form of an estimate and its read statistics.
+    pub fn new(e: &Estimate, last_seen: u64, reads_per_s: f64) -> TagJson {
+        TagJson {
+            epc: e.epc.clone(),
+            estimate: e.estimate.map(Point::from),
+            covariance: e.covariance,
+            estimator: e.estimator,
+            state: e.state,
+            samples: e.samples,
+            last_seen,
+            reads_per_s,
+        }
+    }
+}
+
+impl From<&TagView> for TagJson {
+    fn from(v: &TagView) -> TagJson {
+        TagJson::new(&v.estimate, v.last_seen_us, v.reads_per_s)
+    }
+}
+
+/// The document of `GET /api/tags` and `localize --output`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TagsJson {
+    /// Every tag, in EPC order.
+    pub tags: Vec<TagJson>,
+}
