@@ -105,6 +105,7 @@ fn main() -> ExitCode {
                 tls: tls_cert
                     .zip(tls_key)
                     .map(|(cert, key)| llrp_gateway::net::tls::ServerFiles { cert, key }),
+                localize: None,
             },
         ),
         Command::Proxy(args) => llrp_gateway::gateway::run(args),

@@ -12,6 +12,7 @@
 //! aperture stays and the density falls off with age.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -151,6 +152,7 @@ pub struct Live {
     /// What it publishes.
     pub shared: Arc<Shared>,
     worker: Option<JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
 }
 
 impl Live {
@@ -159,9 +161,11 @@ impl Live {
         let shared = Arc::new(Shared::new());
         let (tx, rx) = mpsc::sync_channel(settings.tap_capacity.max(1));
         let worker = Worker::new(settings, shared.clone());
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopping = stop.clone();
         let handle = std::thread::Builder::new()
             .name("localizer".into())
-            .spawn(move || worker.run(rx))?;
+            .spawn(move || worker.run(rx, &stopping))?;
         Ok(Live {
             tap: Tap {
                 tx,
@@ -169,16 +173,24 @@ impl Live {
             },
             shared,
             worker: Some(handle),
+            stop,
         })
     }
 
-    /// Stops taking input, lets the worker finish what it holds, and waits for it.
+    /// Stops the worker once it has taken in what is already there, and waits for it (taps
+    /// still held elsewhere are refused from then on).
     pub fn stop(mut self) {
-        let handle = self.worker.take();
-        drop(self);
-        if let Some(h) = handle {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.worker.take() {
             let _ = h.join();
         }
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        // Not waited for: the worker ends within its next wait.
+        self.stop.store(true, Ordering::Relaxed);
     }
 }
 
@@ -221,8 +233,20 @@ impl Worker {
         }
     }
 
-    fn run(mut self, rx: Receiver<Input>) {
+    fn run(mut self, rx: Receiver<Input>, stop: &AtomicBool) {
         loop {
+            if stop.load(Ordering::Relaxed) {
+                // What is there already, and no more (a simulator may still be sending).
+                for _ in 0..self.settings.tap_capacity {
+                    match rx.try_recv() {
+                        Ok(input) => self.take(input),
+                        Err(_) => break,
+                    }
+                }
+                self.flush_waiting(true);
+                self.estimate(Duration::MAX, true);
+                return;
+            }
             let wait = if self.any_dirty() {
                 Duration::from_millis(5)
             } else {

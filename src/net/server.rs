@@ -23,6 +23,7 @@ use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
 use super::stream::Stream;
 use super::tls;
+use crate::localize::live::{Input, Tap};
 use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
@@ -59,6 +60,17 @@ pub struct SimReader {
     observer: Option<Observer>,
     /// Where the reader's CPU-bound work (inventory physics, reports) runs.
     pool: Arc<Pool>,
+    live: Option<LiveHook>,
+}
+
+/// How a served reader talks to the live localizer.
+pub struct LiveHook {
+    /// The reader's name in the localizer.
+    pub name: String,
+    /// The localizer's tap: every frame the reader sends its client is offered to it.
+    pub tap: Tap,
+    /// Told whether a client is connected (the simulator's own inventory runs while not).
+    pub client: watch::Sender<bool>,
 }
 
 impl SimReader {
@@ -70,7 +82,15 @@ impl SimReader {
             clock,
             observer,
             pool: Pool::readers(),
+            live: None,
         }
+    }
+
+    /// Offers every frame sent to the client to the live localizer, and tells it (and the
+    /// simulator's own inventory) whether a client is connected.
+    pub fn with_live(mut self, hook: LiveHook) -> Self {
+        self.live = Some(hook);
+        self
     }
 
     /// Whether running the reader now may compute physics (an ROSpec runs or is due).
@@ -228,7 +248,12 @@ pub async fn serve_tls(
     let mut flushed = Instant::now();
     let mut backoff = ACCEPT_BACKOFF_MIN;
     let mut accept_after: Option<tokio::time::Instant> = None;
+    let live = here.as_mut().and_then(|s| s.live.take());
+    let mut told: Option<(bool, bool)> = None;
     loop {
+        if let Some(l) = &live {
+            tell_live(l, &client, here.as_deref(), &mut told);
+        }
         if let Some(mut sim) = here.take() {
             // Requests that came during a turn, in order.
             while let (Some(inbound), Some(c)) = (arrived.pop_front(), client.as_ref()) {
@@ -241,8 +266,16 @@ pub async fn serve_tls(
                 .await?;
             }
             if let Some(c) = &mut client {
+                let now_utc_us = sim.session.reader().utc_us(sim.session.reader().now_us());
                 if let Some(t) = sim.session.transmit() {
                     record_sent(&recorder, c.rec, &t.bytes[..]).await;
+                    if let Some(l) = &live {
+                        l.tap.offer(Input::Frames {
+                            reader: l.name.clone(),
+                            bytes: bytes::Bytes::copy_from_slice(&t.bytes[..]),
+                            now_utc_us,
+                        });
+                    }
                     c.conn.queue_buf(t.bytes);
                     if t.close {
                         // What the session said last goes out, then the connection closes.
@@ -314,6 +347,9 @@ pub async fn serve_tls(
                 let Some(c) = client.as_ref() else { continue };
                 match r {
                     Ok(Io::Frame(inbound)) => {
+                        if let Some(l) = &live {
+                            l.tap.shared().metrics.frames_in.inc();
+                        }
                         if let (Some(r), llrp::Inbound::Frame(f)) = (&recorder, &inbound) {
                             let _ = r.frame(r.now(), c.rec, Direction::ToReader, f.clone()).await;
                         }
@@ -401,6 +437,35 @@ pub async fn serve_tls(
             }
         }
     }
+}
+
+/// Tells the localizer (and the own inventory) whether a client is connected and whether it
+/// inventories, when that changed (`told` holds what was told last).
+fn tell_live(
+    live: &LiveHook,
+    client: &Option<Client>,
+    sim: Option<&SimReader>,
+    told: &mut Option<(bool, bool)>,
+) {
+    let connected = client.is_some();
+    // While the reader is away on its turn it is inventorying.
+    let inventorying = connected && sim.map_or(true, |s| s.session.reader().inventorying());
+    if *told == Some((connected, inventorying)) {
+        return;
+    }
+    *told = Some((connected, inventorying));
+    live.client
+        .send_if_modified(|c| std::mem::replace(c, connected) != connected);
+    let peer = client.as_ref().map(|c| c.peer.clone());
+    live.tap.shared().update_reader(&live.name, |v| {
+        v.connected = connected;
+        v.peer = peer;
+        if connected {
+            v.inventory = if inventorying { "client" } else { "idle" }.into();
+        } else if v.inventory == "client" {
+            v.inventory = "idle".into();
+        }
+    });
 }
 
 /// The reader back from its turn; pending forever when it is not away.

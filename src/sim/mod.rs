@@ -11,14 +11,20 @@ use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
+use crate::localize::live::{Input, Tap};
 use crate::net::clock::{Clock, Speed};
-use crate::net::server::{serve_tls, Observer, SimReader};
+use crate::net::server::{serve_tls, LiveHook, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
 use crate::physics::{AntennaPose, Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::Scenario;
+
+pub mod feed;
+pub mod own;
+
+pub use feed::PoseSource;
 
 /// Longest a shutdown waits for the readers' tasks (each gives its client at most half a
 /// second to take the ConnectionCloseEvent).
@@ -44,6 +50,19 @@ pub struct SimOptions {
     /// Serve LLRP over TLS with this certificate and key on every reader's address (LLRP over
     /// TLS is on port 5085 by convention; `listen` chooses the port).
     pub tls: Option<ServerFiles>,
+    /// Feed the live localizer: every frame the readers send, their antennas' poses and
+    /// the ground truth; while no client is connected (and time runs by the wall clock)
+    /// each reader inventories by itself for it.
+    pub localize: Option<LocalizeFeed>,
+}
+
+/// What the simulator feeds the live localizer.
+#[derive(Clone, Debug)]
+pub struct LocalizeFeed {
+    /// The localizer's tap.
+    pub tap: Tap,
+    /// Which poses it is given.
+    pub poses: PoseSource,
 }
 
 impl Default for SimOptions {
@@ -55,6 +74,7 @@ impl Default for SimOptions {
             record: None,
             record_options: RecordOptions::default(),
             tls: None,
+            localize: None,
         }
     }
 }
@@ -108,6 +128,7 @@ pub struct RunningSim {
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
     recordings: Vec<RecorderTask>,
+    own: Vec<JoinHandle<()>>,
 }
 
 impl RunningSim {
@@ -123,6 +144,10 @@ impl RunningSim {
         };
         if tokio::time::timeout(SHUTDOWN_WAIT, all).await.is_err() {
             tracing::warn!("a reader did not stop within {SHUTDOWN_WAIT:?}");
+        }
+        for t in self.own {
+            // It stops at its next await; one still computing is left to finish alone.
+            let _ = tokio::time::timeout(SHUTDOWN_WAIT, t).await;
         }
         // Each recording ends once its reader's task (holding the recorder) has ended.
         for r in self.recordings {
@@ -253,6 +278,8 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     let mut names = Vec::new();
     let mut tasks = Vec::new();
     let mut recordings = Vec::new();
+    let mut own_tasks = Vec::new();
+    let references: Arc<Vec<bool>> = Arc::new(scenario.tags.iter().map(|t| t.reference).collect());
     for (i, spec) in scenario.readers.iter().enumerate() {
         let addr = opts
             .listen
@@ -273,11 +300,55 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         })?;
         let model = Arc::new(Model::in_world(&world, scenario, i));
         let profile = ReaderProfile::from_scenario(scenario, i, &model);
-        let reader = Reader::new(profile, model, utc0);
-        let observer = truth
+        let reader = Reader::new(profile.clone(), model.clone(), utc0);
+        let mut observer = truth
             .as_ref()
             .map(|t| truth_observer(t.clone(), spec.name.clone(), moving.clone(), utc0));
-        let sim = SimReader::new(Session::new(reader), clock.clone(), observer);
+        let mut hook = None;
+        if let Some(l) = &opts.localize {
+            l.tap.offer(Input::Reader {
+                name: spec.name.clone(),
+                hop_table: Some(llrp::units::HopTable {
+                    id: 1,
+                    frequencies_khz: profile.frequencies_khz.clone(),
+                }),
+                antennas: (1..=model.antenna_count()).collect(),
+                clock_offset_us: i64::try_from(utc0).unwrap_or(i64::MAX),
+            });
+            let feed = |now_us| {
+                own::feed_fn(feed::Feed::new(
+                    l.tap.clone(),
+                    spec.name.clone(),
+                    l.poses,
+                    references.clone(),
+                    now_us,
+                ))
+            };
+            observer = Some(both(observer, feed(0)));
+            let (client, client_rx) = watch::channel(false);
+            hook = Some(LiveHook {
+                name: spec.name.clone(),
+                tap: l.tap.clone(),
+                client,
+            });
+            if opts.speed != Speed::Max {
+                let (model, profile) = (model.clone(), profile.clone());
+                let task = own::OwnTask {
+                    make_reader: Box::new(move || {
+                        Reader::new(profile.clone(), model.clone(), utc0)
+                    }),
+                    clock: clock.clone(),
+                    tap: l.tap.clone(),
+                    name: spec.name.clone(),
+                    feed: feed(0),
+                };
+                own_tasks.push(tokio::spawn(own::run(task, client_rx, rx.clone())));
+            }
+        }
+        let mut sim = SimReader::new(Session::new(reader), clock.clone(), observer);
+        if let Some(h) = hook {
+            sim = sim.with_live(h);
+        }
         let recorder = match &opts.record {
             Some(path) => {
                 let path = record_path(path, &spec.name, scenario.readers.len());
@@ -312,7 +383,19 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         tasks,
         truth,
         recordings,
+        own: own_tasks,
     })
+}
+
+/// One observer calling `first` (if any), then `second`.
+fn both(first: Option<Observer>, mut second: Box<dyn FnMut(&Reader) + Send>) -> Observer {
+    match first {
+        Some(mut f) => Box::new(move |r: &Reader| {
+            f(r);
+            second(r);
+        }),
+        None => second,
+    }
 }
 
 /// The recording file of reader `name`: `path` itself when the scenario has one reader,

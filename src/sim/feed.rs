@@ -1,0 +1,132 @@
+//! What the simulator hands the live localizer beside the LLRP bytes: every antenna's pose
+//! (true, or what the robot itself would report) every [`POSE_INTERVAL_US`] of simulated
+//! time, as a robot's pose feed would, and the ground truth for `GET /api/truth`.
+
+use std::sync::Arc;
+
+use crate::localize::live::{Input, Settings, Tap};
+use crate::localize::poses::PoseSample;
+use crate::localize::series::Ambiguity;
+use crate::localize::shared::{Truth, TruthTag};
+use crate::physics::{AntennaPose, Model};
+use crate::scenario::Scenario;
+
+/// Simulated time between two pose samples of an antenna, µs.
+pub const POSE_INTERVAL_US: u64 = 100_000;
+
+/// Which poses the simulator gives the localizer (`sim --poses`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum PoseSource {
+    /// The true antenna poses.
+    Truth,
+    /// What the robot itself would report: odometry, or the localization-like error of the
+    /// scenario's `pose_estimate`.
+    #[default]
+    Estimated,
+}
+
+/// Reader `name`'s pose and truth feed.
+pub struct Feed {
+    tap: Tap,
+    name: String,
+    source: PoseSource,
+    references: Arc<Vec<bool>>,
+    /// Simulated time of the next sample.
+    next_us: u64,
+}
+
+impl Feed {
+    /// A feed of reader `name` into `tap`, starting with the sample at or before `now_us`.
+    pub fn new(
+        tap: Tap,
+        name: String,
+        source: PoseSource,
+        references: Arc<Vec<bool>>,
+        now_us: u64,
+    ) -> Feed {
+        Feed {
+            tap,
+            name,
+            source,
+            references,
+            next_us: now_us / POSE_INTERVAL_US * POSE_INTERVAL_US,
+        }
+    }
+
+    /// Sends the samples due up to simulated time `now_us`, and the truth at the newest.
+    pub fn feed(&mut self, m: &Model, now_us: u64) {
+        // After a long pause (the own inventory waits while a client is connected) the
+        // samples restart shortly before now instead of catching up the whole pause.
+        let resume = now_us.saturating_sub(10 * POSE_INTERVAL_US) / POSE_INTERVAL_US;
+        self.next_us = self.next_us.max(resume * POSE_INTERVAL_US);
+        let mut poses = Vec::new();
+        let mut last = None;
+        while self.next_us <= now_us {
+            let t = self.next_us;
+            for a in 1..=m.antenna_count() {
+                let pose = match self.source {
+                    PoseSource::Truth => m.antenna_pose(a, t),
+                    PoseSource::Estimated => m.estimated_pose(a, t),
+                };
+                poses.push(sample(&self.name, a, t, &pose));
+            }
+            last = Some(t);
+            self.next_us += POSE_INTERVAL_US;
+        }
+        if poses.is_empty() {
+            return;
+        }
+        self.tap.offer(Input::Poses(poses));
+        if let Some(t) = last {
+            let truth = Truth {
+                tags: (0..m.tag_count())
+                    .map(|k| TruthTag {
+                        epc: crate::reads::hex_upper(m.tag_epc(k).as_bytes()),
+                        position: m.tag_position(k, t),
+                        reference: self.references.get(k).copied().unwrap_or(false),
+                    })
+                    .collect(),
+                antennas: (1..=m.antenna_count())
+                    .map(|a| sample(&self.name, a, t, &m.antenna_pose(a, t)))
+                    .collect(),
+            };
+            self.tap.shared().set_truth(truth);
+        }
+    }
+}
+
+/// A pose as the pose file and the API write it.
+fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSample {
+    let [x, y, z] = pose.position;
+    PoseSample {
+        t_us,
+        reader: reader.to_string(),
+        antenna,
+        x,
+        y,
+        z,
+        yaw_deg: pose.yaw_rad.to_degrees(),
+        pitch_deg: pose.pitch_rad.to_degrees(),
+    }
+}
+
+/// The live localizer's settings for a scenario: its first reader's first antenna gives the
+/// phase sign, the π ambiguity, the side the antennas face (its yaw at time 0) and the tags'
+/// height (the antenna's own, as each antenna assumes in \[A\]).
+pub fn settings(scenario: &Scenario, model: &Model, base: Settings) -> Settings {
+    let mut s = base;
+    if let Some(a) = scenario.readers.first().and_then(|r| r.antennas.first()) {
+        s.geometry.phase_sign = a.phase_sign;
+        s.ambiguity = if a.phase_pi_ambiguity {
+            Ambiguity::Pi
+        } else {
+            Ambiguity::None
+        };
+    }
+    if model.antenna_count() >= 1 {
+        let p = model.antenna_pose(1, 0);
+        s.geometry.tag_height_m = p.position[2];
+        s.geometry.facing = [p.yaw_rad.cos(), p.yaw_rad.sin()];
+    }
+    s
+}
