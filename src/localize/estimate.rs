@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use super::ingest::Ingest;
+use super::linear;
 use super::relock::{self, Obs};
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
@@ -47,16 +48,19 @@ pub struct Estimate {
 pub enum Estimator {
     /// Phase ReLock by Levenberg–Marquardt (\[A\] §III-A1), in 2D at the tag height assumed.
     Relock,
+    /// The min-distance linear model (\[A\] §III-A2), in 2D at the tag height assumed.
+    Linear,
 }
 
 impl Estimator {
     /// Every estimator, in the order the docs list them.
-    pub const ALL: &'static [Estimator] = &[Estimator::Relock];
+    pub const ALL: &'static [Estimator] = &[Estimator::Relock, Estimator::Linear];
 
     /// The estimator's name (`relock`, ...).
     pub fn name(self) -> &'static str {
         match self {
             Estimator::Relock => "relock",
+            Estimator::Linear => "linear",
         }
     }
 }
@@ -132,21 +136,26 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
         state: State::InsufficientGeometry,
         last_update_us: last,
     };
+    // A 2D fix's covariance as 3×3 with the z row and column 0.
+    let planar = |fix: relock::Fix| {
+        let [a, b, c, d] = fix.covariance;
+        (fix.position, [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0])
+    };
     let fix = match estimator {
         Estimator::Relock => {
-            relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m)
+            relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m).map(planar)
+        }
+        Estimator::Linear => {
+            linear::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
         }
     };
     match fix {
-        Ok(fix) => {
-            let [a, b, c, d] = fix.covariance;
-            Estimate {
-                estimate: Some(fix.position),
-                covariance: Some([a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0]),
-                state: state_of(&[a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0]),
-                ..base
-            }
-        }
+        Ok((position, covariance)) => Estimate {
+            estimate: Some(position),
+            covariance: Some(covariance),
+            state: state_of(&covariance),
+            ..base
+        },
         Err(relock::NoFix::InsufficientGeometry) => base,
     }
 }

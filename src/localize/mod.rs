@@ -8,6 +8,7 @@
 
 pub mod estimate;
 pub mod ingest;
+pub mod linear;
 pub mod live;
 pub mod poses;
 pub mod relock;
