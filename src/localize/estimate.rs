@@ -4,8 +4,8 @@
 use serde::Serialize;
 
 use super::ingest::Ingest;
-use super::linear;
 use super::relock::{self, Obs};
+use super::{hyperbolic, linear};
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
 pub const CONVERGED_SIGMA_M: f64 = 0.01;
@@ -50,17 +50,21 @@ pub enum Estimator {
     Relock,
     /// The min-distance linear model (\[A\] §III-A2), in 2D at the tag height assumed.
     Linear,
+    /// Hyperbolic intersection (\[G\] §III-D, after \[T\]), in 2D at the tag height assumed.
+    Hyperbolic,
 }
 
 impl Estimator {
     /// Every estimator, in the order the docs list them.
-    pub const ALL: &'static [Estimator] = &[Estimator::Relock, Estimator::Linear];
+    pub const ALL: &'static [Estimator] =
+        &[Estimator::Relock, Estimator::Linear, Estimator::Hyperbolic];
 
     /// The estimator's name (`relock`, ...).
     pub fn name(self) -> &'static str {
         match self {
             Estimator::Relock => "relock",
             Estimator::Linear => "linear",
+            Estimator::Hyperbolic => "hyperbolic",
         }
     }
 }
@@ -147,6 +151,9 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
         }
         Estimator::Linear => {
             linear::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
+        }
+        Estimator::Hyperbolic => {
+            hyperbolic::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
         }
     };
     match fix {

@@ -7,6 +7,7 @@
 //! The other estimators, the `localize` command and the HTTP API are still to come.
 
 pub mod estimate;
+pub mod hyperbolic;
 pub mod ingest;
 pub mod linear;
 pub mod live;
