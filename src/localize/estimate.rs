@@ -5,7 +5,7 @@ use serde::Serialize;
 
 use super::ingest::Ingest;
 use super::relock::{self, Obs};
-use super::{hyperbolic, linear};
+use super::{hyperbolic, linear, loci3d};
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
 pub const CONVERGED_SIGMA_M: f64 = 0.01;
@@ -52,6 +52,9 @@ pub enum Estimator {
     Linear,
     /// Hyperbolic intersection (\[G\] §III-D, after \[T\]), in 2D at the tag height assumed.
     Hyperbolic,
+    /// 3D by intersecting one circle per antenna pass (\[A\] §III-A3), the circles from the
+    /// min-distance linear model.
+    Loci3d,
 }
 
 impl Estimator {
@@ -65,6 +68,7 @@ impl Estimator {
             Estimator::Relock => "relock",
             Estimator::Linear => "linear",
             Estimator::Hyperbolic => "hyperbolic",
+            Estimator::Loci3d => "loci3d",
         }
     }
 }
@@ -154,6 +158,9 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
         }
         Estimator::Hyperbolic => {
             hyperbolic::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
+        }
+        Estimator::Loci3d => {
+            loci3d::locate(&obs, g.phase_sign, g.facing).map(|f| (f.position, f.covariance))
         }
     };
     match fix {

@@ -11,6 +11,7 @@ pub mod hyperbolic;
 pub mod ingest;
 pub mod linear;
 pub mod live;
+pub mod loci3d;
 pub mod poses;
 pub mod relock;
 pub mod series;
