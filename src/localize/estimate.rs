@@ -5,7 +5,8 @@ use serde::Serialize;
 
 use super::ingest::Ingest;
 use super::relock::{self, Obs};
-use super::{hyperbolic, linear, loci3d};
+use super::{fingerprint, hyperbolic, linear, loci3d};
+use std::collections::BTreeMap;
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
 pub const CONVERGED_SIGMA_M: f64 = 0.01;
@@ -55,6 +56,8 @@ pub enum Estimator {
     /// 3D by intersecting one circle per antenna pass (\[A\] §III-A3), the circles from the
     /// min-distance linear model.
     Loci3d,
+    /// Fingerprinting against reference tags at known positions (\[A\] §III-B, LANDMARC), 3D.
+    Fingerprint,
 }
 
 impl Estimator {
@@ -69,6 +72,7 @@ impl Estimator {
             Estimator::Linear => "linear",
             Estimator::Hyperbolic => "hyperbolic",
             Estimator::Loci3d => "loci3d",
+            Estimator::Fingerprint => "fingerprint",
         }
     }
 }
@@ -107,6 +111,9 @@ pub struct Geometry {
     pub facing: [f64; 2],
     /// Farthest a tag is searched for from the path (m).
     pub reach_m: f64,
+    /// Reference tags at known positions, for fingerprinting: (EPC upper-case hex, position in
+    /// m). A reference tag is itself located from the others.
+    pub references: Vec<(String, [f64; 3])>,
 }
 
 /// One tag's observations for the phase estimators: every unwrapped phase of its series,
@@ -130,6 +137,48 @@ pub fn observations(ingest: &Ingest, epc: &str) -> (Vec<Obs>, u64) {
         }
     }
     (obs, last)
+}
+
+/// Tag `epc`'s readings for fingerprinting, each series a track numbered in `tracks`.
+fn readings(
+    ingest: &Ingest,
+    epc: &str,
+    tracks: &mut BTreeMap<(String, u16, u64), usize>,
+) -> Vec<fingerprint::Reading> {
+    let mut out = Vec::new();
+    for (key, series) in ingest.tag_series(epc) {
+        let next = tracks.len();
+        let track = *tracks.entry((key.1.clone(), key.2, key.3)).or_insert(next);
+        for (segment, seg) in series.segments().iter().enumerate() {
+            out.extend(seg.iter().map(|s| fingerprint::Reading {
+                track,
+                segment,
+                antenna: s.antenna,
+                value: s.phase_rad,
+            }));
+        }
+    }
+    out
+}
+
+/// Tag `epc`'s fingerprint fix against the references of `g` (other than itself).
+fn fingerprint_tag(
+    ingest: &Ingest,
+    epc: &str,
+    g: &Geometry,
+) -> Result<([f64; 3], [f64; 9]), relock::NoFix> {
+    let mut tracks = BTreeMap::new();
+    let target = readings(ingest, epc, &mut tracks);
+    let references: Vec<([f64; 3], Vec<fingerprint::Reading>)> = g
+        .references
+        .iter()
+        .filter(|(r, _)| !r.eq_ignore_ascii_case(epc))
+        .filter_map(|(r, p)| {
+            let seen = ingest.tags().find(|t| t.eq_ignore_ascii_case(r))?;
+            Some((*p, readings(ingest, seen, &mut tracks)))
+        })
+        .collect();
+    fingerprint::locate(&target, &references).map(|f| (f.position, f.covariance))
 }
 
 /// Tag `epc`'s estimate by `estimator` from the reads of `ingest`.
@@ -162,6 +211,7 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
         Estimator::Loci3d => {
             loci3d::locate(&obs, g.phase_sign, g.facing).map(|f| (f.position, f.covariance))
         }
+        Estimator::Fingerprint => fingerprint_tag(ingest, epc, g),
     };
     match fix {
         Ok((position, covariance)) => Estimate {
@@ -245,6 +295,7 @@ mod tests {
             phase_sign: 1.0,
             facing: [0.0, 1.0],
             reach_m: 3.0,
+            references: Vec::new(),
         };
         let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);

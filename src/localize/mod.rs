@@ -1,12 +1,15 @@
 //! The localizer's inputs (issue 18, in progress): antenna poses from a pose file, interpolated
 //! to each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series,
 //! unwrapped with the λ/4 motion check ([`series`]), and reads filed into them or set aside by
-//! reason ([`ingest`]); the first estimator, Phase ReLock in 2D ([`relock`]); and estimates
-//! with covariance and state ([`estimate`]). It sees only
+//! reason ([`ingest`]); the estimators: Phase ReLock in 2D ([`relock`]), the min-distance
+//! linear model ([`linear`]), hyperbolic intersection ([`hyperbolic`]), 3D by loci
+//! intersection ([`loci3d`]) and fingerprinting ([`fingerprint`]); and estimates with
+//! covariance and state ([`estimate`]). It sees only
 //! reads and poses, never simulator internals, so it works the same on a real reader's data.
-//! The other estimators, the `localize` command and the HTTP API are still to come.
+//! The `localize` command and the HTTP API are still to come.
 
 pub mod estimate;
+pub mod fingerprint;
 pub mod hyperbolic;
 pub mod ingest;
 pub mod linear;
