@@ -3,6 +3,7 @@
 
 pub mod decode;
 pub mod gateway;
+pub mod http;
 pub mod inventory;
 pub mod localize;
 pub mod net;

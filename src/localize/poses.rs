@@ -235,6 +235,13 @@ fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
 
 /// A sample whose numbers are all finite and whose antenna is a port.
 fn check(p: PoseSample) -> Result<PoseSample, String> {
+    validate(&p)?;
+    Ok(p)
+}
+
+/// Whether `p`'s numbers are all finite and its antenna is a port (the reason, naming the
+/// field, when not).
+pub fn validate(p: &PoseSample) -> Result<(), String> {
     for (key, v) in [
         ("x", p.x),
         ("y", p.y),
@@ -249,7 +256,7 @@ fn check(p: PoseSample) -> Result<PoseSample, String> {
     if p.antenna == 0 {
         return Err("antenna: must be a port number from 1".into());
     }
-    Ok(p)
+    Ok(())
 }
 
 #[cfg(test)]

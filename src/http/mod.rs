@@ -1,0 +1,253 @@
+//! The HTTP API of the live localizer (issue 18) and the live map page it serves: the tags'
+//! estimates, the readers, the simulation's truth, an event stream of estimate updates, pose
+//! input, Prometheus metrics and an OpenAPI document generated from the handlers
+//! (`docs/http.md` lists the routes and their shapes).
+//!
+//! Every route is declared once, in [`api`]; the router and the OpenAPI document both come
+//! from it. Errors are JSON `{"error": "..."}`, unknown routes included.
+
+use std::future::Future;
+use std::io;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::{header, HeaderValue, Method, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
+use tokio::sync::watch;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::localize::live::Tap;
+use crate::localize::shared::Shared;
+
+mod events;
+mod handlers;
+mod poses;
+pub mod schema;
+
+pub use poses::parse_poses;
+
+/// Default largest request body (`POST /api/poses`): 1 MiB.
+pub const DEFAULT_BODY_LIMIT: usize = 1 << 20;
+
+/// How the API is served.
+#[derive(Clone, Debug)]
+pub struct HttpOptions {
+    /// Bearer token; with one, write routes (POST) need `Authorization: Bearer <token>`.
+    pub token: Option<String>,
+    /// Every route needs the token, reads too (a listener beyond loopback: see
+    /// [`require_token_everywhere`]).
+    pub token_everywhere: bool,
+    /// A simulation: `GET /api/truth` is served (404 otherwise).
+    pub simulation: bool,
+    /// Largest request body (bytes); larger ones get 413.
+    pub body_limit: usize,
+}
+
+impl Default for HttpOptions {
+    fn default() -> Self {
+        HttpOptions {
+            token: None,
+            token_everywhere: false,
+            simulation: false,
+            body_limit: DEFAULT_BODY_LIMIT,
+        }
+    }
+}
+
+/// What the handlers share: the localizer's published state, its tap and the options.
+#[derive(Clone, Debug)]
+pub struct AppState {
+    /// The localizer's published state.
+    pub shared: Arc<Shared>,
+    /// Where posted poses go.
+    pub tap: Tap,
+    /// How the API is served.
+    pub options: Arc<HttpOptions>,
+    /// The OpenAPI document, serialised once.
+    openapi: Arc<String>,
+}
+
+/// Whether a listener on `addr` must require the token on every route: it is not loopback.
+pub fn require_token_everywhere(addr: &SocketAddr) -> bool {
+    !addr.ip().is_loopback()
+}
+
+/// Refuses a listener beyond loopback without a token (the message says why).
+pub fn check_bind(addr: &SocketAddr, token: &Option<String>) -> Result<(), String> {
+    let has_token = token.as_deref().is_some_and(|t| !t.is_empty());
+    if require_token_everywhere(addr) && !has_token {
+        return Err(format!(
+            "refusing to serve the HTTP API on {addr} without a token: \
+             bind a loopback address or set a token"
+        ));
+    }
+    Ok(())
+}
+
+/// Every route of the API, with its OpenAPI operation: the one list the router and the
+/// document are made from.
+pub fn api() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(handlers::base_document())
+        .routes(routes!(handlers::map_page))
+        .routes(routes!(handlers::healthz))
+        .routes(routes!(handlers::metrics))
+        .routes(routes!(handlers::openapi_json))
+        .routes(routes!(handlers::tags))
+        .routes(routes!(handlers::tag))
+        .routes(routes!(handlers::readers))
+        .routes(routes!(handlers::truth))
+        .routes(routes!(events::events))
+        .routes(routes!(handlers::post_poses))
+}
+
+/// The OpenAPI 3 document of [`api`].
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    api().into_openapi()
+}
+
+/// The API's router over `shared` and `tap`.
+pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Router {
+    let (routes, document) = api().split_for_parts();
+    // A document of plain strings and maps always serialises.
+    let openapi = document.to_pretty_json().unwrap_or_else(|_| "{}".into());
+    let body_limit = options.body_limit;
+    let state = AppState {
+        shared,
+        tap,
+        options: Arc::new(options),
+        openapi: Arc::new(openapi),
+    };
+    routes
+        .fallback(no_route)
+        .method_not_allowed_fallback(no_method)
+        .layer(DefaultBodyLimit::max(body_limit))
+        .layer(middleware::from_fn_with_state(state.clone(), authorize))
+        .with_state(state)
+}
+
+/// Serves `router` on `listener` until `shutdown` resolves; then open event streams end and
+/// requests under way finish.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    router: axum::Router,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> io::Result<()> {
+    let (closing_tx, closing_rx) = watch::channel(false);
+    let router = router.layer(Extension(Closing(closing_rx)));
+    axum::serve(listener, router)
+        .with_graceful_shutdown(async move {
+            shutdown.await;
+            let _ = closing_tx.send(true);
+        })
+        .await
+}
+
+/// Tells long-lived responses (the event stream) that the server is shutting down.
+#[derive(Clone, Debug)]
+pub(crate) struct Closing(pub(crate) watch::Receiver<bool>);
+
+/// An error as the API answers it: a status and `{"error": message}`.
+#[derive(Debug)]
+pub struct ApiError {
+    /// The HTTP status.
+    pub status: StatusCode,
+    /// What went wrong.
+    pub message: String,
+}
+
+impl ApiError {
+    /// An error of `status` saying `message`.
+    pub fn new(status: StatusCode, message: impl Into<String>) -> ApiError {
+        ApiError {
+            status,
+            message: message.into(),
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        (
+            self.status,
+            Json(serde_json::json!({ "error": self.message })),
+        )
+            .into_response()
+    }
+}
+
+async fn no_route(method: Method, uri: axum::http::Uri) -> ApiError {
+    ApiError::new(
+        StatusCode::NOT_FOUND,
+        format!("no route {method} {}", uri.path()),
+    )
+}
+
+async fn no_method(method: Method, uri: axum::http::Uri) -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        format!("{} does not take {method}", uri.path()),
+    )
+}
+
+/// The token rule: writes need it when there is one; with `token_everywhere`, reads too.
+async fn authorize(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let Some(token) = state.options.token.as_deref() else {
+        return next.run(request).await;
+    };
+    let write = !matches!(*request.method(), Method::GET | Method::HEAD);
+    if !write && !state.options.token_everywhere {
+        return next.run(request).await;
+    }
+    let given = request
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    let reason = match given {
+        None => "this route needs the header Authorization: Bearer <token>",
+        Some(g) if !same(g.trim().as_bytes(), token.as_bytes()) => "wrong bearer token",
+        Some(_) => return next.run(request).await,
+    };
+    let mut response = ApiError::new(StatusCode::UNAUTHORIZED, reason).into_response();
+    response
+        .headers_mut()
+        .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+    response
+}
+
+/// Compares in time independent of where the first difference is.
+fn same(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beyond_loopback_needs_a_token() {
+        let lo: SocketAddr = "127.0.0.1:8080".parse().expect("address");
+        let lo6: SocketAddr = "[::1]:8080".parse().expect("address");
+        let any: SocketAddr = "0.0.0.0:8080".parse().expect("address");
+        assert!(!require_token_everywhere(&lo) && !require_token_everywhere(&lo6));
+        assert!(require_token_everywhere(&any));
+        assert!(check_bind(&lo, &None).is_ok());
+        let e = check_bind(&any, &None).expect_err("no token");
+        assert!(e.contains("0.0.0.0:8080") && e.contains("token"), "{e}");
+        assert!(
+            check_bind(&any, &Some(String::new())).is_err(),
+            "empty token"
+        );
+        assert!(check_bind(&any, &Some("s3cret".into())).is_ok());
+    }
+
+    #[test]
+    fn tokens_compare_whole() {
+        assert!(same(b"abc", b"abc"));
+        assert!(!same(b"abc", b"abd") && !same(b"abc", b"ab") && !same(b"", b"a"));
+    }
+}

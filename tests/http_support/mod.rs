@@ -1,0 +1,337 @@
+//! For the HTTP API's tests: a live localizer fed a synthetic tag seen from an antenna moving
+//! along x, the API served on loopback in its own thread, and a small blocking HTTP/1.1
+//! client (requests with `Connection: close`, chunked bodies decoded).
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader, Read as _, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use llrp_gateway::http::{self, HttpOptions};
+use llrp_gateway::localize::live::{Input, Live, Settings};
+use llrp_gateway::localize::poses::PoseSample;
+use llrp_gateway::localize::shared::{Truth, TruthTag};
+use llrp_gateway::reads::Read;
+
+/// The synthetic tag's EPC and true position (m); the tag height the localizer assumes.
+pub const EPC: &str = "E2801160600002054CC2A1B7";
+pub const TAG: [f64; 3] = [0.5, 1.5, 0.5];
+/// The synthetic reader.
+pub const READER: &str = "sim-0";
+/// Longest any wait of the tests lasts.
+pub const PATIENCE: Duration = Duration::from_secs(60);
+
+const FREQUENCY_HZ: u64 = 865_700_000;
+
+/// The antenna's pose at `t_us`: along x from −1 m at 1 m/s, at y = 0, facing +y.
+pub fn pose(t_us: u64) -> PoseSample {
+    PoseSample {
+        t_us,
+        reader: READER.into(),
+        antenna: 1,
+        x: -1.0 + t_us as f64 * 1e-6,
+        y: 0.0,
+        z: 0.5,
+        yaw_deg: 90.0,
+        pitch_deg: 0.0,
+    }
+}
+
+/// A read of the tag at `t_us` with the phase of the antenna's pose then (no pose of its
+/// own: the localizer takes it from the poses).
+pub fn read(t_us: u64) -> Read {
+    let p = pose(t_us);
+    let lambda = llrp_gateway::localize::SPEED_OF_LIGHT / FREQUENCY_HZ as f64;
+    let d = ((TAG[0] - p.x).powi(2) + (TAG[1] - p.y).powi(2) + (TAG[2] - p.z).powi(2)).sqrt();
+    Read {
+        epc: EPC.into(),
+        reader: Some(READER.into()),
+        antenna: 1,
+        t_us,
+        phase_rad: Some((0.9 + 4.0 * std::f64::consts::PI * d / lambda) % std::f64::consts::TAU),
+        rssi_dbm: Some(-55.0),
+        channel_index: Some(1),
+        channel_frequency_hz: Some(FREQUENCY_HZ),
+        doppler_hz: None,
+        antenna_pose: None,
+        last_seen_us: None,
+    }
+}
+
+/// The simulation's truth for the synthetic tag.
+pub fn truth() -> Truth {
+    Truth {
+        tags: vec![TruthTag {
+            epc: EPC.into(),
+            position: TAG,
+            reference: false,
+        }],
+        antennas: vec![pose(3_000_000)],
+    }
+}
+
+/// A live localizer and the API over it on 127.0.0.1.
+pub struct Server {
+    /// The localizer (its tap and state).
+    pub live: Live,
+    /// Where the API listens.
+    pub addr: SocketAddr,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<JoinHandle<std::io::Result<()>>>,
+}
+
+impl Server {
+    /// Starts a localizer and serves the API over it with `options`.
+    pub fn start(options: HttpOptions) -> Server {
+        let live = Live::start(Settings::default()).expect("localizer starts");
+        let router = http::router(live.shared.clone(), live.tap.clone(), options);
+        let std_listener = std::net::TcpListener::bind("127.0.0.1:0").expect("binds loopback");
+        let addr = std_listener.local_addr().expect("an address");
+        std_listener.set_nonblocking(true).expect("nonblocking");
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()?;
+            rt.block_on(async move {
+                let listener = tokio::net::TcpListener::from_std(std_listener)?;
+                http::serve(listener, router, async move {
+                    let _ = stopped.await;
+                })
+                .await
+            })
+        });
+        Server {
+            live,
+            addr,
+            stop: Some(stop),
+            thread: Some(thread),
+        }
+    }
+
+    /// Offers the antenna's poses and the tag's reads from 0 to 3 s every 10 ms (the
+    /// aperture and density the estimator converges on).
+    pub fn feed_tag(&self) {
+        let times: Vec<u64> = (0..=300).map(|k| k * 10_000).collect();
+        let poses = times.iter().map(|&t| pose(t)).collect();
+        assert!(self.live.tap.offer(Input::Poses(poses)), "tap takes poses");
+        let reads = times.iter().map(|&t| read(t)).collect();
+        assert!(self.live.tap.offer(Input::Reads(reads)), "tap takes reads");
+    }
+
+    /// GET `path`.
+    pub fn get(&self, path: &str) -> Response {
+        request(self.addr, "GET", path, &[], b"")
+    }
+
+    /// Polls GET /api/tags/{EPC} until the tag is converged; its JSON.
+    pub fn converged(&self) -> serde_json::Value {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let r = self.get(&format!("/api/tags/{EPC}"));
+            if r.status == 200 {
+                let v = r.json();
+                if v["state"] == "converged" {
+                    return v;
+                }
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the tag did not converge: {} {}",
+                r.status,
+                r.text()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            let done = thread.join().expect("the server thread did not panic");
+            if !std::thread::panicking() {
+                done.expect("the server ran and stopped cleanly");
+            }
+        }
+    }
+}
+
+/// An HTTP response.
+#[derive(Debug)]
+pub struct Response {
+    /// Status code.
+    pub status: u16,
+    /// Headers, names lower-case.
+    pub headers: Vec<(String, String)>,
+    /// The body, de-chunked.
+    pub body: Vec<u8>,
+}
+
+impl Response {
+    /// The header `name` (lower-case), if present.
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The body as text.
+    pub fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+
+    /// The body as JSON.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", self.text()))
+    }
+
+    /// The `error` of a JSON error body.
+    pub fn error(&self) -> String {
+        let v = self.json();
+        v["error"]
+            .as_str()
+            .unwrap_or_else(|| panic!("no error string: {v}"))
+            .to_string()
+    }
+}
+
+fn write_request(
+    stream: &mut TcpStream,
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) {
+    let mut head = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n");
+    for (k, v) in headers {
+        head.push_str(&format!("{k}: {v}\r\n"));
+    }
+    if !body.is_empty() || method == "POST" {
+        head.push_str(&format!("Content-Length: {}\r\n", body.len()));
+    }
+    head.push_str("\r\n");
+    stream.write_all(head.as_bytes()).expect("writes the head");
+    // The server may answer (413) before it read all: a failed write is no failure here.
+    let _ = stream.write_all(body);
+}
+
+fn read_head(reader: &mut impl BufRead) -> (u16, Vec<(String, String)>) {
+    let mut line = String::new();
+    reader.read_line(&mut line).expect("a status line");
+    let status = line
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no status in {line:?}"));
+    let mut headers = Vec::new();
+    loop {
+        line.clear();
+        reader.read_line(&mut line).expect("a header line");
+        let l = line.trim_end();
+        if l.is_empty() {
+            break;
+        }
+        if let Some((k, v)) = l.split_once(':') {
+            headers.push((k.trim().to_ascii_lowercase(), v.trim().to_string()));
+        }
+    }
+    (status, headers)
+}
+
+/// One request; the whole response.
+pub fn request(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> Response {
+    let mut stream = TcpStream::connect(addr).expect("connects");
+    stream.set_read_timeout(Some(PATIENCE)).expect("timeout");
+    write_request(&mut stream, addr, method, path, headers, body);
+    let mut reader = BufReader::new(stream);
+    let (status, headers) = read_head(&mut reader);
+    let chunked = headers
+        .iter()
+        .any(|(k, v)| k == "transfer-encoding" && v.contains("chunked"));
+    let mut body = Vec::new();
+    if chunked {
+        while let Some(chunk) = read_chunk(&mut reader) {
+            body.extend(chunk);
+        }
+    } else {
+        let _ = reader.read_to_end(&mut body);
+    }
+    Response {
+        status,
+        headers,
+        body,
+    }
+}
+
+fn read_chunk(reader: &mut impl BufRead) -> Option<Vec<u8>> {
+    let mut line = String::new();
+    reader.read_line(&mut line).ok()?;
+    let size = usize::from_str_radix(line.trim().split(';').next()?, 16).ok()?;
+    if size == 0 {
+        return None;
+    }
+    let mut chunk = vec![0; size + 2];
+    reader.read_exact(&mut chunk).ok()?;
+    chunk.truncate(size);
+    Some(chunk)
+}
+
+/// An open `GET /api/events` stream.
+pub struct Events {
+    reader: BufReader<TcpStream>,
+    buffer: String,
+}
+
+impl Events {
+    /// Opens the stream; returns once the server said it is subscribed.
+    pub fn open(addr: SocketAddr) -> Events {
+        let mut stream = TcpStream::connect(addr).expect("connects");
+        stream.set_read_timeout(Some(PATIENCE)).expect("timeout");
+        write_request(&mut stream, addr, "GET", "/api/events", &[], b"");
+        let mut reader = BufReader::new(stream);
+        let (status, headers) = read_head(&mut reader);
+        assert_eq!(status, 200);
+        let kind = headers.iter().find(|(k, _)| k == "content-type");
+        assert_eq!(
+            kind.map(|(_, v)| v.as_str()),
+            Some("text/event-stream"),
+            "{headers:?}"
+        );
+        let mut events = Events {
+            reader,
+            buffer: String::new(),
+        };
+        events.next_block(|b| b.contains(": subscribed"));
+        events
+    }
+
+    /// The next blank-line-separated block that `want` accepts (others skipped).
+    pub fn next_block(&mut self, want: impl Fn(&str) -> bool) -> String {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            while let Some(end) = self.buffer.find("\n\n") {
+                let block: String = self.buffer.drain(..end + 2).collect();
+                if want(&block) {
+                    return block;
+                }
+            }
+            assert!(Instant::now() < deadline, "no such event in time");
+            let chunk = read_chunk(&mut self.reader).expect("the stream goes on");
+            self.buffer.push_str(&String::from_utf8_lossy(&chunk));
+        }
+    }
+}
