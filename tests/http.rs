@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use http_support::{pose, read, request, truth, Events, Server, EPC, PATIENCE, READER, TAG};
 use llrp_gateway::http::HttpOptions;
-use llrp_gateway::localize::live::Input;
+use llrp_gateway::localize::live::{Input, Settings};
 
 fn open() -> Server {
     Server::start(HttpOptions::default())
@@ -104,6 +104,10 @@ fn an_unknown_epc_is_404_and_a_non_hex_one_400_naming_why() {
     let r = server.get("/api/tags/E2XY");
     assert_eq!(r.status, 400);
     assert!(r.error().contains("'X'"), "{}", r.text());
+    // Not even UTF-8: still a JSON error.
+    let r = server.get("/api/tags/%FF%FE");
+    assert_eq!(r.status, 400);
+    assert!(!r.error().is_empty());
 }
 
 #[test]
@@ -256,6 +260,41 @@ fn a_bad_pose_is_400_naming_index_and_field_and_nothing_is_taken() {
         "{metrics}"
     );
     assert!(server.live.shared.readers().is_empty());
+}
+
+#[test]
+fn posted_poses_are_503_while_the_localizer_is_behind() {
+    // A tap of one input, kept full by large inputs the worker takes a while over.
+    let server = Server::start_with(
+        HttpOptions::default(),
+        Settings {
+            tap_capacity: 1,
+            ..Settings::default()
+        },
+    );
+    let filler = || {
+        let poses = (0..20_000u64)
+            .map(|k| {
+                let mut p = pose(k * 1_000);
+                p.reader = "filler".into();
+                p
+            })
+            .collect();
+        Input::Poses(poses)
+    };
+    let body = pose_json(1_000, 0.25);
+    let deadline = Instant::now() + PATIENCE;
+    let refused = loop {
+        // Fill the tap until it refuses, then post at once.
+        while server.live.tap.offer(filler()) {}
+        let r = request(server.addr, "POST", "/api/poses", &[], body.as_bytes());
+        if r.status == 503 {
+            break r;
+        }
+        assert_eq!(r.status, 202, "{}", r.text());
+        assert!(Instant::now() < deadline, "the tap never refused a post");
+    };
+    assert!(refused.error().contains("behind"), "{}", refused.text());
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! The request handlers other than the event stream, each with its OpenAPI operation.
 
 use axum::body::Bytes;
-use axum::extract::rejection::BytesRejection;
+use axum::extract::rejection::{BytesRejection, PathRejection};
 use axum::extract::{Path, State};
 use axum::http::{header, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
@@ -123,8 +123,9 @@ pub fn check_epc(epc: &str) -> Result<(), String> {
         (status = 404, description = "No such tag was read", body = super::schema::Error)))]
 pub(super) async fn tag(
     State(state): State<AppState>,
-    Path(epc): Path<String>,
+    epc: Result<Path<String>, PathRejection>,
 ) -> Result<Response, ApiError> {
+    let Path(epc) = epc.map_err(|r| ApiError::new(r.status(), r.body_text()))?;
     check_epc(&epc).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
     let view = state.shared.tag(&epc).ok_or_else(|| {
         ApiError::new(

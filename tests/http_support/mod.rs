@@ -84,7 +84,12 @@ pub struct Server {
 impl Server {
     /// Starts a localizer and serves the API over it with `options`.
     pub fn start(options: HttpOptions) -> Server {
-        let live = Live::start(Settings::default()).expect("localizer starts");
+        Server::start_with(options, Settings::default())
+    }
+
+    /// Starts a localizer with `settings` and serves the API over it with `options`.
+    pub fn start_with(options: HttpOptions, settings: Settings) -> Server {
+        let live = Live::start(settings).expect("localizer starts");
         let router = http::router(live.shared.clone(), live.tap.clone(), options);
         let std_listener = std::net::TcpListener::bind("127.0.0.1:0").expect("binds loopback");
         let addr = std_listener.local_addr().expect("an address");
