@@ -35,8 +35,10 @@ pub struct Tag {
     /// EPC, upper-case hex.
     pub epc: String,
     /// The estimated position; null with insufficient geometry.
+    #[schema(required = true)]
     pub estimate: Option<Point>,
     /// Covariance of the estimate: 9 numbers, 3×3 row-major (m²); null without an estimate.
+    #[schema(required = true)]
     pub covariance: Option<Vec<f64>>,
     /// Estimator name.
     pub estimator: String,
@@ -84,14 +86,19 @@ pub struct Read {
     /// First-seen time, UTC µs.
     pub t_us: u64,
     /// RF phase (rad, 0..2π).
+    #[schema(required = true)]
     pub phase_rad: Option<f64>,
     /// Peak RSSI (dBm).
+    #[schema(required = true)]
     pub rssi_dbm: Option<f64>,
     /// 1-based channel index into the reader's hop table.
+    #[schema(required = true)]
     pub channel_index: Option<u16>,
     /// The channel's frequency (Hz).
+    #[schema(required = true)]
     pub channel_frequency_hz: Option<u64>,
     /// Doppler frequency (Hz).
+    #[schema(required = true)]
     pub doppler_hz: Option<f64>,
     /// The antenna's pose at the read (absent when the source did not know it).
     pub antenna_pose: Option<AntennaPose>,
@@ -103,8 +110,10 @@ pub struct TagDetail {
     /// EPC, upper-case hex.
     pub epc: String,
     /// The estimated position; null with insufficient geometry.
+    #[schema(required = true)]
     pub estimate: Option<Point>,
     /// Covariance of the estimate: 9 numbers, 3×3 row-major (m²).
+    #[schema(required = true)]
     pub covariance: Option<Vec<f64>>,
     /// Estimator name.
     pub estimator: String,
@@ -147,6 +156,7 @@ pub struct Antenna {
     /// Antenna port.
     pub antenna: u16,
     /// The newest pose sample; null before any.
+    #[schema(required = true)]
     pub pose: Option<Pose>,
 }
 
@@ -158,6 +168,7 @@ pub struct Reader {
     /// Whether an LLRP client (or a proxy's upstream) is connected.
     pub connected: bool,
     /// The connected peer.
+    #[schema(required = true)]
     pub peer: Option<String>,
     /// Who runs an inventory: `client`, `self` or `idle`.
     pub inventory: String,
@@ -227,6 +238,13 @@ mod tests {
     fn properties<T: PartialSchema>() -> BTreeSet<String> {
         match T::schema() {
             RefOr::T(Schema::Object(o)) => o.properties.keys().cloned().collect(),
+            _ => panic!("not an object schema"),
+        }
+    }
+
+    fn required<T: PartialSchema>() -> BTreeSet<String> {
+        match T::schema() {
+            RefOr::T(Schema::Object(o)) => o.required.into_iter().collect(),
             _ => panic!("not an object schema"),
         }
     }
@@ -303,5 +321,14 @@ mod tests {
         assert_eq!(keys(&pose), properties::<Pose>());
         assert_eq!(keys(&reader), properties::<Reader>());
         assert_eq!(keys(&reader.antennas[0]), properties::<Antenna>());
+        // Required: the keys always written, null or not.
+        assert_eq!(keys(&TagJson::from(&view)), required::<Tag>());
+        assert_eq!(keys(&reader), required::<Reader>());
+        let bare = RealRead {
+            reader: None,
+            antenna_pose: None,
+            ..read
+        };
+        assert_eq!(keys(&bare), required::<Read>());
     }
 }
