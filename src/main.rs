@@ -53,6 +53,16 @@ enum Command {
         /// The TLS certificate's private key (PEM).
         #[arg(long, requires = "tls_cert")]
         tls_key: Option<PathBuf>,
+        /// The HTTP API and live map (default 127.0.0.1:8080; docs/http.md).
+        #[command(flatten)]
+        http: llrp_gateway::http::launch::HttpArgs,
+        /// Antenna poses the localizer is given: `truth`, or `estimated` (what the robot
+        /// itself would report).
+        #[arg(long, value_enum, default_value_t = llrp_gateway::sim::PoseSource::Estimated)]
+        poses: llrp_gateway::sim::PoseSource,
+        /// The localizer's estimator (docs/localize.md).
+        #[arg(long, default_value = "relock")]
+        estimator: llrp_gateway::localize::estimate::Estimator,
     },
     /// Forward clients to a real reader byte for byte, recording the sessions.
     Proxy(llrp_gateway::gateway::ProxyArgs),
@@ -92,8 +102,16 @@ fn main() -> ExitCode {
             record_max_bytes,
             tls_cert,
             tls_key,
+            http,
+            poses,
+            estimator,
         } => run_sim(
             scenario,
+            SimLocalize {
+                http,
+                poses,
+                estimator,
+            },
             SimOptions {
                 listen,
                 speed,
@@ -144,8 +162,15 @@ fn main() -> ExitCode {
     }
 }
 
+/// The localizer and HTTP side of `sim`.
+struct SimLocalize {
+    http: llrp_gateway::http::launch::HttpArgs,
+    poses: llrp_gateway::sim::PoseSource,
+    estimator: llrp_gateway::localize::estimate::Estimator,
+}
+
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
-fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
+fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOptions) -> ExitCode {
     llrp_gateway::stop::init_logging();
     let scenario = match scenario {
         Some(path) => match Scenario::load(&path) {
@@ -177,6 +202,57 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
     };
     runtime.block_on(async move {
         let stop = StopSignal::watch();
+        // The localizer and its HTTP API (the simulator only feeds a localizer someone can
+        // ask: with --no-http neither runs).
+        let mut live = None;
+        let mut http = None;
+        if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
+            let model = llrp_gateway::physics::Model::in_world(
+                &llrp_gateway::physics::World::new(&scenario),
+                &scenario,
+                0,
+            );
+            let settings = llrp_gateway::localize::live::Settings {
+                estimator: localize.estimator,
+                ..Default::default()
+            };
+            let l = match llrp_gateway::localize::live::Live::start(sim::feed::settings(
+                &scenario, &model, settings,
+            )) {
+                Ok(l) => l,
+                Err(e) => {
+                    eprintln!("llrp-gateway sim: cannot start the localizer: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            match llrp_gateway::http::launch::launch(
+                &addr,
+                chosen,
+                localize.http.http_token.clone(),
+                true,
+                l.shared.clone(),
+                l.tap.clone(),
+            )
+            .await
+            {
+                Ok(Some(h)) => {
+                    eprintln!("llrp-gateway sim: HTTP API and live map on http://{}/", h.addr);
+                    opts.localize = Some(sim::LocalizeFeed {
+                        tap: l.tap.clone(),
+                        poses: localize.poses,
+                    });
+                    http = Some(h);
+                    live = Some(l);
+                }
+                Ok(None) => eprintln!(
+                    "llrp-gateway sim: {addr} is taken: running without the HTTP API (choose one with --http ADDR)"
+                ),
+                Err(e) => {
+                    eprintln!("llrp-gateway sim: {e}");
+                    return ExitCode::FAILURE;
+                }
+            }
+        }
         let running = match sim::start(&scenario, &opts).await {
             Ok(r) => r,
             Err(e) => {
@@ -195,6 +271,12 @@ fn run_sim(scenario: Option<PathBuf>, opts: SimOptions) -> ExitCode {
         // Each client gets its ConnectionCloseEvent and the ground truth is flushed, within
         // a second: a client that does not take its last bytes does not hold the exit up.
         running.shutdown().await;
+        if let Some(h) = http {
+            h.stop().await;
+        }
+        if let Some(l) = live {
+            l.stop();
+        }
         eprintln!("llrp-gateway sim: stopped");
         ExitCode::SUCCESS
     })

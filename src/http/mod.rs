@@ -25,6 +25,7 @@ use crate::localize::shared::Shared;
 
 mod events;
 mod handlers;
+pub mod launch;
 mod poses;
 pub mod schema;
 

@@ -66,6 +66,7 @@ impl Default for Settings {
                 phase_sign: 1.0,
                 facing: [0.0, 1.0],
                 reach_m: 4.0,
+                references: Vec::new(),
             },
             ambiguity: Ambiguity::None,
             max_gap_us: 1_000_000,

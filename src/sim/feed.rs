@@ -112,7 +112,8 @@ fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSamp
 
 /// The live localizer's settings for a scenario: its first reader's first antenna gives the
 /// phase sign, the π ambiguity, the side the antennas face (its yaw at time 0) and the tags'
-/// height (the antenna's own, as each antenna assumes in \[A\]).
+/// height (the antenna's own, as each antenna assumes in \[A\]); the reference tags are the
+/// scenario's, at their positions.
 pub fn settings(scenario: &Scenario, model: &Model, base: Settings) -> Settings {
     let mut s = base;
     if let Some(a) = scenario.readers.first().and_then(|r| r.antennas.first()) {
@@ -123,6 +124,15 @@ pub fn settings(scenario: &Scenario, model: &Model, base: Settings) -> Settings 
             Ambiguity::None
         };
     }
+    s.geometry.references = (0..model.tag_count())
+        .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
+        .map(|k| {
+            (
+                crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
+                model.tag_position(k, 0),
+            )
+        })
+        .collect();
     if model.antenna_count() >= 1 {
         let p = model.antenna_pose(1, 0);
         s.geometry.tag_height_m = p.position[2];
