@@ -1,6 +1,7 @@
-//! The live map in a real browser: headless Chromium loads `GET /` from a server over a
-//! converged synthetic tag with the simulation's truth set, and the page it renders shows the
-//! tag's row (converged) and its estimated marker; a screenshot is taken too.
+//! The live map in a real browser: headless Chromium loads `GET /` from a running
+//! `llrp-gateway sim` (no LLRP client: the reader inventories by itself), and the page it
+//! renders shows a row per converged tag, their estimated markers and the true positions; a
+//! screenshot is taken too.
 //!
 //! `#[ignore]`d in a plain `cargo test`: it needs Debian's `chromium` (`scripts/install-chromium`,
 //! which `./scripts/test` runs before the ignored tests). `LLRP_CHROMIUM` names another
@@ -11,9 +12,6 @@ mod http_support;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-use http_support::{Server, EPC};
-use llrp_gateway::http::HttpOptions;
 
 /// Longest one Chromium run may take.
 const BROWSER_PATIENCE: Duration = Duration::from_secs(90);
@@ -80,26 +78,101 @@ fn element<'a>(dom: &'a str, id: &str) -> Option<&'a str> {
     Some(&dom[start..=end])
 }
 
+/// A running `llrp-gateway sim` (the embedded S1, its own inventory at 16× real time, the
+/// HTTP API on a free loopback port), stopped by PID when dropped.
+struct Sim {
+    child: std::process::Child,
+    http: std::net::SocketAddr,
+}
+
+impl Sim {
+    fn start() -> Sim {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+            .args(["sim", "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0"])
+            .args(["--speed", "16"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the simulator starts");
+        let stderr = child.stderr.take().expect("piped stderr");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+            {
+                if let Some(rest) = line.split("live map on http://").nth(1) {
+                    let _ = tx.send(rest.trim_end_matches('/').to_string());
+                }
+            }
+        });
+        let addr = rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the simulator prints its HTTP address");
+        Sim {
+            child,
+            http: addr.parse().expect("an address"),
+        }
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        // SIGTERM, as a user's Ctrl-C; then make sure.
+        let _ = Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 #[test]
 #[ignore = "needs chromium: scripts/install-chromium (./scripts/test runs it)"]
-fn the_map_shows_the_converged_tag_in_a_headless_browser() {
-    let server = Server::start(HttpOptions {
-        simulation: true,
-        ..HttpOptions::default()
-    });
-    server.feed_tag();
-    server.converged();
-    server.live.shared.set_truth(http_support::truth());
-    let url = format!("http://{}/", server.addr);
+fn the_map_of_a_running_simulation_shows_its_tags_localized_in_a_headless_browser() {
+    let sim = Sim::start();
+    // Until the localizer has converged tags (bounded: S1's pass takes under 3 s at 16×).
+    let deadline = Instant::now() + Duration::from_secs(90);
+    let converged = loop {
+        let tags = http_support::request(sim.http, "GET", "/api/tags", &[], b"").json();
+        let converged: Vec<String> = tags["tags"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|t| t["state"] == "converged")
+            .filter_map(|t| t["epc"].as_str().map(String::from))
+            .collect();
+        if converged.len() >= 5 || Instant::now() > deadline {
+            break converged;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(
+        converged.len() >= 5,
+        "too few converged tags: {converged:?}"
+    );
+    let url = format!("http://{}/", sim.http);
     let dir = tempfile::tempdir().expect("a temp dir");
 
     let dom = run_chromium(&dir.path().join("profile-dom"), &url, &["--dump-dom"]);
-    let row = element(&dom, &format!("tag-{EPC}"))
-        .unwrap_or_else(|| panic!("no row tag-{EPC} in the page:\n{dom}"));
-    assert!(row.contains("data-state=\"converged\""), "{row}");
+    for epc in &converged {
+        let row = element(&dom, &format!("tag-{epc}"))
+            .unwrap_or_else(|| panic!("no row tag-{epc} in the page:\n{dom}"));
+        assert!(row.contains("data-state=\"converged\""), "{row}");
+    }
+    let markers = dom.matches("class=\"estimated").count();
     assert!(
-        dom.contains("class=\"estimated"),
-        "no estimated marker:\n{dom}"
+        markers >= converged.len(),
+        "{markers} estimated markers:\n{dom}"
     );
     assert!(dom.contains("class=\"truth\""), "no truth marker:\n{dom}");
 
