@@ -85,6 +85,8 @@ enum Command {
     Export(llrp_gateway::record::pcapng::ExportArgs),
     /// Turn the LLRP streams of a pcap or pcapng capture into a recording.
     Import(llrp_gateway::record::pcapng::ImportArgs),
+    /// Localize every tag of a recording or a reads file (docs/localize.md).
+    Localize(llrp_gateway::localize::command::LocalizeArgs),
 }
 
 fn main() -> ExitCode {
@@ -93,6 +95,7 @@ fn main() -> ExitCode {
         Command::Inventory(args) => llrp_gateway::inventory::run(args),
         Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),
         Command::Import(args) => llrp_gateway::record::pcapng::run_import(&args),
+        Command::Localize(args) => llrp_gateway::localize::command::run(args),
         Command::Sim {
             scenario,
             listen,

@@ -8,6 +8,7 @@
 //! reads and poses, never simulator internals, so it works the same on a real reader's data.
 //! The `localize` command and the HTTP API are still to come.
 
+pub mod command;
 pub mod estimate;
 pub mod fingerprint;
 pub mod hyperbolic;
@@ -15,6 +16,7 @@ pub mod ingest;
 pub mod linear;
 pub mod live;
 pub mod loci3d;
+pub mod offline;
 pub mod poses;
 pub mod relock;
 pub mod series;

@@ -109,6 +109,14 @@ impl Poses {
         }
     }
 
+    /// The earliest sample of any track.
+    pub fn first(&self) -> Option<&PoseSample> {
+        self.tracks
+            .values()
+            .filter_map(|t| t.first())
+            .min_by_key(|p| p.t_us)
+    }
+
     /// Reader time (µs) of the newest sample of `reader`'s `antenna`, if any.
     pub fn newest(&self, reader: &str, antenna: u16) -> Option<u64> {
         let last = self.tracks.get(&(reader.to_string(), antenna))?.last()?;

@@ -1,0 +1,104 @@
+//! The `localize` command line: reads a recording or a reads file, localizes every tag and
+//! writes the estimates as `GET /api/tags` does, with a progress bar on long inputs.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use super::estimate::Estimator;
+use super::offline::{self, Progress, SettingsFile};
+use super::poses::Poses;
+
+/// Inputs this long (reads) get a progress bar on a terminal.
+const PROGRESS_FROM: usize = 100_000;
+
+/// `llrp-gateway localize`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct LocalizeArgs {
+    /// A recording (docs/recordings.md) or a reads file (one JSON read a line, as
+    /// `inventory --output` writes).
+    pub input: PathBuf,
+    /// Antenna poses: JSON Lines or CSV with `t_us, reader, antenna, x, y, z, yaw_deg,
+    /// pitch_deg` (reads with their own `antenna_pose` need none).
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// The estimator (docs/localize.md).
+    #[arg(long, default_value = "relock")]
+    pub estimator: Estimator,
+    /// Per-reader settings (JSON: phase sign, facing side, tag height, reference tags, clock
+    /// offsets; docs/localize.md).
+    #[arg(long)]
+    pub settings: Option<PathBuf>,
+    /// Where to write the estimates (`-` for standard output).
+    #[arg(long)]
+    pub output: PathBuf,
+}
+
+/// Runs `localize`.
+pub fn run(args: LocalizeArgs) -> ExitCode {
+    match execute(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("llrp-gateway localize: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn execute(args: &LocalizeArgs) -> Result<(), String> {
+    let settings = match &args.settings {
+        Some(p) => SettingsFile::load(p).map_err(|e| e.to_string())?,
+        None => SettingsFile::default(),
+    };
+    let poses = match &args.poses {
+        Some(p) => {
+            let file = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            Poses::read(std::io::BufReader::new(file))
+                .map_err(|e| format!("{}: {e}", p.display()))?
+        }
+        None => Poses::new(),
+    };
+    let reads = offline::load_reads(&args.input).map_err(|e| e.to_string())?;
+    let bar = if reads.len() >= PROGRESS_FROM {
+        indicatif::ProgressBar::new(reads.len() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>9} [{bar:40}] {pos}/{len} ({eta})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_message("reads");
+    let mut tags_started = false;
+    let outcome = offline::localize(reads, poses, &settings, args.estimator, &mut |p| match p {
+        Progress::Read => bar.inc(1),
+        Progress::Tag => {
+            if !tags_started {
+                tags_started = true;
+                bar.set_message("tags");
+                bar.set_position(0);
+                bar.set_length(0);
+            }
+            bar.inc_length(1);
+            bar.inc(1);
+        }
+    });
+    bar.finish_and_clear();
+    let json = serde_json::to_string_pretty(&outcome.tags).map_err(|e| e.to_string())?;
+    if args.output.as_os_str() == "-" {
+        println!("{json}");
+    } else {
+        std::fs::write(&args.output, json + "\n")
+            .map_err(|e| format!("{}: {e}", args.output.display()))?;
+    }
+    let a = outcome.set_aside;
+    eprintln!(
+        "llrp-gateway localize: {} tags from {} reads ({} set aside: {} without phase, {} without channel frequency, {} without a pose)",
+        outcome.tags.tags.len(),
+        outcome.taken,
+        a.no_phase + a.no_frequency + a.no_pose,
+        a.no_phase,
+        a.no_frequency,
+        a.no_pose
+    );
+    Ok(())
+}

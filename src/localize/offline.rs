@@ -1,0 +1,286 @@
+//! `llrp-gateway localize`: estimates from a recording or a reads file, with a pose file or
+//! the reads' own `antenna_pose`, written as the same JSON as `GET /api/tags`.
+//!
+//! The per-reader settings a real reader's data cannot carry (the phase sign, the side the
+//! antennas face, the tags' assumed height, the reference tags, the readers' clock offsets)
+//! come from a settings file; without one, the tags are assumed at the first antenna pose's
+//! height and on the side its yaw faces, with the phase sign +1.
+
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::estimate::{self, Estimate, Estimator, Geometry};
+use super::ingest::{Ingest, SetAside};
+use super::poses::{PoseError, Poses};
+use super::series::Ambiguity;
+use super::shared::{TagJson, TagsJson};
+use crate::reads::{Read, ReadDecoder};
+use crate::record::{Direction, RecordError, Recording};
+
+/// Why `localize` could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum OfflineError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The recording is bad.
+    #[error("{path}: {source}")]
+    Recording {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: RecordError,
+    },
+    /// A line of the reads file is bad.
+    #[error("{path}: line {line}: {message}")]
+    Reads {
+        /// The file.
+        path: PathBuf,
+        /// The line.
+        line: usize,
+        /// Why.
+        message: String,
+    },
+    /// The pose file is bad.
+    #[error("{path}: {source}")]
+    Poses {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: PoseError,
+    },
+    /// The settings file is bad.
+    #[error("{path}: {message}")]
+    Settings {
+        /// The file.
+        path: PathBuf,
+        /// Why, naming the field.
+        message: String,
+    },
+}
+
+/// A reference tag of the settings file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceTag {
+    /// EPC, hex.
+    pub epc: String,
+    /// x (m).
+    pub x: f64,
+    /// y (m).
+    pub y: f64,
+    /// z (m).
+    pub z: f64,
+}
+
+/// The settings file (JSON; every key optional).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SettingsFile {
+    /// Height assumed for the tags by the 2D estimators (m).
+    pub tag_height_m: Option<f64>,
+    /// +1, or −1 for a reader that reports the phase negated.
+    pub phase_sign: Option<f64>,
+    /// The side the antennas face, `[x, y]`.
+    pub facing: Option<[f64; 2]>,
+    /// Farthest a tag is searched for from the path (m).
+    pub reach_m: Option<f64>,
+    /// The reader reports phase with Impinj's π ambiguity.
+    #[serde(default)]
+    pub pi_ambiguity: bool,
+    /// Reference tags at known positions (fingerprinting).
+    #[serde(default)]
+    pub references: Vec<ReferenceTag>,
+    /// Per reader, reader time − robot time of the pose file (µs).
+    #[serde(default)]
+    pub clock_offsets_us: BTreeMap<String, i64>,
+}
+
+impl SettingsFile {
+    /// Reads and checks a settings file.
+    pub fn load(path: &Path) -> Result<SettingsFile, OfflineError> {
+        let text = std::fs::read_to_string(path).map_err(|source| OfflineError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let bad = |message: String| OfflineError::Settings {
+            path: path.to_owned(),
+            message,
+        };
+        let mut de = serde_json::Deserializer::from_str(&text);
+        let s: SettingsFile = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| bad(format!("{}: {}", e.path(), e.inner())))?;
+        if let Some(sign) = s.phase_sign.filter(|&v| v != 1.0 && v != -1.0) {
+            return Err(bad(format!("phase_sign: must be 1 or -1, got {sign}")));
+        }
+        if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
+            return Err(bad(format!("tag_height_m: not a finite number: {h}")));
+        }
+        if let Some(r) = s.reach_m.filter(|&r| !(r.is_finite() && r > 0.0)) {
+            return Err(bad(format!("reach_m: must be a positive number, got {r}")));
+        }
+        if let Some(f) = s.facing.filter(|f| !(f[0].hypot(f[1]) > 0.0)) {
+            return Err(bad(format!(
+                "facing: must be a non-zero direction, got {f:?}"
+            )));
+        }
+        for (i, r) in s.references.iter().enumerate() {
+            let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
+            if !hex || r.epc.is_empty() {
+                return Err(bad(format!("references[{i}].epc: not hex: {:?}", r.epc)));
+            }
+        }
+        Ok(s)
+    }
+}
+
+/// The reads of a recording (every connection's frames from the reader) or a reads file
+/// (one JSON read a line), told apart by the first line.
+pub fn load_reads(path: &Path) -> Result<Vec<Read>, OfflineError> {
+    let io = |source| OfflineError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut input = std::io::BufReader::new(file);
+    let first = input.fill_buf().map_err(io)?;
+    if !first.starts_with(b"{\"llrp_recording\"") {
+        return crate::reads::read_jsonl(input).map_err(|e| OfflineError::Reads {
+            path: path.to_owned(),
+            line: e.line,
+            message: e.message,
+        });
+    }
+    let recording = Recording::read(input).map_err(|source| OfflineError::Recording {
+        path: path.to_owned(),
+        source,
+    })?;
+    let upstream = &recording.header.upstream;
+    let reader = upstream
+        .strip_prefix("sim:")
+        .unwrap_or(upstream)
+        .to_string();
+    let mut reads = Vec::new();
+    for conn in recording.connections() {
+        let mut decoder = ReadDecoder::new(Some(reader.clone()));
+        for (at, dir, frame) in recording.frames(conn) {
+            // An RO_ACCESS_REPORT that does not decode is skipped: its reads are lost, the
+            // others are not.
+            if dir == Direction::FromReader {
+                let _ = decoder.frame(frame, at.utc_us, &mut reads);
+            }
+        }
+    }
+    Ok(reads)
+}
+
+/// What a `localize` run found.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    /// One estimate per tag, in EPC order, with its newest read time and read rate.
+    pub tags: TagsJson,
+    /// Reads filed into series.
+    pub taken: u64,
+    /// Reads set aside, by reason.
+    pub set_aside: SetAside,
+}
+
+/// The estimator's settings for `reads` and `poses` under `file`: what the file gives, the
+/// rest from the first pose (its height, the side its yaw faces).
+pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry {
+    let first = reads
+        .iter()
+        .find_map(|r| r.antenna_pose.as_ref().map(|p| (p.z, p.yaw_deg)))
+        .or_else(|| poses.first().map(|p| (p.z, p.yaw_deg)));
+    let (z, yaw) = first.unwrap_or((0.0, 90.0));
+    let yaw = yaw.to_radians();
+    Geometry {
+        tag_height_m: file.tag_height_m.unwrap_or(z),
+        phase_sign: file.phase_sign.unwrap_or(1.0),
+        facing: file.facing.unwrap_or([yaw.cos(), yaw.sin()]),
+        reach_m: file.reach_m.unwrap_or(4.0),
+        references: file
+            .references
+            .iter()
+            .map(|r| (r.epc.to_ascii_uppercase(), [r.x, r.y, r.z]))
+            .collect(),
+    }
+}
+
+/// Localizes every tag of `reads` with `estimator`; `progress` is told of each read filed
+/// and each tag estimated.
+pub fn localize(
+    mut reads: Vec<Read>,
+    mut poses: Poses,
+    file: &SettingsFile,
+    estimator: Estimator,
+    progress: &mut dyn FnMut(Progress),
+) -> Outcome {
+    for (reader, offset) in &file.clock_offsets_us {
+        poses.set_offset(reader, *offset);
+    }
+    let g = geometry(file, &reads, &poses);
+    let ambiguity = if file.pi_ambiguity {
+        Ambiguity::Pi
+    } else {
+        Ambiguity::None
+    };
+    // Series want their reads in time order (a recording of several connections, or a
+    // merged reads file, may not be).
+    reads.sort_by_key(|r| r.t_us);
+    let mut stats: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
+    let mut ingest = Ingest::new(poses, ambiguity, 1_000_000);
+    for r in &reads {
+        ingest.push(r);
+        let s = stats.entry(r.epc.clone()).or_insert((r.t_us, r.t_us, 0));
+        s.1 = s.1.max(r.t_us);
+        s.2 += 1;
+        progress(Progress::Read);
+    }
+    let epcs: Vec<String> = ingest.tags().map(String::from).collect();
+    let mut estimates: BTreeMap<String, Estimate> = BTreeMap::new();
+    for epc in epcs {
+        let e = estimate::estimate_tag(&ingest, &epc, estimator, &g);
+        estimates.insert(epc, e);
+        progress(Progress::Tag);
+    }
+    let tags = stats
+        .into_iter()
+        .map(|(epc, (first, last, n))| {
+            let span = (last - first) as f64 / 1e6;
+            let rate = if span > 0.0 { n as f64 / span } else { 0.0 };
+            let e = estimates.remove(&epc).unwrap_or_else(|| Estimate {
+                epc: epc.clone(),
+                estimator: estimator.name(),
+                estimate: None,
+                covariance: None,
+                samples: 0,
+                state: estimate::State::InsufficientGeometry,
+                last_update_us: 0,
+            });
+            TagJson::new(&e, last, rate)
+        })
+        .collect();
+    Outcome {
+        tags: TagsJson { tags },
+        taken: ingest.taken(),
+        set_aside: ingest.set_aside(),
+    }
+}
+
+/// A step of a `localize` run, for a progress bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Progress {
+    /// A read was filed.
+    Read,
+    /// A tag was estimated.
+    Tag,
+}
