@@ -124,10 +124,13 @@ impl SettingsFile {
         if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
             return Err(bad(format!("tag_height_m: not a finite number: {h}")));
         }
-        if let Some(r) = s.reach_m.filter(|&r| !(r.is_finite() && r > 0.0)) {
+        if let Some(r) = s.reach_m.filter(|&r| r.is_nan() || r.is_infinite() || r <= 0.0) {
             return Err(bad(format!("reach_m: must be a positive number, got {r}")));
         }
-        if let Some(f) = s.facing.filter(|f| !(f[0].hypot(f[1]) > 0.0)) {
+        if let Some(f) = s.facing.filter(|f| {
+            let n = f[0].hypot(f[1]);
+            n.is_nan() || n.is_infinite() || n <= 0.0
+        }) {
             return Err(bad(format!(
                 "facing: must be a non-zero direction, got {f:?}"
             )));
