@@ -157,7 +157,7 @@ impl Drop for Proc {
 /// `llrp-gateway sim` on `addr` (with `scenario`, else the embedded S1), once it listens.
 fn sim(scenario: Option<&Path>, addr: &str) -> Proc {
     let mut cmd = bin();
-    cmd.args(["sim", "--listen", addr]);
+    cmd.args(["sim", "--no-http", "--listen", addr]);
     if let Some(s) = scenario {
         cmd.arg("--scenario").arg(s);
     }

@@ -90,7 +90,7 @@ impl Running {
 }
 
 fn sim() -> (Running, String) {
-    let mut s = spawn(&["sim", "--listen", "127.0.0.1:0"]);
+    let mut s = spawn(&["sim", "--no-http", "--listen", "127.0.0.1:0"]);
     let addr = s.listening(1).into_values().next().expect("an address");
     (s, addr)
 }

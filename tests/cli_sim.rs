@@ -59,9 +59,16 @@ struct Running {
     lines: std::sync::mpsc::Receiver<String>,
 }
 
-/// Starts `llrp-gateway sim` with `args` on a free loopback port and waits for its
+/// Starts `llrp-gateway sim --no-http` with `args` on a free loopback port and waits for its
 /// "listening on" line.
 fn spawn_sim(args: &[&str]) -> Running {
+    let mut all = vec!["--no-http"];
+    all.extend_from_slice(args);
+    spawn_sim_as(&all)
+}
+
+/// [`spawn_sim`] with exactly `args` (the HTTP API on by default).
+fn spawn_sim_as(args: &[&str]) -> Running {
     use std::io::{BufRead, BufReader};
     use std::process::Stdio;
 
@@ -171,6 +178,55 @@ fn failed_accepts_back_off_and_the_reader_recovers() {
     assert!(
         log.contains("pausing accepts for 20ms"),
         "the pause grows: {log}"
+    );
+}
+
+/// The default HTTP address taken (here, or by anyone else): one line says so, and the
+/// simulator serves LLRP all the same.
+#[test]
+fn a_taken_default_http_port_is_said_in_one_line_and_the_simulator_runs_on() {
+    // Held for the test if free; if another process holds it, it is taken all the same.
+    let _hold = std::net::TcpListener::bind("127.0.0.1:8080");
+    let sim = spawn_sim_as(&[]);
+    let mut s = std::net::TcpStream::connect(&sim.addr).expect("LLRP is served");
+    s.set_read_timeout(Some(std::time::Duration::from_secs(20)))
+        .expect("timeout");
+    let hello = read_message(&mut s).expect("the greeting");
+    assert_eq!(hello.name(), "READER_EVENT_NOTIFICATION");
+    let (ok, log) = sim.terminate();
+    assert!(ok, "{log}");
+    let said: Vec<&str> = log.lines().filter(|l| l.contains("is taken")).collect();
+    assert_eq!(said.len(), 1, "{log}");
+    assert!(
+        said[0].contains("127.0.0.1:8080") && said[0].contains("--http ADDR"),
+        "{log}"
+    );
+}
+
+/// An HTTP address the user chose must bind; beyond loopback it needs a token.
+#[test]
+fn a_chosen_http_address_that_cannot_serve_is_an_error() {
+    let held = std::net::TcpListener::bind("127.0.0.1:0").expect("binds");
+    let addr = held.local_addr().expect("bound").to_string();
+    let out = bin()
+        .args(["sim", "--listen", "127.0.0.1:0", "--http", &addr])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains(&format!("--http {addr}: cannot listen")),
+        "{err}"
+    );
+    let out = bin()
+        .args(["sim", "--listen", "127.0.0.1:0", "--http", "0.0.0.0:0"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--http 0.0.0.0:0") && err.contains("token"),
+        "{err}"
     );
 }
 

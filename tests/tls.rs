@@ -646,7 +646,7 @@ fn bin() -> Command {
 fn the_inventory_binary_reads_over_tls_from_the_sim_binary() {
     let pki = Pki::new();
     let mut cmd = bin();
-    cmd.args(["sim", "--listen", "127.0.0.1:0", "--tls-cert"])
+    cmd.args(["sim", "--no-http", "--listen", "127.0.0.1:0", "--tls-cert"])
         .arg(&pki.cert)
         .arg("--tls-key")
         .arg(&pki.key);

@@ -16,6 +16,7 @@ use crate::net::tls::{self, ServerFiles, Verify};
 use crate::record::{Header, RecordOptions, Recorder};
 use crate::stop::StopSignal;
 
+pub mod live;
 mod replay;
 
 pub use replay::{run_replay, ReplayArgs};
@@ -83,6 +84,9 @@ pub struct ProxyArgs {
     /// "upstream_insecure"}]}`.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// The live localizer and its HTTP API (`--http ADDR`).
+    #[command(flatten)]
+    pub live: live::LiveArgs,
 }
 
 /// A regulatory region's channel table.
@@ -345,6 +349,13 @@ pub fn run(args: ProxyArgs) -> ExitCode {
     let timeout = Duration::from_millis(args.connect_timeout_ms);
     runtime.block_on(async move {
         let stop = StopSignal::watch();
+        let localizer = match live::start(&args.live, "proxy").await {
+            Ok(l) => l,
+            Err(e) => {
+                eprintln!("llrp-gateway proxy: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
         let (stop_tx, stop_rx) = watch::channel(false);
         let mut tasks = Vec::new();
         let mut writers = Vec::new();
@@ -392,9 +403,14 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 tls: tls.0,
                 upstream_tls: tls.1,
             };
-            // No tap yet: its consumers (the localizer, the fleet publisher) are still to
-            // come, and decoding every read for nobody costs a third of the throughput.
-            let proxy = match Proxy::bind(config, recorder, None).await {
+            // A tap only for the localizer: decoding every read for nobody costs a third of
+            // the throughput.
+            let tap = localizer.as_ref().map(|l| {
+                let (tap, rx) = crate::net::proxy::Tap::new(4096);
+                tokio::spawn(live::forward(rx, l.tap()));
+                tap
+            });
+            let proxy = match Proxy::bind(config, recorder, tap).await {
                 Ok(p) => p,
                 Err(err) => {
                     eprintln!(
@@ -452,6 +468,9 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                     failed = true;
                 }
             }
+        }
+        if let Some(l) = localizer {
+            l.stop().await;
         }
         eprintln!("llrp-gateway proxy: stopped");
         if failed {

@@ -30,6 +30,9 @@ pub struct ReplayArgs {
     /// The private key (PEM) of `--tls-cert`.
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
+    /// The live localizer and its HTTP API (`--http ADDR`), fed with what is replayed.
+    #[command(flatten)]
+    pub live: super::live::LiveArgs,
 }
 
 /// Runs `llrp-gateway replay`.
@@ -100,11 +103,26 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
             ),
             Err(e) => eprintln!("llrp-gateway replay: {e}"),
         }
+        let localizer = match super::live::start(&args.live, "replay").await {
+            Ok(l) => l,
+            Err(e) => {
+                eprintln!("llrp-gateway replay: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        let upstream = &recording.header.upstream;
+        let name = upstream.strip_prefix("sim:").unwrap_or(upstream).to_string();
+        let tap = localizer.as_ref().map(|l| (name, l.tap()));
         let (tx, rx) = watch::channel(false);
-        let task = tokio::spawn(crate::net::replay::serve(listener, script, options, tls, rx));
+        let task = tokio::spawn(crate::net::replay::serve_tapped(
+            listener, script, options, tls, rx, tap,
+        ));
         stop.wait().await;
         let _ = tx.send(true);
         let _ = task.await;
+        if let Some(l) = localizer {
+            l.stop().await;
+        }
         eprintln!("llrp-gateway replay: stopped");
         ExitCode::SUCCESS
     })

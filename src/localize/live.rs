@@ -140,6 +140,21 @@ impl Tap {
         }
     }
 
+    /// Hands `input` to the localizer, or gives it back when it is behind (not counted as
+    /// dropped: for a caller that can wait, such as a pose file loaded at start); dropped and
+    /// counted when the localizer has stopped.
+    pub fn try_offer(&self, input: Input) -> Result<(), Input> {
+        match self.tx.try_send(input) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(i)) => Err(i),
+            Err(TrySendError::Disconnected(i)) => {
+                // The localizer has stopped: waiting would not help.
+                self.shared.metrics.dropped_taps.inc_by(i.weight());
+                Ok(())
+            }
+        }
+    }
+
     /// The localizer's published state.
     pub fn shared(&self) -> &Arc<Shared> {
         &self.shared

@@ -124,7 +124,10 @@ impl SettingsFile {
         if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
             return Err(bad(format!("tag_height_m: not a finite number: {h}")));
         }
-        if let Some(r) = s.reach_m.filter(|&r| r.is_nan() || r.is_infinite() || r <= 0.0) {
+        if let Some(r) = s
+            .reach_m
+            .filter(|&r| r.is_nan() || r.is_infinite() || r <= 0.0)
+        {
             return Err(bad(format!("reach_m: must be a positive number, got {r}")));
         }
         if let Some(f) = s.facing.filter(|f| {

@@ -109,6 +109,11 @@ impl Poses {
         }
     }
 
+    /// Every sample held, track by track.
+    pub fn samples(&self) -> Vec<PoseSample> {
+        self.tracks.values().flatten().cloned().collect()
+    }
+
     /// The earliest sample of any track.
     pub fn first(&self) -> Option<&PoseSample> {
         self.tracks

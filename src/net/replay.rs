@@ -18,6 +18,7 @@ use tokio::sync::watch;
 
 use super::connection::{Connection, Io};
 use super::tls::Acceptor;
+use crate::localize::live::{Input, Tap};
 use crate::record::replay::{ReplayOptions, ReplaySession, Script};
 use crate::record::writer::utc_now_us;
 
@@ -30,7 +31,20 @@ pub async fn serve(
     script: Arc<Script>,
     options: ReplayOptions,
     tls: Option<Acceptor>,
+    shutdown: watch::Receiver<bool>,
+) -> io::Result<()> {
+    serve_tapped(listener, script, options, tls, shutdown, None).await
+}
+
+/// [`serve`], offering every frame sent to the client to the live localizer's `tap` under the
+/// reader name given with it.
+pub async fn serve_tapped(
+    listener: TcpListener,
+    script: Arc<Script>,
+    options: ReplayOptions,
+    tls: Option<Acceptor>,
     mut shutdown: watch::Receiver<bool>,
+    tap: Option<(String, Tap)>,
 ) -> io::Result<()> {
     // Whether a client is being served; taken once a client's TLS handshake (if any) is
     // done, so a client that never finishes one does not keep the next one out.
@@ -56,6 +70,7 @@ pub async fn serve(
                 let busy = Arc::clone(&busy);
                 let stop = shutdown.clone();
                 let tls = tls.clone();
+                let tap = tap.clone();
                 tokio::spawn(async move {
                     let conn = match &tls {
                         None => Ok(Connection::new(stream)),
@@ -79,7 +94,22 @@ pub async fn serve(
                     // Frees the slot however the session ends (a panic included).
                     let slot = Slot(&busy);
                     tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
-                    match session(conn, peer, &script, options, stop).await {
+                    if let Some((name, t)) = &tap {
+                        t.shared().update_reader(name, |v| {
+                            v.connected = true;
+                            v.peer = Some(peer.to_string());
+                            v.inventory = "client".into();
+                        });
+                    }
+                    let result = session(conn, peer, &script, options, stop, tap.as_ref()).await;
+                    if let Some((name, t)) = &tap {
+                        t.shared().update_reader(name, |v| {
+                            v.connected = false;
+                            v.peer = None;
+                            v.inventory = "idle".into();
+                        });
+                    }
+                    match result {
                         Ok(()) => tracing::info!(%peer, "client disconnected"),
                         Err(e) => tracing::info!(%peer, "connection ended: {e}"),
                     }
@@ -97,6 +127,7 @@ async fn session(
     script: &Script,
     options: ReplayOptions,
     mut shutdown: watch::Receiver<bool>,
+    tap: Option<&(String, Tap)>,
 ) -> io::Result<()> {
     let start = Instant::now();
     let now = || start.elapsed().as_micros() as u64;
@@ -104,6 +135,13 @@ async fn session(
     loop {
         s.advance(now(), QUEUE_BYTES.saturating_sub(conn.queued()));
         let out = s.transmit();
+        if let (Some((name, t)), false) = (tap, out.bytes.is_empty()) {
+            t.offer(Input::Frames {
+                reader: name.clone(),
+                bytes: bytes::Bytes::copy_from_slice(&out.bytes[..]),
+                now_utc_us: utc_now_us(),
+            });
+        }
         conn.queue_buf(&mut out.bytes);
         if out.close {
             let _ = tokio::time::timeout(Duration::from_secs(1), conn.shutdown()).await;

@@ -1,0 +1,152 @@
+//! The live localizer and its HTTP API beside `proxy` and `replay` (on with `--http ADDR`):
+//! the reads of the real or replayed reader, poses from a pose file or `POST /api/poses`, the
+//! per-reader settings from a settings file.
+
+use std::path::PathBuf;
+
+use crate::http::launch::{launch, HttpArgs, Launched};
+use crate::localize::estimate::Estimator;
+use crate::localize::live::{Input, Live, Settings, Tap};
+use crate::localize::offline::{geometry, SettingsFile};
+use crate::localize::poses::Poses;
+use crate::localize::series::Ambiguity;
+use crate::net::proxy::Tapped;
+
+/// The localizer options of `proxy` and `replay`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct LiveArgs {
+    /// The HTTP API and live map (off unless `--http ADDR`; docs/http.md).
+    #[command(flatten)]
+    pub http: HttpArgs,
+    /// Antenna poses for the localizer: JSON Lines or CSV with `t_us, reader, antenna, x, y,
+    /// z, yaw_deg, pitch_deg` (robots may also POST them to /api/poses).
+    #[arg(long, value_name = "FILE")]
+    pub poses: Option<PathBuf>,
+    /// The localizer's per-reader settings (JSON; docs/localize.md).
+    #[arg(long, value_name = "FILE")]
+    pub localize_settings: Option<PathBuf>,
+    /// The localizer's estimator.
+    #[arg(long, default_value = "relock")]
+    pub estimator: Estimator,
+}
+
+/// A running localizer and its API.
+pub struct Running {
+    /// The localizer.
+    pub live: Live,
+    /// Its HTTP API.
+    pub http: Launched,
+}
+
+impl Running {
+    /// The localizer's tap.
+    pub fn tap(&self) -> Tap {
+        self.live.tap.clone()
+    }
+
+    /// Stops the API, then the localizer.
+    pub async fn stop(self) {
+        self.http.stop().await;
+        self.live.stop();
+    }
+}
+
+/// Starts the localizer and its API when `--http` was given; `command` names the command in
+/// messages.
+pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, String> {
+    let Some((addr, chosen)) = args.http.address(None) else {
+        return Ok(None);
+    };
+    let file = match &args.localize_settings {
+        Some(p) => SettingsFile::load(p).map_err(|e| e.to_string())?,
+        None => SettingsFile::default(),
+    };
+    let poses = match &args.poses {
+        Some(p) => {
+            let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            Poses::read(std::io::BufReader::new(f)).map_err(|e| format!("{}: {e}", p.display()))?
+        }
+        None => Poses::new(),
+    };
+    let settings = Settings {
+        estimator: args.estimator,
+        geometry: geometry(&file, &[], &poses),
+        ambiguity: if file.pi_ambiguity {
+            Ambiguity::Pi
+        } else {
+            Ambiguity::None
+        },
+        ..Settings::default()
+    };
+    let live = Live::start(settings).map_err(|e| format!("cannot start the localizer: {e}"))?;
+    for (reader, offset) in &file.clock_offsets_us {
+        live.tap.offer(Input::Reader {
+            name: reader.clone(),
+            hop_table: None,
+            antennas: Vec::new(),
+            clock_offset_us: *offset,
+        });
+    }
+    let samples = poses.samples();
+    for chunk in samples.chunks(1024) {
+        // A pose file larger than the tap holds goes in as the localizer takes it.
+        let mut input = Input::Poses(chunk.to_vec());
+        loop {
+            match live.tap.try_offer(input) {
+                Ok(()) => break,
+                Err(back) => {
+                    input = back;
+                    tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+                }
+            }
+        }
+    }
+    let http = launch(
+        &addr,
+        chosen,
+        args.http.http_token.clone(),
+        false,
+        live.shared.clone(),
+        live.tap.clone(),
+    )
+    .await
+    .map_err(|e| e.to_string())?
+    .ok_or_else(|| format!("--http {addr}: cannot listen"))?;
+    eprintln!(
+        "llrp-gateway {command}: HTTP API and live map on http://{}/",
+        http.addr
+    );
+    Ok(Some(Running { live, http }))
+}
+
+/// Hands the proxy's tapped reads to the localizer until the proxy's tap closes.
+pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, tap: Tap) {
+    while let Some(t) = rx.recv().await {
+        match t {
+            Tapped::Reads(reads) => {
+                tap.offer(Input::Reads(reads));
+            }
+            Tapped::Event {
+                reader, message, ..
+            } => {
+                let llrp::MessageBody::ReaderEventNotification(n) = &message.body else {
+                    continue;
+                };
+                let data = &n.reader_event_notification_data;
+                let connected = if data.connection_close_event.is_some() {
+                    Some(false)
+                } else {
+                    data.connection_attempt_event
+                        .as_ref()
+                        .map(|e| e.status == llrp::enums::ConnectionAttemptStatus::Success)
+                };
+                if let Some(c) = connected {
+                    tap.shared().update_reader(&reader, |v| {
+                        v.connected = c;
+                        v.inventory = if c { "client" } else { "idle" }.into();
+                    });
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,235 @@
+//! The live localizer beside `replay` and `proxy` (`--http ADDR`): a replayed recording with
+//! its pose file localizes as `localize` does offline; the proxy's tapped reads reach it.
+
+mod http_support;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use http_support::request;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+}
+
+fn fixture(name: &str) -> String {
+    let p: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/localize")
+        .join(name);
+    p.to_str().expect("utf-8").to_string()
+}
+
+/// A running child with the addresses it printed; SIGTERM and a wait when dropped.
+struct Proc {
+    child: Child,
+    lines: mpsc::Receiver<String>,
+    log: Vec<String>,
+}
+
+impl Proc {
+    fn spawn(args: &[&str]) -> Proc {
+        let mut child = bin()
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("runs");
+        let stderr = child.stderr.take().expect("piped");
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        Proc {
+            child,
+            lines,
+            log: Vec::new(),
+        }
+    }
+
+    /// The address after `marker` in the first line of the log that has it.
+    fn address(&mut self, marker: &str) -> String {
+        let mut seen = 0;
+        loop {
+            if seen == self.log.len() {
+                let line = self
+                    .lines
+                    .recv_timeout(Duration::from_secs(30))
+                    .unwrap_or_else(|_| panic!("no line with {marker:?} in {:?}", self.log));
+                self.log.push(line);
+            }
+            let line = &self.log[seen];
+            seen += 1;
+            if let Some(rest) = line.split(marker).nth(1) {
+                return rest
+                    .split([',', ' '])
+                    .next()
+                    .unwrap_or_default()
+                    .trim_end_matches('/')
+                    .to_string();
+            }
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Polls `GET path` until `pred` holds on its JSON (at most 60 s); the last JSON.
+fn poll(
+    http: std::net::SocketAddr,
+    path: &str,
+    pred: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let v = request(http, "GET", path, &[], b"").json();
+        if pred(&v) || Instant::now() > deadline {
+            return v;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_replayed_recording_localizes_live_as_localize_does_offline() {
+    let rec = fixture("s1-report-per-read.jsonl");
+    let poses = fixture("s1-report-per-read.poses.jsonl");
+    let settings = fixture("s1-report-per-read.settings.json");
+    let mut replay = Proc::spawn(&[
+        "replay",
+        &rec,
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+        "--http",
+        "127.0.0.1:0",
+        "--poses",
+        &poses,
+        "--localize-settings",
+        &settings,
+    ]);
+    let http: std::net::SocketAddr = replay.address("live map on http://").parse().expect("addr");
+    let llrp = replay.address("listening on ");
+    // The client the recording was made with, asking what it asked then.
+    let status = bin()
+        .args(["inventory", &llrp, "--impinj", "--report-every", "1"])
+        .args(["--seconds", "3"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .expect("inventory runs");
+    assert!(status.success());
+    let all_in = |v: &serde_json::Value| {
+        v["tags"]
+            .as_array()
+            .is_some_and(|t| t.len() == 10 && t.iter().all(|t| t["state"] == "converged"))
+    };
+    let live = poll(http, "/api/tags", all_in);
+    assert!(all_in(&live), "{live}");
+    let readers = request(http, "GET", "/api/readers", &[], b"").json();
+    assert_eq!(readers["readers"][0]["name"], "s1-reader", "{readers}");
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("offline.json");
+    let ok = bin()
+        .args(["localize", &rec, "--poses", &poses, "--settings", &settings])
+        .arg("--output")
+        .arg(&out)
+        .stderr(Stdio::null())
+        .status()
+        .expect("localize runs")
+        .success();
+    assert!(ok);
+    let offline: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).expect("written")).expect("JSON");
+    for (a, b) in live["tags"]
+        .as_array()
+        .expect("live")
+        .iter()
+        .zip(offline["tags"].as_array().expect("offline"))
+    {
+        assert_eq!(a["epc"], b["epc"]);
+        let d = ["x", "y"]
+            .map(|k| a["estimate"][k].as_f64().expect("p") - b["estimate"][k].as_f64().expect("q"));
+        assert!(d[0].hypot(d[1]) < 1e-3, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn the_proxys_tapped_reads_reach_the_localizer() {
+    let mut sim = Proc::spawn(&[
+        "sim",
+        "--no-http",
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "8",
+    ]);
+    let upstream = sim.address("listening on ");
+    let mut proxy = Proc::spawn(&[
+        "proxy",
+        "--upstream",
+        &upstream,
+        "--listen",
+        "127.0.0.1:0",
+        "--http",
+        "127.0.0.1:0",
+    ]);
+    let http: std::net::SocketAddr = proxy.address("live map on http://").parse().expect("addr");
+    let llrp = proxy.address("listening on ");
+    let status = bin()
+        .args(["inventory", &llrp, "--impinj", "--seconds", "2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .expect("inventory runs");
+    assert!(status.success());
+    let readers = poll(http, "/api/readers", |v| {
+        v["readers"][0]["reads"].as_u64().unwrap_or(0) > 0
+    });
+    assert_eq!(readers["readers"][0]["name"], "reader", "{readers}");
+    assert!(
+        readers["readers"][0]["reads"].as_u64().unwrap_or(0) > 0,
+        "{readers}"
+    );
+    // No pose came: the reads are set aside as such, never guessed.
+    let metrics = request(http, "GET", "/metrics", &[], b"").text();
+    let count = |name: &str| -> u64 {
+        metrics
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    assert!(count("llrp_gateway_reads_total") > 0, "{metrics}");
+    assert!(count("llrp_gateway_reads_set_aside_total") > 0, "{metrics}");
+    let tags = request(http, "GET", "/api/tags", &[], b"").json();
+    assert!(
+        tags["tags"].as_array().is_some_and(
+            |t| !t.is_empty() && t.iter().all(|t| t["state"] == "insufficient_geometry")
+        ),
+        "{tags}"
+    );
+}
