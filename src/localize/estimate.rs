@@ -62,8 +62,13 @@ pub enum Estimator {
 
 impl Estimator {
     /// Every estimator, in the order the docs list them.
-    pub const ALL: &'static [Estimator] =
-        &[Estimator::Relock, Estimator::Linear, Estimator::Hyperbolic];
+    pub const ALL: &'static [Estimator] = &[
+        Estimator::Relock,
+        Estimator::Linear,
+        Estimator::Hyperbolic,
+        Estimator::Loci3d,
+        Estimator::Fingerprint,
+    ];
 
     /// The estimator's name (`relock`, ...).
     pub fn name(self) -> &'static str {
@@ -279,6 +284,27 @@ mod tests {
             }),
             last_seen_us: None,
         }
+    }
+
+    #[test]
+    fn every_estimator_is_listed_once_and_parses_from_its_name() {
+        // An exhaustive match: a new estimator must be placed here, and then in ALL.
+        let place = |e: Estimator| match e {
+            Estimator::Relock => 0,
+            Estimator::Linear => 1,
+            Estimator::Hyperbolic => 2,
+            Estimator::Loci3d => 3,
+            Estimator::Fingerprint => 4,
+        };
+        let mut seen: Vec<usize> = Estimator::ALL.iter().map(|&e| place(e)).collect();
+        seen.sort();
+        assert_eq!(seen, (0..5).collect::<Vec<_>>());
+        for &e in Estimator::ALL {
+            assert_eq!(e.name().parse::<Estimator>(), Ok(e));
+        }
+        assert!("kalman"
+            .parse::<Estimator>()
+            .is_err_and(|m| m.contains("relock, linear")));
     }
 
     #[test]

@@ -14,8 +14,9 @@ use super::relock::{Fix, NoFix, Obs};
 
 /// Fewest phases a segment needs (ours).
 pub const MIN_SAMPLES: usize = 10;
-/// Largest RMS distance of a segment's antenna positions from their straight line (m, ours).
-pub const MAX_PATH_RMS_M: f64 = 0.01;
+/// Largest RMS distance of a segment's antenna positions from their straight line (m, ours:
+/// the jitter of a robot's own pose estimate, some centimetres, still counts as straight).
+pub const MAX_PATH_RMS_M: f64 = 0.05;
 /// Largest vertical component of a path's unit direction for a 2D fix (ours).
 pub const MAX_SLOPE: f64 = 0.05;
 

@@ -1,8 +1,8 @@
 //! Phase ReLock (\[A\] §III-A1) in 2D: the tag position (x, y) and one phase offset per segment
 //! that best explain the unwrapped phases, θ_i ≈ s·4π·d_i/λ_i + c_k, by Levenberg–Marquardt
-//! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a coarse
-//! grid (5 cm, on up to 200 of the phases) on the side the antenna faces (the mirror image about a straight path explains the
-//! phases as well).
+//! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a grid on
+//! the side the antenna faces (the mirror image about a straight path explains the phases as
+//! well): 25 cm on up to 64 of the phases, then 5 cm on up to 200 around its best.
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
@@ -95,23 +95,43 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 }
 
-/// Residual sum of squares at (x, y) with each segment's offset at its best (the mean).
-fn cost(obs: &[Obs], segments: usize, z: f64, sign: f64, x: f64, y: f64) -> f64 {
-    let model = |o: &Obs| {
+/// Residual sum of squares at (x, y) with each segment's offset at its best (the mean);
+/// `sum` and `n` are scratch space of one entry per segment.
+#[allow(clippy::too_many_arguments)]
+fn cost(
+    obs: &[Obs],
+    z: f64,
+    sign: f64,
+    x: f64,
+    y: f64,
+    sum: &mut [f64],
+    sq: &mut [f64],
+    n: &mut [usize],
+) -> f64 {
+    sum.fill(0.0);
+    sq.fill(0.0);
+    n.fill(0);
+    for o in obs {
         let d =
             ((x - o.antenna[0]).powi(2) + (y - o.antenna[1]).powi(2) + (z - o.antenna[2]).powi(2))
                 .sqrt();
-        o.phase_rad - sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
-    };
-    let mut sum = vec![0.0; segments];
-    let mut n = vec![0usize; segments];
-    for o in obs {
-        sum[o.segment] += model(o);
+        let r = o.phase_rad - sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m;
+        sum[o.segment] += r;
+        sq[o.segment] += r * r;
         n[o.segment] += 1;
     }
-    obs.iter()
-        .map(|o| (model(o) - sum[o.segment] / n[o.segment].max(1) as f64).powi(2))
+    // Σ(r − mean)² = Σr² − (Σr)²/n per segment.
+    sum.iter()
+        .zip(sq.iter())
+        .zip(n.iter())
+        .map(|((s, q), &k)| if k == 0 { 0.0 } else { q - s * s / k as f64 })
         .sum()
+}
+
+/// Up to `max` of `obs`, evenly spread.
+fn spread(obs: &[Obs], max: usize) -> Vec<Obs> {
+    let stride = obs.len().div_ceil(max).max(1);
+    obs.iter().step_by(stride).copied().collect()
 }
 
 /// The position of a tag at height `z` from `obs` (phase sign `sign`: +1 or −1), searching
@@ -138,32 +158,45 @@ pub fn locate(
     if obs.len() < segments + 3 || aperture < lambda / 2.0 {
         return Err(NoFix::InsufficientGeometry);
     }
-    // Coarse grid, 5 cm, over the path's box widened by the reach, on the facing side.
+    // A coarse grid (25 cm, up to 64 phases) over the path's box widened by the reach, on the
+    // facing side, then a fine one (5 cm, up to 200 phases) around its best point; after
+    // unwrapping the cost is smooth on that side, so the coarse best is near the minimum.
     let mid = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
-    let step = 0.05;
-    let (nx, ny) = (
-        ((max[0] - min[0] + 2.0 * reach_m) / step) as i64,
-        ((max[1] - min[1] + 2.0 * reach_m) / step) as i64,
-    );
-    // The grid looks at up to 200 phases evenly spread (LM then uses all of them).
-    let stride = obs.len().div_ceil(200).max(1);
-    let coarse: Vec<Obs> = obs.iter().step_by(stride).copied().collect();
+    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
+    let mut search =
+        |obs: &[Obs], lo: [f64; 2], hi: [f64; 2], step: f64, best: &mut (f64, f64, f64)| {
+            let nx = ((hi[0] - lo[0]) / step).ceil() as i64;
+            let ny = ((hi[1] - lo[1]) / step).ceil() as i64;
+            for i in 0..=nx {
+                for j in 0..=ny {
+                    let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
+                    if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
+                        continue;
+                    }
+                    let c = cost(obs, z, sign, x, y, &mut sum, &mut sq, &mut n);
+                    if c < best.0 {
+                        *best = (c, x, y);
+                    }
+                }
+            }
+        };
     let mut best = (f64::INFINITY, mid[0], mid[1]);
-    for i in 0..=nx {
-        for j in 0..=ny {
-            let (x, y) = (
-                min[0] - reach_m + i as f64 * step,
-                min[1] - reach_m + j as f64 * step,
-            );
-            if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
-                continue;
-            }
-            let c = cost(&coarse, segments, z, sign, x, y);
-            if c < best.0 {
-                best = (c, x, y);
-            }
-        }
-    }
+    search(
+        &spread(obs, 64),
+        [min[0] - reach_m, min[1] - reach_m],
+        [max[0] + reach_m, max[1] + reach_m],
+        0.25,
+        &mut best,
+    );
+    let (cx, cy) = (best.1, best.2);
+    best.0 = f64::INFINITY;
+    search(
+        &spread(obs, 200),
+        [cx - 0.3, cy - 0.3],
+        [cx + 0.3, cy + 0.3],
+        0.05,
+        &mut best,
+    );
     let mut p = DVector::zeros(2 + segments);
     p[0] = best.1;
     p[1] = best.2;
