@@ -87,6 +87,16 @@ enum Command {
     Import(llrp_gateway::record::pcapng::ImportArgs),
     /// Localize every tag of a recording or a reads file (docs/localize.md).
     Localize(llrp_gateway::localize::command::LocalizeArgs),
+    /// Benchmarks (docs/benchmarks.md).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Simulate a scenario faster than real time and localize it with every applicable
+    /// estimator: errors against the truth and compute times.
+    Localize(llrp_gateway::localize::bench_cli::BenchLocalizeArgs),
 }
 
 fn main() -> ExitCode {
@@ -96,6 +106,9 @@ fn main() -> ExitCode {
         Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),
         Command::Import(args) => llrp_gateway::record::pcapng::run_import(&args),
         Command::Localize(args) => llrp_gateway::localize::command::run(args),
+        Command::Bench(BenchCommand::Localize(args)) => {
+            llrp_gateway::localize::bench_cli::run(args)
+        }
         Command::Sim {
             scenario,
             listen,

@@ -8,6 +8,8 @@
 //! reads and poses, never simulator internals, so it works the same on a real reader's data.
 //! The `localize` command and the HTTP API are still to come.
 
+pub mod bench;
+pub mod bench_cli;
 pub mod command;
 pub mod estimate;
 pub mod fingerprint;
@@ -17,6 +19,7 @@ pub mod linear;
 pub mod live;
 pub mod loci3d;
 pub mod offline;
+pub mod plot;
 pub mod poses;
 pub mod relock;
 pub mod series;

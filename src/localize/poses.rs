@@ -114,6 +114,11 @@ impl Poses {
         self.tracks.values().flatten().cloned().collect()
     }
 
+    /// The first sample of each track.
+    pub fn first_samples(&self) -> Vec<&PoseSample> {
+        self.tracks.values().filter_map(|t| t.first()).collect()
+    }
+
     /// The earliest sample of any track.
     pub fn first(&self) -> Option<&PoseSample> {
         self.tracks

@@ -1,0 +1,263 @@
+//! `llrp-gateway bench localize`: a scenario simulated faster than real time through the
+//! simulated reader's own LLRP output (every reader inventories all its antennas, a report
+//! per read), localized by every applicable estimator with the true antenna poses and with
+//! the poses the robot itself reports; errors against the ground truth and compute times.
+
+use std::time::Instant;
+
+use super::estimate::{estimate_all, Estimate, Estimator, Geometry};
+use super::ingest::Ingest;
+use super::live::Settings;
+use super::poses::{PoseSample, Poses};
+use crate::physics::{AntennaPose, Model, World};
+use crate::reader::session::Now;
+use crate::reader::{Reader, ReaderProfile};
+use crate::reads::{Read, ReadDecoder};
+use crate::scenario::{Mount, Scenario};
+use crate::sim::own::OwnInventory;
+
+/// Simulated time between two steps of the readers (µs).
+const STEP_US: u64 = 10_000;
+
+/// Simulated time between two pose samples (µs).
+const POSE_US: u64 = 100_000;
+
+/// The reads and poses of one simulated run.
+pub struct Run {
+    /// Every read, in time order per reader.
+    pub reads: Vec<Read>,
+    /// The true antenna poses.
+    pub true_poses: Poses,
+    /// The poses the robots report.
+    pub estimated_poses: Poses,
+    /// Each tag's true position (at time 0), by EPC.
+    pub truth: Vec<(String, [f64; 3], bool)>,
+    /// The localizer's settings, from the scenario (geometry, π ambiguity).
+    pub settings: Settings,
+    /// Simulated seconds run.
+    pub seconds: f64,
+}
+
+/// How long a scenario runs: until its slowest robot has driven its path (a 2 s margin),
+/// 10 s without robots.
+pub fn duration_s(s: &Scenario) -> f64 {
+    let mut longest: f64 = 0.0;
+    for r in &s.readers {
+        for a in &r.antennas {
+            if let Mount::Robot { robot, .. } = &a.mount {
+                let mut at = [robot.start[0], robot.start[1]];
+                let mut length = 0.0;
+                for w in &robot.waypoints {
+                    length += (w[0] - at[0]).hypot(w[1] - at[1]);
+                    at = *w;
+                }
+                longest = longest.max(length / robot.speed.max(1e-6));
+            }
+        }
+    }
+    if longest > 0.0 {
+        longest + 2.0
+    } else {
+        10.0
+    }
+}
+
+fn sample(reader: &str, antenna: u16, t_us: u64, p: &AntennaPose) -> PoseSample {
+    PoseSample {
+        t_us,
+        reader: reader.to_string(),
+        antenna,
+        x: p.position[0],
+        y: p.position[1],
+        z: p.position[2],
+        yaw_deg: p.yaw_rad.to_degrees(),
+        pitch_deg: p.pitch_rad.to_degrees(),
+    }
+}
+
+/// Simulates `scenario` for `seconds` of simulated time.
+pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
+    let world = World::new(scenario);
+    let end_us = (seconds * 1e6) as u64;
+    let mut reads = Vec::new();
+    let (mut true_poses, mut estimated_poses) = (Poses::new(), Poses::new());
+    let mut settings = Settings::default();
+    let mut truth = Vec::new();
+    for (i, spec) in scenario.readers.iter().enumerate() {
+        let model = std::sync::Arc::new(Model::in_world(&world, scenario, i));
+        if i == 0 {
+            settings = crate::sim::feed::settings(scenario, &model, Settings::default());
+            truth = (0..model.tag_count())
+                .map(|k| {
+                    (
+                        crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
+                        model.tag_position(k, 0),
+                        scenario.tags.get(k).is_some_and(|t| t.reference),
+                    )
+                })
+                .collect();
+        }
+        let profile = ReaderProfile::from_scenario(scenario, i, &model);
+        let table = llrp::units::HopTable {
+            id: 1,
+            frequencies_khz: profile.frequencies_khz.clone(),
+        };
+        // UTC 0 is simulated time 0: the poses need no clock offset.
+        let reader = Reader::new(profile, model.clone(), 0);
+        let mut decoder =
+            ReadDecoder::new(Some(spec.name.clone())).with_fallback_table(Some(table));
+        let Some(mut own) = OwnInventory::start(reader, Now::default()) else {
+            continue;
+        };
+        let mut t = 0;
+        while t <= end_us {
+            own.advance(Now {
+                sim_us: t,
+                wall_ms: t / 1000,
+            });
+            if let Some(bytes) = own.take_output() {
+                let mut at = 0;
+                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
+                    let len = (h.length as usize).max(llrp::frame::HEADER_LEN);
+                    if at + len > bytes.len() {
+                        break;
+                    }
+                    let _ = decoder.frame(&bytes[at..at + len], t, &mut reads);
+                    at += len;
+                }
+            }
+            if t % POSE_US == 0 {
+                for a in 1..=model.antenna_count() {
+                    true_poses.add(sample(&spec.name, a, t, &model.antenna_pose(a, t)));
+                    estimated_poses.add(sample(&spec.name, a, t, &model.estimated_pose(a, t)));
+                }
+            }
+            t += STEP_US;
+        }
+    }
+    Run {
+        reads,
+        true_poses,
+        estimated_poses,
+        truth,
+        settings,
+        seconds,
+    }
+}
+
+/// Error statistics of one estimator on one run (m), and its compute time (s).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scores {
+    /// The estimator.
+    pub estimator: Estimator,
+    /// `true` or `estimated` poses.
+    pub poses: &'static str,
+    /// Tags with an estimate, of those the reads cover (reference tags left out).
+    pub located: usize,
+    /// Tags read.
+    pub read: usize,
+    /// Mean, median, max and standard deviation of the error.
+    pub mean: f64,
+    /// Median error.
+    pub median: f64,
+    /// Largest error.
+    pub max: f64,
+    /// Standard deviation of the error.
+    pub std: f64,
+    /// Ingest and estimation of every tag, reads already in memory (s).
+    pub seconds: f64,
+    /// The estimates.
+    pub estimates: Vec<Estimate>,
+}
+
+/// Whether `e` estimates in 3D (its error is measured in 3D).
+pub fn is_3d(e: Estimator) -> bool {
+    matches!(e, Estimator::Loci3d | Estimator::Fingerprint)
+}
+
+/// Localizes `run` with `estimator` on `poses` (`"true"` or `"estimated"`).
+pub fn score(run: &Run, estimator: Estimator, estimated: bool) -> Scores {
+    let poses = if estimated {
+        run.estimated_poses.clone()
+    } else {
+        run.true_poses.clone()
+    };
+    let mut g: Geometry = run.settings.geometry.clone();
+    if estimator != Estimator::Fingerprint {
+        g.references.clear();
+    }
+    let start = Instant::now();
+    let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us);
+    for r in &run.reads {
+        ingest.push(r);
+    }
+    let estimates = estimate_all(&ingest, estimator, &g);
+    let seconds = start.elapsed().as_secs_f64();
+    let mut errors = Vec::new();
+    let mut read = 0;
+    for e in &estimates {
+        let Some((_, p, reference)) = run.truth.iter().find(|(epc, _, _)| *epc == e.epc) else {
+            continue;
+        };
+        if *reference {
+            continue;
+        }
+        read += 1;
+        if let Some(q) = e.estimate {
+            let dz = if is_3d(estimator) { q[2] - p[2] } else { 0.0 };
+            errors.push(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + dz * dz).sqrt());
+        }
+    }
+    let (mean, median, max, std) = stats(&mut errors);
+    Scores {
+        estimator,
+        poses: if estimated { "estimated" } else { "true" },
+        located: errors.len(),
+        read,
+        mean,
+        median,
+        max,
+        std,
+        seconds,
+        estimates,
+    }
+}
+
+/// Mean, median, max and standard deviation (NaN for none).
+fn stats(v: &mut [f64]) -> (f64, f64, f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let median = if v.len() % 2 == 1 {
+        v[v.len() / 2]
+    } else {
+        (v[v.len() / 2 - 1] + v[v.len() / 2]) / 2.0
+    };
+    let std = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+    (mean, median, v[v.len() - 1], std)
+}
+
+/// The estimators that apply to a scenario: the 2D phase estimators always, loci3d with
+/// antennas at two heights or more, fingerprinting with reference tags.
+pub fn applicable(run: &Run) -> Vec<Estimator> {
+    let mut heights: Vec<f64> = run
+        .true_poses
+        .first_samples()
+        .iter()
+        .map(|p| (p.z * 100.0).round())
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    heights.dedup();
+    Estimator::ALL
+        .iter()
+        .copied()
+        .filter(|&e| match e {
+            Estimator::Loci3d => heights.len() >= 2,
+            Estimator::Fingerprint => run.truth.iter().any(|t| t.2),
+            _ => true,
+        })
+        .collect()
+}

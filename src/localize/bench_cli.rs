@@ -1,0 +1,107 @@
+//! The `bench localize` command line: the table of errors and compute times, and the plot.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use super::bench::{applicable, duration_s, score, simulate, Scores};
+use crate::scenario::Scenario;
+
+/// `llrp-gateway bench localize`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct BenchLocalizeArgs {
+    /// `S1` (the embedded default), `S2` (\[A\]'s side-by-side banners), `S2-back-to-back`,
+    /// `S3`, or a scenario file.
+    #[arg(long, default_value = "S1")]
+    pub scenario: String,
+    /// Simulated seconds (default: until the slowest robot has driven its path, + 2 s).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Write the plot of truth against the `relock` estimates here (PNG).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// The scenario `name` (a fixture's name or a file).
+pub fn scenario(name: &str) -> Result<Scenario, String> {
+    let embedded = match name.to_ascii_uppercase().as_str() {
+        "S1" => return Ok(Scenario::default_s1()),
+        "S2" => include_str!("../../fixtures/scenarios/s2-side-by-side.json"),
+        "S2-BACK-TO-BACK" => include_str!("../../fixtures/scenarios/s2-back-to-back.json"),
+        "S3" => include_str!("../../fixtures/scenarios/s3.json"),
+        _ => {
+            let path = std::path::Path::new(name);
+            return Scenario::load(path).map_err(|e| format!("{name}: {e}"));
+        }
+    };
+    Scenario::from_json(embedded).map_err(|e| format!("{name}: {e}"))
+}
+
+/// Runs `bench localize`.
+pub fn run(args: BenchLocalizeArgs) -> ExitCode {
+    let s = match scenario(&args.scenario) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("llrp-gateway bench localize: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let seconds = args.seconds.unwrap_or_else(|| duration_s(&s));
+    eprintln!(
+        "llrp-gateway bench localize: scenario '{}', {seconds:.0} s simulated...",
+        s.name
+    );
+    let started = std::time::Instant::now();
+    let run = simulate(&s, seconds);
+    let tags = run.truth.iter().filter(|t| !t.2).count();
+    println!(
+        "Scenario '{}': {} reads of {} tags ({} reference tags) in {seconds:.0} s simulated ({:.1} s to simulate)\n",
+        s.name,
+        run.reads.len(),
+        tags,
+        run.truth.len() - tags,
+        started.elapsed().as_secs_f64()
+    );
+    println!("| estimator | poses | located | mean (mm) | median (mm) | max (mm) | std (mm) | compute (ms) |");
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut relock: Vec<Scores> = Vec::new();
+    for e in applicable(&run) {
+        for estimated in [false, true] {
+            let sc = score(&run, e, estimated);
+            let mm = |v: f64| {
+                if v.is_finite() {
+                    format!("{:.1}", v * 1e3)
+                } else {
+                    "–".into()
+                }
+            };
+            println!(
+                "| {} | {} | {}/{} | {} | {} | {} | {} | {:.1} |",
+                e,
+                sc.poses,
+                sc.located,
+                sc.read,
+                mm(sc.mean),
+                mm(sc.median),
+                mm(sc.max),
+                mm(sc.std),
+                sc.seconds * 1e3
+            );
+            if e == super::estimate::Estimator::Relock {
+                relock.push(sc);
+            }
+        }
+    }
+    println!("\n2D estimators: error in (x, y), the tags at the height assumed; 3D (loci3d, fingerprint): in (x, y, z). Compute: filing the reads into series and estimating every tag, reads in memory, one core.");
+    if let (Some(path), [t, e]) = (&args.plot, relock.as_slice()) {
+        let title = format!("{}: truth and relock estimates", s.name);
+        if let Err(err) = super::plot::plot(path, &title, &run, t, e) {
+            eprintln!("llrp-gateway bench localize: {}: {err}", path.display());
+            return ExitCode::FAILURE;
+        }
+        eprintln!(
+            "llrp-gateway bench localize: plot written to {}",
+            path.display()
+        );
+    }
+    ExitCode::SUCCESS
+}
