@@ -170,11 +170,6 @@ pub struct Scores {
     pub estimates: Vec<Estimate>,
 }
 
-/// Whether `e` estimates in 3D (its error is measured in 3D).
-pub fn is_3d(e: Estimator) -> bool {
-    matches!(e, Estimator::Loci3d | Estimator::Fingerprint)
-}
-
 /// Localizes `run` with `estimator` on `poses` (`"true"` or `"estimated"`).
 pub fn score(run: &Run, estimator: Estimator, estimated: bool) -> Scores {
     let poses = if estimated {
@@ -204,7 +199,12 @@ pub fn score(run: &Run, estimator: Estimator, estimated: bool) -> Scores {
         }
         read += 1;
         if let Some(q) = e.estimate {
-            let dz = if is_3d(estimator) { q[2] - p[2] } else { 0.0 };
+            // A 3D estimate (its covariance has a z term) is scored in 3D, a 2D one in (x, y).
+            let dz = if e.covariance.is_some_and(|c| c[8] > 0.0) {
+                q[2] - p[2]
+            } else {
+                0.0
+            };
             errors.push(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + dz * dz).sqrt());
         }
     }

@@ -91,7 +91,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             }
         }
     }
-    println!("\n2D estimators: error in (x, y), the tags at the height assumed; 3D (loci3d, fingerprint): in (x, y, z). Compute: filing the reads into series and estimating every tag, reads in memory, one core.");
+    println!("\nError in (x, y, z) for 3D estimates (loci3d, fingerprint, and relock with antennas at several heights), in (x, y) for 2D ones (the tags at the height assumed). Compute: filing the reads into series and estimating every tag, reads in memory, one core.");
     if let (Some(path), [t, e]) = (&args.plot, relock.as_slice()) {
         let title = format!("{}: truth and relock estimates", s.name);
         if let Err(err) = super::plot::plot(path, &title, &run, t, e) {

@@ -205,7 +205,16 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
     };
     let fix = match estimator {
         Estimator::Relock => {
-            relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m).map(planar)
+            let (lo, hi) = obs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), o| {
+                (lo.min(o.antenna[2]), hi.max(o.antenna[2]))
+            });
+            if hi - lo >= relock::MIN_HEIGHT_SPAN_M {
+                // Antennas at several heights: the height is estimated too.
+                relock::locate3d(&obs, g.phase_sign, g.facing, g.reach_m)
+                    .map(|f| (f.position, f.covariance))
+            } else {
+                relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m).map(planar)
+            }
         }
         Estimator::Linear => {
             linear::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)

@@ -69,7 +69,7 @@ impl Default for Settings {
                 references: Vec::new(),
             },
             ambiguity: Ambiguity::None,
-            max_gap_us: 1_000_000,
+            max_gap_us: super::series::DEFAULT_MAX_GAP_US,
             pose_reach_us: super::poses::DEFAULT_REACH_US,
             min_interval: Duration::from_millis(50),
             compute_budget: Duration::from_millis(50),

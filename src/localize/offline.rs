@@ -243,7 +243,7 @@ pub fn localize(
     // merged reads file, may not be).
     reads.sort_by_key(|r| r.t_us);
     let mut stats: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
-    let mut ingest = Ingest::new(poses, ambiguity, 1_000_000);
+    let mut ingest = Ingest::new(poses, ambiguity, super::series::DEFAULT_MAX_GAP_US);
     for r in &reads {
         ingest.push(r);
         let s = stats.entry(r.epc.clone()).or_insert((r.t_us, r.t_us, 0));

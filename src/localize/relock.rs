@@ -41,19 +41,25 @@ pub enum NoFix {
 struct Problem<'a> {
     obs: &'a [Obs],
     segments: usize,
+    /// 2: (x, y) at height `z`; 3: (x, y, z).
+    dims: usize,
     z: f64,
     sign: f64,
     p: DVector<f64>,
 }
 
 impl Problem<'_> {
-    fn distance(&self, o: &Obs) -> (f64, f64, f64) {
-        let (dx, dy, dz) = (
+    fn distance(&self, o: &Obs) -> (f64, [f64; 3]) {
+        let z = if self.dims == 3 { self.p[2] } else { self.z };
+        let d = [
             self.p[0] - o.antenna[0],
             self.p[1] - o.antenna[1],
-            self.z - o.antenna[2],
-        );
-        ((dx * dx + dy * dy + dz * dz).sqrt().max(1e-9), dx, dy)
+            z - o.antenna[2],
+        ];
+        (
+            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-9),
+            d,
+        )
     }
 }
 
@@ -74,22 +80,23 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         Some(DVector::from_iterator(
             self.obs.len(),
             self.obs.iter().map(|o| {
-                let (d, _, _) = self.distance(o);
+                let (d, _) = self.distance(o);
                 o.phase_rad
                     - self.sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
-                    - self.p[2 + o.segment]
+                    - self.p[self.dims + o.segment]
             }),
         ))
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let mut j = DMatrix::zeros(self.obs.len(), 2 + self.segments);
+        let mut j = DMatrix::zeros(self.obs.len(), self.dims + self.segments);
         for (i, o) in self.obs.iter().enumerate() {
-            let (d, dx, dy) = self.distance(o);
+            let (d, v) = self.distance(o);
             let k = self.sign * 4.0 * std::f64::consts::PI / o.wavelength_m;
-            j[(i, 0)] = -k * dx / d;
-            j[(i, 1)] = -k * dy / d;
-            j[(i, 2 + o.segment)] = -1.0;
+            for (a, va) in v.iter().enumerate().take(self.dims) {
+                j[(i, a)] = -k * va / d;
+            }
+            j[(i, self.dims + o.segment)] = -1.0;
         }
         Some(j)
     }
@@ -203,36 +210,155 @@ pub fn locate(
     let problem = Problem {
         obs,
         segments,
+        dims: 2,
         z,
         sign,
         p,
     };
-    // Start each offset at its best for the grid point.
+    let (p, cov, rms) = solve(
+        problem,
+        [min[0] - reach_m, min[1] - reach_m],
+        [max[0] + reach_m, max[1] + reach_m],
+    )?;
+    Ok(Fix {
+        position: [p[0], p[1], z],
+        covariance: [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]],
+        rms_rad: rms,
+    })
+}
+
+/// Runs Levenberg–Marquardt from `problem`'s start (each segment's offset set to its best
+/// there); the solution, its covariance ((JᵀJ)⁻¹ times the residual variance) and the RMS
+/// residual. A solution outside the search box (`lo`, `hi` in x and y) is no fix: the
+/// phases did not pin the tag down.
+fn solve(
+    mut problem: Problem<'_>,
+    lo: [f64; 2],
+    hi: [f64; 2],
+) -> Result<(DVector<f64>, DMatrix<f64>, f64), NoFix> {
+    let (obs, dims, segments) = (problem.obs, problem.dims, problem.segments);
     let r0 = problem.residuals().ok_or(NoFix::InsufficientGeometry)?;
-    let mut problem = problem;
     for k in 0..segments {
         let (s, n) = obs
             .iter()
             .zip(r0.iter())
             .filter(|(o, _)| o.segment == k)
             .fold((0.0, 0), |(s, n), (_, r)| (s + r, n + 1));
-        problem.p[2 + k] = s / n.max(1) as f64;
+        problem.p[dims + k] = s / n.max(1) as f64;
     }
     let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let dof = (obs.len() - (2 + segments)).max(1) as f64;
+    let dof = (obs.len() - (dims + segments)).max(1) as f64;
     let variance = r.norm_squared() / dof;
     let info = j.transpose() * &j;
     let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)? * variance;
-    let (x, y) = (solved.p[0], solved.p[1]);
-    if !(x.is_finite() && y.is_finite()) {
+    let p = solved.p;
+    let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= lo[a] && p[a] <= hi[a]);
+    let finite = (0..dims).all(|a| p[a].is_finite() && cov[(a, a)].is_finite());
+    if !(inside && finite) {
         return Err(NoFix::InsufficientGeometry);
     }
-    Ok(Fix {
-        position: [x, y, z],
-        covariance: [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]],
-        rms_rad: (r.norm_squared() / obs.len() as f64).sqrt(),
+    Ok((p, cov, (r.norm_squared() / obs.len() as f64).sqrt()))
+}
+
+/// A 3D estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fix3 {
+    /// Position (m).
+    pub position: [f64; 3],
+    /// Covariance of (x, y, z), m², row-major 3×3.
+    pub covariance: [f64; 9],
+    /// Root-mean-square phase residual (rad).
+    pub rms_rad: f64,
+}
+
+/// Antenna heights must span this much (m) for the height to be estimated.
+pub const MIN_HEIGHT_SPAN_M: f64 = 0.2;
+
+/// Phase ReLock in 3D: (x, y, z) and the offsets, for antennas at several heights (at
+/// least [`MIN_HEIGHT_SPAN_M`] apart); the grid runs over the heights from the floor to a
+/// metre above the highest antenna.
+pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Result<Fix3, NoFix> {
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let (min, max) = obs
+        .iter()
+        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), o| {
+            (
+                [0, 1, 2].map(|a| lo[a].min(o.antenna[a])),
+                [0, 1, 2].map(|a| hi[a].max(o.antenna[a])),
+            )
+        });
+    let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
+    let lambda = obs.first().map_or(0.33, |o| o.wavelength_m);
+    if obs.len() < segments + 4 || aperture < lambda / 2.0 || max[2] - min[2] < MIN_HEIGHT_SPAN_M {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let mid = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
+    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
+    let mut search =
+        |obs: &[Obs], lo: [f64; 3], hi: [f64; 3], step: f64, best: &mut (f64, [f64; 3])| {
+            let steps = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / step).ceil().max(0.0) as i64);
+            for i in 0..=steps[0] {
+                for j in 0..=steps[1] {
+                    let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
+                    if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
+                        continue;
+                    }
+                    for k in 0..=steps[2] {
+                        let z = lo[2] + k as f64 * step;
+                        let c = cost(obs, z, sign, x, y, &mut sum, &mut sq, &mut n);
+                        if c < best.0 {
+                            *best = (c, [x, y, z]);
+                        }
+                    }
+                }
+            }
+        };
+    let mut best = (f64::INFINITY, [mid[0], mid[1], (min[2] + max[2]) / 2.0]);
+    search(
+        &spread(obs, 64),
+        [min[0] - reach_m, min[1] - reach_m, 0.0],
+        [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
+        0.25,
+        &mut best,
+    );
+    let c = best.1;
+    best.0 = f64::INFINITY;
+    search(
+        &spread(obs, 200),
+        [c[0] - 0.3, c[1] - 0.3, (c[2] - 0.3).max(0.0)],
+        [c[0] + 0.3, c[1] + 0.3, c[2] + 0.3],
+        0.05,
+        &mut best,
+    );
+    let mut p = DVector::zeros(3 + segments);
+    for a in 0..3 {
+        p[a] = best.1[a];
+    }
+    let problem = Problem {
+        obs,
+        segments,
+        dims: 3,
+        z: 0.0,
+        sign,
+        p,
+    };
+    let (p, cov, rms) = solve(
+        problem,
+        [min[0] - reach_m, min[1] - reach_m],
+        [max[0] + reach_m, max[1] + reach_m],
+    )?;
+    let mut covariance = [0.0; 9];
+    for a in 0..3 {
+        for b in 0..3 {
+            covariance[3 * a + b] = cov[(a, b)];
+        }
+    }
+    Ok(Fix3 {
+        position: [p[0], p[1], p[2]],
+        covariance,
+        rms_rad: rms,
     })
 }
 
@@ -290,6 +416,56 @@ mod tests {
             assert!((fix.rms_rad - 0.1).abs() < 0.02, "{}", fix.rms_rad);
         }
         assert!(within >= 16, "{within} of 20 within the 95 % ellipse");
+    }
+
+    /// Unwrapped phases of a tag at `tag` from passes along y = 0 at the heights `zs`, one
+    /// segment per height.
+    fn passes(tag: [f64; 3], zs: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
+        let mut obs = Vec::new();
+        for (s, &z) in zs.iter().enumerate() {
+            for k in 0..300 {
+                let a = [-1.0 + 0.01 * k as f64, 0.0, z];
+                let d = ((tag[0] - a[0]).powi(2) + (tag[1] - a[1]).powi(2) + (tag[2] - z).powi(2))
+                    .sqrt();
+                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
+                obs.push(Obs {
+                    phase_rad: 0.4 * s as f64 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
+                    antenna: a,
+                    wavelength_m: LAMBDA,
+                    segment: s,
+                });
+            }
+        }
+        obs
+    }
+
+    #[test]
+    fn in_3d_antennas_at_several_heights_recover_the_tag_height() {
+        let tag = [0.9, 1.2, 1.3];
+        let zs = [0.4, 0.9, 1.4, 1.9];
+        let fix = locate3d(&passes(tag, &zs, 0.0, 1), 1.0, [0.0, 1.0], 3.0).expect("a fix");
+        let err = (0..3)
+            .map(|a| (fix.position[a] - tag[a]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(err < 1e-3, "{err} m: {fix:?}");
+        // With noise: within 2 cm in every seed, the covariance's diagonal positive.
+        for seed in 0..5 {
+            let fix = locate3d(&passes(tag, &zs, 0.1, seed), 1.0, [0.0, 1.0], 3.0).expect("fix");
+            let err = (0..3)
+                .map(|a| (fix.position[a] - tag[a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert!(err < 0.02, "seed {seed}: {err} m");
+            assert!(fix.covariance[0] > 0.0 && fix.covariance[4] > 0.0 && fix.covariance[8] > 0.0);
+        }
+        // One height cannot tell the tag's height.
+        assert_eq!(
+            locate3d(&passes(tag, &[0.9], 0.0, 1), 1.0, [0.0, 1.0], 3.0),
+            Err(NoFix::InsufficientGeometry)
+        );
     }
 
     #[test]

@@ -43,6 +43,12 @@ pub struct Sample {
     pub antenna: Vec3,
 }
 
+/// Default longest time between two reads of one segment (µs): the motion check is what
+/// keeps unwrapping right for a static tag; the gap bounds how long a tag may go unread
+/// (moved by hand, a pose feed that stalled) before its phases start afresh. A slow robot
+/// reads a tag on each antenna only every second or two (\[A\]'s 3.5 cm/s, 100 tags).
+pub const DEFAULT_MAX_GAP_US: u64 = 10_000_000;
+
 /// The segments of one (reader, antenna, tag, channel) series.
 #[derive(Clone, Debug)]
 pub struct Series {
