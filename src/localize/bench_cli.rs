@@ -19,6 +19,10 @@ pub struct BenchLocalizeArgs {
     /// Write the plot of truth against the `relock` estimates here (PNG).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Offer the reads to a live localizer with its HTTP API at this multiple of real time
+    /// and measure the read-to-HTTP latency of its updates; 0 skips it.
+    #[arg(long, default_value = "10")]
+    pub live_speed: f64,
 }
 
 /// The scenario `name` (a fixture's name or a file).
@@ -92,6 +96,24 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         }
     }
     println!("\nError in (x, y, z) for 3D estimates (loci3d, fingerprint, and relock with antennas at several heights), in (x, y) for 2D ones (the tags at the height assumed). Compute: filing the reads into series and estimating every tag, reads in memory, one core.");
+    if args.live_speed > 0.0 {
+        match super::bench_live::measure(&run, args.live_speed) {
+            Ok(l) => println!(
+                "\nLive (relock, true poses, the reads offered at {}x real time, {:.0} reads/s): {} estimate updates over HTTP (/api/events); read-to-HTTP latency p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} inputs dropped.",
+                args.live_speed,
+                run.reads.len() as f64 / run.seconds * args.live_speed,
+                l.updates,
+                l.p50 * 1e3,
+                l.p99 * 1e3,
+                l.max * 1e3,
+                l.dropped
+            ),
+            Err(e) => {
+                eprintln!("llrp-gateway bench localize: live: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
     if let (Some(path), [t, e]) = (&args.plot, relock.as_slice()) {
         let title = format!("{}: truth and relock estimates", s.name);
         if let Err(err) = super::plot::plot(path, &title, &run, t, e) {

@@ -10,6 +10,7 @@
 
 pub mod bench;
 pub mod bench_cli;
+pub mod bench_live;
 pub mod command;
 pub mod estimate;
 pub mod fingerprint;
