@@ -38,9 +38,14 @@ pub enum NoFix {
     InsufficientGeometry,
 }
 
+/// The least-squares problem in the position alone: each segment's offset is at its best
+/// for the position (the mean residual of the segment), so residuals and Jacobian columns are
+/// centred per segment (variable projection: the offsets are linear, and the position's
+/// covariance from the centred Jacobian is its marginal covariance).
 struct Problem<'a> {
     obs: &'a [Obs],
-    segments: usize,
+    /// Phases per segment.
+    counts: Vec<usize>,
     /// 2: (x, y) at height `z`; 3: (x, y, z).
     dims: usize,
     z: f64,
@@ -48,7 +53,23 @@ struct Problem<'a> {
     p: DVector<f64>,
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    fn new(obs: &'a [Obs], dims: usize, z: f64, sign: f64, start: &[f64]) -> Problem<'a> {
+        let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+        let mut counts = vec![0; segments];
+        for o in obs {
+            counts[o.segment] += 1;
+        }
+        Problem {
+            obs,
+            counts,
+            dims,
+            z,
+            sign,
+            p: DVector::from_column_slice(&start[..dims]),
+        }
+    }
+
     fn distance(&self, o: &Obs) -> (f64, [f64; 3]) {
         let z = if self.dims == 3 { self.p[2] } else { self.z };
         let d = [
@@ -77,26 +98,38 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        Some(DVector::from_iterator(
+        let mut r = DVector::from_iterator(
             self.obs.len(),
             self.obs.iter().map(|o| {
                 let (d, _) = self.distance(o);
-                o.phase_rad
-                    - self.sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
-                    - self.p[self.dims + o.segment]
+                o.phase_rad - self.sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
             }),
-        ))
+        );
+        let mut mean = vec![0.0; self.counts.len()];
+        for (o, v) in self.obs.iter().zip(r.iter()) {
+            mean[o.segment] += v / self.counts[o.segment] as f64;
+        }
+        for (o, v) in self.obs.iter().zip(r.iter_mut()) {
+            *v -= mean[o.segment];
+        }
+        Some(r)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let mut j = DMatrix::zeros(self.obs.len(), self.dims + self.segments);
+        let mut j = DMatrix::zeros(self.obs.len(), self.dims);
+        let mut mean = vec![[0.0; 3]; self.counts.len()];
         for (i, o) in self.obs.iter().enumerate() {
             let (d, v) = self.distance(o);
             let k = self.sign * 4.0 * std::f64::consts::PI / o.wavelength_m;
             for (a, va) in v.iter().enumerate().take(self.dims) {
                 j[(i, a)] = -k * va / d;
+                mean[o.segment][a] += j[(i, a)] / self.counts[o.segment] as f64;
             }
-            j[(i, self.dims + o.segment)] = -1.0;
+        }
+        for (i, o) in self.obs.iter().enumerate() {
+            for a in 0..self.dims {
+                j[(i, a)] -= mean[o.segment][a];
+            }
         }
         Some(j)
     }
@@ -204,17 +237,7 @@ pub fn locate(
         0.05,
         &mut best,
     );
-    let mut p = DVector::zeros(2 + segments);
-    p[0] = best.1;
-    p[1] = best.2;
-    let problem = Problem {
-        obs,
-        segments,
-        dims: 2,
-        z,
-        sign,
-        p,
-    };
+    let problem = Problem::new(obs, 2, z, sign, &[best.1, best.2]);
     let (p, cov, rms) = solve(
         problem,
         [min[0] - reach_m, min[1] - reach_m],
@@ -227,25 +250,15 @@ pub fn locate(
     })
 }
 
-/// Runs Levenberg–Marquardt from `problem`'s start (each segment's offset set to its best
-/// there); the solution, its covariance ((JᵀJ)⁻¹ times the residual variance) and the RMS
-/// residual. A solution outside the search box (`lo`, `hi` in x and y) is no fix: the
-/// phases did not pin the tag down.
+/// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
+/// times the residual variance) and the RMS residual. A solution outside the search box
+/// (`lo`, `hi` in x and y) is no fix: the phases did not pin the tag down.
 fn solve(
-    mut problem: Problem<'_>,
+    problem: Problem<'_>,
     lo: [f64; 2],
     hi: [f64; 2],
 ) -> Result<(DVector<f64>, DMatrix<f64>, f64), NoFix> {
-    let (obs, dims, segments) = (problem.obs, problem.dims, problem.segments);
-    let r0 = problem.residuals().ok_or(NoFix::InsufficientGeometry)?;
-    for k in 0..segments {
-        let (s, n) = obs
-            .iter()
-            .zip(r0.iter())
-            .filter(|(o, _)| o.segment == k)
-            .fold((0.0, 0), |(s, n), (_, r)| (s + r, n + 1));
-        problem.p[dims + k] = s / n.max(1) as f64;
-    }
+    let (obs, dims, segments) = (problem.obs, problem.dims, problem.counts.len());
     let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
@@ -332,18 +345,7 @@ pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Resul
         0.05,
         &mut best,
     );
-    let mut p = DVector::zeros(3 + segments);
-    for a in 0..3 {
-        p[a] = best.1[a];
-    }
-    let problem = Problem {
-        obs,
-        segments,
-        dims: 3,
-        z: 0.0,
-        sign,
-        p,
-    };
+    let problem = Problem::new(obs, 3, 0.0, sign, &best.1);
     let (p, cov, rms) = solve(
         problem,
         [min[0] - reach_m, min[1] - reach_m],
