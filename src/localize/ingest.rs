@@ -63,14 +63,14 @@ impl Ingest {
             return;
         };
         let reader = read.reader.clone().unwrap_or_default();
-        let position = match &read.antenna_pose {
-            Some(p) => Some([p.x, p.y, p.z]),
+        let pose = match &read.antenna_pose {
+            Some(p) => Some(([p.x, p.y, p.z], p.yaw_deg)),
             None => self
                 .poses
                 .at(&reader, read.antenna, read.t_us)
-                .map(|p| [p.x, p.y, p.z]),
+                .map(|p| ([p.x, p.y, p.z], p.yaw_deg)),
         };
-        let Some(position) = position else {
+        let Some((position, yaw_deg)) = pose else {
             self.set_aside.no_pose += 1;
             return;
         };
@@ -78,7 +78,7 @@ impl Ingest {
         self.series
             .entry((read.epc.clone(), reader, read.antenna, f_hz))
             .or_insert_with(|| Series::new(SPEED_OF_LIGHT / f_hz as f64, ambiguity, max_gap))
-            .push(read.t_us, phase, position);
+            .push(read.t_us, phase, position, yaw_deg.to_radians());
         self.taken += 1;
     }
 
@@ -175,7 +175,7 @@ mod tests {
                 x,
                 y: 1.0,
                 z: 0.5,
-                yaw_deg: 0.0,
+                yaw_deg: x * 1000.0,
                 pitch_deg: 0.0,
             });
         }
@@ -214,5 +214,9 @@ mod tests {
         // The antenna position interpolated at each read: x = 0.005 and 0.015.
         assert!((seg[0].antenna[0] - 0.005).abs() < 1e-12);
         assert!((seg[1].antenna[0] - 0.015).abs() < 1e-12);
+        // With its yaw, interpolated too (5° and 15°), and the phase as reported.
+        assert!((seg[0].yaw_rad - 5f64.to_radians()).abs() < 1e-12);
+        assert!((seg[1].yaw_rad - 15f64.to_radians()).abs() < 1e-12);
+        assert_eq!((seg[0].raw_phase_rad, seg[1].raw_phase_rad), (1.0, 1.1));
     }
 }

@@ -41,6 +41,11 @@ pub struct Sample {
     pub phase_rad: f64,
     /// Antenna position at the read (m).
     pub antenna: Vec3,
+    /// Antenna yaw at the read (rad, about +z, 0 = +x).
+    pub yaw_rad: f64,
+    /// The phase as reported (rad), not unwrapped: equal to `phase_rad` modulo the ambiguity's
+    /// period.
+    pub raw_phase_rad: f64,
 }
 
 /// Default longest time between two reads of one segment (µs): the motion check is what
@@ -82,6 +87,11 @@ impl Series {
         self.wavelength_m
     }
 
+    /// How the reader's phase is ambiguous.
+    pub fn ambiguity(&self) -> Ambiguity {
+        self.ambiguity
+    }
+
     /// Largest antenna displacement between two reads that unwrapping can follow (m): λ/4,
     /// or λ/8 with the π ambiguity.
     pub fn motion_limit_m(&self) -> f64 {
@@ -89,8 +99,8 @@ impl Series {
     }
 
     /// Adds a read (in time order) of reported phase `phase_rad` with the antenna at
-    /// `antenna`.
-    pub fn push(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3) {
+    /// `antenna`, its yaw `yaw_rad`.
+    pub fn push(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3, yaw_rad: f64) {
         let period = self.ambiguity.period();
         let folded = phase_rad.rem_euclid(period);
         let limit = self.motion_limit_m();
@@ -113,6 +123,8 @@ impl Series {
                         t_us,
                         phase_rad: prev.phase_rad + step,
                         antenna,
+                        yaw_rad,
+                        raw_phase_rad: phase_rad,
                     })
                 }
             }
@@ -128,6 +140,8 @@ impl Series {
                 t_us,
                 phase_rad: folded,
                 antenna,
+                yaw_rad,
+                raw_phase_rad: phase_rad,
             }]),
         }
     }
@@ -188,7 +202,7 @@ mod tests {
             .map(|k| [-2.0 + 0.01 * k as f64, 1.0, 0.0])
             .collect();
         for (k, a) in path.iter().enumerate() {
-            s.push(k as u64 * 20_000, reported(*a, 1.3), *a);
+            s.push(k as u64 * 20_000, reported(*a, 1.3), *a, 0.0);
         }
         assert_eq!(s.segments().len(), 1);
         assert_eq!(s.splits(), (0, 0));
@@ -208,13 +222,13 @@ mod tests {
     #[test]
     fn a_move_of_a_quarter_wavelength_or_a_long_gap_starts_a_new_segment() {
         let mut s = Series::new(LAMBDA, Ambiguity::None, 100_000);
-        s.push(0, 0.1, [0.0, 1.0, 0.0]);
-        s.push(10_000, 0.2, [LAMBDA / 4.0 * 0.99, 1.0, 0.0]);
-        s.push(20_000, 0.3, [LAMBDA / 4.0 * 1.99, 1.0, 0.0]);
+        s.push(0, 0.1, [0.0, 1.0, 0.0], 0.0);
+        s.push(10_000, 0.2, [LAMBDA / 4.0 * 0.99, 1.0, 0.0], 0.0);
+        s.push(20_000, 0.3, [LAMBDA / 4.0 * 1.99, 1.0, 0.0], 0.0);
         assert_eq!(s.segments().len(), 1);
-        s.push(30_000, 0.4, [LAMBDA / 4.0 * 3.0, 1.0, 0.0]);
+        s.push(30_000, 0.4, [LAMBDA / 4.0 * 3.0, 1.0, 0.0], 0.0);
         assert_eq!(s.splits(), (1, 0));
-        s.push(200_000, 0.5, [LAMBDA / 4.0 * 3.0, 1.0, 0.0]);
+        s.push(200_000, 0.5, [LAMBDA / 4.0 * 3.0, 1.0, 0.0], 0.0);
         assert_eq!(s.splits(), (1, 1));
         assert_eq!(
             s.segments().iter().map(Vec::len).collect::<Vec<_>>(),
@@ -227,7 +241,7 @@ mod tests {
         let mut s = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
         let a = [0.0; 3];
         for (k, phi) in [6.2, 0.05, 6.25, 0.1, 3.3].iter().enumerate() {
-            s.push(k as u64, *phi, a);
+            s.push(k as u64, *phi, a, 0.0);
         }
         let got: Vec<f64> = s.segments()[0].iter().map(|x| x.phase_rad).collect();
         let want = [6.2, TAU + 0.05, 6.25, TAU + 0.1, 3.3];
@@ -250,8 +264,8 @@ mod tests {
             } else {
                 true_phase
             };
-            plain.push(k * 10_000, true_phase, a);
-            folded.push(k * 10_000, flipped, a);
+            plain.push(k * 10_000, true_phase, a, 0.0);
+            folded.push(k * 10_000, flipped, a, 0.0);
         }
         let p = &plain.segments()[0];
         let f = &folded.segments()[0];
