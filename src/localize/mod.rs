@@ -19,6 +19,7 @@ pub mod ingest;
 pub mod linear;
 pub mod live;
 pub mod loci3d;
+pub mod mhekf;
 pub mod offline;
 pub mod plot;
 pub mod poses;
