@@ -26,6 +26,7 @@ pub mod poses;
 pub mod relock;
 pub mod series;
 pub mod shared;
+pub mod wls;
 
 /// Speed of light (m/s), for a channel's wavelength.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
