@@ -4,8 +4,9 @@
 use serde::Serialize;
 
 use super::ingest::Ingest;
+use super::mhekf::{self, PoseObs};
 use super::relock::{self, Obs};
-use super::{fingerprint, hyperbolic, linear, loci3d};
+use super::{fingerprint, hyperbolic, linear, loci3d, wls};
 use std::collections::BTreeMap;
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
@@ -58,6 +59,12 @@ pub enum Estimator {
     Loci3d,
     /// Fingerprinting against reference tags at known positions (\[A\] §III-B, LANDMARC), 3D.
     Fingerprint,
+    /// The multi-hypothesis EKF per (reader, antenna) from the phases as reported and the
+    /// antenna's motion (\[M\] §III-A), in 2D at the tag height assumed; the best track's fix.
+    Mhekf,
+    /// Distributed WLS by average consensus over the readers' MHEKF fixes (\[M\] §III-B), in
+    /// 2D at the tag height assumed.
+    Wls,
 }
 
 impl Estimator {
@@ -68,6 +75,8 @@ impl Estimator {
         Estimator::Hyperbolic,
         Estimator::Loci3d,
         Estimator::Fingerprint,
+        Estimator::Mhekf,
+        Estimator::Wls,
     ];
 
     /// The estimator's name (`relock`, ...).
@@ -78,6 +87,8 @@ impl Estimator {
             Estimator::Hyperbolic => "hyperbolic",
             Estimator::Loci3d => "loci3d",
             Estimator::Fingerprint => "fingerprint",
+            Estimator::Mhekf => "mhekf",
+            Estimator::Wls => "wls",
         }
     }
 }
@@ -142,6 +153,83 @@ pub fn observations(ingest: &Ingest, epc: &str) -> (Vec<Obs>, u64) {
         }
     }
     (obs, last)
+}
+
+/// One (reader, antenna) track of a tag's phases as reported, for the filters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseTrack {
+    /// Reader name.
+    pub reader: String,
+    /// Antenna port.
+    pub antenna: u16,
+    /// Every channel's reads, in time order.
+    pub obs: Vec<PoseObs>,
+}
+
+/// Tag `epc`'s reads per (reader, antenna), channels merged in time order, each phase as
+/// reported with the antenna's position and yaw.
+pub fn pose_observations(ingest: &Ingest, epc: &str) -> Vec<PoseTrack> {
+    let mut tracks: BTreeMap<(String, u16), Vec<PoseObs>> = BTreeMap::new();
+    for (key, series) in ingest.tag_series(epc) {
+        let (lambda, period) = (series.wavelength_m(), series.ambiguity().period());
+        let track = tracks.entry((key.1.clone(), key.2)).or_default();
+        for s in series.segments().iter().flatten() {
+            track.push(PoseObs {
+                t_us: s.t_us,
+                phase_rad: s.raw_phase_rad.rem_euclid(period),
+                antenna: s.antenna,
+                yaw_rad: s.yaw_rad,
+                wavelength_m: lambda,
+                period_rad: period,
+            });
+        }
+    }
+    tracks
+        .into_iter()
+        .map(|((reader, antenna), mut obs)| {
+            obs.sort_by_key(|o| o.t_us);
+            PoseTrack {
+                reader,
+                antenna,
+                obs,
+            }
+        })
+        .collect()
+}
+
+/// Tag `epc`'s MHEKF fix: one filter bank per track, the fix with the least covariance trace.
+fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
+    let s = mhekf::Settings {
+        max_range_m: g.reach_m,
+        ..mhekf::Settings::default()
+    };
+    pose_observations(ingest, epc)
+        .iter()
+        .filter_map(|t| {
+            mhekf::locate(&t.obs, g.tag_height_m, g.phase_sign, Some(g.facing), &s).ok()
+        })
+        .min_by(|a, b| {
+            let tr = |f: &relock::Fix| f.covariance[0] + f.covariance[3];
+            tr(a).total_cmp(&tr(b))
+        })
+        .ok_or(relock::NoFix::InsufficientGeometry)
+}
+
+/// Tag `epc`'s distributed WLS fix: each reader a robot, its tracks its filters.
+fn wls_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
+    let s = wls::Settings {
+        filter: mhekf::Settings {
+            max_range_m: g.reach_m,
+            ..mhekf::Settings::default()
+        },
+        ..wls::Settings::default()
+    };
+    let mut robots: BTreeMap<String, Vec<Vec<PoseObs>>> = BTreeMap::new();
+    for t in pose_observations(ingest, epc) {
+        robots.entry(t.reader).or_default().push(t.obs);
+    }
+    let robots: Vec<Vec<Vec<PoseObs>>> = robots.into_values().collect();
+    wls::locate(&robots, g.tag_height_m, g.phase_sign, Some(g.facing), &s).map(|(fix, _)| fix)
 }
 
 /// Tag `epc`'s readings for fingerprinting, each series a track numbered in `tracks`.
@@ -226,6 +314,8 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
             loci3d::locate(&obs, g.phase_sign, g.facing).map(|f| (f.position, f.covariance))
         }
         Estimator::Fingerprint => fingerprint_tag(ingest, epc, g),
+        Estimator::Mhekf => mhekf_tag(ingest, epc, g).map(planar),
+        Estimator::Wls => wls_tag(ingest, epc, g).map(planar),
     };
     match fix {
         Ok((position, covariance)) => Estimate {
@@ -304,10 +394,12 @@ mod tests {
             Estimator::Hyperbolic => 2,
             Estimator::Loci3d => 3,
             Estimator::Fingerprint => 4,
+            Estimator::Mhekf => 5,
+            Estimator::Wls => 6,
         };
         let mut seen: Vec<usize> = Estimator::ALL.iter().map(|&e| place(e)).collect();
         seen.sort();
-        assert_eq!(seen, (0..5).collect::<Vec<_>>());
+        assert_eq!(seen, (0..7).collect::<Vec<_>>());
         for &e in Estimator::ALL {
             assert_eq!(e.name().parse::<Estimator>(), Ok(e));
         }
@@ -354,5 +446,104 @@ mod tests {
             json.contains("\"insufficient_geometry\"") && !json.contains("NaN"),
             "{json}"
         );
+    }
+
+    /// Reader `reader`'s reads of tag `epc` along a synthetic S3 robot run, noise-free, phase
+    /// sign −1, alternating between two channels.
+    fn robot_reads(
+        reader: &str,
+        epc: &str,
+        tag: [f64; 3],
+        start: [f64; 2],
+        seed: u64,
+    ) -> Vec<Read> {
+        let run = crate::localize::mhekf::synth::run(tag, start, 0.3, 0.5, 1500, 0.0, 0.0, seed);
+        run.iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let f = if k % 2 == 0 {
+                    867_000_000u64
+                } else {
+                    865_700_000
+                };
+                let lambda = crate::localize::SPEED_OF_LIGHT / f as f64;
+                let d = crate::physics::geometry::distance(o.antenna, tag);
+                Read {
+                    epc: epc.into(),
+                    reader: Some(reader.into()),
+                    antenna: 1,
+                    t_us: o.t_us,
+                    phase_rad: Some(
+                        (-4.0 * std::f64::consts::PI * d / lambda)
+                            .rem_euclid(std::f64::consts::TAU),
+                    ),
+                    rssi_dbm: None,
+                    channel_index: Some(1),
+                    channel_frequency_hz: Some(f),
+                    doppler_hz: None,
+                    antenna_pose: Some(AntennaPose {
+                        x: o.antenna[0],
+                        y: o.antenna[1],
+                        z: o.antenna[2],
+                        yaw_deg: o.yaw_rad.to_degrees(),
+                        pitch_deg: 0.0,
+                    }),
+                    last_seen_us: None,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_filters_take_each_readers_reads_as_reported() {
+        let tag = [1.0, 2.0, 0.5];
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        let (r1, r2) = (
+            robot_reads("r1", "AA", tag, [-0.3, 2.2], 1),
+            robot_reads("r2", "AA", tag, [2.2, 1.5], 2),
+        );
+        for r in r1.iter().chain(&r2) {
+            ingest.push(r);
+        }
+        let mut bb = r1[..3].to_vec();
+        bb.iter_mut().for_each(|r| r.epc = "BB".into());
+        bb.iter().for_each(|r| ingest.push(r));
+        // One track per (reader, antenna), both channels merged in time order, as reported.
+        let tracks = pose_observations(&ingest, "AA");
+        assert_eq!(tracks.len(), 2);
+        assert_eq!((tracks[0].reader.as_str(), tracks[0].antenna), ("r1", 1));
+        assert_eq!(tracks[0].obs.len(), r1.len());
+        assert!(tracks[0].obs.windows(2).all(|w| w[0].t_us <= w[1].t_us));
+        let o = tracks[0].obs[2];
+        assert_eq!((o.t_us, Some(o.phase_rad)), (r1[2].t_us, r1[2].phase_rad));
+        let yaw = r1[2]
+            .antenna_pose
+            .map_or(f64::NAN, |p| p.yaw_deg.to_radians());
+        assert!((o.yaw_rad - yaw).abs() < 1e-12, "{} vs {yaw}", o.yaw_rad);
+        assert_ne!(tracks[0].obs[0].wavelength_m, tracks[0].obs[1].wavelength_m);
+        let g = Geometry {
+            tag_height_m: 0.5,
+            phase_sign: -1.0,
+            facing: [0.0, 1.0],
+            reach_m: 2.0,
+            references: Vec::new(),
+        };
+        for estimator in [Estimator::Mhekf, Estimator::Wls] {
+            let e = estimate_tag(&ingest, "AA", estimator, &g);
+            let p = e.estimate.expect("a position");
+            // Default odometry noise (K = 1e-5) on exact poses: millimetres, not 1 mm.
+            assert!(
+                (p[0] - tag[0]).hypot(p[1] - tag[1]) < 5e-3,
+                "{estimator}: {p:?}"
+            );
+            let cov = e.covariance.expect("a covariance");
+            assert_eq!(
+                (cov[2], cov[5], cov[8]),
+                (0.0, 0.0, 0.0),
+                "the height is assumed"
+            );
+            let b = estimate_tag(&ingest, "BB", estimator, &g);
+            assert_eq!((b.state, b.estimate), (State::InsufficientGeometry, None));
+        }
     }
 }

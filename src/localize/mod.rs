@@ -3,7 +3,8 @@
 //! unwrapped with the λ/4 motion check ([`series`]), and reads filed into them or set aside by
 //! reason ([`ingest`]); the estimators: Phase ReLock in 2D ([`relock`]), the min-distance
 //! linear model ([`linear`]), hyperbolic intersection ([`hyperbolic`]), 3D by loci
-//! intersection ([`loci3d`]) and fingerprinting ([`fingerprint`]); and estimates with
+//! intersection ([`loci3d`]), fingerprinting ([`fingerprint`]), the multi-hypothesis EKF
+//! ([`mhekf`]) and distributed WLS by consensus ([`wls`]); and estimates with
 //! covariance and state ([`estimate`]). It sees only
 //! reads and poses, never simulator internals, so it works the same on a real reader's data.
 //! The `localize` command and the HTTP API are still to come.
