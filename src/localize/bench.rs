@@ -36,6 +36,9 @@ pub struct Run {
     pub settings: Settings,
     /// Simulated seconds run.
     pub seconds: f64,
+    /// Every antenna's phase offset φ0 is 0 on every channel (a calibrated reader): what the
+    /// EKF and WLS of \[M\] assume.
+    pub calibrated: bool,
 }
 
 /// How long a scenario runs: until its slowest robot has driven its path (a 2 s margin),
@@ -83,6 +86,7 @@ pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
     let (mut true_poses, mut estimated_poses) = (Poses::new(), Poses::new());
     let mut settings = Settings::default();
     let mut truth = Vec::new();
+    let mut calibrated = true;
     for (i, spec) in scenario.readers.iter().enumerate() {
         let model = std::sync::Arc::new(Model::in_world(&world, scenario, i));
         if i == 0 {
@@ -98,6 +102,10 @@ pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
                 .collect();
         }
         let profile = ReaderProfile::from_scenario(scenario, i, &model);
+        calibrated &= spec.antennas.iter().all(|a| {
+            a.phase_offset_rad.len() >= profile.frequencies_khz.len()
+                && a.phase_offset_rad.iter().all(|&p| p == 0.0)
+        });
         let table = llrp::units::HopTable {
             id: 1,
             frequencies_khz: profile.frequencies_khz.clone(),
@@ -142,6 +150,7 @@ pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
         truth,
         settings,
         seconds,
+        calibrated,
     }
 }
 
@@ -241,7 +250,8 @@ fn stats(v: &mut [f64]) -> (f64, f64, f64, f64) {
 }
 
 /// The estimators that apply to a scenario: the 2D phase estimators always, loci3d with
-/// antennas at two heights or more, fingerprinting with reference tags.
+/// antennas at two heights or more, fingerprinting with reference tags, the EKF and WLS of
+/// \[M\] with a calibrated reader (φ0 = 0).
 pub fn applicable(run: &Run) -> Vec<Estimator> {
     let mut heights: Vec<f64> = run
         .true_poses
@@ -257,6 +267,7 @@ pub fn applicable(run: &Run) -> Vec<Estimator> {
         .filter(|&e| match e {
             Estimator::Loci3d => heights.len() >= 2,
             Estimator::Fingerprint => run.truth.iter().any(|t| t.2),
+            Estimator::Mhekf | Estimator::Wls => run.calibrated,
             _ => true,
         })
         .collect()

@@ -23,6 +23,9 @@ pub struct BenchLocalizeArgs {
     /// and measure the read-to-HTTP latency of its updates; 0 skips it.
     #[arg(long, default_value = "10")]
     pub live_speed: f64,
+    /// Runs per Monte-Carlo variant of S3 (σ_φ, odometry K, swarm size); 0 skips them.
+    #[arg(long, default_value = "20")]
+    pub runs: usize,
 }
 
 /// The scenario `name` (a fixture's name or a file).
@@ -111,6 +114,32 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             Err(e) => {
                 eprintln!("llrp-gateway bench localize: live: {e}");
                 return ExitCode::FAILURE;
+            }
+        }
+    }
+    if args.scenario.eq_ignore_ascii_case("S3") && args.runs > 0 {
+        println!(
+            "\nS3 Monte-Carlo variants ({} runs each: own random paths and noise seed per run; odometry-only poses; error of the final estimate):\n",
+            args.runs
+        );
+        println!("| variant | estimator | located | mean (mm) | median (mm) |");
+        println!("|---|---|---|---|---|");
+        let base = include_str!("../../fixtures/scenarios/s3.json");
+        for v in super::montecarlo::variants() {
+            match super::montecarlo::run_variant(base, &v, args.runs) {
+                Ok(o) => println!(
+                    "| {} | {} | {}/{} | {:.1} | {:.1} |",
+                    v.name,
+                    o.estimator,
+                    o.located,
+                    o.runs,
+                    o.mean * 1e3,
+                    o.median * 1e3
+                ),
+                Err(e) => {
+                    eprintln!("llrp-gateway bench localize: S3 {}: {e}", v.name);
+                    return ExitCode::FAILURE;
+                }
             }
         }
     }

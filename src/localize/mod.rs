@@ -21,6 +21,7 @@ pub mod linear;
 pub mod live;
 pub mod loci3d;
 pub mod mhekf;
+pub mod montecarlo;
 pub mod offline;
 pub mod plot;
 pub mod poses;
