@@ -2,7 +2,7 @@
 //! that best explain the unwrapped phases, θ_i ≈ s·4π·d_i/λ_i + c_k, by Levenberg–Marquardt
 //! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a grid on
 //! the side the antenna faces (the mirror image about a straight path explains the phases as
-//! well): 25 cm on up to 64 of the phases, then 5 cm on up to 200 around its best.
+//! well): 50 cm on up to 32 of the phases, then 10 cm on up to 100 within 60 cm of its best.
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
@@ -168,6 +168,12 @@ fn cost(
         .sum()
 }
 
+/// The start's coarse grid: step (m) and most phases looked at.
+const COARSE: (f64, usize) = (0.5, 32);
+/// The fine grid around the coarse best: step (m), most phases, and steps either side.
+const FINE: (f64, usize) = (0.1, 100);
+const FINE_HALF_STEPS: f64 = 6.0;
+
 /// Up to `max` of `obs`, evenly spread.
 fn spread(obs: &[Obs], max: usize) -> Vec<Obs> {
     let stride = obs.len().div_ceil(max).max(1);
@@ -198,8 +204,8 @@ pub fn locate(
     if obs.len() < segments + 3 || aperture < lambda / 2.0 {
         return Err(NoFix::InsufficientGeometry);
     }
-    // A coarse grid (25 cm, up to 64 phases) over the path's box widened by the reach, on the
-    // facing side, then a fine one (5 cm, up to 200 phases) around its best point; after
+    // A coarse grid (COARSE) over the path's box widened by the reach, on the facing side,
+    // then a finer one (FINE) around its best point; after
     // unwrapping the cost is smooth on that side, so the coarse best is near the minimum.
     let mid = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
     let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
@@ -222,19 +228,20 @@ pub fn locate(
         };
     let mut best = (f64::INFINITY, mid[0], mid[1]);
     search(
-        &spread(obs, 64),
+        &spread(obs, COARSE.1),
         [min[0] - reach_m, min[1] - reach_m],
         [max[0] + reach_m, max[1] + reach_m],
-        0.25,
+        COARSE.0,
         &mut best,
     );
     let (cx, cy) = (best.1, best.2);
     best.0 = f64::INFINITY;
+    let r = FINE.0 * FINE_HALF_STEPS;
     search(
-        &spread(obs, 200),
-        [cx - 0.3, cy - 0.3],
-        [cx + 0.3, cy + 0.3],
-        0.05,
+        &spread(obs, FINE.1),
+        [cx - r, cy - r],
+        [cx + r, cy + r],
+        FINE.0,
         &mut best,
     );
     let problem = Problem::new(obs, 2, z, sign, &[best.1, best.2]);
@@ -330,19 +337,20 @@ pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Resul
         };
     let mut best = (f64::INFINITY, [mid[0], mid[1], (min[2] + max[2]) / 2.0]);
     search(
-        &spread(obs, 64),
+        &spread(obs, COARSE.1),
         [min[0] - reach_m, min[1] - reach_m, 0.0],
         [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
-        0.25,
+        COARSE.0,
         &mut best,
     );
     let c = best.1;
     best.0 = f64::INFINITY;
+    let r = FINE.0 * FINE_HALF_STEPS;
     search(
-        &spread(obs, 200),
-        [c[0] - 0.3, c[1] - 0.3, (c[2] - 0.3).max(0.0)],
-        [c[0] + 0.3, c[1] + 0.3, c[2] + 0.3],
-        0.05,
+        &spread(obs, FINE.1),
+        [c[0] - r, c[1] - r, (c[2] - r).max(0.0)],
+        [c[0] + r, c[1] + r, c[2] + r],
+        FINE.0,
         &mut best,
     );
     let problem = Problem::new(obs, 3, 0.0, sign, &best.1);
