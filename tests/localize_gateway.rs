@@ -233,3 +233,38 @@ fn the_proxys_tapped_reads_reach_the_localizer() {
         "{tags}"
     );
 }
+
+#[test]
+fn the_inventory_clients_reads_reach_its_localizer() {
+    let rec = fixture("s1-report-per-read.jsonl");
+    let poses = fixture("s1-report-per-read.poses.jsonl");
+    let settings = fixture("s1-report-per-read.settings.json");
+    let mut replay = Proc::spawn(&["replay", &rec, "--listen", "127.0.0.1:0", "--speed", "max"]);
+    let llrp = replay.address("listening on ");
+    let mut client = Proc::spawn(&[
+        "inventory",
+        &llrp,
+        "--impinj",
+        "--report-every",
+        "1",
+        "--seconds",
+        "20",
+        // The reader's name in the pose file and the settings.
+        "--name",
+        "s1-reader",
+        "--http",
+        "127.0.0.1:0",
+        "--poses",
+        &poses,
+        "--localize-settings",
+        &settings,
+    ]);
+    let http: std::net::SocketAddr = client.address("live map on http://").parse().expect("addr");
+    let all_in = |v: &serde_json::Value| {
+        v["tags"]
+            .as_array()
+            .is_some_and(|t| t.len() == 10 && t.iter().all(|t| t["state"] == "converged"))
+    };
+    let tags = poll(http, "/api/tags", all_in);
+    assert!(all_in(&tags), "{tags}");
+}

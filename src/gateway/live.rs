@@ -13,7 +13,7 @@ use crate::localize::series::Ambiguity;
 use crate::net::proxy::Tapped;
 
 /// The localizer options of `proxy` and `replay`.
-#[derive(clap::Args, Clone, Debug)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct LiveArgs {
     /// The HTTP API and live map (off unless `--http ADDR`; docs/http.md).
     #[command(flatten)]

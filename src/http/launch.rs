@@ -13,7 +13,7 @@ use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 
 /// The `--http` options of a command.
-#[derive(Clone, Debug, Default, clap::Args)]
+#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
 pub struct HttpArgs {
     /// Serve the HTTP API and live map here (`127.0.0.1:0` picks a free port; the bound
     /// address is printed). Beyond loopback it needs `--http-token`.

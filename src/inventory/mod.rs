@@ -83,6 +83,9 @@ pub enum InventoryError {
         /// What the reader said.
         source: ClientError,
     },
+    /// The localizer or its HTTP API could not start.
+    #[error("{0}")]
+    Localizer(String),
     /// The TLS settings cannot be used.
     #[error("TLS: {0}")]
     Tls(#[from] TlsError),
@@ -195,6 +198,16 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         source,
     };
     let mut sink = Sink::open(&args.output).map_err(output_error)?;
+    let localizer = crate::gateway::live::start(&args.live, "inventory")
+        .await
+        .map_err(InventoryError::Localizer)?;
+    let tap = localizer.as_ref().map(|l| l.tap());
+    // The reads of a batch go to the localizer too (if any), then to the file.
+    let share = |batch: &[crate::reads::Read]| {
+        if let (Some(t), false) = (&tap, batch.is_empty()) {
+            t.offer(crate::localize::live::Input::Reads(batch.to_vec()));
+        }
+    };
     let stop = watch_stop_signals();
     let deadline = args
         .seconds
@@ -279,6 +292,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
                 stats.keepalives += stream.keepalives_answered();
                 stats.bad_reports += stream.bad_reports();
                 let closed = stream.finish(CLOSE_TIMEOUT, &mut batch).await;
+                share(&batch);
                 for r in batch.drain(..) {
                     sink.write(&r).map_err(output_error)?;
                     stats.add(&r);
@@ -307,6 +321,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
                 keepalives = stream.keepalives_answered();
                 last_heard = Instant::now();
             }
+            share(&batch);
             for r in batch.drain(..) {
                 sink.write(&r).map_err(output_error)?;
                 stats.add(&r);
@@ -334,6 +349,9 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         }
     }
     sink.flush().map_err(output_error)?;
+    if let Some(l) = localizer {
+        l.stop().await;
+    }
     screen.clear();
     if stats.connections == 0 {
         return Err(InventoryError::NeverConnected(addr));
