@@ -78,72 +78,24 @@ fn element<'a>(dom: &'a str, id: &str) -> Option<&'a str> {
     Some(&dom[start..=end])
 }
 
-/// A running `llrp-gateway sim` (the embedded S1, its own inventory at 16× real time, the
-/// HTTP API on a free loopback port), stopped by PID when dropped.
-struct Sim {
-    child: std::process::Child,
-    http: std::net::SocketAddr,
-}
-
-impl Sim {
-    fn start() -> Sim {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
-            .args(["sim", "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0"])
-            .args(["--speed", "16"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("the simulator starts");
-        let stderr = child.stderr.take().expect("piped stderr");
-        let (tx, rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            for line in std::io::BufReader::new(stderr)
-                .lines()
-                .map_while(Result::ok)
-            {
-                if let Some(rest) = line.split("live map on http://").nth(1) {
-                    let _ = tx.send(rest.trim_end_matches('/').to_string());
-                }
-            }
-        });
-        let addr = rx
-            .recv_timeout(Duration::from_secs(30))
-            .expect("the simulator prints its HTTP address");
-        Sim {
-            child,
-            http: addr.parse().expect("an address"),
-        }
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        // SIGTERM, as a user's Ctrl-C; then make sure.
-        let _ = Command::new("kill")
-            .arg(self.child.id().to_string())
-            .status();
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 #[test]
 #[ignore = "needs chromium: scripts/install-chromium (./scripts/test runs it)"]
 fn the_map_of_a_running_simulation_shows_its_tags_localized_in_a_headless_browser() {
-    let sim = Sim::start();
+    // The embedded S1, its own inventory at 16× real time, the HTTP API on a free port.
+    let mut sim = http_support::Proc::spawn(&[
+        "sim",
+        "--listen",
+        "127.0.0.1:0",
+        "--http",
+        "127.0.0.1:0",
+        "--speed",
+        "16",
+    ]);
+    let http: std::net::SocketAddr = sim.address("live map on http://").parse().expect("addr");
     // Until the localizer has converged tags (bounded: S1's pass takes under 3 s at 16×).
     let deadline = Instant::now() + Duration::from_secs(90);
     let converged = loop {
-        let tags = http_support::request(sim.http, "GET", "/api/tags", &[], b"").json();
+        let tags = http_support::request(http, "GET", "/api/tags", &[], b"").json();
         let converged: Vec<String> = tags["tags"]
             .as_array()
             .into_iter()
@@ -160,7 +112,7 @@ fn the_map_of_a_running_simulation_shows_its_tags_localized_in_a_headless_browse
         converged.len() >= 5,
         "too few converged tags: {converged:?}"
     );
-    let url = format!("http://{}/", sim.http);
+    let url = format!("http://{}/", http);
     let dir = tempfile::tempdir().expect("a temp dir");
 
     let dom = run_chromium(&dir.path().join("profile-dom"), &url, &["--dump-dom"]);

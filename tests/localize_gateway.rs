@@ -3,13 +3,11 @@
 
 mod http_support;
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use http_support::request;
+use http_support::{request, Proc};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
@@ -20,78 +18,6 @@ fn fixture(name: &str) -> String {
         .join("fixtures/localize")
         .join(name);
     p.to_str().expect("utf-8").to_string()
-}
-
-/// A running child with the addresses it printed; SIGTERM and a wait when dropped.
-struct Proc {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-    log: Vec<String>,
-}
-
-impl Proc {
-    fn spawn(args: &[&str]) -> Proc {
-        let mut child = bin()
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("runs");
-        let stderr = child.stderr.take().expect("piped");
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                let _ = tx.send(line);
-            }
-        });
-        Proc {
-            child,
-            lines,
-            log: Vec::new(),
-        }
-    }
-
-    /// The address after `marker` in the first line of the log that has it.
-    fn address(&mut self, marker: &str) -> String {
-        let mut seen = 0;
-        loop {
-            if seen == self.log.len() {
-                let line = self
-                    .lines
-                    .recv_timeout(Duration::from_secs(30))
-                    .unwrap_or_else(|_| panic!("no line with {marker:?} in {:?}", self.log));
-                self.log.push(line);
-            }
-            let line = &self.log[seen];
-            seen += 1;
-            if let Some(rest) = line.split(marker).nth(1) {
-                return rest
-                    .split([',', ' '])
-                    .next()
-                    .unwrap_or_default()
-                    .trim_end_matches('/')
-                    .to_string();
-            }
-        }
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .arg(self.child.id().to_string())
-            .status();
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 /// Polls `GET path` until `pred` holds on its JSON (at most 60 s); the last JSON.

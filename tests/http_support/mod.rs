@@ -1,6 +1,7 @@
 //! For the HTTP API's tests: a live localizer fed a synthetic tag seen from an antenna moving
-//! along x, the API served on loopback in its own thread, and a small blocking HTTP/1.1
-//! client (requests with `Connection: close`, chunked bodies decoded).
+//! along x, the API served on loopback in its own thread, a small blocking HTTP/1.1 client
+//! (requests with `Connection: close`, chunked bodies decoded), and a child process of the
+//! binary that prints its addresses ([`Proc`]).
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Read as _, Write};
@@ -338,5 +339,78 @@ impl Events {
             let chunk = read_chunk(&mut self.reader).expect("the stream goes on");
             self.buffer.push_str(&String::from_utf8_lossy(&chunk));
         }
+    }
+}
+
+/// A running child with the addresses it printed; SIGTERM and a wait when dropped.
+pub struct Proc {
+    child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    log: Vec<String>,
+}
+
+impl Proc {
+    /// Starts the binary with `args`, its standard error collected line by line.
+    pub fn spawn(args: &[&str]) -> Proc {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("runs");
+        let stderr = child.stderr.take().expect("piped");
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        Proc {
+            child,
+            lines,
+            log: Vec::new(),
+        }
+    }
+
+    /// The address after `marker` in the first line of the log that has it.
+    pub fn address(&mut self, marker: &str) -> String {
+        let mut seen = 0;
+        loop {
+            if seen == self.log.len() {
+                let line = self
+                    .lines
+                    .recv_timeout(Duration::from_secs(30))
+                    .unwrap_or_else(|_| panic!("no line with {marker:?} in {:?}", self.log));
+                self.log.push(line);
+            }
+            let line = &self.log[seen];
+            seen += 1;
+            if let Some(rest) = line.split(marker).nth(1) {
+                return rest
+                    .split([',', ' '])
+                    .next()
+                    .unwrap_or_default()
+                    .trim_end_matches('/')
+                    .to_string();
+            }
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
