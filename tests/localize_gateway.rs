@@ -174,7 +174,7 @@ fn the_inventory_clients_reads_reach_its_localizer() {
         "--report-every",
         "1",
         "--seconds",
-        "20",
+        "60",
         // The reader's name in the pose file and the settings.
         "--name",
         "s1-reader",
