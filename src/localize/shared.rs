@@ -96,7 +96,8 @@ pub struct TruthTag {
 pub struct Metrics {
     /// LLRP frames clients sent to the readers.
     pub frames_in: Counter,
-    /// LLRP frames the readers sent to their clients.
+    /// LLRP frames the readers sent to their clients, as the localizer took them in (frames
+    /// the tap dropped count in `dropped_taps` instead).
     pub frames_out: Counter,
     /// Tag reads taken in.
     pub reads: Counter,
@@ -148,7 +149,7 @@ impl Metrics {
         );
         registry.register(
             "frames_out",
-            "LLRP frames the readers sent to their clients",
+            "LLRP frames the readers sent to their clients, as the localizer took them in",
             m.frames_out.clone(),
         );
         registry.register("reads", "Tag reads taken in", m.reads.clone());
