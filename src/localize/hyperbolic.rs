@@ -310,29 +310,11 @@ pub fn locate_with_report(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+    use crate::localize::synthetic;
 
-    const LAMBDA: f64 = 0.3463;
-
-    /// Unwrapped phases of a tag at `tag` from a straight pass along y = 0 at z = 0.5, x from
-    /// −1 m in 1 cm steps.
+    /// One pass at z = 0.5, phase offset 2.1.
     fn pass(tag: [f64; 3], noise: f64, seed: u64) -> Vec<Obs> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
-        (0..300)
-            .map(|k| {
-                let a = [-1.0 + 0.01 * f64::from(k), 0.0, 0.5];
-                let d = (0..3).map(|j| (tag[j] - a[j]).powi(2)).sum::<f64>().sqrt();
-                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
-                Obs {
-                    phase_rad: 2.1 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
-                    antenna: a,
-                    wavelength_m: LAMBDA,
-                    segment: 0,
-                }
-            })
-            .collect()
+        synthetic::passes(tag, &[0.5], (2.1, 0.0), noise, seed)
     }
 
     #[test]

@@ -226,31 +226,11 @@ pub fn locate(obs: &[Obs], z: f64, sign: f64, facing: [f64; 2]) -> Result<Fix, N
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+    use crate::localize::synthetic::{self, LAMBDA};
 
-    const LAMBDA: f64 = 0.3463;
-
-    /// Unwrapped phases of a tag at `tag` from a straight pass along y = 0 at height `az`,
-    /// x from −1 m in 1 cm steps, one segment per height of `heights`.
+    /// Passes at `heights`, phase offsets 0.7, 1.7, ...
     fn pass(tag: [f64; 3], heights: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
-        let mut obs = Vec::new();
-        for (s, &az) in heights.iter().enumerate() {
-            for k in 0..300 {
-                let a = [-1.0 + 0.01 * k as f64, 0.0, az];
-                let d = (0..3).map(|j| (tag[j] - a[j]).powi(2)).sum::<f64>().sqrt();
-                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
-                obs.push(Obs {
-                    phase_rad: 0.7 + s as f64 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
-                    antenna: a,
-                    wavelength_m: LAMBDA,
-                    segment: s,
-                });
-            }
-        }
-        obs
+        synthetic::passes(tag, heights, (0.7, 1.0), noise, seed)
     }
 
     fn err(fix: &Fix, tag: [f64; 3]) -> f64 {

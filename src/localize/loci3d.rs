@@ -191,31 +191,11 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+    use crate::localize::synthetic;
 
-    const LAMBDA: f64 = 0.3463;
-
-    /// Phases of a tag at `tag` from antennas at `heights` passing along y = 0, x from −1 m in
-    /// 1 cm steps; one segment each.
+    /// Passes at `heights`, phase offsets 0.3 apart.
     fn pass(tag: [f64; 3], heights: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
-        let mut obs = Vec::new();
-        for (s, &az) in heights.iter().enumerate() {
-            for k in 0..300 {
-                let a = [-1.0 + 0.01 * f64::from(k), 0.0, az];
-                let d = (0..3).map(|j| (tag[j] - a[j]).powi(2)).sum::<f64>().sqrt();
-                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
-                obs.push(Obs {
-                    phase_rad: 0.3 * s as f64 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
-                    antenna: a,
-                    wavelength_m: LAMBDA,
-                    segment: s,
-                });
-            }
-        }
-        obs
+        synthetic::passes(tag, heights, (0.0, 0.3), noise, seed)
     }
 
     const HEIGHTS: [f64; 4] = [0.3, 0.6, 0.9, 1.2];

@@ -28,6 +28,8 @@ pub mod poses;
 pub mod relock;
 pub mod series;
 pub mod shared;
+#[cfg(test)]
+mod synthetic;
 pub mod wls;
 
 /// Speed of light (m/s), for a channel's wavelength.

@@ -375,28 +375,16 @@ pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+    use crate::localize::synthetic;
 
-    const LAMBDA: f64 = 0.3463;
-
-    /// Unwrapped phases of a tag at `tag` seen from a straight pass along y = 0 at z = 0.5.
+    /// One pass at z = 0.5 of a tag at that height, phase offset 1.7.
     fn pass(tag: [f64; 2], noise: f64, seed: u64) -> Vec<Obs> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
-        (0..300)
-            .map(|k| {
-                let a = [-1.0 + 0.01 * k as f64, 0.0, 0.5];
-                let d = ((tag[0] - a[0]).powi(2) + (tag[1] - a[1]).powi(2)).sqrt();
-                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
-                Obs {
-                    phase_rad: 1.7 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
-                    antenna: a,
-                    wavelength_m: LAMBDA,
-                    segment: 0,
-                }
-            })
-            .collect()
+        synthetic::passes([tag[0], tag[1], 0.5], &[0.5], (1.7, 0.0), noise, seed)
+    }
+
+    /// Passes at the heights `zs`, offsets 0.4 apart.
+    fn passes(tag: [f64; 3], zs: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
+        synthetic::passes(tag, zs, (0.0, 0.4), noise, seed)
     }
 
     #[test]
@@ -426,29 +414,6 @@ mod tests {
             assert!((fix.rms_rad - 0.1).abs() < 0.02, "{}", fix.rms_rad);
         }
         assert!(within >= 16, "{within} of 20 within the 95 % ellipse");
-    }
-
-    /// Unwrapped phases of a tag at `tag` from passes along y = 0 at the heights `zs`, one
-    /// segment per height.
-    fn passes(tag: [f64; 3], zs: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = Normal::new(0.0, noise.max(1e-300)).expect("valid σ");
-        let mut obs = Vec::new();
-        for (s, &z) in zs.iter().enumerate() {
-            for k in 0..300 {
-                let a = [-1.0 + 0.01 * k as f64, 0.0, z];
-                let d = ((tag[0] - a[0]).powi(2) + (tag[1] - a[1]).powi(2) + (tag[2] - z).powi(2))
-                    .sqrt();
-                let e = if noise > 0.0 { n.sample(&mut rng) } else { 0.0 };
-                obs.push(Obs {
-                    phase_rad: 0.4 * s as f64 + 4.0 * std::f64::consts::PI * d / LAMBDA + e,
-                    antenna: a,
-                    wavelength_m: LAMBDA,
-                    segment: s,
-                });
-            }
-        }
-        obs
     }
 
     #[test]
