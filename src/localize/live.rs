@@ -231,6 +231,8 @@ struct Worker {
     reader_rates: HashMap<String, (u64, u64)>,
     tags: BTreeMap<String, TagState>,
     set_aside_seen: u64,
+    /// Input came since the waiting reads were last looked at.
+    taken_since_flush: bool,
 }
 
 impl Worker {
@@ -246,6 +248,7 @@ impl Worker {
             reader_rates: HashMap::new(),
             tags: BTreeMap::new(),
             set_aside_seen: 0,
+            taken_since_flush: false,
         }
     }
 
@@ -287,7 +290,10 @@ impl Worker {
                     return;
                 }
             }
-            self.flush_waiting(false);
+            // Whether a waiting read is ready changes only with new poses or reads.
+            if std::mem::take(&mut self.taken_since_flush) {
+                self.flush_waiting(false);
+            }
             self.estimate(self.settings.compute_budget, false);
         }
     }
@@ -297,6 +303,7 @@ impl Worker {
     }
 
     fn take(&mut self, input: Input) {
+        self.taken_since_flush = true;
         match input {
             Input::Reader {
                 name,
