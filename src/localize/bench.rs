@@ -179,15 +179,21 @@ pub struct Scores {
     pub estimates: Vec<Estimate>,
 }
 
-/// Localizes `run` with `estimator` on `poses` (`"true"` or `"estimated"`).
+/// Localizes `run` with `estimator` on `poses` (`"true"` or `"estimated"`), told the
+/// scenario's reference tags (fingerprinting's references, `relock`'s calibration).
 pub fn score(run: &Run, estimator: Estimator, estimated: bool) -> Scores {
+    score_with(run, estimator, estimated, true)
+}
+
+/// [`score`], told the reference tags only when `references` is set.
+pub fn score_with(run: &Run, estimator: Estimator, estimated: bool, references: bool) -> Scores {
     let poses = if estimated {
         run.estimated_poses.clone()
     } else {
         run.true_poses.clone()
     };
     let mut g: Geometry = run.settings.geometry.clone();
-    if estimator != Estimator::Fingerprint {
+    if !references {
         g.references.clear();
     }
     let start = Instant::now();

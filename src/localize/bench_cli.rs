@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use super::bench::{applicable, duration_s, score, simulate, Scores};
+use super::bench::{applicable, duration_s, score_with, simulate, Scores};
+use super::estimate::Estimator;
 use crate::scenario::Scenario;
 
 /// `llrp-gateway bench localize`.
@@ -71,9 +72,20 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
     println!("| estimator | poses | located | mean (mm) | median (mm) | max (mm) | std (mm) | compute (ms) |");
     println!("|---|---|---|---|---|---|---|---|");
     let mut relock: Vec<Scores> = Vec::new();
-    for e in applicable(&run) {
+    let references = !run.settings.geometry.references.is_empty();
+    let mut rows: Vec<(Estimator, bool)> =
+        applicable(&run).into_iter().map(|e| (e, true)).collect();
+    if references {
+        // relock also without the antenna calibration the references give it.
+        let at = rows
+            .iter()
+            .position(|r| r.0 == Estimator::Relock)
+            .map_or(0, |i| i + 1);
+        rows.insert(at, (Estimator::Relock, false));
+    }
+    for (e, told) in rows {
         for estimated in [false, true] {
-            let sc = score(&run, e, estimated);
+            let sc = score_with(&run, e, estimated, told);
             let mm = |v: f64| {
                 if v.is_finite() {
                     format!("{:.1}", v * 1e3)
@@ -81,9 +93,14 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
                     "–".into()
                 }
             };
+            let name = match (e, told) {
+                (Estimator::Relock, true) if references => "relock (calibrated)".to_string(),
+                (Estimator::Relock, false) => "relock (not calibrated)".to_string(),
+                _ => e.to_string(),
+            };
             println!(
                 "| {} | {} | {}/{} | {} | {} | {} | {} | {:.1} |",
-                e,
+                name,
                 sc.poses,
                 sc.located,
                 sc.read,
@@ -93,12 +110,15 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
                 mm(sc.std),
                 sc.seconds * 1e3
             );
-            if e == super::estimate::Estimator::Relock {
+            if e == Estimator::Relock && told {
                 relock.push(sc);
             }
         }
     }
     println!("\nError in (x, y, z) for 3D estimates (loci3d, fingerprint, and relock with antennas at several heights), in (x, y) for 2D ones (the tags at the height assumed). Compute: filing the reads into series and estimating every tag, reads in memory, one core.");
+    if references {
+        println!("relock (calibrated): the offsets between antennas measured on the reference tags; (not calibrated): the references not told to relock.");
+    }
     if args.live_speed > 0.0 {
         match super::bench_live::measure(&run, args.live_speed) {
             Ok(l) => println!(

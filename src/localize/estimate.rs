@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 
+use super::calibrate::Calibration;
 use super::ingest::Ingest;
 use super::mhekf::{self, PoseObs};
 use super::relock::{self, Obs};
@@ -133,21 +134,42 @@ pub struct Geometry {
 }
 
 /// One tag's observations for the phase estimators: every unwrapped phase of its series,
-/// one segment number per (series, segment), and the time of the newest.
+/// one segment number per (series, segment), one group per series, and the time of the
+/// newest.
 pub fn observations(ingest: &Ingest, epc: &str) -> (Vec<Obs>, u64) {
+    calibrated_observations(ingest, epc, &Calibration::default())
+}
+
+/// [`observations`] with the offsets of `calibration` taken off the phases of the antennas it
+/// calibrates, whose series on one (reader, channel) then form one joint group.
+pub fn calibrated_observations(
+    ingest: &Ingest,
+    epc: &str,
+    calibration: &Calibration,
+) -> (Vec<Obs>, u64) {
     let mut obs: Vec<Obs> = Vec::new();
     let mut last = 0;
-    for (_, series) in ingest.tag_series(epc) {
-        let lambda = series.wavelength_m();
+    // (reader, antenna or none when calibrated, channel) → joint group.
+    let mut joints: BTreeMap<(&str, Option<u16>, u64), usize> = BTreeMap::new();
+    for (group, (key, series)) in ingest.tag_series(epc).enumerate() {
+        let (lambda, period_rad) = (series.wavelength_m(), series.ambiguity().period());
+        let offset = calibration.offset(&key.1, key.2, key.3);
+        let next = joints.len();
+        let joint = *joints
+            .entry((key.1.as_str(), offset.map_or(Some(key.2), |_| None), key.3))
+            .or_insert(next);
         for seg in series.segments() {
             let segment = obs.last().map_or(0, |o| o.segment + 1);
             for s in seg {
                 last = last.max(s.t_us);
                 obs.push(Obs {
-                    phase_rad: s.phase_rad,
+                    phase_rad: s.phase_rad - offset.unwrap_or(0.0),
                     antenna: s.antenna,
                     wavelength_m: lambda,
                     segment,
+                    group,
+                    joint,
+                    period_rad,
                 });
             }
         }
@@ -276,7 +298,34 @@ fn fingerprint_tag(
 
 /// Tag `epc`'s estimate by `estimator` from the reads of `ingest`.
 pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geometry) -> Estimate {
-    let (obs, last) = observations(ingest, epc);
+    estimate_calibrated(
+        ingest,
+        epc,
+        estimator,
+        g,
+        &calibration(ingest, estimator, g),
+    )
+}
+
+/// The calibration `estimator` uses: `relock`'s from the references of `g`, none for the
+/// others.
+pub fn calibration(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Calibration {
+    if estimator == Estimator::Relock && !g.references.is_empty() {
+        Calibration::from_references(ingest, &g.references, g.phase_sign)
+    } else {
+        Calibration::default()
+    }
+}
+
+/// [`estimate_tag`] with the antenna calibration already measured.
+pub fn estimate_calibrated(
+    ingest: &Ingest,
+    epc: &str,
+    estimator: Estimator,
+    g: &Geometry,
+    calibration: &Calibration,
+) -> Estimate {
+    let (obs, last) = calibrated_observations(ingest, epc, calibration);
     let base = Estimate {
         epc: epc.to_string(),
         estimator: estimator.name(),
@@ -345,9 +394,10 @@ pub fn state_of(covariance: &[f64; 9]) -> State {
 
 /// Every tag's estimate by `estimator`, in EPC order.
 pub fn estimate_all(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Vec<Estimate> {
+    let cal = calibration(ingest, estimator, g);
     ingest
         .tags()
-        .map(|epc| estimate_tag(ingest, epc, estimator, g))
+        .map(|epc| estimate_calibrated(ingest, epc, estimator, g, &cal))
         .collect()
 }
 

@@ -310,6 +310,9 @@ mod tests {
                     antenna: p,
                     wavelength_m: LAMBDA,
                     segment: 0,
+                    group: 0,
+                    joint: 0,
+                    period_rad: std::f64::consts::TAU,
                 }
             })
             .collect();

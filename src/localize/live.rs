@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 use bytes::Bytes;
 use llrp::units::HopTable;
 
+use super::calibrate::Calibration;
 use super::estimate::{self, Estimate, Estimator, Geometry, State};
 use super::ingest::Ingest;
 use super::poses::{PoseSample, Poses};
@@ -511,6 +512,16 @@ impl Worker {
             })
             .collect();
         due.sort();
+        // Measured once a round: the references move little between rounds.
+        let calibration = if due.is_empty() {
+            Calibration::default()
+        } else {
+            estimate::calibration(
+                &self.ingest,
+                self.settings.estimator,
+                &self.settings.geometry,
+            )
+        };
         for (since, epc) in due {
             if started.elapsed() >= budget {
                 break;
@@ -519,11 +530,12 @@ impl Worker {
                 self.ingest.thin_tag(&epc);
             }
             let t0 = Instant::now();
-            let e = estimate::estimate_tag(
+            let e = estimate::estimate_calibrated(
                 &self.ingest,
                 &epc,
                 self.settings.estimator,
                 &self.settings.geometry,
+                &calibration,
             );
             let done = Instant::now();
             self.shared

@@ -1,22 +1,26 @@
-//! The localizer's inputs (issue 18, in progress): antenna poses from a pose file, interpolated
-//! to each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series,
-//! unwrapped with the λ/4 motion check ([`series`]), and reads filed into them or set aside by
-//! reason ([`ingest`]); the estimators: Phase ReLock in 2D ([`relock`]), the min-distance
-//! linear model ([`linear`]), hyperbolic intersection ([`hyperbolic`]), 3D by loci
-//! intersection ([`loci3d`]), fingerprinting ([`fingerprint`]), the multi-hypothesis EKF
-//! ([`mhekf`]) and distributed WLS by consensus ([`wls`]); and estimates with
-//! covariance and state ([`estimate`]). It sees only
-//! reads and poses, never simulator internals, so it works the same on a real reader's data.
-//! The `localize` command and the HTTP API are still to come.
+//! The localizer (issue 18): antenna poses from a pose file or a live feed, interpolated to
+//! each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series unwrapped
+//! with the λ/4 motion check ([`series`]), reads filed into them or set aside by reason
+//! ([`ingest`]); the estimators: Phase ReLock in 2D and 3D ([`relock`], with the joining of
+//! split series, [`join`], and the antennas' calibration from reference tags,
+//! [`calibrate`]), the min-distance linear model ([`linear`]), hyperbolic intersection
+//! ([`hyperbolic`]), 3D by loci intersection ([`loci3d`]), fingerprinting ([`fingerprint`]),
+//! the multi-hypothesis EKF ([`mhekf`]) and distributed WLS by consensus ([`wls`]); estimates
+//! with covariance and state ([`estimate`]); the live worker ([`live`], [`shared`]), the
+//! `localize` command ([`command`], [`offline`]) and `bench localize` ([`mod@bench`]). It sees
+//! only reads and poses, never simulator internals, so it works the same on a real reader's
+//! data.
 
 pub mod bench;
 pub mod bench_cli;
 pub mod bench_live;
+pub mod calibrate;
 pub mod command;
 pub mod estimate;
 pub mod fingerprint;
 pub mod hyperbolic;
 pub mod ingest;
+pub mod join;
 pub mod linear;
 pub mod live;
 pub mod loci3d;

@@ -253,8 +253,9 @@ pub fn localize(
     }
     let epcs: Vec<String> = ingest.tags().map(String::from).collect();
     let mut estimates: BTreeMap<String, Estimate> = BTreeMap::new();
+    let calibration = estimate::calibration(&ingest, estimator, &g);
     for epc in epcs {
-        let e = estimate::estimate_tag(&ingest, &epc, estimator, &g);
+        let e = estimate::estimate_calibrated(&ingest, &epc, estimator, &g, &calibration);
         estimates.insert(epc, e);
         progress(Progress::Tag);
     }

@@ -35,6 +35,9 @@ pub fn passes(
                 antenna: a,
                 wavelength_m: LAMBDA,
                 segment: s,
+                group: s,
+                joint: s,
+                period_rad: std::f64::consts::TAU,
             });
         }
     }

@@ -1,11 +1,16 @@
-//! Phase ReLock (\[A\] §III-A1) in 2D: the tag position (x, y) and one phase offset per segment
+//! Phase ReLock (\[A\] §III-A1), in 2D or 3D: the tag position and one phase offset per segment
 //! that best explain the unwrapped phases, θ_i ≈ s·4π·d_i/λ_i + c_k, by Levenberg–Marquardt
 //! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a grid on
 //! the side the antenna faces (the mirror image about a straight path explains the phases as
 //! well): 50 cm on up to 32 of the phases, then 10 cm on up to 100 within 60 cm of its best.
+//! Where a series is split, its segments are joined (`split`, ours, with [`super::join`]).
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
+
+use super::join;
+
+mod split;
 
 /// One unwrapped phase with where the antenna was.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -18,6 +23,14 @@ pub struct Obs {
     pub wavelength_m: f64,
     /// Segment the phase belongs to (its own offset), 0-based.
     pub segment: usize,
+    /// Group of segments whose offsets are equal modulo `period_rad` (one series), 0-based.
+    pub group: usize,
+    /// Group of series whose offsets are equal modulo `period_rad` once calibrated (the
+    /// calibrated antennas of one reader on one channel; see [`super::calibrate`]), 0-based;
+    /// as `group` for a series not calibrated.
+    pub joint: usize,
+    /// Period of the phase as reported (rad): 2π, or π with the π ambiguity.
+    pub period_rad: f64,
 }
 
 /// A 2D estimate.
@@ -174,10 +187,174 @@ const COARSE: (f64, usize) = (0.5, 32);
 const FINE: (f64, usize) = (0.1, 100);
 const FINE_HALF_STEPS: f64 = 6.0;
 
-/// Up to `max` of `obs`, evenly spread.
+/// Up to about `max` of `obs` for the start's grids, evenly spread within each segment and at
+/// least [`GRID_MIN_PER_SEGMENT`] of each segment taken (a segment's offset takes one of its
+/// phases, so a lone phase tells the grid nothing): the longest segments first.
 fn spread(obs: &[Obs], max: usize) -> Vec<Obs> {
-    let stride = obs.len().div_ceil(max).max(1);
-    obs.iter().step_by(stride).copied().collect()
+    if obs.len() <= max {
+        return obs.to_vec();
+    }
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let mut by_segment: Vec<Vec<Obs>> = vec![Vec::new(); segments];
+    for o in obs {
+        by_segment[o.segment].push(*o);
+    }
+    by_segment.retain(|s| s.len() >= GRID_MIN_PER_SEGMENT);
+    by_segment.sort_by_key(|s| std::cmp::Reverse(s.len()));
+    let mut out = Vec::with_capacity(max + GRID_MIN_PER_SEGMENT);
+    for seg in by_segment {
+        if out.len() >= max {
+            break;
+        }
+        let take = (seg.len() * max / obs.len()).clamp(GRID_MIN_PER_SEGMENT, seg.len());
+        out.extend(seg.iter().step_by(seg.len().div_ceil(take)).copied());
+    }
+    out
+}
+
+/// Fewest phases of a segment the start's grids look at.
+const GRID_MIN_PER_SEGMENT: usize = 3;
+
+/// Where a fit searches: dimensions (2: at height `z`), phase sign, the side the antennas
+/// face and the middle of their path, and the box (x, y, z).
+struct Search {
+    dims: usize,
+    z: f64,
+    sign: f64,
+    facing: [f64; 2],
+    mid: [f64; 2],
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+/// The points of the grid of `step` over (`lo`, `hi`) on the facing side, each with its
+/// `cost`.
+fn grid(
+    s: &Search,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    step: f64,
+    cost: &mut dyn FnMut([f64; 3]) -> f64,
+) -> Vec<(f64, [f64; 3])> {
+    let steps = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / step).ceil().max(0.0) as i64);
+    let mut out = Vec::new();
+    for i in 0..=steps[0] {
+        for j in 0..=steps[1] {
+            let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
+            if (x - s.mid[0]) * s.facing[0] + (y - s.mid[1]) * s.facing[1] < 0.0 {
+                continue;
+            }
+            for k in 0..=steps[2] {
+                let p = [x, y, lo[2] + k as f64 * step];
+                out.push((cost(p), p));
+            }
+        }
+    }
+    out
+}
+
+/// The per-segment cost of `obs` as a grid's cost.
+fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 + '_ {
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
+    move |p| cost(obs, p[2], sign, p[0], p[1], &mut sum, &mut sq, &mut n)
+}
+
+/// The fit of `obs` in `s`: a coarse grid (COARSE) of the per-segment cost over the box, a
+/// finer one (FINE) around its best point, and Levenberg–Marquardt from there, each segment
+/// with its own offset; when a series is split, also [`split::fit`], which joins the segments
+/// and is taken unless it explains the phases clearly worse. A fit outside the box in height
+/// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
+/// phases could not tell from it: no fix.
+fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
+    let (coarse, fine) = (spread(obs, COARSE.1), spread(obs, FINE.1));
+    let start = grid_starts(
+        s,
+        &mut segment_cost(&coarse, s.sign),
+        &mut segment_cost(&fine, s.sign),
+        1,
+    )
+    .first()
+    .copied()
+    .ok_or(NoFix::InsufficientGeometry)?;
+    // A fit outside the box in height is no fix.
+    let in_box = |f: Result<Solution, NoFix>| {
+        f.ok().filter(|f| {
+            let q = position(&f.0, s);
+            q[2] >= s.lo[2] && q[2] <= s.hi[2]
+        })
+    };
+    let separate = in_box(solve(Problem::new(obs, s.dims, s.z, s.sign, &start), s));
+    if !join::has_splits(obs) {
+        return separate.ok_or(NoFix::InsufficientGeometry);
+    }
+    // Joined segments must explain the phases about as well as separate offsets do: over a
+    // pose track that drifts (odometry), one offset does not hold for long.
+    match (in_box(split::fit(obs, s)), separate) {
+        (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
+        (Some(joined), _) => Ok(joined),
+        (None, separate) => separate.ok_or(NoFix::InsufficientGeometry),
+    }
+}
+
+/// The best points of the coarse grid (`coarse` cost), up to `starts` of them at least
+/// 1.5 steps apart, each moved to the best of the fine grid around it (`fine` cost).
+fn grid_starts(
+    s: &Search,
+    coarse: &mut dyn FnMut([f64; 3]) -> f64,
+    fine: &mut dyn FnMut([f64; 3]) -> f64,
+    starts: usize,
+) -> Vec<[f64; 3]> {
+    let mut points = grid(s, s.lo, s.hi, COARSE.0, coarse);
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut chosen: Vec<[f64; 3]> = Vec::new();
+    for (_, p) in points {
+        if chosen.len() >= starts {
+            break;
+        }
+        if chosen.iter().all(|q| distance(p, *q) > 1.5 * COARSE.0) {
+            chosen.push(p);
+        }
+    }
+    let r = FINE.0 * FINE_HALF_STEPS;
+    chosen
+        .into_iter()
+        .map(|c| {
+            let (lo, hi) = if s.dims == 3 {
+                (
+                    [c[0] - r, c[1] - r, (c[2] - r).max(s.lo[2])],
+                    [c[0] + r, c[1] + r, (c[2] + r).min(s.hi[2])],
+                )
+            } else {
+                ([c[0] - r, c[1] - r, s.z], [c[0] + r, c[1] + r, s.z])
+            };
+            grid(s, lo, hi, FINE.0, fine)
+                .into_iter()
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map_or(c, |(_, p)| p)
+        })
+        .collect()
+}
+
+/// The position of a solution's parameters.
+fn position(p: &DVector<f64>, s: &Search) -> [f64; 3] {
+    [p[0], p[1], if s.dims == 3 { p[2] } else { s.z }]
+}
+
+/// Distance between two points (m).
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// The antennas' box over `obs` (m).
+fn bounds(obs: &[Obs]) -> ([f64; 3], [f64; 3]) {
+    obs.iter()
+        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), o| {
+            (
+                [0, 1, 2].map(|a| lo[a].min(o.antenna[a])),
+                [0, 1, 2].map(|a| hi[a].max(o.antenna[a])),
+            )
+        })
 }
 
 /// The position of a tag at height `z` from `obs` (phase sign `sign`: +1 or −1), searching
@@ -191,65 +368,22 @@ pub fn locate(
     reach_m: f64,
 ) -> Result<Fix, NoFix> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-    let (min, max) = obs
-        .iter()
-        .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), o| {
-            (
-                [lo[0].min(o.antenna[0]), lo[1].min(o.antenna[1])],
-                [hi[0].max(o.antenna[0]), hi[1].max(o.antenna[1])],
-            )
-        });
+    let (min, max) = bounds(obs);
     let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
     let lambda = obs.first().map_or(0.33, |o| o.wavelength_m);
     if obs.len() < segments + 3 || aperture < lambda / 2.0 {
         return Err(NoFix::InsufficientGeometry);
     }
-    // A coarse grid (COARSE) over the path's box widened by the reach, on the facing side,
-    // then a finer one (FINE) around its best point; after
-    // unwrapping the cost is smooth on that side, so the coarse best is near the minimum.
-    let mid = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
-    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
-    let mut search =
-        |obs: &[Obs], lo: [f64; 2], hi: [f64; 2], step: f64, best: &mut (f64, f64, f64)| {
-            let nx = ((hi[0] - lo[0]) / step).ceil() as i64;
-            let ny = ((hi[1] - lo[1]) / step).ceil() as i64;
-            for i in 0..=nx {
-                for j in 0..=ny {
-                    let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
-                    if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
-                        continue;
-                    }
-                    let c = cost(obs, z, sign, x, y, &mut sum, &mut sq, &mut n);
-                    if c < best.0 {
-                        *best = (c, x, y);
-                    }
-                }
-            }
-        };
-    let mut best = (f64::INFINITY, mid[0], mid[1]);
-    search(
-        &spread(obs, COARSE.1),
-        [min[0] - reach_m, min[1] - reach_m],
-        [max[0] + reach_m, max[1] + reach_m],
-        COARSE.0,
-        &mut best,
-    );
-    let (cx, cy) = (best.1, best.2);
-    best.0 = f64::INFINITY;
-    let r = FINE.0 * FINE_HALF_STEPS;
-    search(
-        &spread(obs, FINE.1),
-        [cx - r, cy - r],
-        [cx + r, cy + r],
-        FINE.0,
-        &mut best,
-    );
-    let problem = Problem::new(obs, 2, z, sign, &[best.1, best.2]);
-    let (p, cov, rms) = solve(
-        problem,
-        [min[0] - reach_m, min[1] - reach_m],
-        [max[0] + reach_m, max[1] + reach_m],
-    )?;
+    let search = Search {
+        dims: 2,
+        z,
+        sign,
+        facing,
+        mid: [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0],
+        lo: [min[0] - reach_m, min[1] - reach_m, z],
+        hi: [max[0] + reach_m, max[1] + reach_m, z],
+    };
+    let (p, cov, rms) = fit(obs, &search)?;
     Ok(Fix {
         position: [p[0], p[1], z],
         covariance: [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]],
@@ -259,12 +393,8 @@ pub fn locate(
 
 /// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
 /// times the residual variance) and the RMS residual. A solution outside the search box
-/// (`lo`, `hi` in x and y) is no fix: the phases did not pin the tag down.
-fn solve(
-    problem: Problem<'_>,
-    lo: [f64; 2],
-    hi: [f64; 2],
-) -> Result<(DVector<f64>, DMatrix<f64>, f64), NoFix> {
+/// of `s` is no fix: the phases did not pin the tag down.
+fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
     let (obs, dims, segments) = (problem.obs, problem.dims, problem.counts.len());
     let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
@@ -274,13 +404,16 @@ fn solve(
     let info = j.transpose() * &j;
     let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)? * variance;
     let p = solved.p;
-    let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= lo[a] && p[a] <= hi[a]);
+    let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= s.lo[a] && p[a] <= s.hi[a]);
     let finite = (0..dims).all(|a| p[a].is_finite() && cov[(a, a)].is_finite());
     if !(inside && finite) {
         return Err(NoFix::InsufficientGeometry);
     }
     Ok((p, cov, (r.norm_squared() / obs.len() as f64).sqrt()))
 }
+
+/// A solution: position, covariance, RMS residual.
+type Solution = (DVector<f64>, DMatrix<f64>, f64);
 
 /// A 3D estimate.
 #[derive(Clone, Debug, PartialEq)]
@@ -301,64 +434,22 @@ pub const MIN_HEIGHT_SPAN_M: f64 = 0.2;
 /// metre above the highest antenna.
 pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Result<Fix3, NoFix> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-    let (min, max) = obs
-        .iter()
-        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), o| {
-            (
-                [0, 1, 2].map(|a| lo[a].min(o.antenna[a])),
-                [0, 1, 2].map(|a| hi[a].max(o.antenna[a])),
-            )
-        });
+    let (min, max) = bounds(obs);
     let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
     let lambda = obs.first().map_or(0.33, |o| o.wavelength_m);
     if obs.len() < segments + 4 || aperture < lambda / 2.0 || max[2] - min[2] < MIN_HEIGHT_SPAN_M {
         return Err(NoFix::InsufficientGeometry);
     }
-    let mid = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
-    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
-    let mut search =
-        |obs: &[Obs], lo: [f64; 3], hi: [f64; 3], step: f64, best: &mut (f64, [f64; 3])| {
-            let steps = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / step).ceil().max(0.0) as i64);
-            for i in 0..=steps[0] {
-                for j in 0..=steps[1] {
-                    let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
-                    if (x - mid[0]) * facing[0] + (y - mid[1]) * facing[1] < 0.0 {
-                        continue;
-                    }
-                    for k in 0..=steps[2] {
-                        let z = lo[2] + k as f64 * step;
-                        let c = cost(obs, z, sign, x, y, &mut sum, &mut sq, &mut n);
-                        if c < best.0 {
-                            *best = (c, [x, y, z]);
-                        }
-                    }
-                }
-            }
-        };
-    let mut best = (f64::INFINITY, [mid[0], mid[1], (min[2] + max[2]) / 2.0]);
-    search(
-        &spread(obs, COARSE.1),
-        [min[0] - reach_m, min[1] - reach_m, 0.0],
-        [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
-        COARSE.0,
-        &mut best,
-    );
-    let c = best.1;
-    best.0 = f64::INFINITY;
-    let r = FINE.0 * FINE_HALF_STEPS;
-    search(
-        &spread(obs, FINE.1),
-        [c[0] - r, c[1] - r, (c[2] - r).max(0.0)],
-        [c[0] + r, c[1] + r, c[2] + r],
-        FINE.0,
-        &mut best,
-    );
-    let problem = Problem::new(obs, 3, 0.0, sign, &best.1);
-    let (p, cov, rms) = solve(
-        problem,
-        [min[0] - reach_m, min[1] - reach_m],
-        [max[0] + reach_m, max[1] + reach_m],
-    )?;
+    let search = Search {
+        dims: 3,
+        z: 0.0,
+        sign,
+        facing,
+        mid: [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0],
+        lo: [min[0] - reach_m, min[1] - reach_m, 0.0],
+        hi: [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
+    };
+    let (p, cov, rms) = fit(obs, &search)?;
     let mut covariance = [0.0; 9];
     for a in 0..3 {
         for b in 0..3 {

@@ -1,0 +1,379 @@
+//! Joining a tag's unwrapped segments that share one phase offset (ours, for sparse reads).
+//!
+//! The phase offset φ0 of a (reader, antenna, tag, channel) series is one physical constant,
+//! but every split of the series (a gap, a step over the λ/4 motion limit) gives Phase ReLock
+//! an offset of its own, and with it the phase history across the split is lost: at a few
+//! reads a second per antenna, a slow robot splits a series into dozens of short segments and
+//! the fix is poor. The offsets of one series' segments are equal modulo the series' period
+//! (2π, or π with the π ambiguity), and so are those of a reader's antennas on one channel
+//! once calibrated ([`super::calibrate`]). Such a group of segments is:
+//!
+//! 1. judged by its coherence, |Σ exp(i·2π/P·(θ − s·4πd/λ))| over its phases, summed over the
+//!    groups ([`coherence`]): it needs no unwrapping, so the splits do not matter to it, and
+//!    is searched for its best point in a box ([`search_box`]) or along a fix's weak axes
+//!    ([`search`]);
+//! 2. joined at that point ([`join`]): each segment's offset is compared with its group's,
+//!    and a segment within a quarter period of it is shifted by whole periods onto the
+//!    group's offset and merged into one segment with it; the others stay as they were.
+//!
+//! Phase ReLock then solves again on the joined segments ([`super::relock`]).
+
+use nalgebra::{DMatrix, SymmetricEigen};
+
+use super::relock::Obs;
+
+/// A weak direction is searched when its σ is at least this (m).
+pub const SEARCH_MIN_SIGMA_M: f64 = 0.005;
+/// Farthest from the fix the coherence is searched, along each weak direction (m).
+pub const SEARCH_MAX_M: f64 = 1.0;
+/// Points either side of the fix along a searched direction.
+pub const SEARCH_HALF_POINTS: i32 = 6;
+/// Finest search step (m): well under the λ/4 a coherence lobe is wide.
+const SEARCH_MIN_STEP_M: f64 = 0.01;
+/// Phases the coherence is evaluated on (evenly spread over the tag's).
+pub const SEARCH_PHASES: usize = 400;
+
+/// Whether `obs` has a group of several segments, so that joining can change anything.
+pub fn has_splits(obs: &[Obs]) -> bool {
+    let mut first: Vec<Option<usize>> = Vec::new();
+    for o in obs {
+        if first.len() <= o.group {
+            first.resize(o.group + 1, None);
+        }
+        match first[o.group] {
+            None => first[o.group] = Some(o.segment),
+            Some(s) if s != o.segment => return true,
+            Some(_) => {}
+        }
+    }
+    false
+}
+
+/// The model phase s·4πd/λ of `o` for a tag at `p`.
+fn model(o: &Obs, p: [f64; 3], sign: f64) -> f64 {
+    let d = (0..3)
+        .map(|a| (p[a] - o.antenna[a]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
+}
+
+/// The coherence of `obs` at `p`: Σ over the groups of |Σ exp(i·2π/P·(θ − s·4πd/λ))|, over
+/// the count of phases (1: every group's residuals equal modulo its period).
+pub fn coherence(obs: &[Obs], p: [f64; 3], sign: f64) -> f64 {
+    Evaluator::new(obs, usize::MAX, sign).sum(p) / obs.len().max(1) as f64
+}
+
+/// The summed coherence of up to `phases` of a tag's phases (evenly spread), at any point.
+struct Evaluator {
+    sub: Vec<Obs>,
+    sign: f64,
+    /// Scratch: one sum a group.
+    re: Vec<f64>,
+    im: Vec<f64>,
+}
+
+impl Evaluator {
+    fn new(obs: &[Obs], phases: usize, sign: f64) -> Evaluator {
+        let groups = obs.iter().map(|o| o.group + 1).max().unwrap_or(0);
+        let stride = obs.len().div_ceil(phases.max(1)).max(1);
+        Evaluator {
+            sub: obs.iter().step_by(stride).copied().collect(),
+            sign,
+            re: vec![0.0; groups],
+            im: vec![0.0; groups],
+        }
+    }
+
+    /// Σ over the groups of the coherence of the phases' residuals at `p`.
+    fn sum(&mut self, p: [f64; 3]) -> f64 {
+        self.re.fill(0.0);
+        self.im.fill(0.0);
+        for o in &self.sub {
+            let r = (o.phase_rad - model(o, p, self.sign)) * std::f64::consts::TAU / o.period_rad;
+            let (s, c) = sin_cos(r);
+            self.re[o.group] += c;
+            self.im[o.group] += s;
+        }
+        self.re
+            .iter()
+            .zip(self.im.iter())
+            .map(|(a, b)| a.hypot(*b))
+            .sum()
+    }
+}
+
+/// sin and cos of `x` (|x| up to thousands of radians) within 1e-8: a quadrant reduction and
+/// Taylor polynomials to the 9th (sin) and 10th (cos) power on ±π/4, several times faster than libm's exact
+/// `sin_cos`, which the coherence searches spent most of their time in.
+fn sin_cos(x: f64) -> (f64, f64) {
+    let q = (x * std::f64::consts::FRAC_2_PI).round();
+    let r = x - q * std::f64::consts::FRAC_PI_2;
+    let r2 = r * r;
+    let s =
+        r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 / 362_880.0))));
+    let c = 1.0
+        + r2 * (-0.5
+            + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0 - r2 / 3_628_800.0))));
+    match (q as i64).rem_euclid(4) {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+/// The point of best coherence near `start` along the weak axes of `covariance` (`dims`×`dims`,
+/// over the first `dims` coordinates of the position; the others held): ± 3σ along each (at
+/// most [`SEARCH_MAX_M`]) in ± [`SEARCH_HALF_POINTS`] steps of at least 1 cm on up to
+/// [`COARSE_PHASES`] phases, then in 1 cm steps around the best on up to [`SEARCH_PHASES`].
+pub fn search(obs: &[Obs], start: [f64; 3], covariance: &DMatrix<f64>, sign: f64) -> [f64; 3] {
+    let dims = covariance.nrows().min(3);
+    let eigen = SymmetricEigen::new(covariance.clone());
+    // The weak axes, weakest first; at most two are searched (a plane of points).
+    let mut axes: Vec<(f64, [f64; 3])> = (0..dims)
+        .filter_map(|k| {
+            let sigma = eigen.eigenvalues[k].max(0.0).sqrt();
+            (sigma.is_finite() && sigma >= SEARCH_MIN_SIGMA_M).then(|| {
+                let mut v = [0.0; 3];
+                for (a, va) in v.iter_mut().enumerate().take(dims) {
+                    *va = eigen.eigenvectors[(a, k)];
+                }
+                (sigma, v)
+            })
+        })
+        .collect();
+    axes.sort_by(|a, b| b.0.total_cmp(&a.0));
+    axes.truncate(2);
+    if axes.is_empty() {
+        return start;
+    }
+    // Steps of at most a sixth of a half-width on up to COARSE_PHASES, then 1 cm around the
+    // best on up to SEARCH_PHASES.
+    let plan: Vec<([f64; 3], f64, i32)> = axes
+        .iter()
+        .map(|&(sigma, v)| {
+            let half = (3.0 * sigma).min(SEARCH_MAX_M);
+            let step = (half / f64::from(SEARCH_HALF_POINTS)).max(SEARCH_MIN_STEP_M);
+            (v, step, (half / step).round() as i32)
+        })
+        .collect();
+    let coarse = best_on(obs, start, &plan, COARSE_PHASES, sign);
+    if plan.iter().all(|p| p.1 <= SEARCH_MIN_STEP_M) {
+        return coarse;
+    }
+    let fine: Vec<([f64; 3], f64, i32)> = plan
+        .iter()
+        .map(|&(v, step, _)| {
+            (
+                v,
+                SEARCH_MIN_STEP_M,
+                (step / SEARCH_MIN_STEP_M).ceil() as i32,
+            )
+        })
+        .collect();
+    best_on(obs, coarse, &fine, SEARCH_PHASES, sign)
+}
+
+/// Phases the coarse pass of [`search`] is evaluated on.
+pub const COARSE_PHASES: usize = 100;
+
+/// The most coherent point of the grid `centre` + Σ i_k·step_k·v_k, |i_k| ≤ n_k, over the
+/// one or two axes of `plan`, on up to `phases` of `obs`.
+fn best_on(
+    obs: &[Obs],
+    centre: [f64; 3],
+    plan: &[([f64; 3], f64, i32)],
+    phases: usize,
+    sign: f64,
+) -> [f64; 3] {
+    let mut at = Evaluator::new(obs, phases, sign);
+    let (v0, h0, n0) = plan[0];
+    let (v1, h1, n1) = plan.get(1).copied().unwrap_or(([0.0; 3], 0.0, 0));
+    let mut best = (at.sum(centre), centre);
+    for i in -n0..=n0 {
+        for j in -n1..=n1 {
+            let p = [0, 1, 2]
+                .map(|a| centre[a] + f64::from(i) * h0 * v0[a] + f64::from(j) * h1 * v1[a]);
+            let c = at.sum(p);
+            if c > best.0 {
+                best = (c, p);
+            }
+        }
+    }
+    best.1
+}
+
+/// The point of best coherence on the grid of `step` within `half` of `centre` (in the first
+/// `dims` coordinates), on up to `phases` of `obs`.
+pub fn search_box(
+    obs: &[Obs],
+    centre: [f64; 3],
+    (dims, half, step, phases): (usize, f64, f64, usize),
+    sign: f64,
+) -> [f64; 3] {
+    let mut at = Evaluator::new(obs, phases, sign);
+    let n = (half / step).round() as i32;
+    let nz = if dims == 3 { n } else { 0 };
+    let mut best = (f64::MIN, centre);
+    for i in -n..=n {
+        for j in -n..=n {
+            for k in -nz..=nz {
+                let p = [
+                    centre[0] + f64::from(i) * step,
+                    centre[1] + f64::from(j) * step,
+                    centre[2] + f64::from(k) * step,
+                ];
+                let c = at.sum(p);
+                if c > best.0 {
+                    best = (c, p);
+                }
+            }
+        }
+    }
+    best.1
+}
+
+/// `obs` with every segment whose offset at `p` is within a quarter period of its group's
+/// shifted onto it by whole periods and merged into one segment per group; the segments
+/// renumbered from 0. The count of segments after joining is returned with them.
+pub fn join(obs: &[Obs], p: [f64; 3], sign: f64) -> (Vec<Obs>, usize) {
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let groups = obs.iter().map(|o| o.group + 1).max().unwrap_or(0);
+    // Each segment's mean residual (its best offset), group and period.
+    let mut sum = vec![0.0; segments];
+    let mut count = vec![0usize; segments];
+    let mut info: Vec<Option<(usize, f64)>> = vec![None; segments];
+    for o in obs {
+        sum[o.segment] += o.phase_rad - model(o, p, sign);
+        count[o.segment] += 1;
+        info[o.segment] = Some((o.group, o.period_rad));
+    }
+    // The group's offset: the circular mean of its segments' offsets, weighted by phases.
+    let (mut re, mut im) = (vec![0.0; groups], vec![0.0; groups]);
+    for k in 0..segments {
+        if let Some((g, period)) = info[k] {
+            let c = sum[k] / count[k] as f64 * std::f64::consts::TAU / period;
+            re[g] += count[k] as f64 * c.cos();
+            im[g] += count[k] as f64 * c.sin();
+        }
+    }
+    // Each segment's new number and its shift (whole periods).
+    let mut joined_id: Vec<Option<usize>> = vec![None; groups];
+    let mut map = vec![(0usize, 0.0f64); segments];
+    let mut next = 0;
+    for k in 0..segments {
+        let Some((g, period)) = info[k] else {
+            continue;
+        };
+        let c = sum[k] / count[k] as f64;
+        let centre = im[g].atan2(re[g]) * period / std::f64::consts::TAU;
+        let turns = ((c - centre) / period).round();
+        let deviation = c - centre - turns * period;
+        if deviation.abs() < period / 4.0 {
+            let id = *joined_id[g].get_or_insert_with(|| {
+                next += 1;
+                next - 1
+            });
+            map[k] = (id, turns * period);
+        } else {
+            map[k] = (next, 0.0);
+            next += 1;
+        }
+    }
+    let out = obs
+        .iter()
+        .map(|o| {
+            let (segment, shift) = map[o.segment];
+            Obs {
+                phase_rad: o.phase_rad - shift,
+                segment,
+                ..*o
+            }
+        })
+        .collect();
+    (out, next)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::localize::synthetic;
+
+    /// One pass at z = 0.5 of a tag 1.5 m off the path, cut into segments of 30 phases, each
+    /// shifted by a different whole number of turns: one group.
+    fn split_pass(tag: [f64; 3]) -> Vec<Obs> {
+        let mut obs = synthetic::passes(tag, &[0.5], (1.0, 0.0), 0.0, 1);
+        for (i, o) in obs.iter_mut().enumerate() {
+            o.segment = i / 30;
+            o.phase_rad += std::f64::consts::TAU * ((i / 30) % 4) as f64;
+        }
+        obs
+    }
+
+    #[test]
+    fn the_fast_sin_cos_matches_libm() {
+        for i in -200_000..=200_000 {
+            let x = f64::from(i) * 1e-3 + 0.123_456;
+            let (s, c) = sin_cos(x);
+            assert!(
+                (s - x.sin()).abs() < 1e-8 && (c - x.cos()).abs() < 1e-8,
+                "{x}"
+            );
+        }
+    }
+
+    #[test]
+    fn segments_of_one_group_are_joined_at_the_tag() {
+        let tag = [0.4, 1.5, 0.5];
+        let obs = split_pass(tag);
+        assert!(has_splits(&obs));
+        let (joined, segments) = join(&obs, tag, 1.0);
+        assert_eq!(segments, 1);
+        // Joined, the phases are one unwrapped series again: every step under λ/4's phase.
+        for w in joined.windows(2) {
+            assert!((w[1].phase_rad - w[0].phase_rad).abs() < std::f64::consts::PI);
+        }
+        assert!(!has_splits(&joined));
+    }
+
+    #[test]
+    fn a_segment_that_disagrees_is_left_alone() {
+        let tag = [0.4, 1.5, 0.5];
+        let mut obs = split_pass(tag);
+        // Segment 3 gets half a turn more: it cannot share the group's offset.
+        for o in obs.iter_mut().filter(|o| o.segment == 3) {
+            o.phase_rad += std::f64::consts::PI;
+        }
+        let (joined, segments) = join(&obs, tag, 1.0);
+        assert_eq!(segments, 2, "the group and the odd segment");
+        let odd = joined
+            .iter()
+            .find(|o| o.antenna == obs[95].antenna)
+            .unwrap();
+        assert!(joined.iter().filter(|o| o.segment == odd.segment).count() == 30);
+    }
+
+    #[test]
+    fn the_search_finds_the_coherent_point_along_the_weak_axis() {
+        let tag = [0.4, 1.5, 0.5];
+        let obs = split_pass(tag);
+        // A start 12 cm off along y, with a covariance that is weak along y only.
+        let start = [0.4, 1.62, 0.5];
+        let cov = DMatrix::from_row_slice(2, 2, &[1e-6, 0.0, 0.0, 0.01]);
+        let p = search(&obs, start, &cov, 1.0);
+        assert!((p[1] - tag[1]).abs() < SEARCH_MIN_STEP_M, "{p:?}");
+        assert_eq!(p[0], start[0]);
+        // Phases in the period π (the π ambiguity) are as coherent.
+        let folded: Vec<Obs> = obs
+            .iter()
+            .map(|o| Obs {
+                phase_rad: o.phase_rad.rem_euclid(std::f64::consts::PI),
+                period_rad: std::f64::consts::PI,
+                ..*o
+            })
+            .collect();
+        let p = search(&folded, start, &cov, 1.0);
+        assert!((p[1] - tag[1]).abs() < SEARCH_MIN_STEP_M, "{p:?}");
+    }
+}

@@ -1,0 +1,227 @@
+//! Phase ReLock on split series (ours): the segments of each series joined, then the series
+//! of calibrated antennas ([`super::super::calibrate`]) joined into one group ([`join`]).
+//!
+//! 1. Grids on the phase differences of consecutive reads of a series ([`pairs`]), which hold
+//!    across its splits, give up to [`STARTS`] starts.
+//! 2. Around each, in the grid's order, the most coherent point within [`START_BOX_M`]
+//!    ([`join::search_box`], each series its own group, 5 cm steps on 60 phases).
+//! 3. From a start: 2.5 cm steps within 5 cm, the segments of each series joined there
+//!    ([`join::join`]) and solved; joined again from the fit while that merges more and the
+//!    fit explains the phases about as well ([`rejoin`]); then the same with the calibrated
+//!    antennas' series in one group.
+//! 4. A fit whose phases are [`COHERENT`] (calibrated antennas in one group) is taken; else
+//!    the next start, and when none is, a box of [`WIDE_BOX_M`] around the best fit; the most
+//!    coherent fit wins.
+
+use super::{distance, grid_starts, position, solve, NoFix, Obs, Problem, Search, Solution};
+use super::{COARSE, FINE};
+use crate::localize::join;
+
+/// Starts tried (the best grid points at least 1.5 grid steps apart).
+const STARTS: usize = 4;
+/// Half-width of the box around a grid point searched for the most coherent point (m).
+const START_BOX_M: f64 = 0.3;
+
+/// Two reads of one series next to each other in time, for the grids of a split series.
+#[derive(Clone, Copy, Debug)]
+struct Pair {
+    a: [f64; 3],
+    b: [f64; 3],
+    /// θ_b − θ_a (rad).
+    dphase: f64,
+    /// s·4π/λ.
+    k: f64,
+    /// 2π over the period.
+    scale: f64,
+}
+
+/// The pairs of consecutive phases of one group (one series, in time order) whose antennas
+/// are less than λ/2 apart, up to `max` of them evenly spread: their phase differences hold
+/// across the splits of a series, and change slowly with the tag's position (the range
+/// difference of two antenna positions δ apart is at most δ), so a coarse grid finds their
+/// best without unwrapping.
+fn pairs(obs: &[Obs], sign: f64, max: usize) -> Vec<Pair> {
+    let all: Vec<Pair> = obs
+        .windows(2)
+        .filter(|w| {
+            w[0].group == w[1].group
+                && w[0].wavelength_m == w[1].wavelength_m
+                && distance(w[0].antenna, w[1].antenna) < w[0].wavelength_m / 2.0
+        })
+        .map(|w| Pair {
+            a: w[0].antenna,
+            b: w[1].antenna,
+            dphase: w[1].phase_rad - w[0].phase_rad,
+            k: sign * 4.0 * std::f64::consts::PI / w[0].wavelength_m,
+            scale: std::f64::consts::TAU / w[0].period_rad,
+        })
+        .collect();
+    let stride = all.len().div_ceil(max).max(1);
+    all.into_iter().step_by(stride).collect()
+}
+
+/// Σ (1 − cos) of the pairs' phase differences against the model's at `p`.
+fn pair_cost(pairs: &[Pair], p: [f64; 3]) -> f64 {
+    pairs
+        .iter()
+        .map(|q| {
+            let m = q.k * (distance(p, q.b) - distance(p, q.a));
+            1.0 - ((q.dphase - m) * q.scale).cos()
+        })
+        .sum()
+}
+
+/// The fit of a tag with split series, as the module describes it.
+pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
+    let (coarse, fine) = (pairs(obs, s.sign, COARSE.1), pairs(obs, s.sign, FINE.1));
+    let starts = grid_starts(
+        s,
+        &mut |p| pair_cost(&coarse, p),
+        &mut |p| pair_cost(&fine, p),
+        STARTS,
+    );
+    let (dims, sign) = (s.dims, s.sign);
+    // The phases with each calibrated antenna's series in one group: what a fit is judged by.
+    let joint: Vec<Obs> = obs
+        .iter()
+        .map(|o| Obs {
+            group: o.joint,
+            ..*o
+        })
+        .collect();
+    let mut best: Option<(f64, Solution)> = None;
+    for c in starts {
+        let q = join::search_box(obs, c, (dims, START_BOX_M, 0.05, 60), sign);
+        let Ok(fit) = join_from(obs, q, s) else {
+            continue;
+        };
+        let score = join::coherence(&joint, position(&fit.0, s), sign);
+        if best.as_ref().map_or(true, |b| score > b.0) {
+            best = Some((score, fit));
+        }
+        if score >= COHERENT {
+            break;
+        }
+    }
+    let (score, fit) = best.ok_or(NoFix::InsufficientGeometry)?;
+    if score >= COHERENT {
+        return Ok(fit);
+    }
+    // No start was coherent: a wider box around the best fit.
+    let q = join::search_box(obs, position(&fit.0, s), (dims, WIDE_BOX_M, 0.05, 60), sign);
+    match join_from(obs, q, s) {
+        Ok(wide) if join::coherence(&joint, position(&wide.0, s), sign) > score => Ok(wide),
+        _ => Ok(fit),
+    }
+}
+
+/// Half-width of the box searched when no start gave a coherent fit (m).
+const WIDE_BOX_M: f64 = 0.75;
+
+/// A fit whose phases are at least this coherent ([`join::coherence`], calibrated antennas in
+/// one group) is taken; below it the next start is tried, and the most coherent fit wins.
+const COHERENT: f64 = 0.6;
+
+/// From `start` (a coherent point of the series): 2.5 cm steps around it, the segments of each
+/// series joined there and solved, then joined again from the fit while that merges more; then,
+/// where antennas are calibrated, their series joined into one group the same way.
+fn join_from(obs: &[Obs], start: [f64; 3], s: &Search) -> Result<Solution, NoFix> {
+    let q = join::search_box(obs, start, (s.dims, 0.05, 0.025, 400), s.sign);
+    let (current, segments) = join::join(obs, q, s.sign);
+    let fit = solve(Problem::new(&current, s.dims, s.z, s.sign, &q), s)?;
+    let (mut current, mut fit) = rejoin(current, segments, fit, s);
+    if current.iter().any(|o| o.joint != o.group) {
+        for o in &mut current {
+            o.group = o.joint;
+        }
+        let segments = current.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+        (_, fit) = rejoin(current, segments + 1, fit, s);
+    }
+    Ok(fit)
+}
+
+/// Rounds of search (± 3σ along the weak axes), join and solve while joining merges segments
+/// and the joined fit explains the phases about as well (a wrong join leaves whole turns in
+/// the residuals).
+fn rejoin(
+    mut current: Vec<Obs>,
+    mut segments: usize,
+    mut fit: Solution,
+    s: &Search,
+) -> (Vec<Obs>, Solution) {
+    for _ in 0..JOIN_ROUNDS {
+        let q = join::search(&current, position(&fit.0, s), &fit.1, s.sign);
+        let (joined, n) = join::join(&current, q, s.sign);
+        if n >= segments {
+            break;
+        }
+        match solve(Problem::new(&joined, s.dims, s.z, s.sign, &q), s) {
+            Ok(better) if better.2 <= fit.2 * 1.5 + 0.02 => {
+                fit = better;
+                current = joined;
+                segments = n;
+            }
+            _ => break,
+        }
+    }
+    (current, fit)
+}
+
+/// Most rounds of search, join and solve.
+const JOIN_ROUNDS: usize = 3;
+
+#[cfg(test)]
+mod tests {
+    use super::super::locate3d;
+    use super::*;
+    use crate::localize::synthetic;
+
+    /// Passes at four heights, each cut into segments of five phases (5 cm of path), every
+    /// segment shifted by a whole number of turns: what unwrapping leaves of sparse reads.
+    fn short_segments(tag: [f64; 3], noise: f64, seed: u64, joint: bool) -> Vec<Obs> {
+        let zs = [0.4, 0.9, 1.4, 1.9];
+        let mut obs = synthetic::passes(tag, &zs, (0.7, 0.0), noise, seed);
+        for (i, o) in obs.iter_mut().enumerate() {
+            o.segment = i / 5;
+            o.phase_rad += std::f64::consts::TAU * ((i / 5) % 3) as f64;
+            if joint {
+                o.joint = 0;
+            }
+        }
+        obs
+    }
+
+    fn error(p: [f64; 3], tag: [f64; 3]) -> f64 {
+        distance(p, tag)
+    }
+
+    #[test]
+    fn a_noise_free_tag_in_short_segments_is_recovered_within_a_millimetre() {
+        let tag = [0.3, 1.1, 1.0];
+        for joint in [false, true] {
+            let obs = short_segments(tag, 0.0, 1, joint);
+            let fix = locate3d(&obs, 1.0, [0.0, 1.0], 3.0).expect("a fix");
+            assert!(error(fix.position, tag) < 1e-3, "joint {joint}: {fix:?}");
+        }
+    }
+
+    #[test]
+    fn with_noise_joined_segments_stay_within_a_centimetre() {
+        let tag = [0.3, 1.1, 1.0];
+        for seed in 0..5 {
+            let obs = short_segments(tag, 0.1, seed, true);
+            let fix = locate3d(&obs, 1.0, [0.0, 1.0], 3.0).expect("a fix");
+            assert!(error(fix.position, tag) < 0.01, "seed {seed}: {fix:?}");
+        }
+    }
+
+    #[test]
+    fn pairs_keep_consecutive_phases_of_one_series_only() {
+        let obs = short_segments([0.3, 1.1, 1.0], 0.0, 1, false);
+        let all = pairs(&obs, 1.0, usize::MAX);
+        // 300 phases a height, four heights: 299 pairs each; none across heights.
+        assert_eq!(all.len(), 4 * 299);
+        assert!(all.iter().all(|p| p.a[2] == p.b[2]));
+        assert_eq!(pairs(&obs, 1.0, 100).len(), 100);
+    }
+}
