@@ -4,7 +4,7 @@
 //! 1. Grids on the phase differences of consecutive reads of a series ([`pairs`]), which hold
 //!    across its splits, give up to [`STARTS`] starts.
 //! 2. Around each, in the grid's order, the most coherent point within [`START_BOX_M`]
-//!    ([`join::search_box`], each series its own group, 5 cm steps on 60 phases).
+//!    ([`join::search_box`], each series its own group, 4 cm steps on 80 phases).
 //! 3. From a start: 2.5 cm steps within 5 cm, the segments of each series joined there
 //!    ([`join::join`]) and solved; joined again from the fit while that merges more and the
 //!    fit explains the phases about as well ([`rejoin`]); then the same with the calibrated
@@ -91,7 +91,7 @@ pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         .collect();
     let mut best: Option<(f64, Solution)> = None;
     for c in starts {
-        let q = join::search_box(obs, c, (dims, START_BOX_M, 0.05, 60), sign);
+        let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
         let Ok(fit) = join_from(obs, q, s) else {
             continue;
         };
