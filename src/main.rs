@@ -223,17 +223,12 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
         let mut live = None;
         let mut http = None;
         if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
-            let model = llrp_gateway::physics::Model::in_world(
-                &llrp_gateway::physics::World::new(&scenario),
-                &scenario,
-                0,
-            );
             let settings = llrp_gateway::localize::live::Settings {
                 estimator: localize.estimator,
                 ..Default::default()
             };
             let l = match llrp_gateway::localize::live::Live::start(sim::feed::settings(
-                &scenario, &model, settings,
+                &scenario, settings,
             )) {
                 Ok(l) => l,
                 Err(e) => {

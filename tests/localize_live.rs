@@ -14,7 +14,6 @@ use llrp_gateway::localize::estimate::State;
 use llrp_gateway::localize::live::{Live, Settings};
 use llrp_gateway::localize::shared::Shared;
 use llrp_gateway::net::clock::Speed;
-use llrp_gateway::physics::{Model, World};
 use llrp_gateway::sim::{self, feed, LocalizeFeed, PoseSource, SimOptions};
 
 /// Polls `pred` on the localizer's state every 50 ms until it holds or `limit` passes.
@@ -30,8 +29,7 @@ async fn until(shared: &Shared, limit: Duration, pred: impl Fn(&Shared) -> bool)
 }
 
 fn live_for(scenario: &llrp_gateway::scenario::Scenario) -> Live {
-    let model = Model::in_world(&World::new(scenario), scenario, 0);
-    Live::start(feed::settings(scenario, &model, Settings::default())).expect("starts")
+    Live::start(feed::settings(scenario, Settings::default())).expect("starts")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -210,6 +210,29 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
         !ok && stderr.contains("phase_sign: must be 1 or -1"),
         "{stderr}"
     );
+    // A reader's own settings are checked as the defaults are, named by the reader.
+    for (body, want) in [
+        (
+            r#"{"readers": {"left": {"phase_sign": 0}}}"#,
+            "readers.left.phase_sign: must be 1 or -1",
+        ),
+        (
+            r#"{"readers": {"left": {"facing": [0, 0]}}}"#,
+            "readers.left.facing: must be a non-zero direction",
+        ),
+        (r#"{"readers": {"left": {"gain": 1}}}"#, "gain"),
+    ] {
+        std::fs::write(&settings, body).expect("writes");
+        let (ok, _, stderr) = localize(
+            &[
+                rec.to_str().expect("utf-8"),
+                "--settings",
+                settings.to_str().expect("utf-8"),
+            ],
+            &out,
+        );
+        assert!(!ok && stderr.contains(want), "{body}: {stderr}");
+    }
     let reads = dir.path().join("reads.jsonl");
     std::fs::write(
         &reads,

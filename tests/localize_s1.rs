@@ -112,6 +112,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
         facing: [0.0, 1.0],
         reach_m: 4.0,
         references: Vec::new(),
+        readers: Default::default(),
     };
     let estimates = estimate::estimate_all(&ingest, estimate::Estimator::Relock, &geometry);
     assert_eq!(estimates.len(), 10);

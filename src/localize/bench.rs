@@ -84,13 +84,12 @@ pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
     let end_us = (seconds * 1e6) as u64;
     let mut reads = Vec::new();
     let (mut true_poses, mut estimated_poses) = (Poses::new(), Poses::new());
-    let mut settings = Settings::default();
+    let settings = crate::sim::feed::settings(scenario, Settings::default());
     let mut truth = Vec::new();
     let mut calibrated = true;
     for (i, spec) in scenario.readers.iter().enumerate() {
         let model = std::sync::Arc::new(Model::in_world(&world, scenario, i));
         if i == 0 {
-            settings = crate::sim::feed::settings(scenario, &model, Settings::default());
             truth = (0..model.tag_count())
                 .map(|k| {
                     (

@@ -50,11 +50,11 @@ fn circular_mean(angles: impl Iterator<Item = f64>, period: f64) -> (f64, f64) {
 
 impl Calibration {
     /// The offsets measured by `references` (EPC upper-case hex, true position) in `ingest`'s
-    /// series, phase sign `sign`.
+    /// series, each reader's phase sign `sign(reader)`.
     pub fn from_references(
         ingest: &Ingest,
         references: &[(String, [f64; 3])],
-        sign: f64,
+        sign: &dyn Fn(&str) -> f64,
     ) -> Calibration {
         // (reader, channel) → reference → antenna → (offset, period).
         type PerReference = BTreeMap<usize, BTreeMap<u16, (f64, f64)>>;
@@ -62,6 +62,7 @@ impl Calibration {
         for (r, (epc, position)) in references.iter().enumerate() {
             for (key, series) in ingest.tag_series(epc) {
                 let (lambda, period) = (series.wavelength_m(), series.ambiguity().period());
+                let sign = sign(&key.1);
                 let residuals = series.segments().iter().flatten().map(|s| {
                     let d = (0..3)
                         .map(|a| (position[a] - s.antenna[a]).powi(2))
@@ -139,7 +140,8 @@ mod tests {
     use super::*;
     use crate::localize::poses::Poses;
     use crate::localize::series::Ambiguity;
-    use crate::reads::{AntennaPose, Read};
+    use crate::localize::synthetic;
+    use crate::reads::Read;
 
     /// Reads of tag `epc` at `tag` by antennas 1..=3 at heights 0.4, 0.9, 1.4 passing along
     /// y = 0, each antenna with offset `antenna_offset · port`, the tag with `tag_offset`.
@@ -150,28 +152,13 @@ mod tests {
             for k in 0..200u64 {
                 let a = [-1.0 + 0.01 * k as f64, 0.0, z];
                 let d = (0..3).map(|j| (tag[j] - a[j]).powi(2)).sum::<f64>().sqrt();
-                let lambda = crate::localize::SPEED_OF_LIGHT / 866.9e6;
+                let lambda = crate::localize::SPEED_OF_LIGHT / synthetic::FREQUENCY_HZ as f64;
                 let phase = 4.0 * std::f64::consts::PI * d / lambda
                     + tag_offset
                     + antenna_offset * f64::from(port);
                 out.push(Read {
-                    epc: epc.to_string(),
-                    reader: None,
                     antenna: port,
-                    t_us: 1_000 * k + u64::from(port),
-                    phase_rad: Some(phase.rem_euclid(TAU)),
-                    rssi_dbm: None,
-                    channel_index: None,
-                    channel_frequency_hz: Some(866_900_000),
-                    doppler_hz: None,
-                    antenna_pose: Some(AntennaPose {
-                        x: a[0],
-                        y: a[1],
-                        z: a[2],
-                        yaw_deg: 90.0,
-                        pitch_deg: 0.0,
-                    }),
-                    last_seen_us: None,
+                    ..synthetic::read(epc, 1_000 * k + u64::from(port), phase, a)
                 });
             }
         }
@@ -191,22 +178,27 @@ mod tests {
         for r in &all {
             ingest.push(r);
         }
-        let cal = Calibration::from_references(&ingest, &refs, 1.0);
-        let base = cal.offset("", 1, 866_900_000).expect("antenna 1");
+        let cal = Calibration::from_references(&ingest, &refs, &|_| 1.0);
+        let base = cal
+            .offset("", 1, synthetic::FREQUENCY_HZ)
+            .expect("antenna 1");
         assert_eq!(base, 0.0, "the base antenna: most references, lowest port");
         for port in 2..=3u16 {
-            let got = cal.offset("", port, 866_900_000).expect("calibrated");
+            let got = cal
+                .offset("", port, synthetic::FREQUENCY_HZ)
+                .expect("calibrated");
             let want = 1.1 * f64::from(port - 1);
             let err = (got - want + TAU / 2.0).rem_euclid(TAU) - TAU / 2.0;
             assert!(err.abs() < 1e-6, "antenna {port}: {got} against {want}");
         }
         // A tag's series on the calibrated antennas: three groups, one joint group, and the
         // antennas' offsets taken off (the phases of one position differ by the tag's alone).
-        let (obs, _) = crate::localize::estimate::calibrated_observations(&ingest, "BB", &cal);
+        let g = crate::localize::live::Settings::default().geometry;
+        let obs = crate::localize::estimate::calibrated_observations(&ingest, "BB", &g, &cal).obs;
         let groups: std::collections::BTreeSet<usize> = obs.iter().map(|o| o.group).collect();
         assert_eq!(groups.len(), 3);
         assert!(obs.iter().all(|o| o.joint == obs[0].joint));
-        let uncalibrated = crate::localize::estimate::observations(&ingest, "BB").0;
+        let uncalibrated = crate::localize::estimate::observations(&ingest, "BB", &g).obs;
         assert_eq!(
             uncalibrated
                 .iter()
@@ -215,9 +207,9 @@ mod tests {
             groups
         );
         // One reference is not enough; a wrong position scatters and is left out.
-        let one = Calibration::from_references(&ingest, &refs[..1], 1.0);
+        let one = Calibration::from_references(&ingest, &refs[..1], &|_| 1.0);
         assert!(one.is_empty());
         let wrong = [refs[0].clone(), ("BB".to_string(), [0.9, 0.3, 0.1])];
-        assert!(Calibration::from_references(&ingest, &wrong, 1.0).is_empty());
+        assert!(Calibration::from_references(&ingest, &wrong, &|_| 1.0).is_empty());
     }
 }

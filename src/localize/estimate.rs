@@ -4,9 +4,13 @@
 use serde::Serialize;
 
 use super::calibrate::Calibration;
+pub use super::geometry::{Geometry, ReaderGeometry};
 use super::ingest::Ingest;
 use super::mhekf::{self, PoseObs};
-use super::relock::{self, Obs};
+pub use super::observe::{
+    calibrated_observations, observations, pose_observations, Observed, PoseTrack,
+};
+use super::relock;
 use super::{fingerprint, hyperbolic, linear, loci3d, wls};
 use std::collections::BTreeMap;
 
@@ -115,120 +119,17 @@ impl std::str::FromStr for Estimator {
     }
 }
 
-/// What an estimator is told beside the reads: the per-reader settings (from the scenario in
-/// simulation, from a settings file for a real reader).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Geometry {
-    /// Height assumed for the tags by the 2D estimators (m).
-    pub tag_height_m: f64,
-    /// Phase sign s of φ = s·4πd/λ + φ0: +1, or −1 for a reader that reports it negated.
-    pub phase_sign: f64,
-    /// The side the antennas face (a horizontal direction; only its sign against the path
-    /// matters): a straight path cannot tell a tag from its mirror image.
-    pub facing: [f64; 2],
-    /// Farthest a tag is searched for from the path (m).
-    pub reach_m: f64,
-    /// Reference tags at known positions, for fingerprinting: (EPC upper-case hex, position in
-    /// m). A reference tag is itself located from the others.
-    pub references: Vec<(String, [f64; 3])>,
-}
-
-/// One tag's observations for the phase estimators: every unwrapped phase of its series,
-/// one segment number per (series, segment), one group per series, and the time of the
-/// newest.
-pub fn observations(ingest: &Ingest, epc: &str) -> (Vec<Obs>, u64) {
-    calibrated_observations(ingest, epc, &Calibration::default())
-}
-
-/// [`observations`] with the offsets of `calibration` taken off the phases of the antennas it
-/// calibrates, whose series on one (reader, channel) then form one joint group.
-pub fn calibrated_observations(
-    ingest: &Ingest,
-    epc: &str,
-    calibration: &Calibration,
-) -> (Vec<Obs>, u64) {
-    let mut obs: Vec<Obs> = Vec::new();
-    let mut last = 0;
-    // (reader, antenna or none when calibrated, channel) → joint group.
-    let mut joints: BTreeMap<(&str, Option<u16>, u64), usize> = BTreeMap::new();
-    for (group, (key, series)) in ingest.tag_series(epc).enumerate() {
-        let (lambda, period_rad) = (series.wavelength_m(), series.ambiguity().period());
-        let offset = calibration.offset(&key.1, key.2, key.3);
-        let next = joints.len();
-        let joint = *joints
-            .entry((key.1.as_str(), offset.map_or(Some(key.2), |_| None), key.3))
-            .or_insert(next);
-        for seg in series.segments() {
-            let segment = obs.last().map_or(0, |o| o.segment + 1);
-            for s in seg {
-                last = last.max(s.t_us);
-                obs.push(Obs {
-                    phase_rad: s.phase_rad - offset.unwrap_or(0.0),
-                    antenna: s.antenna,
-                    wavelength_m: lambda,
-                    segment,
-                    group,
-                    joint,
-                    period_rad,
-                });
-            }
-        }
-    }
-    (obs, last)
-}
-
-/// One (reader, antenna) track of a tag's phases as reported, for the filters.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PoseTrack {
-    /// Reader name.
-    pub reader: String,
-    /// Antenna port.
-    pub antenna: u16,
-    /// Every channel's reads, in time order.
-    pub obs: Vec<PoseObs>,
-}
-
-/// Tag `epc`'s reads per (reader, antenna), channels merged in time order, each phase as
-/// reported with the antenna's position and yaw.
-pub fn pose_observations(ingest: &Ingest, epc: &str) -> Vec<PoseTrack> {
-    let mut tracks: BTreeMap<(String, u16), Vec<PoseObs>> = BTreeMap::new();
-    for (key, series) in ingest.tag_series(epc) {
-        let (lambda, period) = (series.wavelength_m(), series.ambiguity().period());
-        let track = tracks.entry((key.1.clone(), key.2)).or_default();
-        for s in series.segments().iter().flatten() {
-            track.push(PoseObs {
-                t_us: s.t_us,
-                phase_rad: s.raw_phase_rad.rem_euclid(period),
-                antenna: s.antenna,
-                yaw_rad: s.yaw_rad,
-                wavelength_m: lambda,
-                period_rad: period,
-            });
-        }
-    }
-    tracks
-        .into_iter()
-        .map(|((reader, antenna), mut obs)| {
-            obs.sort_by_key(|o| o.t_us);
-            PoseTrack {
-                reader,
-                antenna,
-                obs,
-            }
-        })
-        .collect()
-}
-
 /// Tag `epc`'s MHEKF fix: one filter bank per track, the fix with the least covariance trace.
 fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
     let s = mhekf::Settings {
         max_range_m: g.reach_m,
         ..mhekf::Settings::default()
     };
-    pose_observations(ingest, epc)
+    pose_observations(ingest, epc, g)
         .iter()
         .filter_map(|t| {
-            mhekf::locate(&t.obs, g.tag_height_m, g.phase_sign, Some(g.facing), &s).ok()
+            let facing = g.facing_of(&t.reader);
+            mhekf::locate(&t.obs, g.tag_height_m, 1.0, Some(facing), &s).ok()
         })
         .min_by(|a, b| {
             let tr = |f: &relock::Fix| f.covariance[0] + f.covariance[3];
@@ -247,11 +148,13 @@ fn wls_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relo
         ..wls::Settings::default()
     };
     let mut robots: BTreeMap<String, Vec<Vec<PoseObs>>> = BTreeMap::new();
-    for t in pose_observations(ingest, epc) {
+    for t in pose_observations(ingest, epc, g) {
         robots.entry(t.reader).or_default().push(t.obs);
     }
+    // One side for the consensus: the first robot's (a swarm's readers share a layout).
+    let facing = robots.keys().next().map_or(g.facing, |r| g.facing_of(r));
     let robots: Vec<Vec<Vec<PoseObs>>> = robots.into_values().collect();
-    wls::locate(&robots, g.tag_height_m, g.phase_sign, Some(g.facing), &s).map(|(fix, _)| fix)
+    wls::locate(&robots, g.tag_height_m, 1.0, Some(facing), &s).map(|(fix, _)| fix)
 }
 
 /// Tag `epc`'s readings for fingerprinting, each series a track numbered in `tracks`.
@@ -311,7 +214,7 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
 /// others.
 pub fn calibration(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Calibration {
     if estimator == Estimator::Relock && !g.references.is_empty() {
-        Calibration::from_references(ingest, &g.references, g.phase_sign)
+        Calibration::from_references(ingest, &g.references, &|r: &str| g.sign_of(r))
     } else {
         Calibration::default()
     }
@@ -325,7 +228,11 @@ pub fn estimate_calibrated(
     g: &Geometry,
     calibration: &Calibration,
 ) -> Estimate {
-    let (obs, last) = calibrated_observations(ingest, epc, calibration);
+    let Observed {
+        obs,
+        last_us: last,
+        facing,
+    } = calibrated_observations(ingest, epc, g, calibration);
     let base = Estimate {
         epc: epc.to_string(),
         estimator: estimator.name(),
@@ -335,6 +242,8 @@ pub fn estimate_calibrated(
         state: State::InsufficientGeometry,
         last_update_us: last,
     };
+    // The phases are times their readers' signs: the estimators see s = +1.
+    let sign = 1.0;
     // A 2D fix's covariance as 3×3 with the z row and column 0.
     let planar = |fix: relock::Fix| {
         let [a, b, c, d] = fix.covariance;
@@ -347,21 +256,14 @@ pub fn estimate_calibrated(
             });
             if hi - lo >= relock::MIN_HEIGHT_SPAN_M {
                 // Antennas at several heights: the height is estimated too.
-                relock::locate3d(&obs, g.phase_sign, g.facing, g.reach_m)
-                    .map(|f| (f.position, f.covariance))
+                relock::locate3d(&obs, sign, facing, g.reach_m).map(|f| (f.position, f.covariance))
             } else {
-                relock::locate(&obs, g.tag_height_m, g.phase_sign, g.facing, g.reach_m).map(planar)
+                relock::locate(&obs, g.tag_height_m, sign, facing, g.reach_m).map(planar)
             }
         }
-        Estimator::Linear => {
-            linear::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
-        }
-        Estimator::Hyperbolic => {
-            hyperbolic::locate(&obs, g.tag_height_m, g.phase_sign, g.facing).map(planar)
-        }
-        Estimator::Loci3d => {
-            loci3d::locate(&obs, g.phase_sign, g.facing).map(|f| (f.position, f.covariance))
-        }
+        Estimator::Linear => linear::locate(&obs, g.tag_height_m, sign, facing).map(planar),
+        Estimator::Hyperbolic => hyperbolic::locate(&obs, g.tag_height_m, sign, facing).map(planar),
+        Estimator::Loci3d => loci3d::locate(&obs, sign, facing).map(|f| (f.position, f.covariance)),
         Estimator::Fingerprint => fingerprint_tag(ingest, epc, g),
         Estimator::Mhekf => mhekf_tag(ingest, epc, g).map(planar),
         Estimator::Wls => wls_tag(ingest, epc, g).map(planar),
@@ -406,6 +308,7 @@ mod tests {
     use super::*;
     use crate::localize::poses::Poses;
     use crate::localize::series::Ambiguity;
+    use crate::localize::synthetic;
     use crate::reads::{AntennaPose, Read};
 
     fn read(epc: &str, t_us: u64, x: f64, tag: [f64; 2]) -> Read {
@@ -413,25 +316,15 @@ mod tests {
         let lambda = crate::localize::SPEED_OF_LIGHT / f as f64;
         let d = ((tag[0] - x).powi(2) + tag[1].powi(2)).sqrt();
         Read {
-            epc: epc.into(),
             reader: Some("r".into()),
-            antenna: 1,
-            t_us,
-            phase_rad: Some(
-                (0.9 + 4.0 * std::f64::consts::PI * d / lambda).rem_euclid(std::f64::consts::TAU),
-            ),
-            rssi_dbm: None,
             channel_index: Some(1),
             channel_frequency_hz: Some(f),
-            doppler_hz: None,
-            antenna_pose: Some(AntennaPose {
-                x,
-                y: 0.0,
-                z: 0.5,
-                yaw_deg: 90.0,
-                pitch_deg: 0.0,
-            }),
-            last_seen_us: None,
+            ..synthetic::read(
+                epc,
+                t_us,
+                0.9 + 4.0 * std::f64::consts::PI * d / lambda,
+                [x, 0.0, 0.5],
+            )
         }
     }
 
@@ -473,6 +366,7 @@ mod tests {
             facing: [0.0, 1.0],
             reach_m: 3.0,
             references: Vec::new(),
+            readers: BTreeMap::new(),
         };
         let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);
@@ -558,8 +452,21 @@ mod tests {
         let mut bb = r1[..3].to_vec();
         bb.iter_mut().for_each(|r| r.epc = "BB".into());
         bb.iter().for_each(|r| ingest.push(r));
-        // One track per (reader, antenna), both channels merged in time order, as reported.
-        let tracks = pose_observations(&ingest, "AA");
+        let g = Geometry {
+            tag_height_m: 0.5,
+            phase_sign: -1.0,
+            facing: [0.0, 1.0],
+            reach_m: 2.0,
+            references: Vec::new(),
+            readers: BTreeMap::new(),
+        };
+        // One track per (reader, antenna), both channels merged in time order, as reported
+        // (times the phase sign: +1 here).
+        let plus = Geometry {
+            phase_sign: 1.0,
+            ..g.clone()
+        };
+        let tracks = pose_observations(&ingest, "AA", &plus);
         assert_eq!(tracks.len(), 2);
         assert_eq!((tracks[0].reader.as_str(), tracks[0].antenna), ("r1", 1));
         assert_eq!(tracks[0].obs.len(), r1.len());
@@ -571,13 +478,6 @@ mod tests {
             .map_or(f64::NAN, |p| p.yaw_deg.to_radians());
         assert!((o.yaw_rad - yaw).abs() < 1e-12, "{} vs {yaw}", o.yaw_rad);
         assert_ne!(tracks[0].obs[0].wavelength_m, tracks[0].obs[1].wavelength_m);
-        let g = Geometry {
-            tag_height_m: 0.5,
-            phase_sign: -1.0,
-            facing: [0.0, 1.0],
-            reach_m: 2.0,
-            references: Vec::new(),
-        };
         for estimator in [Estimator::Mhekf, Estimator::Wls] {
             let e = estimate_tag(&ingest, "AA", estimator, &g);
             let p = e.estimate.expect("a position");

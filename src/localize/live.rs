@@ -68,6 +68,7 @@ impl Default for Settings {
                 facing: [0.0, 1.0],
                 reach_m: 4.0,
                 references: Vec::new(),
+                readers: BTreeMap::new(),
             },
             ambiguity: Ambiguity::None,
             max_gap_us: super::series::DEFAULT_MAX_GAP_US,

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::estimate::{self, Estimate, Estimator, Geometry};
+use super::estimate::{self, Estimate, Estimator, Geometry, ReaderGeometry};
 use super::ingest::{Ingest, SetAside};
 use super::poses::{PoseError, Poses};
 use super::series::Ambiguity;
@@ -102,6 +102,38 @@ pub struct SettingsFile {
     /// Per reader, reader time − robot time of the pose file (µs).
     #[serde(default)]
     pub clock_offsets_us: BTreeMap<String, i64>,
+    /// Per reader name, its own phase sign and facing (the keys above for the others).
+    #[serde(default)]
+    pub readers: BTreeMap<String, ReaderSettings>,
+}
+
+/// One reader's own settings in the settings file.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ReaderSettings {
+    /// +1, or −1 for a reader that reports the phase negated.
+    pub phase_sign: Option<f64>,
+    /// The side its antennas face, `[x, y]`.
+    pub facing: Option<[f64; 2]>,
+}
+
+/// Why `phase_sign` is not one a reader has.
+fn check_sign(sign: Option<f64>) -> Result<(), String> {
+    match sign.filter(|&v| v != 1.0 && v != -1.0) {
+        Some(v) => Err(format!("must be 1 or -1, got {v}")),
+        None => Ok(()),
+    }
+}
+
+/// Why `facing` is not a direction.
+fn check_facing(facing: Option<[f64; 2]>) -> Result<(), String> {
+    match facing.filter(|f| {
+        let n = f[0].hypot(f[1]);
+        n.is_nan() || n.is_infinite() || n <= 0.0
+    }) {
+        Some(f) => Err(format!("must be a non-zero direction, got {f:?}")),
+        None => Ok(()),
+    }
 }
 
 impl SettingsFile {
@@ -118,9 +150,7 @@ impl SettingsFile {
         let mut de = serde_json::Deserializer::from_str(&text);
         let s: SettingsFile = serde_path_to_error::deserialize(&mut de)
             .map_err(|e| bad(format!("{}: {}", e.path(), e.inner())))?;
-        if let Some(sign) = s.phase_sign.filter(|&v| v != 1.0 && v != -1.0) {
-            return Err(bad(format!("phase_sign: must be 1 or -1, got {sign}")));
-        }
+        check_sign(s.phase_sign).map_err(|e| bad(format!("phase_sign: {e}")))?;
         if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
             return Err(bad(format!("tag_height_m: not a finite number: {h}")));
         }
@@ -130,13 +160,10 @@ impl SettingsFile {
         {
             return Err(bad(format!("reach_m: must be a positive number, got {r}")));
         }
-        if let Some(f) = s.facing.filter(|f| {
-            let n = f[0].hypot(f[1]);
-            n.is_nan() || n.is_infinite() || n <= 0.0
-        }) {
-            return Err(bad(format!(
-                "facing: must be a non-zero direction, got {f:?}"
-            )));
+        check_facing(s.facing).map_err(|e| bad(format!("facing: {e}")))?;
+        for (name, r) in &s.readers {
+            check_sign(r.phase_sign).map_err(|e| bad(format!("readers.{name}.phase_sign: {e}")))?;
+            check_facing(r.facing).map_err(|e| bad(format!("readers.{name}.facing: {e}")))?;
         }
         for (i, r) in s.references.iter().enumerate() {
             let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
@@ -207,17 +234,44 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
         .find_map(|r| r.antenna_pose.as_ref().map(|p| (p.z, p.yaw_deg)))
         .or_else(|| poses.first().map(|p| (p.z, p.yaw_deg)));
     let (z, yaw) = first.unwrap_or((0.0, 90.0));
-    let yaw = yaw.to_radians();
+    let towards = |yaw_deg: f64| [yaw_deg.to_radians().cos(), yaw_deg.to_radians().sin()];
+    let facing = file.facing.unwrap_or(towards(yaw));
+    let phase_sign = file.phase_sign.unwrap_or(1.0);
+    // Each reader faces where its own first pose does, unless the file says otherwise.
+    let mut own: BTreeMap<String, [f64; 2]> = BTreeMap::new();
+    for p in poses.first_samples() {
+        own.entry(p.reader.clone()).or_insert(towards(p.yaw_deg));
+    }
+    for r in reads {
+        if let (Some(reader), Some(p)) = (&r.reader, &r.antenna_pose) {
+            own.entry(reader.clone()).or_insert(towards(p.yaw_deg));
+        }
+    }
+    for name in file.readers.keys() {
+        own.entry(name.clone()).or_insert(facing);
+    }
+    let readers = own
+        .into_iter()
+        .map(|(name, derived)| {
+            let mine = file.readers.get(&name).cloned().unwrap_or_default();
+            let r = ReaderGeometry {
+                phase_sign: mine.phase_sign.unwrap_or(phase_sign),
+                facing: mine.facing.or(file.facing).unwrap_or(derived),
+            };
+            (name, r)
+        })
+        .collect();
     Geometry {
         tag_height_m: file.tag_height_m.unwrap_or(z),
-        phase_sign: file.phase_sign.unwrap_or(1.0),
-        facing: file.facing.unwrap_or([yaw.cos(), yaw.sin()]),
+        phase_sign,
+        facing,
         reach_m: file.reach_m.unwrap_or(4.0),
         references: file
             .references
             .iter()
             .map(|r| (r.epc.to_ascii_uppercase(), [r.x, r.y, r.z]))
             .collect(),
+        readers,
     }
 }
 
@@ -290,4 +344,48 @@ pub enum Progress {
     Read,
     /// A tag was estimated.
     Tag,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::localize::poses::PoseSample;
+
+    fn pose(reader: &str, yaw_deg: f64) -> PoseSample {
+        PoseSample {
+            t_us: 0,
+            reader: reader.into(),
+            antenna: 1,
+            x: 0.0,
+            y: 0.0,
+            z: 0.8,
+            yaw_deg,
+            pitch_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn each_reader_faces_where_its_first_pose_does_unless_the_file_says_otherwise() {
+        let mut poses = Poses::new();
+        poses.add(pose("left", 90.0));
+        poses.add(pose("right", -90.0));
+        let mut file = SettingsFile::default();
+        let g = geometry(&file, &[], &poses);
+        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-9;
+        assert!(near(g.facing_of("left"), [0.0, 1.0]), "{g:?}");
+        assert!(near(g.facing_of("right"), [0.0, -1.0]), "{g:?}");
+        assert_eq!(g.sign_of("right"), 1.0);
+        // The file's own values: a default facing for all, a reader's own above it.
+        file.facing = Some([1.0, 0.0]);
+        file.readers.insert(
+            "right".into(),
+            ReaderSettings {
+                phase_sign: Some(-1.0),
+                facing: None,
+            },
+        );
+        let g = geometry(&file, &[], &poses);
+        assert!(near(g.facing_of("left"), [1.0, 0.0]) && near(g.facing_of("right"), [1.0, 0.0]));
+        assert_eq!((g.sign_of("left"), g.sign_of("right")), (1.0, -1.0));
+    }
 }

@@ -5,6 +5,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::relock::Obs;
+use crate::reads::{AntennaPose, Read};
 
 /// The wavelength of the synthetic channel (m).
 pub const LAMBDA: f64 = 0.3463;
@@ -43,3 +44,31 @@ pub fn passes(
     }
     obs
 }
+
+/// A read of tag `epc` at `t_us` by antenna 1 of an unnamed reader at `at` facing +y, its
+/// phase `phase_rad` (wrapped onto [0, 2π)) on 866.9 MHz; change what a test needs with
+/// `Read { .., ..read(..) }`.
+pub fn read(epc: &str, t_us: u64, phase_rad: f64, at: [f64; 3]) -> Read {
+    Read {
+        epc: epc.to_string(),
+        reader: None,
+        antenna: 1,
+        t_us,
+        phase_rad: Some(phase_rad.rem_euclid(std::f64::consts::TAU)),
+        rssi_dbm: None,
+        channel_index: None,
+        channel_frequency_hz: Some(FREQUENCY_HZ),
+        doppler_hz: None,
+        antenna_pose: Some(AntennaPose {
+            x: at[0],
+            y: at[1],
+            z: at[2],
+            yaw_deg: 90.0,
+            pitch_deg: 0.0,
+        }),
+        last_seen_us: None,
+    }
+}
+
+/// The channel of [`read`] (Hz).
+pub const FREQUENCY_HZ: u64 = 866_900_000;

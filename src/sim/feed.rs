@@ -4,11 +4,12 @@
 
 use std::sync::Arc;
 
+use crate::localize::estimate::ReaderGeometry;
 use crate::localize::live::{Input, Settings, Tap};
 use crate::localize::poses::PoseSample;
 use crate::localize::series::Ambiguity;
 use crate::localize::shared::{Truth, TruthTag};
-use crate::physics::{AntennaPose, Model};
+use crate::physics::{AntennaPose, Model, World};
 use crate::scenario::Scenario;
 
 /// Simulated time between two pose samples of an antenna, µs.
@@ -111,32 +112,46 @@ fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSamp
 }
 
 /// The live localizer's settings for a scenario: its first reader's first antenna gives the
-/// phase sign, the π ambiguity, the side the antennas face (its yaw at time 0) and the tags'
-/// height (the antenna's own, as each antenna assumes in \[A\]); the reference tags are the
+/// default phase sign, the π ambiguity, the side the antennas face (its yaw at time 0) and the
+/// tags' height (the antenna's own, as each antenna assumes in \[A\]); every reader its own
+/// phase sign and facing, from its first antenna the same way; the reference tags are the
 /// scenario's, at their positions.
-pub fn settings(scenario: &Scenario, model: &Model, base: Settings) -> Settings {
+pub fn settings(scenario: &Scenario, base: Settings) -> Settings {
     let mut s = base;
-    if let Some(a) = scenario.readers.first().and_then(|r| r.antennas.first()) {
-        s.geometry.phase_sign = a.phase_sign;
-        s.ambiguity = if a.phase_pi_ambiguity {
-            Ambiguity::Pi
-        } else {
-            Ambiguity::None
+    let world = World::new(scenario);
+    for (i, spec) in scenario.readers.iter().enumerate() {
+        let model = Model::in_world(&world, scenario, i);
+        let Some(a) = spec.antennas.first() else {
+            continue;
         };
-    }
-    s.geometry.references = (0..model.tag_count())
-        .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
-        .map(|k| {
-            (
-                crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
-                model.tag_position(k, 0),
-            )
-        })
-        .collect();
-    if model.antenna_count() >= 1 {
-        let p = model.antenna_pose(1, 0);
-        s.geometry.tag_height_m = p.position[2];
-        s.geometry.facing = [p.yaw_rad.cos(), p.yaw_rad.sin()];
+        let pose = model.antenna_pose(1, 0);
+        let facing = [pose.yaw_rad.cos(), pose.yaw_rad.sin()];
+        if i == 0 {
+            s.geometry.phase_sign = a.phase_sign;
+            s.ambiguity = if a.phase_pi_ambiguity {
+                Ambiguity::Pi
+            } else {
+                Ambiguity::None
+            };
+            s.geometry.tag_height_m = pose.position[2];
+            s.geometry.facing = facing;
+            s.geometry.references = (0..model.tag_count())
+                .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
+                .map(|k| {
+                    (
+                        crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
+                        model.tag_position(k, 0),
+                    )
+                })
+                .collect();
+        }
+        s.geometry.readers.insert(
+            spec.name.clone(),
+            ReaderGeometry {
+                phase_sign: a.phase_sign,
+                facing,
+            },
+        );
     }
     s
 }
