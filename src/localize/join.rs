@@ -35,14 +35,26 @@ pub const SEARCH_PHASES: usize = 400;
 
 /// Whether `obs` has a group of several segments, so that joining can change anything.
 pub fn has_splits(obs: &[Obs]) -> bool {
+    spans(obs, |o| o.group, |o| o.segment)
+}
+
+/// Whether joining can change anything in `obs`: a series split into segments, or a joint
+/// group of calibrated antennas holding several series.
+pub fn joinable(obs: &[Obs]) -> bool {
+    has_splits(obs) || spans(obs, |o| o.joint, |o| o.group)
+}
+
+/// Whether some `outer` value of `obs` holds two `inner` values.
+fn spans(obs: &[Obs], outer: fn(&Obs) -> usize, inner: fn(&Obs) -> usize) -> bool {
     let mut first: Vec<Option<usize>> = Vec::new();
     for o in obs {
-        if first.len() <= o.group {
-            first.resize(o.group + 1, None);
+        let (k, v) = (outer(o), inner(o));
+        if first.len() <= k {
+            first.resize(k + 1, None);
         }
-        match first[o.group] {
-            None => first[o.group] = Some(o.segment),
-            Some(s) if s != o.segment => return true,
+        match first[k] {
+            None => first[k] = Some(v),
+            Some(s) if s != v => return true,
             Some(_) => {}
         }
     }
@@ -334,7 +346,19 @@ mod tests {
         for w in joined.windows(2) {
             assert!((w[1].phase_rad - w[0].phase_rad).abs() < std::f64::consts::PI);
         }
-        assert!(!has_splits(&joined));
+        assert!(!has_splits(&joined) && !joinable(&joined));
+        // Two series of one joint group (calibrated antennas) are joinable though unsplit.
+        let two: Vec<Obs> = joined
+            .iter()
+            .enumerate()
+            .map(|(i, o)| Obs {
+                group: i % 2,
+                segment: i % 2,
+                joint: 0,
+                ..*o
+            })
+            .collect();
+        assert!(!has_splits(&two) && joinable(&two));
     }
 
     #[test]

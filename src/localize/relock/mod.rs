@@ -262,8 +262,9 @@ fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 + '_ {
 
 /// The fit of `obs` in `s`: a coarse grid (COARSE) of the per-segment cost over the box, a
 /// finer one (FINE) around its best point, and Levenberg–Marquardt from there, each segment
-/// with its own offset; when a series is split, also [`split::fit`], which joins the segments
-/// and is taken unless it explains the phases clearly worse. A fit outside the box in height
+/// with its own offset; when a series is split or calibrated antennas hold several series
+/// ([`join::joinable`]), also [`split::fit`], which joins them and is taken unless it explains
+/// the phases clearly worse. A fit outside the box in height
 /// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
 /// phases could not tell from it: no fix.
 fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
@@ -285,7 +286,7 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         })
     };
     let separate = in_box(solve(Problem::new(obs, s.dims, s.z, s.sign, &start), s));
-    if !join::has_splits(obs) {
+    if !join::joinable(obs) {
         return separate.ok_or(NoFix::InsufficientGeometry);
     }
     // Joined segments must explain the phases about as well as separate offsets do: over a
