@@ -134,6 +134,7 @@ fn join_from(obs: &[Obs], start: [f64; 3], s: &Search) -> Result<Solution, NoFix
         for o in &mut current {
             o.group = o.joint;
         }
+        // One more than there are, so that the first round runs even if it merges nothing.
         let segments = current.iter().map(|o| o.segment + 1).max().unwrap_or(0);
         (_, fit) = rejoin(current, segments + 1, fit, s);
     }
