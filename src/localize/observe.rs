@@ -91,7 +91,8 @@ pub struct PoseTrack {
 
 /// Tag `epc`'s reads per (reader, antenna), channels merged in time order, each phase as
 /// reported times its reader's phase sign (so that the filters see s = +1), with the
-/// antenna's position and yaw.
+/// antenna's position and yaw; among them, the antenna's pose samples up to its last read
+/// (`read: false`), for the odometry.
 pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTrack> {
     let mut tracks: BTreeMap<(String, u16), Vec<PoseObs>> = BTreeMap::new();
     for (key, series) in ingest.tag_series(epc) {
@@ -106,6 +107,7 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
                 yaw_rad: s.yaw_rad,
                 wavelength_m: lambda,
                 period_rad: period,
+                read: true,
             });
         }
     }
@@ -113,6 +115,33 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
         .into_iter()
         .map(|((reader, antenna), mut obs)| {
             obs.sort_by_key(|o| o.t_us);
+            // The antenna's pose samples up to its last read: the path the filter's odometry
+            // noise is charged on (\[M\] eq. 26 before the first read, and between reads).
+            let (Some(&head), Some(end)) = (obs.first(), obs.last().map(|o| o.t_us)) else {
+                return PoseTrack {
+                    reader,
+                    antenna,
+                    obs,
+                };
+            };
+            let mut path: Vec<PoseObs> = ingest
+                .poses()
+                .track(&reader, antenna)
+                .into_iter()
+                .filter(|p| p.t_us <= end)
+                .map(|p| PoseObs {
+                    t_us: p.t_us,
+                    phase_rad: 0.0,
+                    antenna: [p.x, p.y, p.z],
+                    yaw_rad: p.yaw_deg.to_radians(),
+                    read: false,
+                    ..head
+                })
+                .collect();
+            path.append(&mut obs);
+            // Stable: a pose sample at a read's time comes before the read.
+            path.sort_by_key(|o| o.t_us);
+            let obs = path;
             PoseTrack {
                 reader,
                 antenna,

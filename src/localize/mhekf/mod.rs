@@ -29,6 +29,9 @@ pub struct PoseObs {
     pub wavelength_m: f64,
     /// Period the phase is known modulo (rad): 2π, or π with Impinj's π ambiguity.
     pub period_rad: f64,
+    /// A read (`false`: a pose sample the antenna passed, for the odometry only; its phase is
+    /// not looked at).
+    pub read: bool,
 }
 
 /// The filter's settings; the defaults are \[M\]'s S3 scenario.
@@ -173,13 +176,14 @@ pub fn locate(
     facing: Option<[f64; 2]>,
     s: &Settings,
 ) -> Result<Fix, NoFix> {
-    let ok = obs.iter().all(|o| {
-        o.phase_rad.is_finite()
-            && o.antenna.iter().all(|v| v.is_finite())
-            && o.wavelength_m > 0.0
-            && o.period_rad > 0.0
-    });
-    let (min, max) = obs
+    // The reads; the pose samples before the first read give its pose covariance (\[M\]
+    // eq. 26), those between reads the path the odometry noise is charged on.
+    let reads: Vec<&PoseObs> = obs.iter().filter(|o| o.read).collect();
+    let ok = obs.iter().all(|o| o.antenna.iter().all(|v| v.is_finite()))
+        && reads
+            .iter()
+            .all(|o| o.phase_rad.is_finite() && o.wavelength_m > 0.0 && o.period_rad > 0.0);
+    let (min, max) = reads
         .iter()
         .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), o| {
             (
@@ -187,13 +191,17 @@ pub fn locate(
                 [hi[0].max(o.antenna[0]), hi[1].max(o.antenna[1])],
             )
         });
-    let first = obs.first().ok_or(NoFix::InsufficientGeometry)?;
-    let last = obs.last().ok_or(NoFix::InsufficientGeometry)?;
+    let start = obs
+        .iter()
+        .position(|o| o.read)
+        .ok_or(NoFix::InsufficientGeometry)?;
+    let first = &obs[start];
+    let last = *reads.last().ok_or(NoFix::InsufficientGeometry)?;
     let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
-    if !ok || obs.len() < s.min_reads.max(2) || aperture < first.wavelength_m / 2.0 {
+    if !ok || reads.len() < s.min_reads.max(2) || aperture < first.wavelength_m / 2.0 {
         return Err(NoFix::InsufficientGeometry);
     }
-    // Heading: the direction of travel to the next read, the last one's held.
+    // Heading: the direction of travel to the next vertex, the last one's held.
     let mut chord: Vec<Option<f64>> = obs
         .windows(2)
         .map(|w| {
@@ -210,6 +218,35 @@ pub fn locate(
     for (h, c) in heading.iter_mut().zip(&chord) {
         held = c.unwrap_or(held);
         *h = held;
+    }
+    // The step from vertex k − 1 to k: its (u, ω) and the wheels' noise mapped through W.
+    let to_wheels = SMatrix::<f64, 2, 2>::new(0.5, 0.5, 1.0 / s.wheelbase_m, -1.0 / s.wheelbase_m);
+    let step = |k: usize| {
+        let (prev, o) = (&obs[k - 1], &obs[k]);
+        let u = (o.antenna[0] - prev.antenna[0]).hypot(o.antenna[1] - prev.antenna[1]);
+        let omega = wrap(heading[k] - heading[k - 1], TAU);
+        // Odometry noise (\[M\] eq. 5): the wheels' displacements u ± ωd/2.
+        let (u_r, u_l) = (
+            u + omega * s.wheelbase_m / 2.0,
+            u - omega * s.wheelbase_m / 2.0,
+        );
+        let q = SMatrix::<f64, 2, 2>::new(s.k_r * u_r.abs(), 0.0, 0.0, s.k_l * u_l.abs());
+        (u, omega, q)
+    };
+    // The pose covariance at the first read: the odometry's over the path driven to it.
+    let mut pose = M5::zeros();
+    for k in 1..=start {
+        let (u, omega, q) = step(k);
+        let dummy = V5::new(
+            1.0,
+            0.0,
+            obs[k - 1].antenna[0],
+            obs[k - 1].antenna[1],
+            heading[k - 1],
+        );
+        let (_, f, g) = predict(&dummy, u, omega);
+        let w = g * to_wheels;
+        pose = f * pose * f.transpose() + w * q * w.transpose();
     }
     let model = |o: &PoseObs, rho: f64| {
         let dz = z - o.antenna[2];
@@ -237,33 +274,37 @@ pub fn locate(
         let rho = (d * d - dz * dz).sqrt();
         for b in 0..s.bearings.max(1) {
             let beta = wrap(b as f64 * TAU / s.bearings.max(1) as f64, TAU);
+            // The pose block only: the dummy's range and bearing rows are not the tag's.
             let mut p = M5::zeros();
+            p.fixed_view_mut::<3, 3>(2, 2)
+                .copy_from(&pose.fixed_view::<3, 3>(2, 2));
             p[(0, 0)] = (sigma_d * d / rho).powi(2);
             p[(1, 1)] = s.sigma_bearing_rad.powi(2);
             hyps.push(Hypothesis {
-                xi: V5::new(rho, beta, first.antenna[0], first.antenna[1], heading[0]),
+                xi: V5::new(
+                    rho,
+                    beta,
+                    first.antenna[0],
+                    first.antenna[1],
+                    heading[start],
+                ),
                 p,
                 log_w: 0.0,
             });
         }
     }
     let r2 = s.sigma_phi_rad.powi(2).max(1e-12);
-    for k in 1..obs.len() {
-        let (prev, o) = (&obs[k - 1], &obs[k]);
-        let u = (o.antenna[0] - prev.antenna[0]).hypot(o.antenna[1] - prev.antenna[1]);
-        let omega = wrap(heading[k] - heading[k - 1], TAU);
-        // Odometry noise (\[M\] eq. 5): the wheels' displacements u ± ωd/2.
-        let (u_r, u_l) = (
-            u + omega * s.wheelbase_m / 2.0,
-            u - omega * s.wheelbase_m / 2.0,
-        );
-        let q = SMatrix::<f64, 2, 2>::new(s.k_r * u_r.abs(), 0.0, 0.0, s.k_l * u_l.abs());
-        let to_wheels =
-            SMatrix::<f64, 2, 2>::new(0.5, 0.5, 1.0 / s.wheelbase_m, -1.0 / s.wheelbase_m);
+    for (k, o) in obs.iter().enumerate().skip(start + 1) {
+        let (u, omega, q) = step(k);
         for h in &mut hyps {
             let (xi, f, g) = predict(&h.xi, u, omega);
             let w = g * to_wheels;
             let p = f * h.p * f.transpose() + w * q * w.transpose();
+            if !o.read {
+                h.xi = xi;
+                h.p = p;
+                continue;
+            }
             let (phi_hat, dh) = model(o, xi[0]);
             let hrow = SMatrix::<f64, 1, 5>::new(dh, 0.0, 0.0, 0.0, 0.0);
             let nu = wrap(o.phase_rad - phi_hat, o.period_rad);
@@ -280,6 +321,9 @@ pub fn locate(
             if !(h.xi[0] > 1e-3 && h.log_w.is_finite() && h.p.iter().all(|v| v.is_finite())) {
                 h.log_w = f64::NEG_INFINITY;
             }
+        }
+        if !o.read {
+            continue;
         }
         let best = hyps
             .iter()
@@ -310,14 +354,14 @@ pub fn locate(
         .or_else(|| hyps.iter().max_by(heaviest))
         .ok_or(NoFix::InsufficientGeometry)?;
     let (t, cov) = chosen.tag();
-    let rms = (obs
+    let rms = (reads
         .iter()
         .map(|o| {
             let rho = (t[0] - o.antenna[0]).hypot(t[1] - o.antenna[1]);
             wrap(o.phase_rad - model(o, rho).0, o.period_rad).powi(2)
         })
         .sum::<f64>()
-        / obs.len() as f64)
+        / reads.len() as f64)
         .sqrt();
     let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
     if !(t.iter().chain(&covariance).all(|v| v.is_finite())) {
@@ -379,6 +423,7 @@ pub(crate) mod synth {
                     yaw_rad: eth,
                     wavelength_m: LAMBDA,
                     period_rad: TAU,
+                    read: true,
                 });
             }
             let delta = (goal[0] - p[0]).hypot(goal[1] - p[1]);
@@ -413,155 +458,4 @@ pub(crate) mod synth {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::synth::{error, run, LAMBDA};
-    use super::*;
-
-    #[test]
-    fn two_metres_at_867_mhz_take_twelve_filters() {
-        // [M]'s own check (§IV); its printed n_max = ρ_max·λ/2 would give 0.35.
-        assert_eq!(hypotheses(2.0, LAMBDA, TAU), 12);
-        assert_eq!(hypotheses(2.0, LAMBDA, PI), 24);
-    }
-
-    #[test]
-    fn the_prediction_jacobians_match_finite_differences() {
-        let xi = V5::new(1.3, 0.7, 0.2, -0.4, 2.1);
-        let (u, om) = (0.03, -0.05);
-        let (_, f, g) = predict(&xi, u, om);
-        let h = 1e-6;
-        for i in 0..5 {
-            let mut a = xi;
-            let mut b = xi;
-            a[i] += h;
-            b[i] -= h;
-            let diff = (predict(&a, u, om).0 - predict(&b, u, om).0) / (2.0 * h);
-            for r in 0..5 {
-                assert!(
-                    (diff[r] - f[(r, i)]).abs() < 1e-6,
-                    "F[{r},{i}]: {diff} vs {f}"
-                );
-            }
-        }
-        let du = (predict(&xi, u + h, om).0 - predict(&xi, u - h, om).0) / (2.0 * h);
-        let dw = (predict(&xi, u, om + h).0 - predict(&xi, u, om - h).0) / (2.0 * h);
-        for r in 0..5 {
-            assert!((du[r] - g[(r, 0)]).abs() < 1e-6 && (dw[r] - g[(r, 1)]).abs() < 1e-6);
-        }
-        // The tag stays put: its position from the predicted state is the same.
-        let tag = |x: &V5| {
-            [
-                x[2] + x[0] * (x[4] - x[1]).cos(),
-                x[3] + x[0] * (x[4] - x[1]).sin(),
-            ]
-        };
-        let (next, _, _) = predict(&xi, u, om);
-        let (t0, t1) = (tag(&xi), tag(&next));
-        assert!((t0[0] - t1[0]).hypot(t0[1] - t1[1]) < 1e-12);
-    }
-
-    #[test]
-    fn a_noise_free_tag_is_recovered_within_a_millimetre() {
-        // Exact odometry, told so: the pose is known, and only (ρ, β) are estimated.
-        let s = Settings {
-            k_r: 0.0,
-            k_l: 0.0,
-            ..Settings::default()
-        };
-        for (seed, tag, antenna_z) in [
-            (1, [3.0, 2.0, 0.5], 0.5),
-            (2, [-1.0, 4.0, 0.5], 0.5),
-            (3, [2.0, -2.5, 0.8], 0.5),
-        ] {
-            let start = [tag[0] - 1.5, tag[1] + 0.3];
-            let obs = run(tag, start, 0.4, antenna_z, 3000, 0.0, 0.0, seed);
-            let fix = locate(&obs, tag[2], -1.0, None, &s).expect("a fix");
-            let (err, _) = error(&fix, tag);
-            assert!(err < 1e-3, "seed {seed}: {err} m, {fix:?}");
-            assert!(fix.rms_rad < 1e-3, "{fix:?}");
-        }
-        // With Impinj's π ambiguity: every other phase reported π off, known modulo π.
-        let tag = [3.0, 2.0, 0.5];
-        let mut obs = run(tag, [1.5, 2.3], 0.4, 0.5, 3000, 0.0, 0.0, 1);
-        for (k, o) in obs.iter_mut().enumerate() {
-            o.phase_rad = (o.phase_rad + PI * (k % 2) as f64).rem_euclid(TAU);
-            o.period_rad = PI;
-        }
-        let fix = locate(&obs, tag[2], -1.0, None, &s).expect("a fix");
-        assert!(error(&fix, tag).0 < 1e-3, "{fix:?}");
-    }
-
-    #[test]
-    fn with_phase_noise_the_error_stays_within_the_covariance() {
-        // σ_φ = 0.2 rad as in [M]'s S3, the poses exact (and the filter told so).
-        let s = Settings {
-            k_r: 0.0,
-            k_l: 0.0,
-            ..Settings::default()
-        };
-        let tag = [1.0, 1.0, 0.5];
-        let mut within = 0;
-        for seed in 0..20 {
-            let obs = run(tag, [-0.5, 1.2], 0.0, 0.5, 3000, 0.2, 0.0, 100 + seed);
-            let fix = locate(&obs, tag[2], -1.0, None, &s).expect("a fix");
-            let (err, m2) = error(&fix, tag);
-            assert!(err < 0.01, "seed {seed}: {err} m");
-            within += usize::from(m2 <= 6.0);
-            assert!((fix.rms_rad - 0.2).abs() < 0.02, "{}", fix.rms_rad);
-        }
-        assert!(within >= 16, "{within} of 20 within the 95 % ellipse");
-    }
-
-    #[test]
-    fn on_s3_the_error_meets_the_papers_figure() {
-        // σ_φ = 0.2 rad and odometry-only poses with K = 1e-5, as in [M]'s S3: [M] reports a
-        // mean of about 7.5 cm for one robot.
-        let s = Settings::default();
-        let tag = [1.0, 1.0, 0.5];
-        let mut sum = 0.0;
-        for seed in 0..20 {
-            let obs = run(tag, [-0.5, 1.2], 0.0, 0.5, 3000, 0.2, 1e-5, 100 + seed);
-            let fix = locate(&obs, tag[2], -1.0, None, &s).expect("a fix");
-            let (err, _) = error(&fix, tag);
-            // A wrong half-wavelength would put it ≥ 17 cm off.
-            assert!(err < 0.1, "seed {seed}: {err} m");
-            sum += err;
-        }
-        assert!(sum / 20.0 <= 0.075, "mean {} m", sum / 20.0);
-    }
-
-    #[test]
-    fn too_little_geometry_is_said_not_guessed() {
-        let s = Settings::default();
-        let tag = [1.0, 1.0, 0.5];
-        let obs = run(tag, [-0.5, 1.2], 0.0, 0.5, 3000, 0.0, 0.0, 7);
-        // No reads, too few reads, one pose.
-        assert_eq!(
-            locate(&[], 0.5, -1.0, None, &s),
-            Err(NoFix::InsufficientGeometry)
-        );
-        assert_eq!(
-            locate(&obs[..5], 0.5, -1.0, None, &s),
-            Err(NoFix::InsufficientGeometry)
-        );
-        let still = vec![obs[0]; 200];
-        assert_eq!(
-            locate(&still, 0.5, -1.0, None, &s),
-            Err(NoFix::InsufficientGeometry)
-        );
-        // A tag never in range: no reads at all.
-        let far = run([50.0, 50.0, 0.5], [-0.5, 1.2], 0.0, 0.5, 10, 0.0, 0.0, 7);
-        let none: Vec<PoseObs> = far.into_iter().filter(|o| o.antenna[0] > 40.0).collect();
-        assert_eq!(
-            locate(&none, 0.5, -1.0, None, &s),
-            Err(NoFix::InsufficientGeometry)
-        );
-        // A phase that is not a number is refused, not propagated.
-        let mut bad = obs.clone();
-        bad[3].phase_rad = f64::NAN;
-        assert_eq!(
-            locate(&bad, 0.5, -1.0, None, &s),
-            Err(NoFix::InsufficientGeometry)
-        );
-    }
-}
+mod tests;
