@@ -263,8 +263,8 @@ fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 + '_ {
 /// The fit of `obs` in `s`: a coarse grid (COARSE) of the per-segment cost over the box, a
 /// finer one (FINE) around its best point, and Levenberg–Marquardt from there, each segment
 /// with its own offset; when a series is split or calibrated antennas hold several series
-/// ([`join::joinable`]), also [`split::fit`], which joins them and is taken unless it explains
-/// the phases clearly worse. A fit outside the box in height
+/// ([`join::joinable`]) and that fit leaves σ above [`JOIN_ABOVE_SIGMA_M`], also
+/// [`split::fit`], which joins them and is taken unless it explains the phases clearly worse. A fit outside the box in height
 /// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
 /// phases could not tell from it: no fix.
 fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
@@ -289,6 +289,14 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     if !join::joinable(obs) {
         return separate.ok_or(NoFix::InsufficientGeometry);
     }
+    // Separate offsets that already pin the tag down are kept: joining adds nothing there but
+    // risk, where the poses are not exact.
+    if let Some(sep) = &separate {
+        let worst = (0..s.dims).map(|a| sep.1[(a, a)]).fold(0.0, f64::max).sqrt();
+        if worst <= JOIN_ABOVE_SIGMA_M {
+            return Ok(sep.clone());
+        }
+    }
     // Joined segments must explain the phases about as well as separate offsets do: over a
     // pose track that drifts (odometry), one offset does not hold for long.
     match (in_box(split::fit(obs, s)), separate) {
@@ -297,6 +305,10 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         (None, separate) => separate.ok_or(NoFix::InsufficientGeometry),
     }
 }
+
+/// Series are joined only when the fit with separate offsets leaves σ above this (m) on some
+/// axis.
+const JOIN_ABOVE_SIGMA_M: f64 = 0.02;
 
 /// The best points of the coarse grid (`coarse` cost), up to `starts` of them at least
 /// 1.5 steps apart, each moved to the best of the fine grid around it (`fine` cost).
