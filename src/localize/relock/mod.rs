@@ -292,7 +292,10 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     // Separate offsets that already pin the tag down are kept: joining adds nothing there but
     // risk, where the poses are not exact.
     if let Some(sep) = &separate {
-        let worst = (0..s.dims).map(|a| sep.1[(a, a)]).fold(0.0, f64::max).sqrt();
+        let worst = (0..s.dims)
+            .map(|a| sep.1[(a, a)])
+            .fold(0.0, f64::max)
+            .sqrt();
         if worst <= JOIN_ABOVE_SIGMA_M {
             return Ok(sep.clone());
         }
