@@ -127,10 +127,9 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
             let mut path: Vec<PoseObs> = ingest
                 .poses()
                 .track(&reader, antenna)
-                .into_iter()
-                .filter(|p| p.t_us <= end)
-                .map(|p| PoseObs {
-                    t_us: p.t_us,
+                .take_while(|(t_us, _)| *t_us <= end)
+                .map(|(t_us, p)| PoseObs {
+                    t_us,
                     phase_rad: 0.0,
                     antenna: [p.x, p.y, p.z],
                     yaw_rad: p.yaw_deg.to_radians(),

@@ -127,18 +127,19 @@ impl Poses {
             .min_by_key(|p| p.t_us)
     }
 
-    /// The samples of `reader`'s `antenna`, oldest first, their times in reader time (µs).
-    pub fn track(&self, reader: &str, antenna: u16) -> Vec<PoseSample> {
+    /// The samples of `reader`'s `antenna`, oldest first, each with its time in reader time
+    /// (µs).
+    pub fn track<'a>(
+        &'a self,
+        reader: &str,
+        antenna: u16,
+    ) -> impl Iterator<Item = (u64, &'a PoseSample)> + 'a {
         let offset = i128::from(self.offsets.get(reader).copied().unwrap_or(0));
         self.tracks
             .get(&(reader.to_string(), antenna))
             .into_iter()
             .flatten()
-            .filter_map(|p| {
-                let t_us = u64::try_from(i128::from(p.t_us) + offset).ok()?;
-                Some(PoseSample { t_us, ..p.clone() })
-            })
-            .collect()
+            .filter_map(move |p| Some((u64::try_from(i128::from(p.t_us) + offset).ok()?, p)))
     }
 
     /// Reader time (µs) of the newest sample of `reader`'s `antenna`, if any.
