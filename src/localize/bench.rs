@@ -78,8 +78,23 @@ fn sample(reader: &str, antenna: u16, t_us: u64, p: &AntennaPose) -> PoseSample 
     }
 }
 
-/// Simulates `scenario` for `seconds` of simulated time.
+/// The inventory settings a benchmark's client asks of every reader.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Inventory {
+    /// RF mode (C1G2RFControl ModeIndex); `None`: the reader's default.
+    pub mode: Option<u16>,
+    /// Gen2 session (C1G2SingulationControl); `None`: the reader's default.
+    pub session: Option<u8>,
+}
+
+/// Simulates `scenario` for `seconds` of simulated time, the readers at their defaults.
 pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
+    simulate_with(scenario, seconds, Inventory::default())
+}
+
+/// Simulates `scenario` for `seconds` of simulated time, every reader inventoried as
+/// `inventory` asks.
+pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) -> Run {
     let world = World::new(scenario);
     let end_us = (seconds * 1e6) as u64;
     let mut reads = Vec::new();
@@ -113,7 +128,9 @@ pub fn simulate(scenario: &Scenario, seconds: f64) -> Run {
         let reader = Reader::new(profile, model.clone(), 0);
         let mut decoder =
             ReadDecoder::new(Some(spec.name.clone())).with_fallback_table(Some(table));
-        let Some(mut own) = OwnInventory::start(reader, Now::default()) else {
+        let Some(mut own) =
+            OwnInventory::start_with(reader, Now::default(), inventory.mode, inventory.session)
+        else {
             continue;
         };
         let mut t = 0;

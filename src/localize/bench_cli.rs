@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use super::bench::{applicable, duration_s, score_with, simulate, Scores};
+use super::bench::{applicable, duration_s, score_with, simulate_with, Inventory, Scores};
 use super::estimate::Estimator;
 use crate::scenario::Scenario;
 
@@ -27,6 +27,13 @@ pub struct BenchLocalizeArgs {
     /// Runs per Monte-Carlo variant of S3 (σ_φ, odometry K, swarm size); 0 skips them.
     #[arg(long, default_value = "20")]
     pub runs: usize,
+    /// RF mode (ModeIndex of the reader's mode table) the benchmark's client asks for;
+    /// default: the reader's own (1000).
+    #[arg(long)]
+    pub mode: Option<u16>,
+    /// Gen2 session (0–3) the benchmark's client asks for; default: the reader's own (2).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=3))]
+    pub session: Option<u8>,
 }
 
 /// The scenario `name` (a fixture's name or a file).
@@ -53,13 +60,26 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    if let Some(m) = args.mode {
+        if !crate::reader::caps::RF_MODES.contains(&u32::from(m)) {
+            eprintln!(
+                "llrp-gateway bench localize: --mode {m}: not in the reader's RF mode table {:?}",
+                crate::reader::caps::RF_MODES
+            );
+            return ExitCode::FAILURE;
+        }
+    }
     let seconds = args.seconds.unwrap_or_else(|| duration_s(&s));
     eprintln!(
         "llrp-gateway bench localize: scenario '{}', {seconds:.0} s simulated...",
         s.name
     );
     let started = std::time::Instant::now();
-    let run = simulate(&s, seconds);
+    let inventory = Inventory {
+        mode: args.mode,
+        session: args.session,
+    };
+    let run = simulate_with(&s, seconds, inventory);
     let tags = run.truth.iter().filter(|t| !t.2).count();
     println!(
         "Scenario '{}': {} reads of {} tags ({} reference tags) in {seconds:.0} s simulated ({:.1} s to simulate)\n",

@@ -40,6 +40,17 @@ impl OwnInventory {
     /// Connects to `reader` and starts an inventory of all its antennas with Impinj phase,
     /// peak RSSI and Doppler in the reports.
     pub fn start(reader: Reader, now: Now) -> Option<OwnInventory> {
+        OwnInventory::start_with(reader, now, None, None)
+    }
+
+    /// [`OwnInventory::start`] with an RF mode (ModeIndex) and Gen2 session of the client's
+    /// choosing; `None` keeps the reader's default.
+    pub fn start_with(
+        reader: Reader,
+        now: Now,
+        mode: Option<u16>,
+        gen2_session: Option<u8>,
+    ) -> Option<OwnInventory> {
         let mut session = Session::new(reader);
         let Accepted::Client(client) = session.connect(now) else {
             return None;
@@ -49,6 +60,8 @@ impl OwnInventory {
             impinj: true,
             report_every: REPORT_EVERY,
             keepalive_ms: 0,
+            mode,
+            session: gen2_session,
             ..InventorySpec::default()
         };
         let antennas = session.reader().model().antenna_count();
