@@ -2,6 +2,7 @@
 //! client and frame decoder. The LLRP codec lives in the `llrp` crate (`protocol/`).
 
 pub mod decode;
+pub mod fleet;
 pub mod gateway;
 pub mod http;
 pub mod inventory;

@@ -63,6 +63,9 @@ enum Command {
         /// The localizer's estimator (docs/localize.md).
         #[arg(long, default_value = "relock")]
         estimator: llrp_gateway::localize::estimate::Estimator,
+        /// Publishing to an MQTT broker (docs/fleet.md).
+        #[command(flatten)]
+        publish: llrp_gateway::fleet::args::PublishArgs,
     },
     /// Forward clients to a real reader byte for byte, recording the sessions.
     Proxy(llrp_gateway::gateway::ProxyArgs),
@@ -121,12 +124,14 @@ fn main() -> ExitCode {
             http,
             poses,
             estimator,
+            publish,
         } => run_sim(
             scenario,
             SimLocalize {
                 http,
                 poses,
                 estimator,
+                publish,
             },
             SimOptions {
                 listen,
@@ -183,6 +188,24 @@ struct SimLocalize {
     http: llrp_gateway::http::launch::HttpArgs,
     poses: llrp_gateway::sim::PoseSource,
     estimator: llrp_gateway::localize::estimate::Estimator,
+    publish: llrp_gateway::fleet::args::PublishArgs,
+}
+
+/// The EPCs of `scenario`'s reference tags.
+fn scenario_references(scenario: &Scenario) -> std::collections::BTreeSet<String> {
+    let world = llrp_gateway::physics::World::new(scenario);
+    let model = llrp_gateway::physics::Model::in_world(&world, scenario, 0);
+    (0..model.tag_count())
+        .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
+        .map(|k| llrp_gateway::reads::hex_upper(model.tag_epc(k).as_bytes()))
+        .collect()
+}
+
+/// A broker address as shown: its password hidden.
+fn redacted(url: &str) -> String {
+    llrp_gateway::fleet::url::BrokerUrl::parse(url)
+        .map(|u| u.to_string())
+        .unwrap_or_default()
 }
 
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
@@ -264,6 +287,34 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
                 }
             }
         }
+        // The MQTT publisher takes a copy of everything the localizer is offered (with
+        // --no-http, of what it would be offered).
+        let shared = live
+            .as_ref()
+            .map(|l: &llrp_gateway::localize::live::Live| l.shared.clone())
+            .unwrap_or_default();
+        let references = scenario_references(&scenario);
+        let publisher = match localize.publish.start(shared.clone(), references) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("llrp-gateway sim: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        if let Some(p) = &publisher {
+            let tap = match &opts.localize {
+                Some(l) => l.tap.clone(),
+                None => llrp_gateway::localize::live::Tap::detached(shared.clone()),
+            };
+            opts.localize = Some(sim::LocalizeFeed {
+                tap: tap.with_mirror(p.mirror()),
+                poses: localize.poses,
+            });
+            eprintln!(
+                "llrp-gateway sim: publishing to {}",
+                localize.publish.publish.as_deref().map(redacted).unwrap_or_default()
+            );
+        }
         let running = match sim::start(&scenario, &opts).await {
             Ok(r) => r,
             Err(e) => {
@@ -282,6 +333,10 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
         // Each client gets its ConnectionCloseEvent and the ground truth is flushed, within
         // a second: a client that does not take its last bytes does not hold the exit up.
         running.shutdown().await;
+        drop(opts);
+        if let Some(p) = publisher {
+            p.stop();
+        }
         if let Some(h) = http {
             h.stop().await;
         }

@@ -51,6 +51,20 @@ impl Running {
     }
 }
 
+/// The live localizer's settings from a settings file and the poses known at start.
+pub fn settings_from(file: &SettingsFile, poses: &Poses, estimator: Estimator) -> Settings {
+    Settings {
+        estimator,
+        geometry: geometry(file, &[], poses),
+        ambiguity: if file.pi_ambiguity {
+            Ambiguity::Pi
+        } else {
+            Ambiguity::None
+        },
+        ..Settings::default()
+    }
+}
+
 /// Starts the localizer and its API when `--http` was given; `command` names the command in
 /// messages.
 pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, String> {
@@ -68,16 +82,7 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
         }
         None => Poses::new(),
     };
-    let settings = Settings {
-        estimator: args.estimator,
-        geometry: geometry(&file, &[], &poses),
-        ambiguity: if file.pi_ambiguity {
-            Ambiguity::Pi
-        } else {
-            Ambiguity::None
-        },
-        ..Settings::default()
-    };
+    let settings = settings_from(&file, &poses, args.estimator);
     let live = Live::start(settings).map_err(|e| format!("cannot start the localizer: {e}"))?;
     for (reader, offset) in &file.clock_offsets_us {
         live.tap.offer(Input::Reader {

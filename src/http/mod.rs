@@ -26,7 +26,7 @@ use crate::localize::shared::Shared;
 mod events;
 mod handlers;
 pub mod launch;
-mod poses;
+pub mod poses;
 pub mod schema;
 
 pub use poses::parse_poses;

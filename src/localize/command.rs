@@ -16,7 +16,8 @@ const PROGRESS_FROM: usize = 100_000;
 pub struct LocalizeArgs {
     /// A recording (docs/recordings.md) or a reads file (one JSON read a line, as
     /// `inventory --output` writes).
-    pub input: PathBuf,
+    #[arg(required_unless_present = "subscribe", conflicts_with = "subscribe")]
+    pub input: Option<PathBuf>,
     /// Antenna poses: JSON Lines or CSV with `t_us, reader, antenna, x, y, z, yaw_deg,
     /// pitch_deg` (reads with their own `antenna_pose` need none).
     #[arg(long)]
@@ -29,12 +30,23 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub settings: Option<PathBuf>,
     /// Where to write the estimates (`-` for standard output).
-    #[arg(long)]
-    pub output: PathBuf,
+    #[arg(
+        long,
+        required_unless_present = "subscribe",
+        conflicts_with = "subscribe"
+    )]
+    pub output: Option<PathBuf>,
+    /// Run as a localizer worker on this MQTT broker's reads instead
+    /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).
+    #[command(flatten)]
+    pub worker: crate::fleet::worker_cli::WorkerArgs,
 }
 
 /// Runs `localize`.
 pub fn run(args: LocalizeArgs) -> ExitCode {
+    if args.worker.subscribe.is_some() {
+        return crate::fleet::worker_cli::run(&args);
+    }
     match execute(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -57,7 +69,11 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         }
         None => Poses::new(),
     };
-    let reads = offline::load_reads(&args.input).map_err(|e| e.to_string())?;
+    // clap requires both without --subscribe.
+    let (Some(input), Some(output)) = (&args.input, &args.output) else {
+        return Err("INPUT and --output are needed (or --subscribe)".into());
+    };
+    let reads = offline::load_reads(input).map_err(|e| e.to_string())?;
     let bar = if reads.len() >= PROGRESS_FROM {
         indicatif::ProgressBar::new(reads.len() as u64)
     } else {
@@ -84,11 +100,10 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
     });
     bar.finish_and_clear();
     let json = serde_json::to_string_pretty(&outcome.tags).map_err(|e| e.to_string())?;
-    if args.output.as_os_str() == "-" {
+    if output.as_os_str() == "-" {
         println!("{json}");
     } else {
-        std::fs::write(&args.output, json + "\n")
-            .map_err(|e| format!("{}: {e}", args.output.display()))?;
+        std::fs::write(output, json + "\n").map_err(|e| format!("{}: {e}", output.display()))?;
     }
     let a = outcome.set_aside;
     eprintln!(

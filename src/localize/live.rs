@@ -112,8 +112,8 @@ pub enum Input {
 }
 
 impl Input {
-    /// How many reads or poses the input counts for when dropped.
-    fn weight(&self) -> u64 {
+    /// How many reads or poses the input counts for when dropped (1 for anything else).
+    pub fn weight(&self) -> u64 {
         match self {
             Input::Reads(r) => r.len() as u64,
             Input::Poses(p) => p.len() as u64,
@@ -122,18 +122,59 @@ impl Input {
     }
 }
 
-/// The sending side of the localizer: never waits.
+/// The sending side of the localizer (and of any mirror beside it, such as an MQTT
+/// publisher): never waits.
 #[derive(Clone, Debug)]
 pub struct Tap {
-    tx: SyncSender<Input>,
+    /// `None`: no localizer runs (a tap for mirrors only).
+    tx: Option<SyncSender<Input>>,
     shared: Arc<Shared>,
+    mirrors: Vec<Mirror>,
+}
+
+/// Another consumer of everything a [`Tap`] is offered, with its own bound and drop count.
+#[derive(Clone, Debug)]
+pub struct Mirror {
+    /// Where the copies go.
+    pub tx: SyncSender<Input>,
+    /// Inputs (reads or poses, one by one) dropped because it was behind.
+    pub dropped: prometheus_client::metrics::counter::Counter,
 }
 
 impl Tap {
+    /// A tap with no localizer behind it: what it is offered goes to its mirrors only;
+    /// `shared` still takes the readers' states and the metrics.
+    pub fn detached(shared: Arc<Shared>) -> Tap {
+        Tap {
+            tx: None,
+            shared,
+            mirrors: Vec::new(),
+        }
+    }
+
+    /// This tap with `mirror` also offered everything.
+    pub fn with_mirror(mut self, mirror: Mirror) -> Tap {
+        self.mirrors.push(mirror);
+        self
+    }
+
+    /// Offers a copy of `input` to every mirror.
+    fn mirror(&self, input: &Input) {
+        for m in &self.mirrors {
+            if m.tx.try_send(input.clone()).is_err() {
+                m.dropped.inc_by(input.weight());
+            }
+        }
+    }
+
     /// Hands `input` to the localizer; `false` (and counted) when it is behind or gone.
     pub fn offer(&self, input: Input) -> bool {
+        self.mirror(&input);
+        let Some(tx) = &self.tx else {
+            return true;
+        };
         let weight = input.weight();
-        match self.tx.try_send(input) {
+        match tx.try_send(input) {
             Ok(()) => true,
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
                 self.shared.metrics.dropped_taps.inc_by(weight);
@@ -144,9 +185,14 @@ impl Tap {
 
     /// Hands `input` to the localizer, or gives it back when it is behind (not counted as
     /// dropped: for a caller that can wait, such as a pose file loaded at start); dropped and
-    /// counted when the localizer has stopped.
+    /// counted when the localizer has stopped. Mirrors are offered a copy once it is taken.
     pub fn try_offer(&self, input: Input) -> Result<(), Input> {
-        match self.tx.try_send(input) {
+        let Some(tx) = &self.tx else {
+            self.mirror(&input);
+            return Ok(());
+        };
+        let copy = (!self.mirrors.is_empty()).then(|| input.clone());
+        let taken = match tx.try_send(input) {
             Ok(()) => Ok(()),
             Err(TrySendError::Full(i)) => Err(i),
             Err(TrySendError::Disconnected(i)) => {
@@ -154,7 +200,11 @@ impl Tap {
                 self.shared.metrics.dropped_taps.inc_by(i.weight());
                 Ok(())
             }
+        };
+        if let (Ok(()), Some(c)) = (&taken, copy) {
+            self.mirror(&c);
         }
+        taken
     }
 
     /// The localizer's published state.
@@ -186,8 +236,9 @@ impl Live {
             .spawn(move || worker.run(rx, &stopping))?;
         Ok(Live {
             tap: Tap {
-                tx,
+                tx: Some(tx),
                 shared: shared.clone(),
+                mirrors: Vec::new(),
             },
             shared,
             worker: Some(handle),
@@ -432,6 +483,13 @@ impl Worker {
         let now = Instant::now();
         let before = self.ingest.taken();
         self.ingest.push(&r);
+        // Thinned as the reads come, not as estimates are made: what a tag holds is then a
+        // function of its reads alone (two workers on different shards hold what one does).
+        if self.ingest.taken() > before
+            && self.ingest.tag_samples(&r.epc) > self.settings.max_samples_per_tag
+        {
+            self.ingest.thin_tag(&r.epc);
+        }
         let aside = self.ingest.set_aside();
         let aside = aside.no_phase + aside.no_frequency + aside.no_pose;
         if aside > self.set_aside_seen {
@@ -526,9 +584,6 @@ impl Worker {
         for (since, epc) in due {
             if started.elapsed() >= budget {
                 break;
-            }
-            if self.ingest.tag_samples(&epc) > self.settings.max_samples_per_tag {
-                self.ingest.thin_tag(&epc);
             }
             let t0 = Instant::now();
             let e = estimate::estimate_calibrated(

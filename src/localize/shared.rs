@@ -114,6 +114,20 @@ pub struct Metrics {
     pub estimator_seconds: Histogram,
     /// From a read's arrival at the localizer to its tag's updated estimate (s).
     pub update_latency_seconds: Histogram,
+    /// MQTT messages handed to the broker connection.
+    pub mqtt_published: Counter,
+    /// Reads, poses and messages the MQTT publisher dropped (its tap or its queue full).
+    pub mqtt_dropped: Counter,
+    /// MQTT messages a worker took in.
+    pub mqtt_received: Counter,
+    /// MQTT messages skipped: not JSON of the schema, or on a topic not ours.
+    pub mqtt_malformed: Counter,
+    /// Messages missing by sequence number, as a worker counts them.
+    pub mqtt_gaps: Counter,
+    /// Messages received again (QoS 1 redelivery), as a worker counts them.
+    pub mqtt_duplicates: Counter,
+    /// Connections to the broker lost.
+    pub mqtt_disconnects: Counter,
     registry: Registry,
 }
 
@@ -138,6 +152,13 @@ impl Metrics {
             poses: Counter::default(),
             estimator_seconds: buckets(),
             update_latency_seconds: buckets(),
+            mqtt_published: Counter::default(),
+            mqtt_dropped: Counter::default(),
+            mqtt_received: Counter::default(),
+            mqtt_malformed: Counter::default(),
+            mqtt_gaps: Counter::default(),
+            mqtt_duplicates: Counter::default(),
+            mqtt_disconnects: Counter::default(),
             registry: Registry::with_prefix("llrp_gateway"),
         };
         let mut registry = Registry::with_prefix("llrp_gateway");
@@ -179,6 +200,42 @@ impl Metrics {
             "From a read's arrival at the localizer to its tag's updated estimate",
             m.update_latency_seconds.clone(),
         );
+        let mqtt = [
+            (
+                "mqtt_published",
+                "MQTT messages handed to the broker connection",
+                &m.mqtt_published,
+            ),
+            (
+                "mqtt_dropped",
+                "Reads, poses and messages the MQTT publisher dropped",
+                &m.mqtt_dropped,
+            ),
+            ("mqtt_received", "MQTT messages taken in", &m.mqtt_received),
+            (
+                "mqtt_malformed",
+                "MQTT messages skipped as malformed or foreign",
+                &m.mqtt_malformed,
+            ),
+            (
+                "mqtt_gaps",
+                "MQTT messages missing by sequence number",
+                &m.mqtt_gaps,
+            ),
+            (
+                "mqtt_duplicates",
+                "MQTT messages received again",
+                &m.mqtt_duplicates,
+            ),
+            (
+                "mqtt_disconnects",
+                "Connections to the MQTT broker lost",
+                &m.mqtt_disconnects,
+            ),
+        ];
+        for (name, help, counter) in mqtt {
+            registry.register(name, help, counter.clone());
+        }
         Metrics { registry, ..m }
     }
 

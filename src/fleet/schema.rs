@@ -1,0 +1,224 @@
+//! The messages on the broker (schema version 1, topics under `PREFIX/v1/`): tag reads in
+//! batches, antenna poses, estimates and statuses. Per-read field names and units are the
+//! Impinj R700 IoT device interface's `tagInventoryEvent` where it has the field (`epcHex`,
+//! `antennaPort`, `peakRssiCdbm` in centi-dBm, `frequency` in kHz, `phaseAngle` in degrees,
+//! `lastSeenTime` as RFC 3339); the rest are ours, in the same camelCase (docs/fleet.md).
+
+use std::time::{Duration, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+
+use crate::reads::{AntennaPose, Read};
+
+/// The schema version in every message's `v` and in the topics (`v1`).
+pub const VERSION: u32 = 1;
+
+/// Default number of read shards (`--shard-count`).
+pub const DEFAULT_SHARDS: u16 = 16;
+
+/// The shard of an EPC: FNV-1a (64-bit) of its bytes (the hex decoded; the text's bytes
+/// when it is not whole bytes of hex) modulo `count`.
+pub fn shard(epc_hex: &str, count: u16) -> u16 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let fold = |h: u64, b: u8| (h ^ u64::from(b)).wrapping_mul(PRIME);
+    let hash = match decode_hex(epc_hex) {
+        Some(bytes) => bytes.into_iter().fold(OFFSET, fold),
+        None => epc_hex.bytes().fold(OFFSET, fold),
+    };
+    (hash % u64::from(count.max(1))) as u16
+}
+
+fn decode_hex(s: &str) -> Option<Vec<u8>> {
+    if s.len() % 2 != 0 || s.is_empty() {
+        return None;
+    }
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
+        .collect()
+}
+
+/// One tag read on the broker.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+pub struct TagRead {
+    /// EPC, upper-case hex (R700 `epcHex`).
+    pub epc_hex: String,
+    /// Antenna port, 1-based (R700 `antennaPort`).
+    pub antenna_port: u16,
+    /// Peak RSSI in centi-dBm (R700 `peakRssiCdbm`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rssi_cdbm: Option<i32>,
+    /// RF phase in degrees, 0–360 (R700 `phaseAngle`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phase_angle: Option<f64>,
+    /// Channel frequency in kHz (R700 `frequency`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frequency: Option<u32>,
+    /// When the tag was last seen, RFC 3339 UTC with microseconds (R700 `lastSeenTime`).
+    pub last_seen_time: String,
+    /// When the tag was first seen in this read, UTC µs since the Unix epoch (ours: the
+    /// LLRP FirstSeenTimestampUTC, exact).
+    pub first_seen_us: u64,
+    /// 1-based channel index into the reader's hop table (ours).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub channel_index: Option<u16>,
+    /// Doppler frequency in Hz (ours: ImpinjRFDopplerFrequency).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub doppler_hz: Option<f64>,
+    /// The antenna's pose at the read, where the publisher knows it (ours; metres, degrees).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub antenna_pose: Option<AntennaPose>,
+}
+
+impl TagRead {
+    /// The broker's form of `r`.
+    pub fn from_read(r: &Read) -> TagRead {
+        TagRead {
+            epc_hex: r.epc.clone(),
+            antenna_port: r.antenna,
+            peak_rssi_cdbm: r.rssi_dbm.map(|d| (d * 100.0).round() as i32),
+            phase_angle: r.phase_rad.map(f64::to_degrees),
+            frequency: r
+                .channel_frequency_hz
+                .and_then(|hz| u32::try_from(hz / 1000).ok()),
+            last_seen_time: rfc3339(r.last_seen_us.unwrap_or(r.t_us)),
+            first_seen_us: r.t_us,
+            channel_index: r.channel_index,
+            doppler_hz: r.doppler_hz,
+            antenna_pose: r.antenna_pose,
+        }
+    }
+
+    /// The read of reader `reader` this stands for.
+    pub fn to_read(&self, reader: &str) -> Read {
+        Read {
+            epc: self.epc_hex.to_ascii_uppercase(),
+            reader: Some(reader.to_owned()),
+            antenna: self.antenna_port,
+            t_us: self.first_seen_us,
+            phase_rad: self.phase_angle.map(f64::to_radians),
+            rssi_dbm: self.peak_rssi_cdbm.map(|c| f64::from(c) / 100.0),
+            channel_index: self.channel_index,
+            channel_frequency_hz: self.frequency.map(|k| u64::from(k) * 1000),
+            doppler_hz: self.doppler_hz,
+            antenna_pose: self.antenna_pose,
+            last_seen_us: None,
+        }
+    }
+}
+
+/// A batch of one reader's reads (`PREFIX/v1/reads/{shard}` and `PREFIX/v1/refs`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+pub struct ReadBatch {
+    /// Schema version ([`VERSION`]).
+    pub v: u32,
+    /// The publishing gateway's name.
+    pub gateway: String,
+    /// The reader that read them.
+    pub reader: String,
+    /// This reader's message number on this topic, from 1 in each gateway run: a gap is a
+    /// lost message, a repeat a redelivery.
+    pub seq: u64,
+    /// The reads, in the reader's order.
+    pub reads: Vec<TagRead>,
+}
+
+/// A reader's or gateway's status (`PREFIX/v1/status/{reader}`,
+/// `PREFIX/v1/status/gateway/{name}`; retained).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+pub struct Status {
+    /// Schema version ([`VERSION`]).
+    pub v: u32,
+    /// `online` or `offline`.
+    pub status: String,
+    /// The gateway the status comes from.
+    pub gateway: String,
+    /// The reader, for a reader's status.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reader: Option<String>,
+    /// On a reader's clean `offline`: the last `seq` it published on each topic (the topic
+    /// under `PREFIX/v1/`), so a subscriber can tell it has everything.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub last_seq: std::collections::BTreeMap<String, u64>,
+}
+
+/// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds.
+pub fn rfc3339(us: u64) -> String {
+    humantime::format_rfc3339_micros(UNIX_EPOCH + Duration::from_micros(us)).to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_by_fnv1a_64_of_the_epc_bytes() {
+        // FNV-1a 64 reference values (the FNV authors' test suite): "" and "a", "foobar".
+        assert_eq!(
+            shard("", u16::MAX),
+            (0xcbf2_9ce4_8422_2325u64 % 65535) as u16
+        );
+        assert_eq!(
+            shard("61", u16::MAX),
+            (0xaf63_dc4c_8601_ec8cu64 % 65535) as u16
+        );
+        assert_eq!(
+            shard("666F6F626172", u16::MAX),
+            (0x8594_4171_f739_67e8u64 % 65535) as u16
+        );
+        // Case does not matter (the bytes do); a non-hex EPC hashes its text.
+        assert_eq!(shard("666f6f626172", 16), shard("666F6F626172", 16));
+        assert_eq!(shard("foobar", u16::MAX), shard("666F6F626172", u16::MAX));
+        // Every shard gets some of 1000 EPCs.
+        let mut seen = [0; 16];
+        for k in 0..1000u32 {
+            seen[usize::from(shard(&format!("E280{k:020X}"), 16))] += 1;
+        }
+        assert!(seen.iter().all(|&n| n > 30), "{seen:?}");
+    }
+
+    #[test]
+    fn a_read_goes_to_the_broker_and_back_unchanged() {
+        let r = Read {
+            epc: "E2801160600002049ACB0065".into(),
+            reader: Some("r1".into()),
+            antenna: 3,
+            t_us: 1_764_633_600_123_456,
+            phase_rad: Some(1.25),
+            rssi_dbm: Some(-53.25),
+            channel_index: Some(2),
+            channel_frequency_hz: Some(866_300_000),
+            doppler_hz: Some(-4.5),
+            antenna_pose: None,
+            last_seen_us: None,
+        };
+        let t = TagRead::from_read(&r);
+        assert_eq!(t.peak_rssi_cdbm, Some(-5325));
+        assert_eq!(t.frequency, Some(866_300));
+        assert_eq!(t.last_seen_time, "2025-12-02T00:00:00.123456Z");
+        let json = serde_json::to_value(&t).expect("serializes");
+        for key in [
+            "epcHex",
+            "antennaPort",
+            "peakRssiCdbm",
+            "phaseAngle",
+            "frequency",
+        ] {
+            assert!(json.get(key).is_some(), "{key} in {json}");
+        }
+        let back: TagRead = serde_json::from_value(json).expect("parses");
+        let again = back.to_read("r1");
+        assert!((again.phase_rad.expect("phase") - 1.25).abs() < 1e-12);
+        assert_eq!(
+            Read {
+                phase_rad: r.phase_rad,
+                ..again
+            },
+            r
+        );
+    }
+}

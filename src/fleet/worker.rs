@@ -1,0 +1,371 @@
+//! A localizer worker (`localize --subscribe`): takes the read shards it owns, the reference
+//! reads and the poses from the broker with a persistent session, runs the live localizer on
+//! them, and publishes each estimate, retained, to `PREFIX/v1/estimates/{epc}`.
+//!
+//! Messages are acknowledged only once the localizer has taken them, so reads published
+//! while the worker is down, or taken but not yet filed when it dies, come again from its
+//! session. A redelivered batch (a sequence number already seen from that reader on that
+//! topic in that gateway run) is counted and skipped; a malformed message or one on a topic
+//! not ours is counted and skipped.
+
+use std::collections::{BTreeSet, HashMap};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
+
+use super::publish::{mqtt_options, refusal, topic_level, PublishError};
+use super::schema::{self, ReadBatch, VERSION};
+use super::url::BrokerUrl;
+use crate::localize::live::{Input, Live, Settings};
+use crate::localize::shared::{Shared, TagJson};
+
+/// How a worker runs.
+#[derive(Clone, Debug)]
+pub struct WorkerOptions {
+    /// The broker.
+    pub url: BrokerUrl,
+    /// The shards this worker owns.
+    pub shards: BTreeSet<u16>,
+    /// How many shards the publishers split the reads into.
+    pub shard_count: u16,
+    /// The MQTT client id, which names its persistent session.
+    pub client_id: String,
+    /// The localizer's settings.
+    pub settings: Settings,
+    /// Per reader, reader time − robot time of the poses robots publish (µs).
+    pub clock_offsets_us: Vec<(String, i64)>,
+}
+
+/// A running worker.
+pub struct Worker {
+    /// Its localizer.
+    pub live: Live,
+    client: Client,
+    stopping: Arc<AtomicBool>,
+    connection: Option<JoinHandle<()>>,
+    estimates: Option<JoinHandle<()>>,
+}
+
+/// The shards of a `--shards` list such as `0-7` or `0,3,8-11`, each below `count`.
+pub fn parse_shards(list: &str, count: u16) -> Result<BTreeSet<u16>, String> {
+    let mut out = BTreeSet::new();
+    for part in list.split(',').map(str::trim) {
+        let (lo, hi) = match part.split_once('-') {
+            Some((a, b)) => (a.trim(), b.trim()),
+            None => (part, part),
+        };
+        let num = |s: &str| {
+            s.parse::<u16>()
+                .map_err(|_| format!("--shards {list}: '{s}' is not a shard number"))
+        };
+        let (lo, hi) = (num(lo)?, num(hi)?);
+        if lo > hi {
+            return Err(format!("--shards {list}: {lo}-{hi} is an empty range"));
+        }
+        if hi >= count {
+            return Err(format!(
+                "--shards {list}: shard {hi} is not below --shard-count {count}"
+            ));
+        }
+        out.extend(lo..=hi);
+    }
+    Ok(out)
+}
+
+impl Worker {
+    /// Starts the localizer, connects and subscribes (waiting up to 5 s for the broker to
+    /// acknowledge the subscriptions: a refusal of the connection is an error, an
+    /// unreachable broker is retried in the background).
+    pub fn start(opts: WorkerOptions) -> Result<Worker, PublishError> {
+        let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, None)?;
+        mqtt.set_manual_acks(true);
+        let (client, connection) = Client::new(mqtt, 10_000);
+        let live = Live::start(opts.settings.clone())?;
+        for (reader, offset) in &opts.clock_offsets_us {
+            live.tap.offer(Input::Reader {
+                name: reader.clone(),
+                hop_table: None,
+                antennas: Vec::new(),
+                clock_offset_us: *offset,
+            });
+        }
+        let stopping = Arc::new(AtomicBool::new(false));
+        let (first_tx, first_rx) = mpsc::channel();
+        let mut run = Run {
+            opts: opts.clone(),
+            client: client.clone(),
+            live_tap: live.tap.clone(),
+            shared: live.shared.clone(),
+            seen: HashMap::new(),
+            stopping: stopping.clone(),
+        };
+        let connection = std::thread::Builder::new()
+            .name("mqtt-worker".into())
+            .spawn(move || run.drive(connection, first_tx))?;
+        let answer = first_rx.recv_timeout(Duration::from_secs(5));
+        if answer.is_err() {
+            tracing::warn!(broker = %opts.url, "not subscribed yet: the broker has not answered");
+        }
+        if let Ok(Err(reason)) = answer {
+            let _ = connection.join();
+            live.stop();
+            return Err(PublishError::Refused {
+                url: opts.url.to_string(),
+                reason,
+            });
+        }
+        let (shared, c, url) = (live.shared.clone(), client.clone(), opts.url.clone());
+        let stop = stopping.clone();
+        let estimates = std::thread::Builder::new()
+            .name("mqtt-estimates".into())
+            .spawn(move || publish_estimates(&shared, &c, &url, &stop))?;
+        Ok(Worker {
+            live,
+            client,
+            stopping,
+            connection: Some(connection),
+            estimates: Some(estimates),
+        })
+    }
+
+    /// Disconnects (unacknowledged messages stay in the session) and stops the localizer.
+    pub fn stop(mut self) {
+        self.stopping.store(true, Ordering::Relaxed);
+        let _ = self.client.disconnect();
+        if let Some(c) = self.connection.take() {
+            let _ = c.join();
+        }
+        if let Some(e) = self.estimates.take() {
+            let _ = e.join();
+        }
+        self.live.stop();
+    }
+}
+
+/// The connection thread's state.
+struct Run {
+    opts: WorkerOptions,
+    client: Client,
+    live_tap: crate::localize::live::Tap,
+    shared: Arc<Shared>,
+    /// Per (gateway, reader, topic): the gateway run's first sequence number seen, and the
+    /// highest.
+    seen: HashMap<(String, String, String), u64>,
+    stopping: Arc<AtomicBool>,
+}
+
+impl Run {
+    fn topics(&self) -> Vec<String> {
+        let t = |rest: String| self.opts.url.topic(&format!("v{VERSION}/{rest}"));
+        let mut topics: Vec<String> = self
+            .opts
+            .shards
+            .iter()
+            .map(|s| t(format!("reads/{s}")))
+            .collect();
+        topics.push(t("refs".into()));
+        topics.push(t("poses/+/+".into()));
+        topics
+    }
+
+    fn drive(&mut self, mut connection: Connection, first: mpsc::Sender<Result<(), String>>) {
+        let mut first = Some(first);
+        let mut backoff = Duration::from_millis(100);
+        let mut down = false;
+        let mut acks = 0;
+        let topics = self.topics().len();
+        for event in connection.iter() {
+            match event {
+                Ok(Event::Incoming(Packet::SubAck(ack))) => {
+                    if ack
+                        .return_codes
+                        .iter()
+                        .any(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
+                    {
+                        tracing::warn!(broker = %self.opts.url, "the broker refused a subscription (no rights to the topic?)");
+                    }
+                    acks += 1;
+                    if acks >= topics {
+                        if let Some(f) = first.take() {
+                            let _ = f.send(Ok(()));
+                        }
+                    }
+                }
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    backoff = Duration::from_millis(100);
+                    acks = 0;
+                    if std::mem::take(&mut down) {
+                        tracing::info!(broker = %self.opts.url, "broker connection back");
+                    }
+                    // Subscribing again to a session that has them is harmless.
+                    for topic in self.topics() {
+                        let _ = self.client.try_subscribe(topic, QoS::AtLeastOnce);
+                    }
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    self.message(&p);
+                    let _ = self.client.try_ack(&p);
+                }
+                Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => return,
+                Ok(_) => {}
+                Err(e) => {
+                    if self.stopping.load(Ordering::Relaxed) {
+                        return;
+                    }
+                    if let Some(f) = first.take() {
+                        if let Some(reason) = refusal(&e) {
+                            let _ = f.send(Err(reason));
+                            return;
+                        }
+                        let _ = f.send(Ok(()));
+                    }
+                    if !std::mem::replace(&mut down, true) {
+                        self.shared.metrics.mqtt_disconnects.inc();
+                        tracing::warn!(broker = %self.opts.url, error = %e, "broker connection lost: retrying");
+                    }
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                }
+            }
+        }
+    }
+
+    /// Files one message, or counts it as malformed.
+    fn message(&mut self, p: &Publish) {
+        self.shared.metrics.mqtt_received.inc();
+        let base = self.opts.url.topic(&format!("v{VERSION}/"));
+        let Some(rest) = p.topic.strip_prefix(&base) else {
+            self.shared.metrics.mqtt_malformed.inc();
+            return;
+        };
+        let levels: Vec<&str> = rest.split('/').collect();
+        let ok = match levels.as_slice() {
+            ["reads", s] => match s.parse::<u16>() {
+                Ok(s) if self.opts.shards.contains(&s) => self.batch(rest, &p.payload, false),
+                _ => false,
+            },
+            ["refs"] => self.batch(rest, &p.payload, true),
+            ["poses", _, _] => match crate::http::poses::parse_poses(&p.payload) {
+                Ok(poses) => {
+                    self.offer(Input::Poses(poses));
+                    true
+                }
+                Err(_) => false,
+            },
+            _ => false,
+        };
+        if !ok {
+            self.shared.metrics.mqtt_malformed.inc();
+        }
+    }
+
+    /// Files a read batch; `refs`: only the reads of tags in shards not ours (ours come on
+    /// their shard). `false` when it is not a batch of the schema.
+    fn batch(&mut self, rest: &str, payload: &[u8], refs: bool) -> bool {
+        let Ok(b) = serde_json::from_slice::<ReadBatch>(payload) else {
+            return false;
+        };
+        if b.v != VERSION {
+            return false;
+        }
+        let key = (b.gateway.clone(), b.reader.clone(), rest.to_owned());
+        let last = self.seen.get(&key).copied();
+        match last {
+            Some(l) if b.seq <= l && b.seq != 1 => {
+                self.shared.metrics.mqtt_duplicates.inc();
+                return true;
+            }
+            Some(l) if b.seq > l + 1 => {
+                self.shared.metrics.mqtt_gaps.inc_by(b.seq - l - 1);
+            }
+            _ => {}
+        }
+        // Sequence 1 again: the gateway started anew. (A first message with a higher number
+        // is where this worker's session began: no gap.)
+        self.seen.insert(key, b.seq);
+        let reads: Vec<_> = b
+            .reads
+            .iter()
+            .filter(|r| {
+                !refs
+                    || !self
+                        .opts
+                        .shards
+                        .contains(&schema::shard(&r.epc_hex, self.opts.shard_count))
+            })
+            .map(|r| r.to_read(&b.reader))
+            .collect();
+        if !reads.is_empty() {
+            self.offer(Input::Reads(reads));
+        }
+        true
+    }
+
+    /// Hands `input` to the localizer, waiting while it is behind (the broker holds the rest).
+    fn offer(&self, mut input: Input) {
+        loop {
+            match self.live_tap.try_offer(input) {
+                Ok(()) => return,
+                Err(back) => {
+                    input = back;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        }
+    }
+}
+
+/// Publishes every estimate update, retained, until `stop`.
+fn publish_estimates(shared: &Shared, client: &Client, url: &BrokerUrl, stop: &AtomicBool) {
+    let mut rx = shared.subscribe();
+    while !stop.load(Ordering::Relaxed) {
+        match rx.try_recv() {
+            Ok(view) => {
+                let json = TagJson::from(&*view);
+                let topic = url.topic(&format!(
+                    "v{VERSION}/estimates/{}",
+                    topic_level(&view.estimate.epc)
+                ));
+                // A TagJson of finite numbers always serializes.
+                let payload = serde_json::to_vec(&json).unwrap_or_default();
+                if client
+                    .try_publish(topic, QoS::AtLeastOnce, true, payload)
+                    .is_ok()
+                {
+                    shared.metrics.mqtt_published.inc();
+                } else {
+                    shared.metrics.mqtt_dropped.inc();
+                }
+            }
+            Err(tokio::sync::broadcast::error::TryRecvError::Lagged(n)) => {
+                shared.metrics.mqtt_dropped.inc_by(n);
+            }
+            Err(tokio::sync::broadcast::error::TryRecvError::Empty) => {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(tokio::sync::broadcast::error::TryRecvError::Closed) => return,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_lists_take_ranges_and_lists_and_name_what_is_wrong() {
+        let s = parse_shards("0-3, 8,10-11", 16).expect("parses");
+        assert_eq!(s.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 8, 10, 11]);
+        assert!(parse_shards("3-1", 16)
+            .expect_err("empty")
+            .contains("empty"));
+        assert!(parse_shards("0-16", 16)
+            .expect_err("too high")
+            .contains("--shard-count 16"));
+        assert!(parse_shards("a", 16).expect_err("nan").contains("'a'"));
+    }
+}

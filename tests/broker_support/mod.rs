@@ -1,0 +1,162 @@
+//! A real mosquitto for the fleet tests: started on a free loopback port with its own
+//! configuration in a temporary directory, stopped by PID when dropped.
+
+#![allow(dead_code)]
+
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running mosquitto.
+pub struct Mosquitto {
+    /// Its loopback port.
+    pub port: u16,
+    child: Child,
+    /// Its configuration and log.
+    pub dir: tempfile::TempDir,
+}
+
+/// The mosquitto binary (Debian puts it in /usr/sbin); `./scripts/install-brokers`
+/// installs it.
+fn binary() -> PathBuf {
+    for p in [
+        "/usr/sbin/mosquitto",
+        "/usr/bin/mosquitto",
+        "/usr/local/sbin/mosquitto",
+    ] {
+        if std::path::Path::new(p).exists() {
+            return p.into();
+        }
+    }
+    panic!("mosquitto is not installed: run ./scripts/install-brokers");
+}
+
+/// A port free on loopback now.
+pub fn free_port() -> u16 {
+    let l = TcpListener::bind("127.0.0.1:0").expect("binds");
+    l.local_addr().expect("address").port()
+}
+
+impl Mosquitto {
+    /// Starts mosquitto with anonymous access and `extra` configuration lines.
+    pub fn start(extra: &str) -> Mosquitto {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let port = free_port();
+        let conf = dir.path().join("mosquitto.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
+                 max_queued_messages 1000000\nlog_dest file {}\n{extra}\n",
+                dir.path().join("mosquitto.log").display()
+            ),
+        )
+        .expect("writes the configuration");
+        let child = Command::new(binary())
+            .arg("-c")
+            .arg(&conf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto starts");
+        let m = Mosquitto { port, child, dir };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "mosquitto did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        m
+    }
+
+    /// `mqtt://127.0.0.1:PORT/prefix`.
+    pub fn url(&self, prefix: &str) -> String {
+        format!("mqtt://127.0.0.1:{}/{prefix}", self.port)
+    }
+}
+
+impl Drop for Mosquitto {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A test's own MQTT client: publishes, and collects what its subscriptions receive.
+pub struct Probe {
+    client: rumqttc::Client,
+    rx: std::sync::mpsc::Receiver<(String, Vec<u8>, bool)>,
+}
+
+impl Probe {
+    /// Connects to `port` and subscribes to `topics`, waiting for the subscriptions.
+    pub fn connect(port: u16, id: &str, topics: &[&str]) -> Probe {
+        let mut o = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
+        o.set_max_packet_size(1 << 20, 1 << 20);
+        let (client, mut connection) = rumqttc::Client::new(o, 100);
+        for t in topics {
+            client
+                .subscribe(*t, rumqttc::QoS::AtLeastOnce)
+                .expect("subscribes");
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let want = topics.len();
+        std::thread::spawn(move || {
+            let mut acks = 0;
+            for event in connection.iter() {
+                match event {
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::SubAck(_))) => {
+                        acks += 1;
+                        if acks == want {
+                            let _ = ready_tx.send(());
+                        }
+                    }
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
+                        if tx.send((p.topic, p.payload.to_vec(), p.retain)).is_err() {
+                            return;
+                        }
+                    }
+                    Ok(_) => {}
+                    Err(_) => return,
+                }
+            }
+        });
+        if want > 0 {
+            ready_rx
+                .recv_timeout(Duration::from_secs(10))
+                .expect("subscribed");
+        }
+        Probe { client, rx }
+    }
+
+    /// Publishes `payload` to `topic` at QoS 1.
+    pub fn publish(&self, topic: &str, payload: &[u8]) {
+        self.client
+            .publish(topic, rumqttc::QoS::AtLeastOnce, false, payload.to_vec())
+            .expect("publishes");
+    }
+
+    /// Messages received within `wait` of the last one (at most `wait` for the first).
+    pub fn drain(&self, wait: Duration) -> Vec<(String, Vec<u8>, bool)> {
+        let mut out = Vec::new();
+        while let Ok(m) = self.rx.recv_timeout(wait) {
+            out.push(m);
+        }
+        out
+    }
+}

@@ -1,0 +1,201 @@
+//! Fleet scale through a real mosquitto (started here on a free loopback port): `sim
+//! --publish` → broker → localizer workers (`localize --subscribe`), which publish their
+//! estimates back, retained.
+
+mod broker_support;
+mod http_support;
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use broker_support::{Mosquitto, Probe};
+use http_support::{request, Proc};
+
+/// A worker on `url` owning `shards`, with its HTTP API on a free port.
+fn worker(url: &str, shards: &str, id: &str) -> (Proc, SocketAddr) {
+    let mut p = Proc::spawn(&[
+        "localize",
+        "--subscribe",
+        url,
+        "--shards",
+        shards,
+        "--client-id",
+        id,
+        "--http",
+        "127.0.0.1:0",
+    ]);
+    let addr = p.address("live map on http://").parse().expect("address");
+    p.address(", subscribed");
+    (p, addr)
+}
+
+/// EPC → (samples, [x, y, z]) of every located tag of `GET /api/tags`.
+fn located(http: SocketAddr) -> BTreeMap<String, (u64, [f64; 3])> {
+    let v = request(http, "GET", "/api/tags", &[], b"").json();
+    let mut out = BTreeMap::new();
+    for t in v["tags"].as_array().cloned().unwrap_or_default() {
+        let e = &t["estimate"];
+        if let (Some(x), Some(y), Some(z)) = (e["x"].as_f64(), e["y"].as_f64(), e["z"].as_f64()) {
+            let epc = t["epc"].as_str().unwrap_or_default().to_string();
+            out.insert(epc, (t["samples"].as_u64().unwrap_or(0), [x, y, z]));
+        }
+    }
+    out
+}
+
+/// The value of counter `name` in `GET /metrics`.
+fn counter(http: SocketAddr, name: &str) -> f64 {
+    let text = request(http, "GET", "/metrics", &[], b"").text();
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("llrp_gateway_{name}_total ")))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {name} in {text}"))
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn two_workers_on_disjoint_shards_give_the_estimates_of_one_worker_on_all() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("site");
+    let (_all, all_http) = worker(&url, "0-15", "all");
+    let (_low, low_http) = worker(&url, "0-7", "low");
+    let (_high, high_http) = worker(&url, "8-15", "high");
+    let status = Probe::connect(broker.port, "status-probe", &["site/v1/status/#"]);
+    {
+        let mut sim = Proc::spawn(&[
+            "sim",
+            "--no-http",
+            "--listen",
+            "127.0.0.1:0",
+            "--speed",
+            "20",
+            "--poses",
+            "truth",
+            "--publish",
+            &url,
+            "--gateway-name",
+            "gw1",
+        ]);
+        sim.address("listening on ");
+        // S1's 46 s drive at 20× real time, and a margin.
+        std::thread::sleep(Duration::from_secs(4));
+        // Dropped: SIGTERM, and a clean exit publishes the offline statuses.
+    }
+    let statuses: BTreeMap<String, serde_json::Value> = status
+        .drain(Duration::from_secs(2))
+        .into_iter()
+        .map(|(t, p, _)| (t, serde_json::from_slice(&p).expect("status JSON")))
+        .collect();
+    let reader = &statuses["site/v1/status/s1-reader"];
+    assert_eq!(reader["status"], "offline", "{statuses:?}");
+    assert_eq!(statuses["site/v1/status/gateway/gw1"]["status"], "offline");
+    let last_seq = reader["lastSeq"].as_object().expect("lastSeq").clone();
+    assert!(
+        last_seq.keys().any(|k| k.starts_with("reads/")),
+        "{last_seq:?}"
+    );
+
+    // Each worker has taken every message and estimated every tag once the two sides agree.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let (one, two) = loop {
+        let one = located(all_http);
+        let mut two = located(low_http);
+        two.extend(located(high_http));
+        let agree = one.len() == 10
+            && one.keys().eq(two.keys())
+            && one.iter().all(|(epc, (n, p))| {
+                let (m, q) = two[epc];
+                *n == m && distance(*p, q) <= 1e-6
+            });
+        if agree || Instant::now() > deadline {
+            break (one, two);
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let diagnosis: Vec<String> = [all_http, low_http, high_http]
+        .iter()
+        .map(|&h| {
+            [
+                "mqtt_received",
+                "mqtt_gaps",
+                "mqtt_duplicates",
+                "reads",
+                "reads_set_aside",
+                "poses",
+            ]
+            .map(|n| format!("{n} {}", counter(h, n)))
+            .join(", ")
+        })
+        .collect();
+    eprintln!("workers (all, low, high): {diagnosis:#?}");
+    assert_eq!(one.len(), 10, "one worker located {one:?}");
+    for (epc, (n, p)) in &one {
+        let (m, q) = two
+            .get(epc)
+            .copied()
+            .unwrap_or_else(|| panic!("{epc} not in {two:?}"));
+        assert_eq!(*n, m, "{epc}: samples");
+        assert!(distance(*p, q) <= 1e-6, "{epc}: {p:?} vs {q:?}");
+    }
+    // Disjoint: every tag is estimated by exactly one of the two.
+    assert_eq!(located(low_http).len() + located(high_http).len(), 10);
+    for http in [all_http, low_http, high_http] {
+        assert_eq!(counter(http, "mqtt_gaps"), 0.0);
+        assert_eq!(counter(http, "mqtt_malformed"), 0.0);
+        assert!(counter(http, "mqtt_received") > 0.0);
+    }
+    // The estimates are on the broker, retained, for a subscriber that comes later.
+    let late = Probe::connect(broker.port, "late", &["site/v1/estimates/+"]);
+    let retained: Vec<_> = late.drain(Duration::from_secs(2));
+    assert_eq!(retained.len(), 10, "{} retained estimates", retained.len());
+    for (topic, payload, retain) in retained {
+        assert!(retain, "{topic}");
+        let v: serde_json::Value = serde_json::from_slice(&payload).expect("JSON");
+        let epc = v["epc"].as_str().expect("epc");
+        assert_eq!(topic, format!("site/v1/estimates/{epc}"));
+        let e = &v["estimate"];
+        let p = [e["x"].as_f64(), e["y"].as_f64(), e["z"].as_f64()].map(|c| c.expect("x, y, z"));
+        assert!(distance(p, one[epc].1) <= 1e-6, "{epc}: {p:?}");
+    }
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn malformed_messages_are_counted_and_skipped_and_the_worker_goes_on() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("m");
+    let (_w, http) = worker(&url, "0-15", "m-worker");
+    let probe = Probe::connect(broker.port, "m-probe", &[]);
+    probe.publish("m/v1/reads/0", b"{not json");
+    probe.publish(
+        "m/v1/refs",
+        br#"{"v": 2, "gateway": "g", "reader": "r", "seq": 1, "reads": []}"#,
+    );
+    probe.publish("m/v1/poses/r/1", br#"{"x": "north"}"#);
+    let good = serde_json::json!({
+        "v": 1, "gateway": "g", "reader": "r", "seq": 1,
+        "reads": [{"epcHex": "300833B2DDD9014000000001", "antennaPort": 1, "phaseAngle": 90.0,
+                   "frequency": 866300, "lastSeenTime": "2026-01-01T00:00:00Z",
+                   "firstSeenUs": 1_000_000}]
+    });
+    let shard = llrp_gateway::fleet::schema::shard("300833B2DDD9014000000001", 16);
+    probe.publish(&format!("m/v1/reads/{shard}"), good.to_string().as_bytes());
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while counter(http, "mqtt_received") < 4.0 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(counter(http, "mqtt_received"), 4.0);
+    assert_eq!(counter(http, "mqtt_malformed"), 3.0);
+    // The good read was taken in (and set aside: no pose for it yet).
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while counter(http, "reads") < 1.0 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(counter(http, "reads"), 1.0);
+    assert_eq!(request(http, "GET", "/healthz", &[], b"").status, 200);
+}
