@@ -28,6 +28,20 @@ pub struct PublishArgs {
     /// This gateway's name on the broker (its status topic and MQTT client id).
     #[arg(long, value_name = "NAME", default_value = "llrp-gateway")]
     pub gateway_name: String,
+    /// For `mqtts://`: the CA certificate (PEM) that signed the broker's.
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_ca: Option<std::path::PathBuf>,
+}
+
+/// The TLS settings of `--mqtt-ca FILE`.
+pub fn tls_config(
+    ca: Option<&std::path::Path>,
+) -> Result<Option<Arc<tokio_rustls::rustls::ClientConfig>>, String> {
+    ca.map(|p| {
+        crate::net::tls::client_config(&crate::net::tls::Verify::Ca(p.to_owned()))
+            .map_err(|e| format!("--mqtt-ca {}: {e}", p.display()))
+    })
+    .transpose()
 }
 
 impl PublishArgs {
@@ -47,6 +61,7 @@ impl PublishArgs {
         opts.queue = self.publish_queue;
         opts.window = Duration::from_millis(self.publish_window_ms);
         opts.references = references;
+        opts.tls = tls_config(self.mqtt_ca.as_deref())?;
         Publisher::start(opts, shared)
             .map(Some)
             .map_err(|e| format!("--publish: {e}"))

@@ -4,11 +4,13 @@
 //! schema: docs/fleet.md).
 //!
 //! Nothing here waits on the broker: the mirror drops (counted) when this thread is behind,
-//! and the broker connection's request queue ([`PublishOptions::queue`] messages) drops
-//! (counted) while the broker is away. Reconnection backs off from 100 ms to 5 s, and each
+//! and the outbox ([`PublishOptions::queue`] messages) drops (counted) what does not fit
+//! while the broker is away or slow. At most `WINDOW` (1,000) messages are with the connection
+//! unacknowledged; they are sent again after a reconnection that resumes the session, and
+//! counted as dropped after one that does not. Reconnection backs off from 100 ms to 5 s, and each
 //! outage is logged once, when it starts and when it ends.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
@@ -112,7 +114,7 @@ pub fn mqtt_options(
     if url.tls {
         let config = tls.ok_or_else(|| {
             PublishError::Tls(format!(
-                "{url}: mqtts:// needs the broker's CA certificate (TLS to the broker is not built yet)"
+                "{url}: mqtts:// needs --mqtt-ca FILE, the CA certificate (PEM) the broker's is signed by"
             ))
         })?;
         o.set_transport(rumqttc::Transport::tls_with_config(
@@ -122,6 +124,16 @@ pub fn mqtt_options(
     Ok(o)
 }
 
+/// Most messages handed to the connection and not yet acknowledged.
+const WINDOW: u64 = 1000;
+
+/// A message waiting in the outbox.
+struct Outgoing {
+    topic: String,
+    retain: bool,
+    payload: Vec<u8>,
+}
+
 /// What the connection thread and the publishing thread share.
 struct Link {
     client: Client,
@@ -129,36 +141,84 @@ struct Link {
     gateway: String,
     /// Readers online, which a reconnection announces again.
     online: Mutex<BTreeSet<String>>,
+    /// The messages not yet handed to the connection (at most `queue`).
+    outbox: Mutex<VecDeque<Outgoing>>,
+    queue: usize,
+    /// The connection is up.
+    connected: AtomicBool,
     /// Publishes the broker acknowledged.
     acked: AtomicU64,
-    /// Publishes handed to the client.
+    /// Publishes handed to the connection.
     sent: AtomicU64,
     shared: Arc<Shared>,
     stopping: AtomicBool,
 }
 
 impl Link {
-    /// Publishes `payload` to `PREFIX/v1/rest` at QoS 1; `false` (counted as dropped) when the
-    /// queue is full.
+    /// Queues `payload` for `PREFIX/v1/rest` at QoS 1; `false` (counted as dropped, with
+    /// `weight` reads or poses) when the outbox is full.
     fn publish(&self, rest: &str, retain: bool, payload: Vec<u8>, weight: u64) -> bool {
         let topic = self.url.topic(&format!("v{VERSION}/{rest}"));
+        let mut q = lock(&self.outbox);
+        if q.len() >= self.queue {
+            drop(q);
+            self.shared.metrics.mqtt_dropped.inc_by(weight);
+            self.shared.metrics.mqtt_dropped_messages.inc();
+            return false;
+        }
+        q.push_back(Outgoing {
+            topic,
+            retain,
+            payload,
+        });
+        true
+    }
+
+    /// Hands queued messages to the connection while it is up and fewer than `WINDOW`
+    /// await the broker's acknowledgement.
+    fn pump(&self) {
+        if !self.connected.load(Ordering::Acquire) {
+            return;
+        }
+        let mut q = lock(&self.outbox);
+        while self.sent.load(Ordering::Relaxed) - self.acked.load(Ordering::Relaxed) < WINDOW {
+            let Some(m) = q.pop_front() else {
+                break;
+            };
+            self.direct(m);
+        }
+    }
+
+    /// Hands `m` to the connection at once.
+    fn direct(&self, m: Outgoing) {
         match self
             .client
-            .try_publish(topic, QoS::AtLeastOnce, retain, payload)
+            .try_publish(m.topic, QoS::AtLeastOnce, m.retain, m.payload)
         {
             Ok(()) => {
                 self.sent.fetch_add(1, Ordering::Relaxed);
                 self.shared.metrics.mqtt_published.inc();
-                true
             }
+            // The request channel holds the window and more: only a stopped connection.
             Err(_) => {
-                self.shared.metrics.mqtt_dropped.inc_by(weight);
-                false
+                self.shared.metrics.mqtt_dropped_messages.inc();
             }
         }
     }
 
-    fn status(&self, reader: Option<&str>, online: bool, last_seq: BTreeMap<String, u64>) {
+    /// Nothing left to send or to be acknowledged.
+    fn drained(&self) -> bool {
+        lock(&self.outbox).is_empty()
+            && self.acked.load(Ordering::Relaxed) >= self.sent.load(Ordering::Relaxed)
+    }
+
+    /// The retained status message of `reader` (the gateway's with `None`).
+    fn status_message(
+        &self,
+        reader: Option<&str>,
+        online: bool,
+        last_seq: BTreeMap<String, u64>,
+    ) -> Outgoing {
         let s = Status {
             v: VERSION,
             status: if online { "online" } else { "offline" }.into(),
@@ -170,9 +230,20 @@ impl Link {
             Some(r) => format!("status/{}", topic_level(r)),
             None => format!("status/gateway/{}", topic_level(&self.gateway)),
         };
-        // A Status always serializes.
-        let payload = serde_json::to_vec(&s).unwrap_or_default();
-        self.publish(&rest, true, payload, 1);
+        Outgoing {
+            topic: self.url.topic(&format!("v{VERSION}/{rest}")),
+            retain: true,
+            // A Status always serializes.
+            payload: serde_json::to_vec(&s).unwrap_or_default(),
+        }
+    }
+
+    /// Queues the status of `reader` (the gateway's with `None`).
+    fn status(&self, reader: Option<&str>, online: bool, last_seq: BTreeMap<String, u64>) {
+        let m = self.status_message(reader, online, last_seq);
+        let mut q = lock(&self.outbox);
+        // A status is never dropped: it may pass the bound by the readers' count.
+        q.push_back(m);
     }
 }
 
@@ -216,12 +287,17 @@ impl Publisher {
             QoS::AtLeastOnce,
             true,
         ));
-        let (client, connection) = Client::new(mqtt, opts.queue.max(1));
+        // The request channel holds the window of unacknowledged messages and the rest;
+        // what waits for the broker waits in the outbox, which is bounded by `queue`.
+        let (client, connection) = Client::new(mqtt, WINDOW as usize + 64);
         let link = Arc::new(Link {
             client,
             url: opts.url.clone(),
             gateway: opts.gateway.clone(),
             online: Mutex::new(BTreeSet::new()),
+            outbox: Mutex::new(VecDeque::new()),
+            queue: opts.queue.max(1),
+            connected: AtomicBool::new(false),
             acked: AtomicU64::new(0),
             sent: AtomicU64::new(0),
             shared: shared.clone(),
@@ -279,9 +355,8 @@ impl Publisher {
             let _ = b.join();
         }
         let until = Instant::now() + Duration::from_secs(3);
-        while self.link.acked.load(Ordering::Relaxed) < self.link.sent.load(Ordering::Relaxed)
-            && Instant::now() < until
-        {
+        while !self.link.drained() && Instant::now() < until {
+            self.link.pump();
             std::thread::sleep(Duration::from_millis(5));
         }
         let _ = self.link.client.disconnect();
@@ -299,7 +374,7 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
     let mut outage: Option<(Instant, String)> = None;
     for event in connection.iter() {
         match event {
-            Ok(Event::Incoming(Packet::ConnAck(_))) => {
+            Ok(Event::Incoming(Packet::ConnAck(ack))) => {
                 backoff = BACKOFF_MIN;
                 if let Some(f) = first.take() {
                     let _ = f.send(Ok(()));
@@ -307,11 +382,19 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
                 if let Some((since, why)) = outage.take() {
                     tracing::info!(broker = %link.url, after_s = since.elapsed().as_secs_f64(), %why, "broker connection back");
                 }
-                link.status(None, true, BTreeMap::new());
+                if !ack.session_present {
+                    // A new session: the connection dropped what awaited acknowledgement.
+                    let sent = link.sent.load(Ordering::Relaxed);
+                    let lost = sent.saturating_sub(link.acked.swap(sent, Ordering::Relaxed));
+                    link.shared.metrics.mqtt_dropped_messages.inc_by(lost);
+                }
+                link.direct(link.status_message(None, true, BTreeMap::new()));
                 let online: Vec<String> = lock(&link.online).iter().cloned().collect();
                 for r in online {
-                    link.status(Some(&r), true, BTreeMap::new());
+                    link.direct(link.status_message(Some(&r), true, BTreeMap::new()));
                 }
+                link.connected.store(true, Ordering::Release);
+                link.pump();
             }
             Ok(Event::Incoming(Packet::PubAck(_))) => {
                 link.acked.fetch_add(1, Ordering::Relaxed);
@@ -319,6 +402,7 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
             Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => return,
             Ok(_) => {}
             Err(e) => {
+                link.connected.store(false, Ordering::Release);
                 if link.stopping.load(Ordering::Relaxed) {
                     return;
                 }
@@ -399,12 +483,19 @@ impl Builder {
             self.opts.window.min(Duration::from_millis(100))
         };
         loop {
-            match rx.recv_timeout(tick) {
+            // Soon again while messages wait for a window.
+            let wait = if lock(&self.link.outbox).is_empty() {
+                tick
+            } else {
+                tick.min(Duration::from_millis(5))
+            };
+            match rx.recv_timeout(wait) {
                 Ok(input) => self.take(input),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => break,
             }
             self.flush(false);
+            self.link.pump();
             if self.link.stopping.load(Ordering::Relaxed) {
                 while let Ok(input) = rx.try_recv() {
                     self.take(input);
@@ -421,6 +512,7 @@ impl Builder {
             self.link.status(Some(&r), false, last);
         }
         self.link.status(None, false, BTreeMap::new());
+        self.link.pump();
     }
 
     fn take(&mut self, input: Input) {

@@ -38,6 +38,8 @@ pub struct WorkerOptions {
     pub settings: Settings,
     /// Per reader, reader time − robot time of the poses robots publish (µs).
     pub clock_offsets_us: Vec<(String, i64)>,
+    /// TLS settings for `mqtts://`.
+    pub tls: Option<Arc<tokio_rustls::rustls::ClientConfig>>,
 }
 
 /// A running worker.
@@ -81,7 +83,7 @@ impl Worker {
     /// acknowledge the subscriptions: a refusal of the connection is an error, an
     /// unreachable broker is retried in the background).
     pub fn start(opts: WorkerOptions) -> Result<Worker, PublishError> {
-        let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, None)?;
+        let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, opts.tls.clone())?;
         mqtt.set_manual_acks(true);
         let (client, connection) = Client::new(mqtt, 10_000);
         let live = Live::start(opts.settings.clone())?;

@@ -36,6 +36,9 @@ pub struct WorkerArgs {
         conflicts_with = "settings"
     )]
     pub scenario: Option<std::path::PathBuf>,
+    /// For `mqtts://`: the CA certificate (PEM) that signed the broker's.
+    #[arg(long, value_name = "FILE", requires = "subscribe")]
+    pub mqtt_ca: Option<std::path::PathBuf>,
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]
     pub http: crate::http::launch::HttpArgs,
@@ -90,6 +93,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         client_id,
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
+        tls: super::args::tls_config(w.mqtt_ca.as_deref())?,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

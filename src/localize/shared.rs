@@ -118,6 +118,9 @@ pub struct Metrics {
     pub mqtt_published: Counter,
     /// Reads, poses and messages the MQTT publisher dropped (its tap or its queue full).
     pub mqtt_dropped: Counter,
+    /// MQTT messages the publisher dropped (its queue full, or lost with a broker session):
+    /// each leaves a gap in its topic's sequence numbers.
+    pub mqtt_dropped_messages: Counter,
     /// MQTT messages a worker took in.
     pub mqtt_received: Counter,
     /// MQTT messages skipped: not JSON of the schema, or on a topic not ours.
@@ -154,6 +157,7 @@ impl Metrics {
             update_latency_seconds: buckets(),
             mqtt_published: Counter::default(),
             mqtt_dropped: Counter::default(),
+            mqtt_dropped_messages: Counter::default(),
             mqtt_received: Counter::default(),
             mqtt_malformed: Counter::default(),
             mqtt_gaps: Counter::default(),
@@ -210,6 +214,11 @@ impl Metrics {
                 "mqtt_dropped",
                 "Reads, poses and messages the MQTT publisher dropped",
                 &m.mqtt_dropped,
+            ),
+            (
+                "mqtt_dropped_messages",
+                "MQTT messages the publisher dropped",
+                &m.mqtt_dropped_messages,
             ),
             ("mqtt_received", "MQTT messages taken in", &m.mqtt_received),
             (

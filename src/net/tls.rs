@@ -193,6 +193,48 @@ pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
     Ok(TlsAcceptor::from(Arc::new(config)))
 }
 
+/// The TLS client configuration trusting `verify` (ring provider, TLS 1.2 and 1.3): for the
+/// LLRP client and proxy and for MQTT brokers. With [`Verify::Insecure`] a warning is logged.
+pub fn client_config(verify: &Verify) -> Result<Arc<ClientConfig>, TlsError> {
+    let builder =
+        ClientConfig::builder_with_provider(provider()).with_safe_default_protocol_versions()?;
+    let config = match verify {
+        Verify::Ca(path) => {
+            let ca_error = |source| TlsError::Ca {
+                path: path.clone(),
+                source,
+            };
+            let certs = load_certs(path)?;
+            let mut roots = RootCertStore::empty();
+            for cert in &certs {
+                roots.add(cert.clone()).map_err(ca_error)?;
+            }
+            let webpki = WebPkiServerVerifier::builder_with_provider(Arc::new(roots), provider())
+                .build()
+                .map_err(|e| ca_error(rustls::Error::General(e.to_string())))?;
+            builder
+                .dangerous()
+                .with_custom_certificate_verifier(Arc::new(CaOrPinned {
+                    webpki,
+                    pinned: certs,
+                }))
+                .with_no_client_auth()
+        }
+        Verify::Insecure => {
+            tracing::warn!(
+                "TLS: the reader's certificate is not checked (--tls-insecure): any \
+                 certificate is accepted, so the connection is encrypted but not \
+                 authenticated"
+            );
+            builder
+                .dangerous()
+                .with_custom_certificate_verifier(Arc::new(AnyCertificate(provider())))
+                .with_no_client_auth()
+        }
+    };
+    Ok(Arc::new(config))
+}
+
 /// Which reader certificates a client accepts.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Verify {
@@ -223,46 +265,10 @@ impl Connector {
     /// certificate (default: the host of the address connected to). With
     /// [`Verify::Insecure`] a warning is logged.
     pub fn new(verify: &Verify, server_name: Option<&str>) -> Result<Connector, TlsError> {
-        let builder = ClientConfig::builder_with_provider(provider())
-            .with_safe_default_protocol_versions()?;
-        let config = match verify {
-            Verify::Ca(path) => {
-                let ca_error = |source| TlsError::Ca {
-                    path: path.clone(),
-                    source,
-                };
-                let certs = load_certs(path)?;
-                let mut roots = RootCertStore::empty();
-                for cert in &certs {
-                    roots.add(cert.clone()).map_err(ca_error)?;
-                }
-                let webpki =
-                    WebPkiServerVerifier::builder_with_provider(Arc::new(roots), provider())
-                        .build()
-                        .map_err(|e| ca_error(rustls::Error::General(e.to_string())))?;
-                builder
-                    .dangerous()
-                    .with_custom_certificate_verifier(Arc::new(CaOrPinned {
-                        webpki,
-                        pinned: certs,
-                    }))
-                    .with_no_client_auth()
-            }
-            Verify::Insecure => {
-                tracing::warn!(
-                    "TLS: the reader's certificate is not checked (--tls-insecure): any \
-                     certificate is accepted, so the connection is encrypted but not \
-                     authenticated"
-                );
-                builder
-                    .dangerous()
-                    .with_custom_certificate_verifier(Arc::new(AnyCertificate(provider())))
-                    .with_no_client_auth()
-            }
-        };
+        let config = client_config(verify)?;
         let server_name = server_name.map(parse_server_name).transpose()?;
         Ok(Connector {
-            connector: TlsConnector::from(Arc::new(config)),
+            connector: TlsConnector::from(config),
             server_name,
         })
     }

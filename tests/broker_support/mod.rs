@@ -12,8 +12,9 @@ use std::time::{Duration, Instant};
 pub struct Mosquitto {
     /// Its loopback port.
     pub port: u16,
-    child: Child,
-    /// Its configuration and log.
+    child: Option<Child>,
+    conf: PathBuf,
+    /// Its configuration, log and persistence.
     pub dir: tempfile::TempDir,
 }
 
@@ -41,36 +42,76 @@ pub fn free_port() -> u16 {
 impl Mosquitto {
     /// Starts mosquitto with anonymous access and `extra` configuration lines.
     pub fn start(extra: &str) -> Mosquitto {
+        Mosquitto::start_with(|port, _| {
+            format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n{extra}\n")
+        })
+    }
+
+    /// Starts mosquitto with the configuration `conf(port, dir)` gives (its first listener
+    /// on `port`), plus a log file in `dir` and no bound on the messages queued for a
+    /// subscriber.
+    pub fn start_with(conf: impl FnOnce(u16, &std::path::Path) -> String) -> Mosquitto {
         let dir = tempfile::tempdir().expect("temp dir");
         let port = free_port();
-        let conf = dir.path().join("mosquitto.conf");
-        std::fs::write(
-            &conf,
-            format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
-                 max_queued_messages 1000000\nlog_dest file {}\n{extra}\n",
-                dir.path().join("mosquitto.log").display()
-            ),
-        )
-        .expect("writes the configuration");
+        let path = dir.path().join("mosquitto.conf");
+        let text = format!(
+            "{}\nmax_queued_messages 1000000\nlog_dest file {}\n",
+            conf(port, dir.path()),
+            dir.path().join("mosquitto.log").display()
+        );
+        std::fs::write(&path, text).expect("writes the configuration");
+        let mut m = Mosquitto {
+            port,
+            child: None,
+            conf: path,
+            dir,
+        };
+        m.run();
+        m
+    }
+
+    fn run(&mut self) {
         let child = Command::new(binary())
             .arg("-c")
-            .arg(&conf)
+            .arg(&self.conf)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
             .expect("mosquitto starts");
-        let m = Mosquitto { port, child, dir };
+        self.child = Some(child);
         let deadline = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
             assert!(
                 Instant::now() < deadline,
-                "mosquitto did not listen on {port}"
+                "mosquitto did not listen on {}",
+                self.port
             );
             std::thread::sleep(Duration::from_millis(20));
         }
-        m
+    }
+
+    /// Stops it (SIGTERM: with persistence on it saves its state) and waits.
+    pub fn stop(&mut self) {
+        let Some(mut child) = self.child.take() else {
+            return;
+        };
+        let _ = Command::new("kill").arg(child.id().to_string()).status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+
+    /// Starts it again on the same port with the same configuration.
+    pub fn restart(&mut self) {
+        self.stop();
+        self.run();
     }
 
     /// `mqtt://127.0.0.1:PORT/prefix`.
@@ -81,18 +122,7 @@ impl Mosquitto {
 
 impl Drop for Mosquitto {
     fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .arg(self.child.id().to_string())
-            .status();
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.stop();
     }
 }
 
@@ -100,13 +130,24 @@ impl Drop for Mosquitto {
 pub struct Probe {
     client: rumqttc::Client,
     rx: std::sync::mpsc::Receiver<(String, Vec<u8>, bool)>,
+    acks: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl Probe {
     /// Connects to `port` and subscribes to `topics`, waiting for the subscriptions.
     pub fn connect(port: u16, id: &str, topics: &[&str]) -> Probe {
+        Probe::connect_as(port, id, None, topics)
+    }
+
+    /// [`Probe::connect`] as user `login.0` with password `login.1`.
+    pub fn connect_as(port: u16, id: &str, login: Option<(&str, &str)>, topics: &[&str]) -> Probe {
         let mut o = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
         o.set_max_packet_size(1 << 20, 1 << 20);
+        if let Some((user, pass)) = login {
+            o.set_credentials(user, pass);
+        }
+        let acks = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let counted = acks.clone();
         let (client, mut connection) = rumqttc::Client::new(o, 100);
         for t in topics {
             client
@@ -126,6 +167,9 @@ impl Probe {
                             let _ = ready_tx.send(());
                         }
                     }
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::PubAck(_))) => {
+                        counted.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    }
                     Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
                         if tx.send((p.topic, p.payload.to_vec(), p.retain)).is_err() {
                             return;
@@ -141,7 +185,18 @@ impl Probe {
                 .recv_timeout(Duration::from_secs(10))
                 .expect("subscribed");
         }
-        Probe { client, rx }
+        Probe { client, rx, acks }
+    }
+
+    /// Publishes `payload` to `topic` at QoS 1 and waits for the broker's acknowledgement.
+    pub fn publish_acked(&self, topic: &str, payload: &[u8]) {
+        let before = self.acks.load(std::sync::atomic::Ordering::SeqCst);
+        self.publish(topic, payload);
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while self.acks.load(std::sync::atomic::Ordering::SeqCst) == before {
+            assert!(Instant::now() < deadline, "no PUBACK for {topic}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
 
     /// Publishes `payload` to `topic` at QoS 1.
