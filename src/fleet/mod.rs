@@ -4,6 +4,7 @@
 //! addresses in [`url`].
 
 pub mod args;
+mod builder;
 pub mod publish;
 pub mod schema;
 pub mod url;

@@ -10,27 +10,19 @@
 //! counted as dropped after one that does not. Reconnection backs off from 100 ms to 5 s, and each
 //! outage is logged once, when it starts and when it ends.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use rumqttc::{Client, Connection, ConnectionError, Event, LastWill, MqttOptions, Packet, QoS};
 
-use super::schema::{self, ReadBatch, Status, TagRead, VERSION};
+use super::schema::{self, Status, VERSION};
 use super::url::BrokerUrl;
-use crate::localize::live::{Input, Mirror};
-use crate::localize::poses::PoseSample;
+use crate::localize::live::Mirror;
 use crate::localize::shared::Shared;
-use crate::reads::{Read, ReadDecoder};
-
-/// LLRP's message type of READER_EVENT_NOTIFICATION.
-const READER_EVENT_NOTIFICATION: u16 = 63;
-
-/// Most reads in one batch message.
-pub const MAX_BATCH_READS: usize = 1000;
 
 /// Largest MQTT packet sent or accepted (bytes).
 pub const MAX_PACKET: usize = 1 << 20;
@@ -135,12 +127,12 @@ struct Outgoing {
 }
 
 /// What the connection thread and the publishing thread share.
-struct Link {
+pub(super) struct Link {
     client: Client,
     url: BrokerUrl,
     gateway: String,
     /// Readers online, which a reconnection announces again.
-    online: Mutex<BTreeSet<String>>,
+    pub(super) online: Mutex<BTreeSet<String>>,
     /// The messages not yet handed to the connection (at most `queue`).
     outbox: Mutex<VecDeque<Outgoing>>,
     queue: usize,
@@ -151,19 +143,29 @@ struct Link {
     /// Publishes handed to the connection.
     sent: AtomicU64,
     shared: Arc<Shared>,
-    stopping: AtomicBool,
+    pub(super) stopping: AtomicBool,
 }
 
 impl Link {
     /// Queues `payload` for `PREFIX/v1/rest` at QoS 1; `false` (counted as dropped, with
-    /// `weight` reads or poses) when the outbox is full.
-    fn publish(&self, rest: &str, retain: bool, payload: Vec<u8>, weight: u64) -> bool {
+    /// `weight` reads or poses, and as a dropped message when it carries a sequence number)
+    /// when the outbox is full.
+    pub(super) fn publish(
+        &self,
+        rest: &str,
+        retain: bool,
+        payload: Vec<u8>,
+        weight: u64,
+        sequenced: bool,
+    ) -> bool {
         let topic = self.url.topic(&format!("v{VERSION}/{rest}"));
         let mut q = lock(&self.outbox);
         if q.len() >= self.queue {
             drop(q);
             self.shared.metrics.mqtt_dropped.inc_by(weight);
-            self.shared.metrics.mqtt_dropped_messages.inc();
+            if sequenced {
+                self.shared.metrics.mqtt_dropped_messages.inc();
+            }
             return false;
         }
         q.push_back(Outgoing {
@@ -176,12 +178,17 @@ impl Link {
 
     /// Hands queued messages to the connection while it is up and fewer than `WINDOW`
     /// await the broker's acknowledgement.
-    fn pump(&self) {
+    pub(super) fn pump(&self) {
         if !self.connected.load(Ordering::Acquire) {
             return;
         }
         let mut q = lock(&self.outbox);
-        while self.sent.load(Ordering::Relaxed) - self.acked.load(Ordering::Relaxed) < WINDOW {
+        while self
+            .sent
+            .load(Ordering::Relaxed)
+            .saturating_sub(self.acked.load(Ordering::Relaxed))
+            < WINDOW
+        {
             let Some(m) = q.pop_front() else {
                 break;
             };
@@ -204,6 +211,11 @@ impl Link {
                 self.shared.metrics.mqtt_dropped_messages.inc();
             }
         }
+    }
+
+    /// No message waits in the outbox.
+    pub(super) fn outbox_empty(&self) -> bool {
+        lock(&self.outbox).is_empty()
     }
 
     /// Nothing left to send or to be acknowledged.
@@ -239,7 +251,12 @@ impl Link {
     }
 
     /// Queues the status of `reader` (the gateway's with `None`).
-    fn status(&self, reader: Option<&str>, online: bool, last_seq: BTreeMap<String, u64>) {
+    pub(super) fn status(
+        &self,
+        reader: Option<&str>,
+        online: bool,
+        last_seq: BTreeMap<String, u64>,
+    ) {
         let m = self.status_message(reader, online, last_seq);
         let mut q = lock(&self.outbox);
         // A status is never dropped: it may pass the bound by the readers' count.
@@ -331,7 +348,7 @@ impl Publisher {
         let l = link.clone();
         let builder = std::thread::Builder::new()
             .name("mqtt-publish".into())
-            .spawn(move || Builder::new(opts, l).run(rx))?;
+            .spawn(move || super::builder::Builder::new(opts, l).run(rx))?;
         Ok(Publisher {
             mirror,
             link,
@@ -440,252 +457,7 @@ pub fn refusal(e: &ConnectionError) -> Option<String> {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     // A panicked holder leaves a set still worth using.
     m.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// Reads waiting for their batch's window to close, per topic.
-struct Pending {
-    reader: String,
-    reads: Vec<TagRead>,
-    since: Instant,
-}
-
-/// The publishing thread: turns inputs into messages.
-struct Builder {
-    opts: PublishOptions,
-    link: Arc<Link>,
-    decoders: HashMap<String, ReadDecoder>,
-    /// Reader time − robot time, per reader (poses go out in the reads' clock).
-    offsets: HashMap<String, i64>,
-    /// Per reader, per topic (under `v1/`), the last sequence number used.
-    seqs: BTreeMap<String, BTreeMap<String, u64>>,
-    pending: BTreeMap<(String, String), Pending>,
-}
-
-impl Builder {
-    fn new(opts: PublishOptions, link: Arc<Link>) -> Builder {
-        Builder {
-            opts,
-            link,
-            decoders: HashMap::new(),
-            offsets: HashMap::new(),
-            seqs: BTreeMap::new(),
-            pending: BTreeMap::new(),
-        }
-    }
-
-    fn run(mut self, rx: Receiver<Input>) {
-        let tick = if self.opts.window.is_zero() {
-            Duration::from_millis(100)
-        } else {
-            self.opts.window.min(Duration::from_millis(100))
-        };
-        loop {
-            // Soon again while messages wait for a window.
-            let wait = if lock(&self.link.outbox).is_empty() {
-                tick
-            } else {
-                tick.min(Duration::from_millis(5))
-            };
-            match rx.recv_timeout(wait) {
-                Ok(input) => self.take(input),
-                Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => break,
-            }
-            self.flush(false);
-            self.link.pump();
-            if self.link.stopping.load(Ordering::Relaxed) {
-                while let Ok(input) = rx.try_recv() {
-                    self.take(input);
-                }
-                break;
-            }
-        }
-        self.flush(true);
-        let online: Vec<String> = std::mem::take(&mut *lock(&self.link.online))
-            .into_iter()
-            .collect();
-        for r in online {
-            let last = self.seqs.get(&r).cloned().unwrap_or_default();
-            self.link.status(Some(&r), false, last);
-        }
-        self.link.status(None, false, BTreeMap::new());
-        self.link.pump();
-    }
-
-    fn take(&mut self, input: Input) {
-        match input {
-            Input::Reader {
-                name,
-                hop_table,
-                clock_offset_us,
-                ..
-            } => {
-                let decoder = self
-                    .decoders
-                    .remove(&name)
-                    .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
-                    .with_fallback_table(hop_table);
-                self.decoders.insert(name.clone(), decoder);
-                self.offsets.insert(name.clone(), clock_offset_us);
-                if lock(&self.link.online).insert(name.clone()) {
-                    self.link.status(Some(&name), true, BTreeMap::new());
-                }
-            }
-            Input::Frames {
-                reader,
-                bytes,
-                now_utc_us,
-            } => {
-                let decoder = self
-                    .decoders
-                    .entry(reader.clone())
-                    .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
-                let mut reads = Vec::new();
-                let mut events = Vec::new();
-                let mut at = 0;
-                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
-                    let len = h.length as usize;
-                    if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
-                        break;
-                    }
-                    let frame = &bytes[at..at + len];
-                    if h.msg_type == READER_EVENT_NOTIFICATION {
-                        if let Ok(m) = llrp::Message::decode(frame) {
-                            if let llrp::MessageBody::ReaderEventNotification(n) = m.body {
-                                events.push(n.reader_event_notification_data);
-                            }
-                        }
-                    } else {
-                        let _ = decoder.frame(frame, now_utc_us, &mut reads);
-                    }
-                    at += len;
-                }
-                self.reads(&reader, reads);
-                for e in events {
-                    self.event(&reader, &e);
-                }
-            }
-            Input::Reads(reads) => {
-                let mut by_reader: BTreeMap<String, Vec<Read>> = BTreeMap::new();
-                for r in reads {
-                    let name = r.reader.clone().unwrap_or_default();
-                    by_reader.entry(name).or_default().push(r);
-                }
-                for (reader, reads) in by_reader {
-                    self.reads(&reader, reads);
-                }
-            }
-            Input::Poses(poses) => self.poses(poses),
-        }
-    }
-
-    fn next_seq(&mut self, reader: &str, rest: &str) -> u64 {
-        let n = self
-            .seqs
-            .entry(reader.to_owned())
-            .or_default()
-            .entry(rest.to_owned())
-            .or_insert(0);
-        *n += 1;
-        *n
-    }
-
-    fn reads(&mut self, reader: &str, reads: Vec<Read>) {
-        if reads.is_empty() {
-            return;
-        }
-        let mut by_topic: BTreeMap<String, Vec<TagRead>> = BTreeMap::new();
-        for r in &reads {
-            let t = TagRead::from_read(r);
-            let shard = schema::shard(&r.epc, self.opts.shard_count);
-            if self.opts.references.contains(&r.epc) {
-                by_topic.entry("refs".into()).or_default().push(t.clone());
-            }
-            by_topic
-                .entry(format!("reads/{shard}"))
-                .or_default()
-                .push(t);
-        }
-        for (rest, reads) in by_topic {
-            let key = (reader.to_owned(), rest);
-            let p = self.pending.entry(key.clone()).or_insert_with(|| Pending {
-                reader: reader.to_owned(),
-                reads: Vec::new(),
-                since: Instant::now(),
-            });
-            p.reads.extend(reads);
-            if self.opts.window.is_zero() || p.reads.len() >= MAX_BATCH_READS {
-                self.send(&key);
-            }
-        }
-    }
-
-    /// Sends the batches whose window has closed (all with `all`).
-    fn flush(&mut self, all: bool) {
-        let due: Vec<(String, String)> = self
-            .pending
-            .iter()
-            .filter(|(_, p)| all || p.since.elapsed() >= self.opts.window)
-            .map(|(k, _)| k.clone())
-            .collect();
-        for k in due {
-            self.send(&k);
-        }
-    }
-
-    fn send(&mut self, key: &(String, String)) {
-        let Some(p) = self.pending.remove(key) else {
-            return;
-        };
-        for chunk in p.reads.chunks(MAX_BATCH_READS) {
-            let seq = self.next_seq(&p.reader, &key.1);
-            let batch = ReadBatch {
-                v: VERSION,
-                gateway: self.opts.gateway.clone(),
-                reader: p.reader.clone(),
-                seq,
-                reads: chunk.to_vec(),
-            };
-            // A batch of plain values always serializes.
-            let payload = serde_json::to_vec(&batch).unwrap_or_default();
-            self.link
-                .publish(&key.1, false, payload, chunk.len() as u64);
-        }
-    }
-
-    fn event(&mut self, reader: &str, data: &llrp::params::ReaderEventNotificationData) {
-        let rest = format!("events/{}", topic_level(reader));
-        let seq = self.next_seq(reader, &rest);
-        let payload = serde_json::json!({
-            "v": VERSION,
-            "gateway": self.opts.gateway,
-            "reader": reader,
-            "seq": seq,
-            "event": data,
-        });
-        self.link
-            .publish(&rest, false, payload.to_string().into_bytes(), 1);
-    }
-
-    fn poses(&mut self, poses: Vec<PoseSample>) {
-        let mut by_antenna: BTreeMap<(String, u16), Vec<PoseSample>> = BTreeMap::new();
-        for mut p in poses {
-            // In the reads' clock, as a worker files them.
-            let offset = self.offsets.get(&p.reader).copied().unwrap_or(0);
-            p.t_us = p.t_us.saturating_add_signed(offset);
-            by_antenna
-                .entry((p.reader.clone(), p.antenna))
-                .or_default()
-                .push(p);
-        }
-        for ((reader, antenna), poses) in by_antenna {
-            let rest = format!("poses/{}/{antenna}", topic_level(&reader));
-            // Pose samples of finite numbers always serialize.
-            let payload = serde_json::to_vec(&poses).unwrap_or_default();
-            self.link.publish(&rest, false, payload, poses.len() as u64);
-        }
-    }
 }

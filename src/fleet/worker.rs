@@ -4,7 +4,9 @@
 //!
 //! Messages are acknowledged only once the localizer has taken them, so reads published
 //! while the worker is down, or taken but not yet filed when it dies, come again from its
-//! session. A redelivered batch (a sequence number already seen from that reader on that
+//! session. Readers' statuses set their `connected` in `GET /api/readers` (a gateway's
+//! `offline` clears its readers'); a reader's clean `offline` carries its last sequence
+//! numbers, so messages missing at the end of a topic count as gaps too. A redelivered batch (a sequence number already seen from that reader on that
 //! topic in that gateway run) is counted and skipped; a malformed message or one on a topic
 //! not ours is counted and skipped.
 
@@ -103,6 +105,7 @@ impl Worker {
             live_tap: live.tap.clone(),
             shared: live.shared.clone(),
             seen: HashMap::new(),
+            gateways: HashMap::new(),
             stopping: stopping.clone(),
         };
         let connection = std::thread::Builder::new()
@@ -157,6 +160,8 @@ struct Run {
     /// Per (gateway, reader, topic): the gateway run's first sequence number seen, and the
     /// highest.
     seen: HashMap<(String, String, String), u64>,
+    /// Each reader's gateway, from the statuses.
+    gateways: HashMap<String, String>,
     stopping: Arc<AtomicBool>,
 }
 
@@ -171,6 +176,8 @@ impl Run {
             .collect();
         topics.push(t("refs".into()));
         topics.push(t("poses/+/+".into()));
+        topics.push(t("status/+".into()));
+        topics.push(t("status/gateway/+".into()));
         topics
     }
 
@@ -251,6 +258,7 @@ impl Run {
                 _ => false,
             },
             ["refs"] => self.batch(rest, &p.payload, true),
+            ["status", "gateway", _] | ["status", _] => self.status(&p.payload),
             ["poses", _, _] => match crate::http::poses::parse_poses(&p.payload) {
                 Ok(poses) => {
                     self.offer(Input::Poses(poses));
@@ -263,6 +271,44 @@ impl Run {
         if !ok {
             self.shared.metrics.mqtt_malformed.inc();
         }
+    }
+
+    /// Takes a reader's or gateway's status: the readers' views follow it, and a reader's
+    /// clean `offline` with its `lastSeq` counts the messages missing at the end of each of
+    /// our topics. `false` when it is not a status of the schema.
+    fn status(&mut self, payload: &[u8]) -> bool {
+        let Ok(s) = serde_json::from_slice::<schema::Status>(payload) else {
+            return false;
+        };
+        if s.v != VERSION {
+            return false;
+        }
+        let online = s.status == "online";
+        match &s.reader {
+            Some(reader) => {
+                self.gateways.insert(reader.clone(), s.gateway.clone());
+                self.shared.update_reader(reader, |v| v.connected = online);
+                for (rest, &last) in &s.last_seq {
+                    let key = (s.gateway.clone(), reader.clone(), rest.clone());
+                    if let Some(seen) = self.seen.get_mut(&key) {
+                        if last > *seen {
+                            self.shared.metrics.mqtt_gaps.inc_by(last - *seen);
+                            *seen = last;
+                        }
+                    }
+                }
+            }
+            // A gateway gone (its last will): its readers' statuses no longer count.
+            None if !online => {
+                for (reader, gateway) in &self.gateways {
+                    if *gateway == s.gateway {
+                        self.shared.update_reader(reader, |v| v.connected = false);
+                    }
+                }
+            }
+            None => {}
+        }
+        true
     }
 
     /// Files a read batch; `refs`: only the reads of tags in shards not ours (ours come on

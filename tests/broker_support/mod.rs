@@ -52,6 +52,13 @@ impl Mosquitto {
     /// subscriber.
     pub fn start_with(conf: impl FnOnce(u16, &std::path::Path) -> String) -> Mosquitto {
         let dir = tempfile::tempdir().expect("temp dir");
+        // Started as root, mosquitto runs as the user `mosquitto`: it must write its log and
+        // persistence here.
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let open = std::fs::Permissions::from_mode(0o777);
+            std::fs::set_permissions(dir.path(), open).expect("chmod");
+        }
         let port = free_port();
         let path = dir.path().join("mosquitto.conf");
         let text = format!(
@@ -141,8 +148,25 @@ impl Probe {
 
     /// [`Probe::connect`] as user `login.0` with password `login.1`.
     pub fn connect_as(port: u16, id: &str, login: Option<(&str, &str)>, topics: &[&str]) -> Probe {
+        Probe::open(port, id, login, topics, true)
+    }
+
+    /// [`Probe::connect`] with a persistent session (clean session off), which survives a
+    /// broker restart with persistence; it reconnects by itself.
+    pub fn connect_persistent(port: u16, id: &str, topics: &[&str]) -> Probe {
+        Probe::open(port, id, None, topics, false)
+    }
+
+    fn open(
+        port: u16,
+        id: &str,
+        login: Option<(&str, &str)>,
+        topics: &[&str],
+        clean: bool,
+    ) -> Probe {
         let mut o = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
         o.set_max_packet_size(1 << 20, 1 << 20);
+        o.set_clean_session(clean);
         if let Some((user, pass)) = login {
             o.set_credentials(user, pass);
         }
@@ -176,7 +200,9 @@ impl Probe {
                         }
                     }
                     Ok(_) => {}
-                    Err(_) => return,
+                    Err(_) if clean => return,
+                    // Persistent: reconnect (the broker may be restarting).
+                    Err(_) => std::thread::sleep(Duration::from_millis(50)),
                 }
             }
         });

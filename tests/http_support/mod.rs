@@ -373,6 +373,17 @@ impl Proc {
         }
     }
 
+    /// The child's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Kills the child at once (SIGKILL: no clean exit) and waits for it.
+    pub fn kill_hard(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
     /// The address after `marker` in the first line of the log that has it.
     pub fn address(&mut self, marker: &str) -> String {
         let mut seen = 0;

@@ -1,0 +1,266 @@
+//! The publishing thread: turns what the tap mirrors (LLRP frames, reads, poses, readers
+//! coming) into messages for the outbox ([`super::publish`]).
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use super::publish::{lock, topic_level, Link, PublishOptions};
+use super::schema::{self, ReadBatch, TagRead, VERSION};
+use crate::localize::live::Input;
+use crate::localize::poses::PoseSample;
+use crate::reads::{Read, ReadDecoder};
+
+/// LLRP's message type of READER_EVENT_NOTIFICATION.
+const READER_EVENT_NOTIFICATION: u16 = 63;
+
+/// Most reads in one batch message.
+pub const MAX_BATCH_READS: usize = 1000;
+
+/// Reads waiting for their batch's window to close, per topic.
+struct Pending {
+    reader: String,
+    reads: Vec<TagRead>,
+    since: Instant,
+}
+
+/// The publishing thread: turns inputs into messages.
+pub(super) struct Builder {
+    opts: PublishOptions,
+    link: Arc<Link>,
+    decoders: HashMap<String, ReadDecoder>,
+    /// Reader time − robot time, per reader (poses go out in the reads' clock).
+    offsets: HashMap<String, i64>,
+    /// Per reader, per topic (under `v1/`), the last sequence number used.
+    seqs: BTreeMap<String, BTreeMap<String, u64>>,
+    pending: BTreeMap<(String, String), Pending>,
+}
+
+impl Builder {
+    pub(super) fn new(opts: PublishOptions, link: Arc<Link>) -> Builder {
+        Builder {
+            opts,
+            link,
+            decoders: HashMap::new(),
+            offsets: HashMap::new(),
+            seqs: BTreeMap::new(),
+            pending: BTreeMap::new(),
+        }
+    }
+
+    pub(super) fn run(mut self, rx: Receiver<Input>) {
+        let tick = if self.opts.window.is_zero() {
+            Duration::from_millis(100)
+        } else {
+            self.opts.window.min(Duration::from_millis(100))
+        };
+        loop {
+            // Soon again while messages wait for a window.
+            let wait = if self.link.outbox_empty() {
+                tick
+            } else {
+                tick.min(Duration::from_millis(5))
+            };
+            match rx.recv_timeout(wait) {
+                Ok(input) => self.take(input),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            self.flush(false);
+            self.link.pump();
+            if self.link.stopping.load(Ordering::Relaxed) {
+                while let Ok(input) = rx.try_recv() {
+                    self.take(input);
+                }
+                break;
+            }
+        }
+        self.flush(true);
+        let online: Vec<String> = std::mem::take(&mut *lock(&self.link.online))
+            .into_iter()
+            .collect();
+        for r in online {
+            let last = self.seqs.get(&r).cloned().unwrap_or_default();
+            self.link.status(Some(&r), false, last);
+        }
+        self.link.status(None, false, BTreeMap::new());
+        self.link.pump();
+    }
+
+    fn take(&mut self, input: Input) {
+        match input {
+            Input::Reader {
+                name,
+                hop_table,
+                clock_offset_us,
+                ..
+            } => {
+                let decoder = self
+                    .decoders
+                    .remove(&name)
+                    .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
+                    .with_fallback_table(hop_table);
+                self.decoders.insert(name.clone(), decoder);
+                self.offsets.insert(name.clone(), clock_offset_us);
+                if lock(&self.link.online).insert(name.clone()) {
+                    self.link.status(Some(&name), true, BTreeMap::new());
+                }
+            }
+            Input::Frames {
+                reader,
+                bytes,
+                now_utc_us,
+            } => {
+                let decoder = self
+                    .decoders
+                    .entry(reader.clone())
+                    .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
+                let mut reads = Vec::new();
+                let mut events = Vec::new();
+                let mut at = 0;
+                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
+                    let len = h.length as usize;
+                    if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
+                        break;
+                    }
+                    let frame = &bytes[at..at + len];
+                    if h.msg_type == READER_EVENT_NOTIFICATION {
+                        if let Ok(m) = llrp::Message::decode(frame) {
+                            if let llrp::MessageBody::ReaderEventNotification(n) = m.body {
+                                events.push(n.reader_event_notification_data);
+                            }
+                        }
+                    } else {
+                        let _ = decoder.frame(frame, now_utc_us, &mut reads);
+                    }
+                    at += len;
+                }
+                self.reads(&reader, reads);
+                for e in events {
+                    self.event(&reader, &e);
+                }
+            }
+            Input::Reads(reads) => {
+                let mut by_reader: BTreeMap<String, Vec<Read>> = BTreeMap::new();
+                for r in reads {
+                    let name = r.reader.clone().unwrap_or_default();
+                    by_reader.entry(name).or_default().push(r);
+                }
+                for (reader, reads) in by_reader {
+                    self.reads(&reader, reads);
+                }
+            }
+            Input::Poses(poses) => self.poses(poses),
+        }
+    }
+
+    fn next_seq(&mut self, reader: &str, rest: &str) -> u64 {
+        let n = self
+            .seqs
+            .entry(reader.to_owned())
+            .or_default()
+            .entry(rest.to_owned())
+            .or_insert(0);
+        *n += 1;
+        *n
+    }
+
+    fn reads(&mut self, reader: &str, reads: Vec<Read>) {
+        if reads.is_empty() {
+            return;
+        }
+        let mut by_topic: BTreeMap<String, Vec<TagRead>> = BTreeMap::new();
+        for r in &reads {
+            let t = TagRead::from_read(r);
+            let shard = schema::shard(&r.epc, self.opts.shard_count);
+            if self.opts.references.contains(&r.epc) {
+                by_topic.entry("refs".into()).or_default().push(t.clone());
+            }
+            by_topic
+                .entry(format!("reads/{shard}"))
+                .or_default()
+                .push(t);
+        }
+        for (rest, reads) in by_topic {
+            let key = (reader.to_owned(), rest);
+            let p = self.pending.entry(key.clone()).or_insert_with(|| Pending {
+                reader: reader.to_owned(),
+                reads: Vec::new(),
+                since: Instant::now(),
+            });
+            p.reads.extend(reads);
+            if self.opts.window.is_zero() || p.reads.len() >= MAX_BATCH_READS {
+                self.send(&key);
+            }
+        }
+    }
+
+    /// Sends the batches whose window has closed (all with `all`).
+    fn flush(&mut self, all: bool) {
+        let due: Vec<(String, String)> = self
+            .pending
+            .iter()
+            .filter(|(_, p)| all || p.since.elapsed() >= self.opts.window)
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in due {
+            self.send(&k);
+        }
+    }
+
+    fn send(&mut self, key: &(String, String)) {
+        let Some(p) = self.pending.remove(key) else {
+            return;
+        };
+        for chunk in p.reads.chunks(MAX_BATCH_READS) {
+            let seq = self.next_seq(&p.reader, &key.1);
+            let batch = ReadBatch {
+                v: VERSION,
+                gateway: self.opts.gateway.clone(),
+                reader: p.reader.clone(),
+                seq,
+                reads: chunk.to_vec(),
+            };
+            // A batch of plain values always serializes.
+            let payload = serde_json::to_vec(&batch).unwrap_or_default();
+            self.link
+                .publish(&key.1, false, payload, chunk.len() as u64, true);
+        }
+    }
+
+    fn event(&mut self, reader: &str, data: &llrp::params::ReaderEventNotificationData) {
+        let rest = format!("events/{}", topic_level(reader));
+        let seq = self.next_seq(reader, &rest);
+        let payload = serde_json::json!({
+            "v": VERSION,
+            "gateway": self.opts.gateway,
+            "reader": reader,
+            "seq": seq,
+            "event": data,
+        });
+        self.link
+            .publish(&rest, false, payload.to_string().into_bytes(), 1, true);
+    }
+
+    fn poses(&mut self, poses: Vec<PoseSample>) {
+        let mut by_antenna: BTreeMap<(String, u16), Vec<PoseSample>> = BTreeMap::new();
+        for mut p in poses {
+            // In the reads' clock, as a worker files them.
+            let offset = self.offsets.get(&p.reader).copied().unwrap_or(0);
+            p.t_us = p.t_us.saturating_add_signed(offset);
+            by_antenna
+                .entry((p.reader.clone(), p.antenna))
+                .or_default()
+                .push(p);
+        }
+        for ((reader, antenna), poses) in by_antenna {
+            let rest = format!("poses/{}/{antenna}", topic_level(&reader));
+            // Pose samples of finite numbers always serialize.
+            let payload = serde_json::to_vec(&poses).unwrap_or_default();
+            self.link
+                .publish(&rest, false, payload, poses.len() as u64, false);
+        }
+    }
+}
