@@ -173,11 +173,9 @@ impl Probe {
         let acks = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
         let counted = acks.clone();
         let (client, mut connection) = rumqttc::Client::new(o, 100);
-        for t in topics {
-            client
-                .subscribe(*t, rumqttc::QoS::AtLeastOnce)
-                .expect("subscribes");
-        }
+        // Subscribed once connected (and again after each reconnection), as the worker does.
+        let subscriber = client.clone();
+        let filters: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         let (tx, rx) = std::sync::mpsc::channel();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
         let want = topics.len();
@@ -185,6 +183,11 @@ impl Probe {
             let mut acks = 0;
             for event in connection.iter() {
                 match event {
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
+                        for f in &filters {
+                            let _ = subscriber.subscribe(f.clone(), rumqttc::QoS::AtLeastOnce);
+                        }
+                    }
                     Ok(rumqttc::Event::Incoming(rumqttc::Packet::SubAck(_))) => {
                         acks += 1;
                         if acks == want {
@@ -239,5 +242,75 @@ impl Probe {
             out.push(m);
         }
         out
+    }
+}
+
+/// A running nats-server with JetStream and its MQTT interface on free loopback ports (its
+/// MQTT `max_ack_pending` left at the default: set to 65,535, a session with several
+/// subscriptions got only its first one's messages).
+pub struct Nats {
+    /// Its MQTT port.
+    pub port: u16,
+    child: Child,
+    /// Its configuration, log and JetStream store.
+    pub dir: tempfile::TempDir,
+}
+
+impl Nats {
+    /// Starts nats-server (Debian's package: `./scripts/install-brokers`).
+    pub fn start() -> Nats {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let (port, client) = (free_port(), free_port());
+        let conf = dir.path().join("nats.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "server_name: \"fleet-test\"\nlisten: 127.0.0.1:{client}\n\
+                 jetstream {{ store_dir: \"{}\" }}\n\
+                 mqtt {{ listen: 127.0.0.1:{port} }}\n",
+                dir.path().join("js").display()
+            ),
+        )
+        .expect("writes the configuration");
+        let log = std::fs::File::create(dir.path().join("nats.log")).expect("log");
+        let child = Command::new("nats-server")
+            .arg("-c")
+            .arg(&conf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("nats-server starts (./scripts/install-brokers)");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "nats-server did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Nats { port, child, dir }
+    }
+
+    /// `mqtt://127.0.0.1:PORT/prefix`.
+    pub fn url(&self, prefix: &str) -> String {
+        format!("mqtt://127.0.0.1:{}/{prefix}", self.port)
+    }
+}
+
+impl Drop for Nats {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .arg(self.child.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
