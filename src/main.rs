@@ -201,13 +201,6 @@ fn scenario_references(scenario: &Scenario) -> std::collections::BTreeSet<String
         .collect()
 }
 
-/// A broker address as shown: its password hidden.
-fn redacted(url: &str) -> String {
-    llrp_gateway::fleet::url::BrokerUrl::parse(url)
-        .map(|u| u.to_string())
-        .unwrap_or_default()
-}
-
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
 fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOptions) -> ExitCode {
     llrp_gateway::stop::init_logging();
@@ -312,7 +305,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
             });
             eprintln!(
                 "llrp-gateway sim: publishing to {}",
-                localize.publish.publish.as_deref().map(redacted).unwrap_or_default()
+                localize.publish.shown()
             );
         }
         let running = match sim::start(&scenario, &opts).await {

@@ -45,6 +45,15 @@ pub fn tls_config(
 }
 
 impl PublishArgs {
+    /// The broker address as shown: its password hidden.
+    pub fn shown(&self) -> String {
+        self.publish
+            .as_deref()
+            .and_then(|u| BrokerUrl::parse(u).ok())
+            .map(|u| u.to_string())
+            .unwrap_or_default()
+    }
+
     /// Starts the publisher when `--publish` was given; `references` are the reference
     /// tags' EPCs.
     pub fn start(

@@ -104,15 +104,14 @@ impl Builder {
                     .with_fallback_table(hop_table);
                 self.decoders.insert(name.clone(), decoder);
                 self.offsets.insert(name.clone(), clock_offset_us);
-                if lock(&self.link.online).insert(name.clone()) {
-                    self.link.status(Some(&name), true, BTreeMap::new());
-                }
+                self.came(&name);
             }
             Input::Frames {
                 reader,
                 bytes,
                 now_utc_us,
             } => {
+                self.came(&reader);
                 let decoder = self
                     .decoders
                     .entry(reader.clone())
@@ -153,6 +152,25 @@ impl Builder {
                 }
             }
             Input::Poses(poses) => self.poses(poses),
+            Input::Status { reader, online } => {
+                if online {
+                    self.came(&reader);
+                } else if lock(&self.link.online).remove(&reader) {
+                    let last = self.seqs.get(&reader).cloned().unwrap_or_default();
+                    self.link.status(Some(&reader), false, last);
+                }
+            }
+            Input::Event { reader, data } => {
+                self.came(&reader);
+                self.event(&reader, &data);
+            }
+        }
+    }
+
+    /// Reader `reader` is online: announced the first time.
+    fn came(&mut self, reader: &str) {
+        if lock(&self.link.online).insert(reader.to_owned()) {
+            self.link.status(Some(reader), true, BTreeMap::new());
         }
     }
 
@@ -171,6 +189,7 @@ impl Builder {
         if reads.is_empty() {
             return;
         }
+        self.came(reader);
         let mut by_topic: BTreeMap<String, Vec<TagRead>> = BTreeMap::new();
         for r in &reads {
             let t = TagRead::from_read(r);

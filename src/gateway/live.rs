@@ -28,6 +28,80 @@ pub struct LiveArgs {
     /// The localizer's estimator.
     #[arg(long, default_value = "relock")]
     pub estimator: Estimator,
+    /// Publishing to an MQTT broker (docs/fleet.md).
+    #[command(flatten)]
+    pub publish: crate::fleet::args::PublishArgs,
+}
+
+/// What the reads go to beside the LLRP client: the localizer and its API, an MQTT
+/// publisher, both or neither.
+pub struct Sinks {
+    localizer: Option<Running>,
+    publisher: Option<crate::fleet::publish::Publisher>,
+    tap: Option<Tap>,
+}
+
+impl Sinks {
+    /// Where to offer the reads, when anything takes them.
+    pub fn tap(&self) -> Option<Tap> {
+        self.tap.clone()
+    }
+
+    /// Stops the publisher (its readers' and gateway's `offline` published), then the API
+    /// and the localizer.
+    pub async fn stop(self) {
+        drop(self.tap);
+        if let Some(p) = self.publisher {
+            // Waits for the broker's acknowledgements, at most a few seconds.
+            let _ = tokio::task::spawn_blocking(move || p.stop()).await;
+        }
+        if let Some(l) = self.localizer {
+            l.stop().await;
+        }
+    }
+}
+
+/// Starts the localizer and its API when `--http` was given and the publisher when
+/// `--publish` was; `command` names the command in messages.
+pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String> {
+    let localizer = start(args, command).await?;
+    let shared = localizer
+        .as_ref()
+        .map(|l| l.live.shared.clone())
+        .unwrap_or_default();
+    let references = match (&args.publish.publish, &args.localize_settings) {
+        (Some(_), Some(p)) => SettingsFile::load(p)
+            .map_err(|e| e.to_string())?
+            .references
+            .iter()
+            .map(|r| r.epc.to_ascii_uppercase())
+            .collect(),
+        _ => Default::default(),
+    };
+    let publisher = args.publish.start(shared.clone(), references)?;
+    let tap = match (&localizer, &publisher) {
+        (None, None) => None,
+        (l, p) => {
+            let tap = l
+                .as_ref()
+                .map_or_else(|| Tap::detached(shared), |l| l.tap());
+            Some(match p {
+                Some(p) => {
+                    eprintln!(
+                        "llrp-gateway {command}: publishing to {}",
+                        args.publish.shown()
+                    );
+                    tap.with_mirror(p.mirror())
+                }
+                None => tap,
+            })
+        }
+    };
+    Ok(Sinks {
+        localizer,
+        publisher,
+        tap,
+    })
 }
 
 /// A running localizer and its API.
@@ -51,9 +125,11 @@ impl Running {
     }
 }
 
-/// The live localizer's settings from a settings file and the poses known at start.
+/// The live localizer's settings from a settings file and the poses known at start (with
+/// none, derived from each reader's first pose as it comes).
 pub fn settings_from(file: &SettingsFile, poses: &Poses, estimator: Estimator) -> Settings {
     Settings {
+        derive_geometry: poses.is_empty().then(|| file.clone()),
         estimator,
         geometry: geometry(file, &[], poses),
         ambiguity: if file.pi_ambiguity {
@@ -138,6 +214,10 @@ pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, tap: Tap) {
                     continue;
                 };
                 let data = &n.reader_event_notification_data;
+                tap.offer(Input::Event {
+                    reader: reader.clone(),
+                    data: Box::new(data.clone()),
+                });
                 let connected = if data.connection_close_event.is_some() {
                     Some(false)
                 } else {
@@ -146,6 +226,10 @@ pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, tap: Tap) {
                         .map(|e| e.status == llrp::enums::ConnectionAttemptStatus::Success)
                 };
                 if let Some(c) = connected {
+                    tap.offer(Input::Status {
+                        reader: reader.clone(),
+                        online: c,
+                    });
                     tap.shared().update_reader(&reader, |v| {
                         v.connected = c;
                         v.inventory = if c { "client" } else { "idle" }.into();

@@ -349,7 +349,7 @@ pub fn run(args: ProxyArgs) -> ExitCode {
     let timeout = Duration::from_millis(args.connect_timeout_ms);
     runtime.block_on(async move {
         let stop = StopSignal::watch();
-        let localizer = match live::start(&args.live, "proxy").await {
+        let sinks = match live::start_sinks(&args.live, "proxy").await {
             Ok(l) => l,
             Err(e) => {
                 eprintln!("llrp-gateway proxy: {e}");
@@ -403,11 +403,11 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 tls: tls.0,
                 upstream_tls: tls.1,
             };
-            // A tap only for the localizer: decoding every read for nobody costs a third of
-            // the throughput.
-            let tap = localizer.as_ref().map(|l| {
+            // A tap only for the localizer or the publisher: decoding every read for nobody
+            // costs a third of the throughput.
+            let tap = sinks.tap().map(|t| {
                 let (tap, rx) = crate::net::proxy::Tap::new(4096);
-                tokio::spawn(live::forward(rx, l.tap()));
+                tokio::spawn(live::forward(rx, t));
                 tap
             });
             let proxy = match Proxy::bind(config, recorder, tap).await {
@@ -469,9 +469,7 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 }
             }
         }
-        if let Some(l) = localizer {
-            l.stop().await;
-        }
+        sinks.stop().await;
         eprintln!("llrp-gateway proxy: stopped");
         if failed {
             ExitCode::FAILURE

@@ -103,7 +103,7 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
             ),
             Err(e) => eprintln!("llrp-gateway replay: {e}"),
         }
-        let localizer = match super::live::start(&args.live, "replay").await {
+        let sinks = match super::live::start_sinks(&args.live, "replay").await {
             Ok(l) => l,
             Err(e) => {
                 eprintln!("llrp-gateway replay: {e}");
@@ -112,7 +112,7 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
         };
         let upstream = &recording.header.upstream;
         let name = upstream.strip_prefix("sim:").unwrap_or(upstream).to_string();
-        let tap = localizer.as_ref().map(|l| (name, l.tap()));
+        let tap = sinks.tap().map(|t| (name, t));
         let (tx, rx) = watch::channel(false);
         let task = tokio::spawn(crate::net::replay::serve_tapped(
             listener, script, options, tls, rx, tap,
@@ -120,9 +120,7 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
         stop.wait().await;
         let _ = tx.send(true);
         let _ = task.await;
-        if let Some(l) = localizer {
-            l.stop().await;
-        }
+        sinks.stop().await;
         eprintln!("llrp-gateway replay: stopped");
         ExitCode::SUCCESS
     })

@@ -13,13 +13,10 @@
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-use bytes::Bytes;
-use llrp::units::HopTable;
 
 use super::calibrate::Calibration;
 use super::estimate::{self, Estimate, Estimator, Geometry, State};
@@ -28,6 +25,8 @@ use super::poses::{PoseSample, Poses};
 use super::series::Ambiguity;
 use super::shared::{AntennaView, Shared, TagView, RECENT_READS};
 use crate::reads::{Read, ReadDecoder};
+
+pub use super::tap::{Input, Mirror, Tap};
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
@@ -56,6 +55,10 @@ pub struct Settings {
     pub tap_capacity: usize,
     /// Phases kept per tag (see the module's documentation).
     pub max_samples_per_tag: usize,
+    /// Derive the geometry from this settings file and the first pose of each reader as it
+    /// comes (as `localize` does offline from its pose file), for a localizer started before
+    /// any pose: a worker, or a proxy whose robot posts its poses.
+    pub derive_geometry: Option<super::offline::SettingsFile>,
 }
 
 impl Default for Settings {
@@ -77,139 +80,8 @@ impl Default for Settings {
             compute_budget: Duration::from_millis(50),
             tap_capacity: 4096,
             max_samples_per_tag: 4096,
+            derive_geometry: None,
         }
-    }
-}
-
-/// What goes into the localizer.
-#[derive(Clone, Debug)]
-pub enum Input {
-    /// A reader is known by this name; its reads' channels are looked up in `hop_table`
-    /// until its own capabilities response is seen.
-    Reader {
-        /// The reader's name.
-        name: String,
-        /// The hop table the reader advertises, when known beforehand.
-        hop_table: Option<HopTable>,
-        /// Its antenna ports.
-        antennas: Vec<u16>,
-        /// Reader time − robot time for its poses (µs).
-        clock_offset_us: i64,
-    },
-    /// Whole LLRP frames reader `reader` sent to its client.
-    Frames {
-        /// The reader's name.
-        reader: String,
-        /// The frames, back to back.
-        bytes: Bytes,
-        /// Arrival time to stamp reads that carry no timestamp (UTC µs).
-        now_utc_us: u64,
-    },
-    /// Reads already decoded (a proxy's tap, a recording, a reads file).
-    Reads(Vec<Read>),
-    /// Antenna pose samples (a simulator, a pose file, `POST /api/poses`).
-    Poses(Vec<PoseSample>),
-}
-
-impl Input {
-    /// How many reads or poses the input counts for when dropped (1 for anything else).
-    pub fn weight(&self) -> u64 {
-        match self {
-            Input::Reads(r) => r.len() as u64,
-            Input::Poses(p) => p.len() as u64,
-            _ => 1,
-        }
-    }
-}
-
-/// The sending side of the localizer (and of any mirror beside it, such as an MQTT
-/// publisher): never waits.
-#[derive(Clone, Debug)]
-pub struct Tap {
-    /// `None`: no localizer runs (a tap for mirrors only).
-    tx: Option<SyncSender<Input>>,
-    shared: Arc<Shared>,
-    mirrors: Vec<Mirror>,
-}
-
-/// Another consumer of everything a [`Tap`] is offered, with its own bound and drop count.
-#[derive(Clone, Debug)]
-pub struct Mirror {
-    /// Where the copies go.
-    pub tx: SyncSender<Input>,
-    /// Inputs (reads or poses, one by one) dropped because it was behind.
-    pub dropped: prometheus_client::metrics::counter::Counter,
-}
-
-impl Tap {
-    /// A tap with no localizer behind it: what it is offered goes to its mirrors only;
-    /// `shared` still takes the readers' states and the metrics.
-    pub fn detached(shared: Arc<Shared>) -> Tap {
-        Tap {
-            tx: None,
-            shared,
-            mirrors: Vec::new(),
-        }
-    }
-
-    /// This tap with `mirror` also offered everything.
-    pub fn with_mirror(mut self, mirror: Mirror) -> Tap {
-        self.mirrors.push(mirror);
-        self
-    }
-
-    /// Offers a copy of `input` to every mirror.
-    fn mirror(&self, input: &Input) {
-        for m in &self.mirrors {
-            if m.tx.try_send(input.clone()).is_err() {
-                m.dropped.inc_by(input.weight());
-            }
-        }
-    }
-
-    /// Hands `input` to the localizer; `false` (and counted) when it is behind or gone.
-    pub fn offer(&self, input: Input) -> bool {
-        self.mirror(&input);
-        let Some(tx) = &self.tx else {
-            return true;
-        };
-        let weight = input.weight();
-        match tx.try_send(input) {
-            Ok(()) => true,
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.shared.metrics.dropped_taps.inc_by(weight);
-                false
-            }
-        }
-    }
-
-    /// Hands `input` to the localizer, or gives it back when it is behind (not counted as
-    /// dropped: for a caller that can wait, such as a pose file loaded at start); dropped and
-    /// counted when the localizer has stopped. Mirrors are offered a copy once it is taken.
-    pub fn try_offer(&self, input: Input) -> Result<(), Input> {
-        let Some(tx) = &self.tx else {
-            self.mirror(&input);
-            return Ok(());
-        };
-        let copy = (!self.mirrors.is_empty()).then(|| input.clone());
-        let taken = match tx.try_send(input) {
-            Ok(()) => Ok(()),
-            Err(TrySendError::Full(i)) => Err(i),
-            Err(TrySendError::Disconnected(i)) => {
-                // The localizer has stopped: waiting would not help.
-                self.shared.metrics.dropped_taps.inc_by(i.weight());
-                Ok(())
-            }
-        };
-        if let (Ok(()), Some(c)) = (&taken, copy) {
-            self.mirror(&c);
-        }
-        taken
-    }
-
-    /// The localizer's published state.
-    pub fn shared(&self) -> &Arc<Shared> {
-        &self.shared
     }
 }
 
@@ -235,11 +107,7 @@ impl Live {
             .name("localizer".into())
             .spawn(move || worker.run(rx, &stopping))?;
         Ok(Live {
-            tap: Tap {
-                tx: Some(tx),
-                shared: shared.clone(),
-                mirrors: Vec::new(),
-            },
+            tap: Tap::new(tx, shared.clone()),
             shared,
             worker: Some(handle),
             stop,
@@ -286,6 +154,8 @@ struct Worker {
     set_aside_seen: u64,
     /// Input came since the waiting reads were last looked at.
     taken_since_flush: bool,
+    /// The readers whose first pose the geometry was derived with.
+    derived: std::collections::BTreeSet<String>,
 }
 
 impl Worker {
@@ -302,6 +172,7 @@ impl Worker {
             tags: BTreeMap::new(),
             set_aside_seen: 0,
             taken_since_flush: false,
+            derived: std::collections::BTreeSet::new(),
         }
     }
 
@@ -414,6 +285,11 @@ impl Worker {
             Input::Reads(reads) => self.reads(reads),
             Input::Poses(poses) => {
                 self.shared.metrics.poses.inc_by(poses.len() as u64);
+                let new: Vec<String> = poses
+                    .iter()
+                    .filter(|p| !self.derived.contains(&p.reader))
+                    .map(|p| p.reader.clone())
+                    .collect();
                 let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
                 for p in poses {
                     newest.insert((p.reader.clone(), p.antenna), p.clone());
@@ -433,12 +309,47 @@ impl Worker {
                         }
                     });
                 }
+                self.derive(new, &[]);
             }
+            Input::Status { reader, online } => {
+                self.shared.update_reader(&reader, |v| v.connected = online);
+            }
+            Input::Event { .. } => {}
+        }
+    }
+
+    /// With [`Settings::derive_geometry`], the geometry again once readers `new` have their
+    /// first pose (or read with its own antenna pose, `reads`).
+    fn derive(&mut self, new: Vec<String>, reads: &[Read]) {
+        let Some(file) = &self.settings.derive_geometry else {
+            return;
+        };
+        let before = self.derived.len();
+        self.derived.extend(new);
+        if self.derived.len() > before {
+            self.settings.geometry = super::offline::geometry(file, reads, self.ingest.poses());
         }
     }
 
     fn reads(&mut self, reads: Vec<Read>) {
         self.shared.metrics.reads.inc_by(reads.len() as u64);
+        if self.settings.derive_geometry.is_some() {
+            let posed: Vec<Read> = reads
+                .iter()
+                .filter(|r| r.antenna_pose.is_some())
+                .filter(|r| {
+                    !self
+                        .derived
+                        .contains(r.reader.as_deref().unwrap_or_default())
+                })
+                .cloned()
+                .collect();
+            let new = posed
+                .iter()
+                .map(|r| r.reader.clone().unwrap_or_default())
+                .collect();
+            self.derive(new, &posed);
+        }
         for r in reads {
             let reader = r.reader.clone().unwrap_or_default();
             let newest = self.newest_read.entry(reader).or_default();

@@ -36,6 +36,7 @@ pub mod series;
 pub mod shared;
 #[cfg(test)]
 mod synthetic;
+pub mod tap;
 pub mod wls;
 
 /// Speed of light (m/s), for a channel's wavelength.

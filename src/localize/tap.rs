@@ -1,0 +1,168 @@
+//! The localizer's input ([`Input`]) and the tap that hands it over without waiting
+//! ([`Tap`]), with copies for mirrors such as an MQTT publisher ([`Mirror`]).
+
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::sync::Arc;
+
+use bytes::Bytes;
+use llrp::units::HopTable;
+
+use super::poses::PoseSample;
+use super::shared::Shared;
+use crate::reads::Read;
+
+/// What goes into the localizer.
+#[derive(Clone, Debug)]
+pub enum Input {
+    /// A reader is known by this name; its reads' channels are looked up in `hop_table`
+    /// until its own capabilities response is seen.
+    Reader {
+        /// The reader's name.
+        name: String,
+        /// The hop table the reader advertises, when known beforehand.
+        hop_table: Option<HopTable>,
+        /// Its antenna ports.
+        antennas: Vec<u16>,
+        /// Reader time − robot time for its poses (µs).
+        clock_offset_us: i64,
+    },
+    /// Whole LLRP frames reader `reader` sent to its client.
+    Frames {
+        /// The reader's name.
+        reader: String,
+        /// The frames, back to back.
+        bytes: Bytes,
+        /// Arrival time to stamp reads that carry no timestamp (UTC µs).
+        now_utc_us: u64,
+    },
+    /// Reads already decoded (a proxy's tap, a recording, a reads file).
+    Reads(Vec<Read>),
+    /// Antenna pose samples (a simulator, a pose file, `POST /api/poses`).
+    Poses(Vec<PoseSample>),
+    /// Reader `reader` came (its upstream connection is up) or went.
+    Status {
+        /// The reader's name.
+        reader: String,
+        /// Up or gone.
+        online: bool,
+    },
+    /// A READER_EVENT_NOTIFICATION a proxied reader sent (the localizer has no use for it;
+    /// an MQTT publisher forwards it).
+    Event {
+        /// The reader's name.
+        reader: String,
+        /// The event.
+        data: Box<llrp::params::ReaderEventNotificationData>,
+    },
+}
+
+impl Input {
+    /// How many reads or poses the input counts for when dropped (1 for anything else).
+    pub fn weight(&self) -> u64 {
+        match self {
+            Input::Reads(r) => r.len() as u64,
+            Input::Poses(p) => p.len() as u64,
+            _ => 1,
+        }
+    }
+}
+
+/// The sending side of the localizer (and of any mirror beside it, such as an MQTT
+/// publisher): never waits.
+#[derive(Clone, Debug)]
+pub struct Tap {
+    /// `None`: no localizer runs (a tap for mirrors only).
+    tx: Option<SyncSender<Input>>,
+    shared: Arc<Shared>,
+    mirrors: Vec<Mirror>,
+}
+
+/// Another consumer of everything a [`Tap`] is offered, with its own bound and drop count.
+#[derive(Clone, Debug)]
+pub struct Mirror {
+    /// Where the copies go.
+    pub tx: SyncSender<Input>,
+    /// Inputs (reads or poses, one by one) dropped because it was behind.
+    pub dropped: prometheus_client::metrics::counter::Counter,
+}
+
+impl Tap {
+    /// The tap of a localizer taking its input from `tx`.
+    pub(super) fn new(tx: SyncSender<Input>, shared: Arc<Shared>) -> Tap {
+        Tap {
+            tx: Some(tx),
+            shared,
+            mirrors: Vec::new(),
+        }
+    }
+
+    /// A tap with no localizer behind it: what it is offered goes to its mirrors only;
+    /// `shared` still takes the readers' states and the metrics.
+    pub fn detached(shared: Arc<Shared>) -> Tap {
+        Tap {
+            tx: None,
+            shared,
+            mirrors: Vec::new(),
+        }
+    }
+
+    /// This tap with `mirror` also offered everything.
+    pub fn with_mirror(mut self, mirror: Mirror) -> Tap {
+        self.mirrors.push(mirror);
+        self
+    }
+
+    /// Offers a copy of `input` to every mirror.
+    fn mirror(&self, input: &Input) {
+        for m in &self.mirrors {
+            if m.tx.try_send(input.clone()).is_err() {
+                m.dropped.inc_by(input.weight());
+            }
+        }
+    }
+
+    /// Hands `input` to the localizer; `false` (and counted) when it is behind or gone.
+    pub fn offer(&self, input: Input) -> bool {
+        self.mirror(&input);
+        let Some(tx) = &self.tx else {
+            return true;
+        };
+        let weight = input.weight();
+        match tx.try_send(input) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.shared.metrics.dropped_taps.inc_by(weight);
+                false
+            }
+        }
+    }
+
+    /// Hands `input` to the localizer, or gives it back when it is behind (not counted as
+    /// dropped: for a caller that can wait, such as a pose file loaded at start); dropped and
+    /// counted when the localizer has stopped. Mirrors are offered a copy once it is taken.
+    pub fn try_offer(&self, input: Input) -> Result<(), Input> {
+        let Some(tx) = &self.tx else {
+            self.mirror(&input);
+            return Ok(());
+        };
+        let copy = (!self.mirrors.is_empty()).then(|| input.clone());
+        let taken = match tx.try_send(input) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(i)) => Err(i),
+            Err(TrySendError::Disconnected(i)) => {
+                // The localizer has stopped: waiting would not help.
+                self.shared.metrics.dropped_taps.inc_by(i.weight());
+                Ok(())
+            }
+        };
+        if let (Ok(()), Some(c)) = (&taken, copy) {
+            self.mirror(&c);
+        }
+        taken
+    }
+
+    /// The localizer's published state.
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+}
