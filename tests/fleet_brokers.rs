@@ -222,3 +222,67 @@ fn malformed_messages_are_counted_and_skipped_and_the_worker_goes_on() {
     assert_eq!(counter(http, "reads"), 1.0);
     assert_eq!(request(http, "GET", "/healthz", &[], b"").status, 200);
 }
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn presence_events_tell_arrivals_moves_and_departures_with_positions() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("p");
+    let probe = Probe::connect(broker.port, "presence-probe", &["p/v1/presence/+"]);
+    let mut w = Proc::spawn(&[
+        "localize",
+        "--subscribe",
+        &url,
+        "--presence-silence-s",
+        "1",
+        "--presence-move-m",
+        "0.5",
+    ]);
+    w.address(", subscribed");
+    {
+        let mut sim = Proc::spawn(&[
+            "sim",
+            "--no-http",
+            "--listen",
+            "127.0.0.1:0",
+            "--speed",
+            "20",
+            "--poses",
+            "truth",
+            "--publish",
+            &url,
+        ]);
+        sim.address("listening on ");
+        std::thread::sleep(Duration::from_secs(3));
+    }
+    // Silent for the second of silence after the simulator stopped: every tag departs.
+    std::thread::sleep(Duration::from_secs(2));
+    let mut by_tag: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    for (topic, payload, _) in probe.drain(Duration::from_secs(1)) {
+        let v: serde_json::Value = serde_json::from_slice(&payload).expect("JSON");
+        assert_eq!(
+            topic,
+            format!("p/v1/presence/{}", v["epc"].as_str().expect("epc"))
+        );
+        by_tag
+            .entry(v["epc"].as_str().unwrap_or_default().into())
+            .or_default()
+            .push(v);
+    }
+    assert_eq!(by_tag.len(), 10, "{by_tag:?}");
+    for (epc, events) in &by_tag {
+        let kinds: Vec<&str> = events
+            .iter()
+            .map(|e| e["event"].as_str().unwrap_or(""))
+            .collect();
+        assert_eq!(kinds.first(), Some(&"arrived"), "{epc}: {kinds:?}");
+        assert_eq!(kinds.last(), Some(&"departed"), "{epc}: {kinds:?}");
+        // Each tag got a position once estimated, and the departure carries the latest.
+        assert!(kinds.contains(&"moved"), "{epc}: {kinds:?}");
+        let last = events.last().expect("departed");
+        assert!(
+            last["position"].is_array() && last["reader"] == "s1-reader",
+            "{last}"
+        );
+    }
+}

@@ -116,6 +116,54 @@ fn the_proxy_publishes_its_readers_reads_events_and_statuses() {
 
 #[test]
 #[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn the_inventory_client_publishes_what_it_reads() {
+    let broker = Mosquitto::start("");
+    let probe = Probe::connect(broker.port, "inventory-probe", &["i/v1/reads/+"]);
+    let mut sim = Proc::spawn(&[
+        "sim",
+        "--no-http",
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "8",
+    ]);
+    let llrp = sim.address("listening on ");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("reads.jsonl");
+    let status = bin()
+        .args([
+            "inventory",
+            &llrp,
+            "--impinj",
+            "--seconds",
+            "2",
+            "--name",
+            "dock",
+        ])
+        .args(["--publish", &broker.url("i"), "--output"])
+        .arg(&file)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .expect("inventory runs");
+    assert!(status.success());
+    let published: usize = probe
+        .drain(Duration::from_secs(2))
+        .iter()
+        .map(|m| serde_json::from_slice::<serde_json::Value>(&m.1).expect("JSON"))
+        .inspect(|b| assert_eq!(b["reader"], "dock", "{b}"))
+        .map(|b| b["reads"].as_array().map_or(0, Vec::len))
+        .sum();
+    let written = std::fs::read_to_string(&file)
+        .expect("reads file")
+        .lines()
+        .count();
+    assert!(written > 0);
+    assert_eq!(published, written, "every read written is published");
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
 fn a_replay_published_with_a_robots_poses_localizes_at_a_worker_as_offline() {
     let rec = fixture("s1-report-per-read.jsonl");
     let poses = fixture("s1-report-per-read.poses.jsonl");

@@ -5,6 +5,7 @@
 
 pub mod args;
 mod builder;
+pub mod presence;
 pub mod publish;
 pub mod schema;
 pub mod url;

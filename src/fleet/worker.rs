@@ -13,12 +13,13 @@
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
 
+use super::presence::{Presence, PresenceEvent};
 use super::publish::{mqtt_options, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
 use super::url::BrokerUrl;
@@ -42,6 +43,10 @@ pub struct WorkerOptions {
     pub clock_offsets_us: Vec<(String, i64)>,
     /// TLS settings for `mqtts://`.
     pub tls: Option<Arc<tokio_rustls::rustls::ClientConfig>>,
+    /// A tag has departed after this long without a read (wall-clock time at the worker).
+    pub presence_silence: Duration,
+    /// A `moved` event when the estimate moves more than this (m).
+    pub presence_move_m: f64,
 }
 
 /// A running worker.
@@ -98,6 +103,10 @@ impl Worker {
             });
         }
         let stopping = Arc::new(AtomicBool::new(false));
+        let presence = Arc::new(Mutex::new(Presence::new(
+            opts.presence_silence,
+            opts.presence_move_m,
+        )));
         let (first_tx, first_rx) = mpsc::channel();
         let mut run = Run {
             opts: opts.clone(),
@@ -106,6 +115,7 @@ impl Worker {
             shared: live.shared.clone(),
             seen: HashMap::new(),
             gateways: HashMap::new(),
+            presence: presence.clone(),
             stopping: stopping.clone(),
         };
         let connection = std::thread::Builder::new()
@@ -123,11 +133,15 @@ impl Worker {
                 reason,
             });
         }
-        let (shared, c, url) = (live.shared.clone(), client.clone(), opts.url.clone());
+        let out = Out {
+            shared: live.shared.clone(),
+            client: client.clone(),
+            url: opts.url.clone(),
+        };
         let stop = stopping.clone();
         let estimates = std::thread::Builder::new()
             .name("mqtt-estimates".into())
-            .spawn(move || publish_estimates(&shared, &c, &url, &stop))?;
+            .spawn(move || publish_estimates(&out, &presence, &stop))?;
         Ok(Worker {
             live,
             client,
@@ -162,6 +176,7 @@ struct Run {
     seen: HashMap<(String, String, String), u64>,
     /// Each reader's gateway, from the statuses.
     gateways: HashMap<String, String>,
+    presence: Arc<Mutex<Presence>>,
     stopping: Arc<AtomicBool>,
 }
 
@@ -335,6 +350,26 @@ impl Run {
         // Sequence 1 again: the gateway started anew. (A first message with a higher number
         // is where this worker's session began: no gap.)
         self.seen.insert(key, b.seq);
+        if !refs {
+            let now = Instant::now();
+            let events: Vec<PresenceEvent> = {
+                let mut p = lock(&self.presence);
+                b.reads
+                    .iter()
+                    .filter_map(|r| {
+                        p.read(&r.epc_hex, &b.reader, r.antenna_port, r.first_seen_us, now)
+                    })
+                    .collect()
+            };
+            let out = Out {
+                shared: self.shared.clone(),
+                client: self.client.clone(),
+                url: self.opts.url.clone(),
+            };
+            for e in events {
+                out.presence(&e);
+            }
+        }
         let reads: Vec<_> = b
             .reads
             .iter()
@@ -367,30 +402,71 @@ impl Run {
     }
 }
 
-/// Publishes every estimate update, retained, until `stop`.
-fn publish_estimates(shared: &Shared, client: &Client, url: &BrokerUrl, stop: &AtomicBool) {
-    let mut rx = shared.subscribe();
+/// Where a worker publishes.
+struct Out {
+    shared: Arc<Shared>,
+    client: Client,
+    url: BrokerUrl,
+}
+
+impl Out {
+    /// Publishes `payload` to `PREFIX/v1/rest` at QoS 1, counted.
+    fn publish(&self, rest: &str, retain: bool, payload: Vec<u8>) {
+        let topic = self.url.topic(&format!("v{VERSION}/{rest}"));
+        if self
+            .client
+            .try_publish(topic, QoS::AtLeastOnce, retain, payload)
+            .is_ok()
+        {
+            self.shared.metrics.mqtt_published.inc();
+        } else {
+            self.shared.metrics.mqtt_dropped.inc();
+        }
+    }
+
+    /// Publishes a presence event to `presence/{epc}`.
+    fn presence(&self, e: &PresenceEvent) {
+        // A presence event of plain values always serializes.
+        let payload = serde_json::to_vec(e).unwrap_or_default();
+        self.publish(&format!("presence/{}", topic_level(&e.epc)), false, payload);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // A panicked holder leaves a state still worth using.
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Publishes every estimate update, retained, and the presence events they and the silences
+/// make, until `stop`.
+fn publish_estimates(out: &Out, presence: &Mutex<Presence>, stop: &AtomicBool) {
+    let mut rx = out.shared.subscribe();
+    let mut ticked = Instant::now();
     while !stop.load(Ordering::Relaxed) {
+        if ticked.elapsed() >= Duration::from_millis(200) {
+            ticked = Instant::now();
+            let departed = lock(presence).tick(ticked);
+            for e in departed {
+                out.presence(&e);
+            }
+        }
         match rx.try_recv() {
             Ok(view) => {
                 let json = TagJson::from(&*view);
-                let topic = url.topic(&format!(
-                    "v{VERSION}/estimates/{}",
-                    topic_level(&view.estimate.epc)
-                ));
+                let epc = &view.estimate.epc;
                 // A TagJson of finite numbers always serializes.
                 let payload = serde_json::to_vec(&json).unwrap_or_default();
-                if client
-                    .try_publish(topic, QoS::AtLeastOnce, true, payload)
-                    .is_ok()
-                {
-                    shared.metrics.mqtt_published.inc();
-                } else {
-                    shared.metrics.mqtt_dropped.inc();
+                out.publish(&format!("estimates/{}", topic_level(epc)), true, payload);
+                let moved = view
+                    .estimate
+                    .estimate
+                    .and_then(|p| lock(presence).estimate(epc, p));
+                if let Some(e) = moved {
+                    out.presence(&e);
                 }
             }
             Err(tokio::sync::broadcast::error::TryRecvError::Lagged(n)) => {
-                shared.metrics.mqtt_dropped.inc_by(n);
+                out.shared.metrics.mqtt_dropped.inc_by(n);
             }
             Err(tokio::sync::broadcast::error::TryRecvError::Empty) => {
                 std::thread::sleep(Duration::from_millis(5));

@@ -39,6 +39,12 @@ pub struct WorkerArgs {
     /// For `mqtts://`: the CA certificate (PEM) that signed the broker's.
     #[arg(long, value_name = "FILE", requires = "subscribe")]
     pub mqtt_ca: Option<std::path::PathBuf>,
+    /// A tag has departed (presence event) after this many seconds without a read.
+    #[arg(long, value_name = "S", default_value_t = 10.0, requires = "subscribe")]
+    pub presence_silence_s: f64,
+    /// A `moved` presence event when the estimate moves more than this (m).
+    #[arg(long, value_name = "M", default_value_t = super::presence::DEFAULT_MOVE_M, requires = "subscribe")]
+    pub presence_move_m: f64,
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]
     pub http: crate::http::launch::HttpArgs,
@@ -94,6 +100,9 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
         tls: super::args::tls_config(w.mqtt_ca.as_deref())?,
+        presence_silence: positive("--presence-silence-s", w.presence_silence_s)
+            .map(std::time::Duration::from_secs_f64)?,
+        presence_move_m: positive("--presence-move-m", w.presence_move_m)?,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -136,6 +145,15 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         eprintln!("llrp-gateway localize: stopped");
         Ok(())
     })
+}
+
+/// `v` when it is a positive finite number, else why not, naming the option.
+fn positive(option: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{option} {v}: must be a positive number"))
+    }
 }
 
 /// `shards` as ranges: `0-7,9`.

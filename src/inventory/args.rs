@@ -70,7 +70,8 @@ pub struct InventoryArgs {
     /// With --tls: the name the reader's certificate must carry (default: HOST).
     #[arg(long, value_name = "NAME", requires = "tls")]
     pub tls_server_name: Option<String>,
-    /// The live localizer and its HTTP API (`--http ADDR`), fed with the reads.
+    /// The live localizer and its HTTP API (`--http ADDR`) and the MQTT publisher
+    /// (`--publish URL`), fed with the reads.
     #[command(flatten)]
     pub live: crate::gateway::live::LiveArgs,
 }

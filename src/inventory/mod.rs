@@ -198,11 +198,12 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         source,
     };
     let mut sink = Sink::open(&args.output).map_err(output_error)?;
-    let localizer = crate::gateway::live::start(&args.live, "inventory")
+    let sinks = crate::gateway::live::start_sinks(&args.live, "inventory")
         .await
         .map_err(InventoryError::Localizer)?;
-    let tap = localizer.as_ref().map(|l| l.tap());
-    // The reads of a batch go to the localizer too (if any), then to the file.
+    let tap = sinks.tap();
+    // The reads of a batch go to the localizer and the MQTT publisher too (if any), then to
+    // the file.
     let share = |batch: &[crate::reads::Read]| {
         if let (Some(t), false) = (&tap, batch.is_empty()) {
             t.offer(crate::localize::live::Input::Reads(batch.to_vec()));
@@ -349,9 +350,8 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         }
     }
     sink.flush().map_err(output_error)?;
-    if let Some(l) = localizer {
-        l.stop().await;
-    }
+    drop(tap);
+    sinks.stop().await;
     screen.clear();
     if stats.connections == 0 {
         return Err(InventoryError::NeverConnected(addr));

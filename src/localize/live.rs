@@ -4,8 +4,10 @@
 //! estimates to [`Shared`].
 //!
 //! A read whose antenna has no pose at or after the read's time yet waits (a robot's pose
-//! may arrive after the reads it explains) until one comes, until its reader's reads are a
-//! pose reach past it, or until [`MAX_WAITING`] reads wait; then it is filed or set aside.
+//! may arrive after the reads it explains, and over MQTT on another topic) until one comes,
+//! for at most [`POSE_WAIT`], or until [`MAX_WAITING`] reads wait; then it is filed or set
+//! aside. Whether a read waits depends on its own time and the poses alone, not on other
+//! tags' reads, so workers on different shards file a tag's reads alike.
 //!
 //! Memory is bounded per tag: when a tag holds more than [`Settings::max_samples_per_tag`]
 //! phases, every series of it is thinned to every other sample (the newest kept), so the
@@ -27,6 +29,9 @@ use super::shared::{AntennaView, Shared, TagView, RECENT_READS};
 use crate::reads::{Read, ReadDecoder};
 
 pub use super::tap::{Input, Mirror, Tap};
+
+/// Longest a read waits for a pose at or after its time (wall-clock time at the localizer).
+pub const POSE_WAIT: Duration = Duration::from_secs(2);
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
@@ -146,9 +151,8 @@ struct Worker {
     shared: Arc<Shared>,
     ingest: Ingest,
     decoders: HashMap<String, ReadDecoder>,
-    waiting: VecDeque<Read>,
-    /// Per reader, the newest read time seen.
-    newest_read: HashMap<String, u64>,
+    /// Reads waiting for a pose, with their arrival.
+    waiting: VecDeque<(Read, Instant)>,
     reader_rates: HashMap<String, (u64, u64)>,
     tags: BTreeMap<String, TagState>,
     set_aside_seen: u64,
@@ -167,7 +171,6 @@ impl Worker {
             shared,
             decoders: HashMap::new(),
             waiting: VecDeque::new(),
-            newest_read: HashMap::new(),
             reader_rates: HashMap::new(),
             tags: BTreeMap::new(),
             set_aside_seen: 0,
@@ -214,8 +217,13 @@ impl Worker {
                     return;
                 }
             }
-            // Whether a waiting read is ready changes only with new poses or reads.
-            if std::mem::take(&mut self.taken_since_flush) {
+            // Whether a waiting read is ready changes only with new poses or reads, or once
+            // it has waited long enough.
+            let expired = self
+                .waiting
+                .front()
+                .is_some_and(|(_, at)| at.elapsed() >= POSE_WAIT);
+            if std::mem::take(&mut self.taken_since_flush) || expired {
                 self.flush_waiting(false);
             }
             self.estimate(self.settings.compute_budget, false);
@@ -350,14 +358,12 @@ impl Worker {
                 .collect();
             self.derive(new, &posed);
         }
+        let now = Instant::now();
         for r in reads {
-            let reader = r.reader.clone().unwrap_or_default();
-            let newest = self.newest_read.entry(reader).or_default();
-            *newest = (*newest).max(r.t_us);
-            self.waiting.push_back(r);
+            self.waiting.push_back((r, now));
         }
         while self.waiting.len() > MAX_WAITING {
-            if let Some(r) = self.waiting.pop_front() {
+            if let Some((r, _)) = self.waiting.pop_front() {
                 self.file(r);
             }
         }
@@ -365,9 +371,8 @@ impl Worker {
 
     /// Files the waiting reads that have a pose now, or will never get one.
     fn flush_waiting(&mut self, all: bool) {
-        let reach = self.settings.pose_reach_us;
         let mut keep = VecDeque::new();
-        while let Some(r) = self.waiting.pop_front() {
+        while let Some((r, at)) = self.waiting.pop_front() {
             let reader = r.reader.clone().unwrap_or_default();
             let ready = all
                 || r.antenna_pose.is_some()
@@ -377,14 +382,11 @@ impl Worker {
                     .poses()
                     .newest(&reader, r.antenna)
                     .is_some_and(|t| t >= r.t_us)
-                || self
-                    .newest_read
-                    .get(&reader)
-                    .is_some_and(|&t| t > r.t_us.saturating_add(reach));
+                || at.elapsed() >= POSE_WAIT;
             if ready {
                 self.file(r);
             } else {
-                keep.push_back(r);
+                keep.push_back((r, at));
             }
         }
         self.waiting = keep;
