@@ -8,10 +8,20 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::publish::{lock, topic_level, Link, PublishOptions};
-use super::schema::{self, ReadBatch, TagRead, VERSION};
+use super::schema::{self, TagRead, VERSION};
 use crate::localize::live::Input;
 use crate::localize::poses::PoseSample;
 use crate::reads::{Read, ReadDecoder};
+
+/// A [`ReadBatch`](super::schema::ReadBatch) serialized without copying its reads.
+#[derive(serde::Serialize)]
+struct BatchRef<'a> {
+    v: u32,
+    gateway: &'a str,
+    reader: &'a str,
+    seq: u64,
+    reads: &'a [TagRead],
+}
 
 /// LLRP's message type of READER_EVENT_NOTIFICATION.
 const READER_EVENT_NOTIFICATION: u16 = 63;
@@ -36,6 +46,8 @@ pub(super) struct Builder {
     /// Per reader, per topic (under `v1/`), the last sequence number used.
     seqs: BTreeMap<String, BTreeMap<String, u64>>,
     pending: BTreeMap<(String, String), Pending>,
+    /// Poses waiting for their window to close, per topic (under `v1/`).
+    pending_poses: BTreeMap<String, (Vec<PoseSample>, Instant)>,
 }
 
 impl Builder {
@@ -47,6 +59,7 @@ impl Builder {
             offsets: HashMap::new(),
             seqs: BTreeMap::new(),
             pending: BTreeMap::new(),
+            pending_poses: BTreeMap::new(),
         }
     }
 
@@ -116,7 +129,8 @@ impl Builder {
                     .decoders
                     .entry(reader.clone())
                     .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
-                let mut reads = Vec::new();
+                // The reads of each RO_ACCESS_REPORT apart: without a window, a message each.
+                let mut reports: Vec<Vec<Read>> = Vec::new();
                 let mut events = Vec::new();
                 let mut at = 0;
                 while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
@@ -132,11 +146,17 @@ impl Builder {
                             }
                         }
                     } else {
+                        let mut reads = Vec::new();
                         let _ = decoder.frame(frame, now_utc_us, &mut reads);
+                        if !reads.is_empty() {
+                            reports.push(reads);
+                        }
                     }
                     at += len;
                 }
-                self.reads(&reader, reads);
+                for reads in reports {
+                    self.reads(&reader, reads);
+                }
                 for e in events {
                     self.event(&reader, &e);
                 }
@@ -216,8 +236,9 @@ impl Builder {
         }
     }
 
-    /// Sends the batches whose window has closed (all with `all`).
+    /// Sends the batches whose window has closed (all with `all`), poses too.
     fn flush(&mut self, all: bool) {
+        self.flush_poses(all);
         let due: Vec<(String, String)> = self
             .pending
             .iter()
@@ -235,12 +256,12 @@ impl Builder {
         };
         for chunk in p.reads.chunks(MAX_BATCH_READS) {
             let seq = self.next_seq(&p.reader, &key.1);
-            let batch = ReadBatch {
+            let batch = BatchRef {
                 v: VERSION,
-                gateway: self.opts.gateway.clone(),
-                reader: p.reader.clone(),
+                gateway: &self.opts.gateway,
+                reader: &p.reader,
                 seq,
-                reads: chunk.to_vec(),
+                reads: chunk,
             };
             // A batch of plain values always serializes.
             let payload = serde_json::to_vec(&batch).unwrap_or_default();
@@ -264,22 +285,76 @@ impl Builder {
     }
 
     fn poses(&mut self, poses: Vec<PoseSample>) {
-        let mut by_antenna: BTreeMap<(String, u16), Vec<PoseSample>> = BTreeMap::new();
         for mut p in poses {
             // In the reads' clock, as a worker files them.
             let offset = self.offsets.get(&p.reader).copied().unwrap_or(0);
             p.t_us = p.t_us.saturating_add_signed(offset);
-            by_antenna
-                .entry((p.reader.clone(), p.antenna))
-                .or_default()
+            let rest = format!("poses/{}/{}", topic_level(&p.reader), p.antenna);
+            self.pending_poses
+                .entry(rest)
+                .or_insert_with(|| (Vec::new(), Instant::now()))
+                .0
                 .push(p);
         }
-        for ((reader, antenna), poses) in by_antenna {
-            let rest = format!("poses/{}/{antenna}", topic_level(&reader));
+        // Batched over the window like the reads (a message per input without one).
+        self.flush_poses(self.opts.window.is_zero());
+    }
+
+    /// Sends the pose batches whose window has closed (all with `all`) or that are full.
+    fn flush_poses(&mut self, all: bool) {
+        let due: Vec<String> = self
+            .pending_poses
+            .iter()
+            .filter(|(_, (p, since))| {
+                all || p.len() >= MAX_BATCH_READS || since.elapsed() >= self.opts.window
+            })
+            .map(|(k, _)| k.clone())
+            .collect();
+        for rest in due {
+            let Some((poses, _)) = self.pending_poses.remove(&rest) else {
+                continue;
+            };
             // Pose samples of finite numbers always serialize.
             let payload = serde_json::to_vec(&poses).unwrap_or_default();
             self.link
                 .publish(&rest, false, payload, poses.len() as u64, false);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_serialized_by_reference_parses_as_the_schemas_batch() {
+        let read = crate::reads::Read {
+            epc: "E2801160600002049ACB0065".into(),
+            reader: Some("r1".into()),
+            antenna: 2,
+            t_us: 1_764_633_600_000_001,
+            phase_rad: Some(0.5),
+            rssi_dbm: Some(-60.0),
+            channel_index: Some(1),
+            channel_frequency_hz: Some(865_700_000),
+            doppler_hz: None,
+            antenna_pose: None,
+            last_seen_us: None,
+        };
+        let reads = [TagRead::from_read(&read)];
+        let json = serde_json::to_vec(&BatchRef {
+            v: VERSION,
+            gateway: "gw",
+            reader: "r1",
+            seq: 7,
+            reads: &reads,
+        })
+        .expect("serializes");
+        let b: schema::ReadBatch = serde_json::from_slice(&json).expect("the schema's batch");
+        assert_eq!(
+            (b.v, b.gateway.as_str(), b.reader.as_str(), b.seq),
+            (1, "gw", "r1", 7)
+        );
+        assert_eq!(b.reads, reads);
     }
 }

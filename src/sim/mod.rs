@@ -250,7 +250,6 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     if scenario.readers.is_empty() {
         return Err(SimError::NoReader);
     }
-    let utc0 = crate::net::clock::utc_now_us();
     let truth = match &opts.truth {
         Some(path) => Some(Arc::new(Truth {
             out: Mutex::new(BufWriter::new(File::create(path).map_err(|source| {
@@ -272,6 +271,9 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     let tls = opts.tls.as_ref().map(ServerFiles::acceptor).transpose()?;
     // The tags, reflectors and robot drives, once for every reader.
     let world = World::new(scenario);
+    // Simulated time 0 is this instant: the readers' UTC timestamps then track the wall clock
+    // at real-time speed, however long the world took to build.
+    let utc0 = crate::net::clock::utc_now_us();
     let clock = Arc::new(Clock::new(opts.speed));
     let (shutdown, rx) = watch::channel(false);
     let mut addrs = Vec::new();
