@@ -216,6 +216,24 @@ impl ReadDecoder {
     }
 }
 
+/// The LLRP frames of `bytes`, back to back as a reader writes them: each whole frame, then
+/// `Err(())` once if what is left is a frame cut short (a length field past the end or under
+/// a header's); a tail shorter than a header ends it quietly.
+pub fn frames(bytes: &[u8]) -> impl Iterator<Item = Result<&[u8], ()>> + '_ {
+    let mut at = 0;
+    std::iter::from_fn(move || {
+        let h = llrp::FrameHeader::peek(bytes.get(at..)?)?;
+        let len = h.length as usize;
+        if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
+            at = bytes.len();
+            return Some(Err(()));
+        }
+        let frame = &bytes[at..at + len];
+        at += len;
+        Some(Ok(frame))
+    })
+}
+
 /// Upper-case hex of `bytes`.
 pub fn hex_upper(bytes: &[u8]) -> String {
     const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
@@ -267,6 +285,19 @@ pub fn read_jsonl(input: impl BufRead) -> Result<Vec<Read>, ReadsFileError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frames_splits_back_to_back_frames_and_flags_one_cut_short() {
+        let one = llrp::Message::new(1, llrp::message::Keepalive::default()).to_bytes();
+        let mut bytes = [one.as_ref(), one.as_ref()].concat();
+        let whole: Vec<_> = frames(&bytes).collect();
+        assert_eq!(whole, [Ok(one.as_ref()), Ok(one.as_ref())]);
+        bytes.extend_from_slice(&one[..one.len() - 1]);
+        let cut: Vec<_> = frames(&bytes).collect();
+        assert_eq!(cut.len(), 3);
+        assert_eq!(cut[2], Err(()));
+        assert_eq!(frames(&bytes[..4]).count(), 0);
+    }
 
     #[test]
     fn a_read_round_trips_through_the_reads_file() {

@@ -9,26 +9,8 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use broker_support::{Mosquitto, Nats, Probe};
-use http_support::{request, Proc};
-
-/// A worker on `url` owning `shards`, with its HTTP API on a free port.
-fn worker(url: &str, shards: &str, id: &str) -> (Proc, SocketAddr) {
-    let mut p = Proc::spawn(&[
-        "localize",
-        "--subscribe",
-        url,
-        "--shards",
-        shards,
-        "--client-id",
-        id,
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let addr = p.address("live map on http://").parse().expect("address");
-    p.address(", subscribed");
-    (p, addr)
-}
+use broker_support::{worker, Mosquitto, Nats, Probe};
+use http_support::{counter, request, Proc};
 
 /// EPC → (samples, [x, y, z]) of every located tag of `GET /api/tags`.
 fn located(http: SocketAddr) -> BTreeMap<String, (u64, [f64; 3])> {
@@ -42,15 +24,6 @@ fn located(http: SocketAddr) -> BTreeMap<String, (u64, [f64; 3])> {
         }
     }
     out
-}
-
-/// The value of counter `name` in `GET /metrics`.
-fn counter(http: SocketAddr, name: &str) -> f64 {
-    let text = request(http, "GET", "/metrics", &[], b"").text();
-    text.lines()
-        .find_map(|l| l.strip_prefix(&format!("llrp_gateway_{name}_total ")))
-        .and_then(|v| v.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no {name} in {text}"))
 }
 
 fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -74,9 +47,9 @@ fn the_same_through_nats_jetstream_mqtt() {
 /// sim → the broker at `url` (MQTT on `port`) → one worker on all shards and two on halves.
 fn two_workers_agree(url: &str, port: u16) {
     let url = url.to_string();
-    let (_all, all_http) = worker(&url, "0-15", "all");
-    let (_low, low_http) = worker(&url, "0-7", "low");
-    let (_high, high_http) = worker(&url, "8-15", "high");
+    let (_all, all_http) = worker(&url, &["--shards", "0-15", "--client-id", "all"]);
+    let (_low, low_http) = worker(&url, &["--shards", "0-7", "--client-id", "low"]);
+    let (_high, high_http) = worker(&url, &["--shards", "8-15", "--client-id", "high"]);
     // (Not `status/#`: NATS 2.9's MQTT interface gives a `#` subscription nothing retained,
     // nats-server issues 4760 and 4919.)
     let status = [Probe::connect(
@@ -192,7 +165,7 @@ fn two_workers_agree(url: &str, port: u16) {
 fn malformed_messages_are_counted_and_skipped_and_the_worker_goes_on() {
     let broker = Mosquitto::start("");
     let url = broker.url("m");
-    let (_w, http) = worker(&url, "0-15", "m-worker");
+    let (_w, http) = worker(&url, &["--client-id", "m-worker"]);
     let probe = Probe::connect(broker.port, "m-probe", &[]);
     probe.publish("m/v1/reads/0", b"{not json");
     probe.publish(
@@ -229,16 +202,10 @@ fn presence_events_tell_arrivals_moves_and_departures_with_positions() {
     let broker = Mosquitto::start("");
     let url = broker.url("p");
     let probe = Probe::connect(broker.port, "presence-probe", &["p/v1/presence/+"]);
-    let mut w = Proc::spawn(&[
-        "localize",
-        "--subscribe",
+    let _w = worker(
         &url,
-        "--presence-silence-s",
-        "1",
-        "--presence-move-m",
-        "0.5",
-    ]);
-    w.address(", subscribed");
+        &["--presence-silence-s", "1", "--presence-move-m", "0.5"],
+    );
     {
         let mut sim = Proc::spawn(&[
             "sim",

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use broker_support::{Mosquitto, Probe};
+use broker_support::{worker, Mosquitto, Probe};
 use http_support::{request, Proc};
 
 fn bin() -> Command {
@@ -170,17 +170,7 @@ fn a_replay_published_with_a_robots_poses_localizes_at_a_worker_as_offline() {
     let settings = fixture("s1-report-per-read.settings.json");
     let broker = Mosquitto::start("");
     let url = broker.url("g");
-    let mut worker = Proc::spawn(&[
-        "localize",
-        "--subscribe",
-        &url,
-        "--settings",
-        &settings,
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let http: std::net::SocketAddr = worker.address("live map on http://").parse().expect("addr");
-    worker.address(", subscribed");
+    let (_worker, http) = worker(&url, &["--settings", &settings]);
     // The robot publishes its poses (the pose file's keys, in its own clock).
     let robot = Probe::connect(broker.port, "robot", &[]);
     let text = std::fs::read_to_string(&poses).expect("pose file");

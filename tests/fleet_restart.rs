@@ -8,32 +8,8 @@ mod http_support;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use broker_support::{Mosquitto, Probe};
-use http_support::{request, Proc};
-
-fn counter(http: SocketAddr, name: &str) -> f64 {
-    let text = request(http, "GET", "/metrics", &[], b"").text();
-    text.lines()
-        .find_map(|l| l.strip_prefix(&format!("llrp_gateway_{name}_total ")))
-        .and_then(|v| v.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no {name} in {text}"))
-}
-
-/// A worker on all shards of `url` with client id `id` and its HTTP API.
-fn worker(url: &str, id: &str) -> (Proc, SocketAddr) {
-    let mut p = Proc::spawn(&[
-        "localize",
-        "--subscribe",
-        url,
-        "--client-id",
-        id,
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let addr = p.address("live map on http://").parse().expect("address");
-    p.address(", subscribed");
-    (p, addr)
-}
+use broker_support::{worker, Mosquitto, Probe};
+use http_support::{counter, request, Proc};
 
 /// What a broker restart did to a stream.
 struct Outcome {
@@ -57,7 +33,7 @@ fn through_a_broker_restart(queue: &str) -> Outcome {
         )
     });
     let url = broker.url("r");
-    let (_w, http) = worker(&url, "restart-worker");
+    let (_w, http) = worker(&url, &["--client-id", "restart-worker"]);
     // Every sequenced message, from the start, across the restart.
     let probe = Probe::connect_persistent(
         broker.port,
@@ -209,7 +185,7 @@ fn a_worker_killed_and_restarted_gets_what_was_published_meanwhile() {
         });
         probe.publish_acked(&topic, b.to_string().as_bytes());
     };
-    let (mut first, http) = worker(&url, "k-worker");
+    let (mut first, http) = worker(&url, &["--client-id", "k-worker"]);
     for i in 1..=50 {
         publish(i);
     }
@@ -226,7 +202,7 @@ fn a_worker_killed_and_restarted_gets_what_was_published_meanwhile() {
     for i in 51..=100 {
         publish(i);
     }
-    let (_second, http) = worker(&url, "k-worker");
+    let (_second, http) = worker(&url, &["--client-id", "k-worker"]);
     let deadline = Instant::now() + Duration::from_secs(20);
     for i in 51..=100 {
         while request(http, "GET", &format!("/api/tags/{}", epc(i)), &[], b"").status != 200 {

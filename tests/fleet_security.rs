@@ -7,13 +7,12 @@
 mod broker_support;
 mod http_support;
 
-use std::net::SocketAddr;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use broker_support::{free_port, Mosquitto, Probe};
-use http_support::{request, Proc};
+use broker_support::{free_port, worker, Mosquitto, Probe};
+use http_support::{counter, request, Proc};
 
 /// CA and server certificate for 127.0.0.1 in `dir`: (ca.pem, server.pem, server.key).
 fn pki(dir: &Path) -> (String, String, String) {
@@ -55,14 +54,6 @@ fn add_user(file: &Path, user: &str, pass: &str) {
         .status()
         .expect("mosquitto_passwd runs (./scripts/install-brokers)");
     assert!(ok.success());
-}
-
-fn counter(http: SocketAddr, name: &str) -> f64 {
-    let text = request(http, "GET", "/metrics", &[], b"").text();
-    text.lines()
-        .find_map(|l| l.strip_prefix(&format!("llrp_gateway_{name}_total ")))
-        .and_then(|v| v.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no {name} in {text}"))
 }
 
 /// A batch of one read of `epc` (with its antenna's pose, so it is filed at once).
@@ -133,17 +124,7 @@ fn tls_credentials_and_topic_rights_are_enforced_by_the_broker() {
     assert!(!err.contains("wrong"), "the password is shown: {err}");
 
     // A worker over TLS with its own credentials.
-    let mut w = Proc::spawn(&[
-        "localize",
-        "--subscribe",
-        &tls("worker:worker-pass"),
-        "--mqtt-ca",
-        &ca,
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let http: SocketAddr = w.address("live map on http://").parse().expect("address");
-    w.address(", subscribed");
+    let (_w, http) = worker(&tls("worker:worker-pass"), &["--mqtt-ca", &ca]);
 
     // The intruder may read but not write: its batch never reaches the worker, while the
     // gateway's, published after it, does.

@@ -132,14 +132,13 @@ impl Builder {
                 // The reads of each RO_ACCESS_REPORT apart: without a window, a message each.
                 let mut reports: Vec<Vec<Read>> = Vec::new();
                 let mut events = Vec::new();
-                let mut at = 0;
-                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
-                    let len = h.length as usize;
-                    if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
+                for frame in crate::reads::frames(&bytes) {
+                    let Ok(frame) = frame else {
                         break;
-                    }
-                    let frame = &bytes[at..at + len];
-                    if h.msg_type == READER_EVENT_NOTIFICATION {
+                    };
+                    let is_event = llrp::FrameHeader::peek(frame)
+                        .is_some_and(|h| h.msg_type == READER_EVENT_NOTIFICATION);
+                    if is_event {
                         if let Ok(m) = llrp::Message::decode(frame) {
                             if let llrp::MessageBody::ReaderEventNotification(n) = m.body {
                                 events.push(n.reader_event_notification_data);
@@ -152,7 +151,6 @@ impl Builder {
                             reports.push(reads);
                         }
                     }
-                    at += len;
                 }
                 for reads in reports {
                     self.reads(&reader, reads);

@@ -33,6 +33,11 @@ pub use super::tap::{Input, Mirror, Tap};
 /// Longest a read waits for a pose at or after its time (wall-clock time at the localizer).
 pub const POSE_WAIT: Duration = Duration::from_secs(2);
 
+/// How much of each antenna's pose track the live localizer keeps (µs), for the estimators
+/// that do not walk the path driven (all but mhekf and wls, which keep up to
+/// [`super::poses::MAX_TRACK`] samples).
+pub const POSE_KEEP_US: u64 = 60_000_000;
+
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
 
@@ -164,7 +169,14 @@ struct Worker {
 
 impl Worker {
     fn new(settings: Settings, shared: Arc<Shared>) -> Worker {
-        let poses = Poses::new().with_reach(settings.pose_reach_us);
+        // A read keeps the pose it was filed with; only mhekf and wls walk the path driven.
+        let keep = match settings.estimator {
+            Estimator::Mhekf | Estimator::Wls => None,
+            _ => Some(POSE_KEEP_US),
+        };
+        let poses = Poses::new()
+            .with_reach(settings.pose_reach_us)
+            .with_keep(keep);
         Worker {
             ingest: Ingest::new(poses, settings.ambiguity, settings.max_gap_us),
             settings,
@@ -272,21 +284,15 @@ impl Worker {
                     .entry(reader.clone())
                     .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
                 let mut reads = Vec::new();
-                let mut at = 0;
-                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
-                    let len = h.length as usize;
-                    if len < llrp::frame::HEADER_LEN || at + len > bytes.len() {
+                for frame in crate::reads::frames(&bytes) {
+                    let Ok(frame) = frame else {
                         self.shared.metrics.decode_errors.inc();
                         break;
-                    }
+                    };
                     self.shared.metrics.frames_out.inc();
-                    if decoder
-                        .frame(&bytes[at..at + len], now_utc_us, &mut reads)
-                        .is_err()
-                    {
+                    if decoder.frame(frame, now_utc_us, &mut reads).is_err() {
                         self.shared.metrics.decode_errors.inc();
                     }
-                    at += len;
                 }
                 self.reads(reads);
             }

@@ -66,6 +66,9 @@ pub struct Poses {
     offsets: HashMap<String, i64>,
     /// Longest gap between two samples a read may fall in (µs).
     reach_us: u64,
+    /// Samples older than this behind their track's newest are dropped (µs); `None`: kept
+    /// up to [`MAX_TRACK`].
+    keep_us: Option<u64>,
 }
 
 /// Most samples kept per antenna track; beyond it the older half is dropped.
@@ -89,6 +92,13 @@ impl Poses {
         self
     }
 
+    /// These poses keeping only the last `keep_us` of each track (`None`: up to
+    /// [`MAX_TRACK`] samples).
+    pub fn with_keep(mut self, keep_us: Option<u64>) -> Poses {
+        self.keep_us = keep_us;
+        self
+    }
+
     /// Sets `reader`'s clock offset: reader time − robot time, µs.
     pub fn set_offset(&mut self, reader: &str, offset_us: i64) {
         self.offsets.insert(reader.to_string(), offset_us);
@@ -106,6 +116,13 @@ impl Poses {
         }
         if track.len() > MAX_TRACK {
             track.drain(..MAX_TRACK / 2);
+        }
+        if let (Some(keep), Some(newest)) = (self.keep_us, track.last().map(|s| s.t_us)) {
+            let old = track.partition_point(|s| s.t_us.saturating_add(keep) < newest);
+            // In steps of a good many samples, not one at a time.
+            if old >= 64 {
+                track.drain(..old);
+            }
         }
     }
 
@@ -295,6 +312,28 @@ pub fn validate(p: &PoseSample) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_kept_window_drops_what_is_older_on_each_track() {
+        let mut p = Poses::new().with_keep(Some(1_000_000));
+        for k in 0..1000u64 {
+            p.add(PoseSample {
+                t_us: k * 10_000,
+                reader: "r".into(),
+                antenna: 1,
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                yaw_deg: 0.0,
+                pitch_deg: 0.0,
+            });
+        }
+        let first = p.first().expect("samples").t_us;
+        // 10 s of samples at 100 Hz, a 1 s window: the oldest left is within 1 s (and the
+        // 64 samples dropped at a time) of the newest.
+        assert!(first >= 9_990_000 - 1_000_000 - 640_000, "{first}");
+        assert!(p.samples().len() <= 100 + 64, "{}", p.samples().len());
+    }
 
     fn sample(t_us: u64, x: f64, yaw_deg: f64) -> PoseSample {
         PoseSample {

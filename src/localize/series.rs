@@ -136,13 +136,19 @@ impl Series {
                     seg.push(s);
                 }
             }
-            None => self.segments.push(vec![Sample {
-                t_us,
-                phase_rad: folded,
-                antenna,
-                yaw_rad,
-                raw_phase_rad: phase_rad,
-            }]),
+            None => {
+                // The segment closed holds no spare capacity from here on.
+                if let Some(seg) = self.segments.last_mut() {
+                    seg.shrink_to_fit();
+                }
+                self.segments.push(vec![Sample {
+                    t_us,
+                    phase_rad: folded,
+                    antenna,
+                    yaw_rad,
+                    raw_phase_rad: phase_rad,
+                }]);
+            }
         }
     }
 
@@ -159,7 +165,8 @@ impl Series {
     /// Keeps every other phase of each segment, and each segment's last (which the next read
     /// is unwrapped against): the aperture stays, the density halves.
     pub fn thin(&mut self) {
-        for seg in &mut self.segments {
+        let last = self.segments.len().saturating_sub(1);
+        for (k, seg) in self.segments.iter_mut().enumerate() {
             let n = seg.len();
             let mut i = 0;
             seg.retain(|_| {
@@ -167,6 +174,11 @@ impl Series {
                 i += 1;
                 keep
             });
+            // A closed segment gives back what it held (retain keeps the capacity): else the
+            // memory of a tag grows with every read it ever had, whatever the bound.
+            if k < last {
+                seg.shrink_to_fit();
+            }
         }
     }
 
@@ -185,6 +197,25 @@ impl Series {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thinning_gives_back_the_memory_of_closed_segments() {
+        let mut s = Series::new(0.346, Ambiguity::None, 1_000);
+        // 200 segments of 100 reads (a gap between each), thinned as a tag's bound would.
+        for k in 0..200u64 {
+            for i in 0..100u64 {
+                s.push(k * 1_000_000 + i * 10, 0.01 * i as f64, [0.0; 3], 0.0);
+            }
+            if s.len() > 4096 {
+                s.thin();
+            }
+        }
+        let held: usize = s.segments().iter().map(Vec::len).sum();
+        let reserved: usize = s.segments().iter().map(Vec::capacity).sum();
+        assert!(held <= 4096 + 100, "{held}");
+        // Only the open segment may keep room to grow.
+        assert!(reserved <= held + 128, "{reserved} reserved for {held}");
+    }
     use std::f64::consts::{PI, TAU};
 
     const LAMBDA: f64 = 0.3276;

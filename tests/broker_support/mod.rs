@@ -8,6 +8,17 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// A localizer worker on `url` (`localize --subscribe URL` and `extra`) with its HTTP API on
+/// a free port, once subscribed. (Needs the test's `mod http_support;`.)
+pub fn worker(url: &str, extra: &[&str]) -> (crate::http_support::Proc, std::net::SocketAddr) {
+    let mut args = vec!["localize", "--subscribe", url, "--http", "127.0.0.1:0"];
+    args.extend_from_slice(extra);
+    let mut p = crate::http_support::Proc::spawn(&args);
+    let addr = p.address("live map on http://").parse().expect("address");
+    p.address(", subscribed");
+    (p, addr)
+}
+
 /// A running mosquitto.
 pub struct Mosquitto {
     /// Its loopback port.

@@ -342,6 +342,15 @@ impl Events {
     }
 }
 
+/// The value of counter `name` (`llrp_gateway_NAME_total`) in `GET /metrics`.
+pub fn counter(http: SocketAddr, name: &str) -> f64 {
+    let text = request(http, "GET", "/metrics", &[], b"").text();
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("llrp_gateway_{name}_total ")))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {name} in {text}"))
+}
+
 /// A running child with the addresses it printed; SIGTERM and a wait when dropped.
 pub struct Proc {
     child: std::process::Child,
