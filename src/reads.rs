@@ -292,7 +292,11 @@ mod tests {
         let mut bytes = [one.as_ref(), one.as_ref()].concat();
         let whole: Vec<_> = frames(&bytes).collect();
         assert_eq!(whole, [Ok(one.as_ref()), Ok(one.as_ref())]);
-        bytes.extend_from_slice(&one[..one.len() - 1]);
+        // A header whose length runs past the end: 20 bytes said, 12 there.
+        let mut short = one.to_vec();
+        short[2..6].copy_from_slice(&20u32.to_be_bytes());
+        short.extend_from_slice(&[0, 0]);
+        bytes.extend_from_slice(&short);
         let cut: Vec<_> = frames(&bytes).collect();
         assert_eq!(cut.len(), 3);
         assert_eq!(cut[2], Err(()));
