@@ -29,19 +29,16 @@ pub struct Mosquitto {
     pub dir: tempfile::TempDir,
 }
 
-/// The mosquitto binary (Debian puts it in /usr/sbin); `./scripts/install-brokers`
-/// installs it.
-fn binary() -> PathBuf {
-    for p in [
-        "/usr/sbin/mosquitto",
-        "/usr/bin/mosquitto",
-        "/usr/local/sbin/mosquitto",
-    ] {
-        if std::path::Path::new(p).exists() {
-            return p.into();
+/// The broker binary `name` (Debian puts mosquitto and nats-server in /usr/sbin, which a
+/// user's PATH may lack); `./scripts/install-brokers` installs them.
+fn binary(name: &str) -> PathBuf {
+    for dir in ["/usr/sbin", "/usr/bin", "/usr/local/sbin", "/usr/local/bin"] {
+        let p = std::path::Path::new(dir).join(name);
+        if p.exists() {
+            return p;
         }
     }
-    panic!("mosquitto is not installed: run ./scripts/install-brokers");
+    panic!("{name} is not installed: run ./scripts/install-brokers");
 }
 
 /// A port free on loopback now.
@@ -89,7 +86,7 @@ impl Mosquitto {
     }
 
     fn run(&mut self) {
-        let child = Command::new(binary())
+        let child = Command::new(binary("mosquitto"))
             .arg("-c")
             .arg(&self.conf)
             .stdin(Stdio::null())
@@ -284,7 +281,7 @@ impl Nats {
         )
         .expect("writes the configuration");
         let log = std::fs::File::create(dir.path().join("nats.log")).expect("log");
-        let child = Command::new("nats-server")
+        let child = Command::new(binary("nats-server"))
             .arg("-c")
             .arg(&conf)
             .stdin(Stdio::null())
