@@ -216,6 +216,29 @@ impl ReadDecoder {
     }
 }
 
+/// One [`ReadDecoder`] per reader, by name.
+#[derive(Debug, Default)]
+pub struct Decoders(std::collections::HashMap<String, ReadDecoder>);
+
+impl Decoders {
+    /// Reader `name` advertises `hop_table` (its decoder keeps what it has learnt).
+    pub fn register(&mut self, name: &str, hop_table: Option<llrp::units::HopTable>) {
+        let d = self
+            .0
+            .remove(name)
+            .unwrap_or_else(|| ReadDecoder::new(Some(name.to_owned())))
+            .with_fallback_table(hop_table);
+        self.0.insert(name.to_owned(), d);
+    }
+
+    /// Reader `name`'s decoder, made when first asked for.
+    pub fn of(&mut self, name: &str) -> &mut ReadDecoder {
+        self.0
+            .entry(name.to_owned())
+            .or_insert_with(|| ReadDecoder::new(Some(name.to_owned())))
+    }
+}
+
 /// The LLRP frames of `bytes`, back to back as a reader writes them: each whole frame, then
 /// `Err(())` once if what is left is a frame cut short (a length field past the end or under
 /// a header's); a tail shorter than a header ends it quietly.

@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use broker_support::{worker, Mosquitto, Nats, Probe};
-use http_support::{counter, request, Proc};
+use broker_support::{publishing_sim, worker, Mosquitto, Nats, Probe};
+use http_support::{counter, request};
 
 /// EPC → (samples, [x, y, z]) of every located tag of `GET /api/tags`.
 fn located(http: SocketAddr) -> BTreeMap<String, (u64, [f64; 3])> {
@@ -58,21 +58,7 @@ fn two_workers_agree(url: &str, port: u16) {
         &["site/v1/status/+", "site/v1/status/gateway/+"],
     )];
     {
-        let mut sim = Proc::spawn(&[
-            "sim",
-            "--no-http",
-            "--listen",
-            "127.0.0.1:0",
-            "--speed",
-            "20",
-            "--poses",
-            "truth",
-            "--publish",
-            &url,
-            "--gateway-name",
-            "gw1",
-        ]);
-        sim.address("listening on ");
+        let _sim = publishing_sim(&url, &["--poses", "truth", "--gateway-name", "gw1"]);
         // S1's 46 s drive at 20× real time, and a margin.
         std::thread::sleep(Duration::from_secs(4));
         // Dropped: SIGTERM, and a clean exit publishes the offline statuses.
@@ -207,19 +193,7 @@ fn presence_events_tell_arrivals_moves_and_departures_with_positions() {
         &["--presence-silence-s", "1", "--presence-move-m", "0.5"],
     );
     {
-        let mut sim = Proc::spawn(&[
-            "sim",
-            "--no-http",
-            "--listen",
-            "127.0.0.1:0",
-            "--speed",
-            "20",
-            "--poses",
-            "truth",
-            "--publish",
-            &url,
-        ]);
-        sim.address("listening on ");
+        let _sim = publishing_sim(&url, &["--poses", "truth"]);
         std::thread::sleep(Duration::from_secs(3));
     }
     // Silent for the second of silence after the simulator stopped: every tag departs.

@@ -11,8 +11,8 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use broker_support::{free_port, worker, Mosquitto, Probe};
-use http_support::{counter, request, Proc};
+use broker_support::{free_port, publishing_sim, worker, Mosquitto, Probe};
+use http_support::{counter, request};
 
 /// CA and server certificate for 127.0.0.1 in `dir`: (ca.pem, server.pem, server.key).
 fn pki(dir: &Path) -> (String, String, String) {
@@ -150,19 +150,7 @@ fn tls_credentials_and_topic_rights_are_enforced_by_the_broker() {
     assert_eq!(counter(http, "mqtt_received"), 1.0);
 
     // The simulator with the right credentials, over TLS: its reads localize at the worker.
-    let mut sim = Proc::spawn(&[
-        "sim",
-        "--no-http",
-        "--listen",
-        "127.0.0.1:0",
-        "--speed",
-        "20",
-        "--publish",
-        &tls("gw:gw-pass"),
-        "--mqtt-ca",
-        &ca,
-    ]);
-    sim.address("listening on ");
+    let sim = publishing_sim(&tls("gw:gw-pass"), &["--mqtt-ca", &ca]);
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
         let tags = request(http, "GET", "/api/tags", &[], b"").json();

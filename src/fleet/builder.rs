@@ -11,7 +11,7 @@ use super::publish::{lock, topic_level, Link, PublishOptions};
 use super::schema::{self, TagRead, VERSION};
 use crate::localize::live::Input;
 use crate::localize::poses::PoseSample;
-use crate::reads::{Read, ReadDecoder};
+use crate::reads::Read;
 
 /// A [`ReadBatch`](super::schema::ReadBatch) serialized without copying its reads.
 #[derive(serde::Serialize)]
@@ -40,7 +40,7 @@ struct Pending {
 pub(super) struct Builder {
     opts: PublishOptions,
     link: Arc<Link>,
-    decoders: HashMap<String, ReadDecoder>,
+    decoders: crate::reads::Decoders,
     /// Reader time − robot time, per reader (poses go out in the reads' clock).
     offsets: HashMap<String, i64>,
     /// Per reader, per topic (under `v1/`), the last sequence number used.
@@ -55,7 +55,7 @@ impl Builder {
         Builder {
             opts,
             link,
-            decoders: HashMap::new(),
+            decoders: crate::reads::Decoders::default(),
             offsets: HashMap::new(),
             seqs: BTreeMap::new(),
             pending: BTreeMap::new(),
@@ -110,12 +110,7 @@ impl Builder {
                 clock_offset_us,
                 ..
             } => {
-                let decoder = self
-                    .decoders
-                    .remove(&name)
-                    .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
-                    .with_fallback_table(hop_table);
-                self.decoders.insert(name.clone(), decoder);
+                self.decoders.register(&name, hop_table);
                 self.offsets.insert(name.clone(), clock_offset_us);
                 self.came(&name);
             }
@@ -125,10 +120,7 @@ impl Builder {
                 now_utc_us,
             } => {
                 self.came(&reader);
-                let decoder = self
-                    .decoders
-                    .entry(reader.clone())
-                    .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
+                let decoder = self.decoders.of(&reader);
                 // The reads of each RO_ACCESS_REPORT apart: without a window, a message each.
                 let mut reports: Vec<Vec<Read>> = Vec::new();
                 let mut events = Vec::new();

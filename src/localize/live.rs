@@ -26,7 +26,7 @@ use super::ingest::Ingest;
 use super::poses::{PoseSample, Poses};
 use super::series::Ambiguity;
 use super::shared::{AntennaView, Shared, TagView, RECENT_READS};
-use crate::reads::{Read, ReadDecoder};
+use crate::reads::Read;
 
 pub use super::tap::{Input, Mirror, Tap};
 
@@ -155,7 +155,7 @@ struct Worker {
     settings: Settings,
     shared: Arc<Shared>,
     ingest: Ingest,
-    decoders: HashMap<String, ReadDecoder>,
+    decoders: crate::reads::Decoders,
     /// Reads waiting for a pose, with their arrival.
     waiting: VecDeque<(Read, Instant)>,
     reader_rates: HashMap<String, (u64, u64)>,
@@ -181,7 +181,7 @@ impl Worker {
             ingest: Ingest::new(poses, settings.ambiguity, settings.max_gap_us),
             settings,
             shared,
-            decoders: HashMap::new(),
+            decoders: crate::reads::Decoders::default(),
             waiting: VecDeque::new(),
             reader_rates: HashMap::new(),
             tags: BTreeMap::new(),
@@ -255,12 +255,7 @@ impl Worker {
                 antennas,
                 clock_offset_us,
             } => {
-                let decoder = self
-                    .decoders
-                    .remove(&name)
-                    .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
-                    .with_fallback_table(hop_table);
-                self.decoders.insert(name.clone(), decoder);
+                self.decoders.register(&name, hop_table);
                 self.ingest.poses_mut().set_offset(&name, clock_offset_us);
                 self.shared.update_reader(&name, |v| {
                     for a in antennas {
@@ -279,10 +274,7 @@ impl Worker {
                 bytes,
                 now_utc_us,
             } => {
-                let decoder = self
-                    .decoders
-                    .entry(reader.clone())
-                    .or_insert_with(|| ReadDecoder::new(Some(reader.clone())));
+                let decoder = self.decoders.of(&reader);
                 let mut reads = Vec::new();
                 for frame in crate::reads::frames(&bytes) {
                     let Ok(frame) = frame else {

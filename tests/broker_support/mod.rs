@@ -19,6 +19,25 @@ pub fn worker(url: &str, extra: &[&str]) -> (crate::http_support::Proc, std::net
     (p, addr)
 }
 
+/// `sim --no-http --speed 20 --publish URL` and `extra` on S1, once it listens; SIGTERM (a
+/// clean exit) when dropped. (Needs the test's `mod http_support;`.)
+pub fn publishing_sim(url: &str, extra: &[&str]) -> crate::http_support::Proc {
+    let mut args = vec![
+        "sim",
+        "--no-http",
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "20",
+        "--publish",
+        url,
+    ];
+    args.extend_from_slice(extra);
+    let mut p = crate::http_support::Proc::spawn(&args);
+    p.address("listening on ");
+    p
+}
+
 /// A running mosquitto.
 pub struct Mosquitto {
     /// Its loopback port.
