@@ -8,6 +8,7 @@ mod builder;
 pub mod presence;
 pub mod publish;
 pub mod schema;
+pub mod seq;
 pub mod url;
 pub mod worker;
 pub mod worker_cli;

@@ -6,9 +6,11 @@
 //! while the worker is down, or taken but not yet filed when it dies, come again from its
 //! session. Readers' statuses set their `connected` in `GET /api/readers` (a gateway's
 //! `offline` clears its readers'); a reader's clean `offline` carries its last sequence
-//! numbers, so messages missing at the end of a topic count as gaps too. A redelivered batch (a sequence number already seen from that reader on that
-//! topic in that gateway run) is counted and skipped; a malformed message or one on a topic
-//! not ours is counted and skipped.
+//! numbers, so messages missing at the end of a topic count as gaps too. A batch late into a
+//! gap is filed (a broker may redeliver out of order, as NATS JetStream does); a missing
+//! number counts as a gap once it is far behind or the reader's clean `offline` closes the
+//! topic; a batch already seen is counted as a duplicate and skipped ([`super::seq`]). A
+//! malformed message or one on a topic not ours is counted and skipped.
 
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,6 +24,7 @@ use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
 use super::presence::{Presence, PresenceEvent};
 use super::publish::{mqtt_options, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
+use super::seq::{Arrival, Seq};
 use super::url::BrokerUrl;
 use crate::localize::live::{Input, Live, Settings};
 use crate::localize::shared::{Shared, TagJson};
@@ -171,9 +174,8 @@ struct Run {
     client: Client,
     live_tap: crate::localize::live::Tap,
     shared: Arc<Shared>,
-    /// Per (gateway, reader, topic): the gateway run's first sequence number seen, and the
-    /// highest.
-    seen: HashMap<(String, String, String), u64>,
+    /// Per (gateway, reader, topic): the sequence numbers seen.
+    seen: HashMap<(String, String, String), Seq>,
     /// Each reader's gateway, from the statuses.
     gateways: HashMap<String, String>,
     presence: Arc<Mutex<Presence>>,
@@ -306,10 +308,7 @@ impl Run {
                 for (rest, &last) in &s.last_seq {
                     let key = (s.gateway.clone(), reader.clone(), rest.clone());
                     if let Some(seen) = self.seen.get_mut(&key) {
-                        if last > *seen {
-                            self.shared.metrics.mqtt_gaps.inc_by(last - *seen);
-                            *seen = last;
-                        }
+                        self.shared.metrics.mqtt_gaps.inc_by(seen.close(last));
                     }
                 }
             }
@@ -336,20 +335,12 @@ impl Run {
             return false;
         }
         let key = (b.gateway.clone(), b.reader.clone(), rest.to_owned());
-        let last = self.seen.get(&key).copied();
-        match last {
-            Some(l) if b.seq <= l && b.seq != 1 => {
-                self.shared.metrics.mqtt_duplicates.inc();
-                return true;
-            }
-            Some(l) if b.seq > l + 1 => {
-                self.shared.metrics.mqtt_gaps.inc_by(b.seq - l - 1);
-            }
-            _ => {}
+        let (arrival, lost) = self.seen.entry(key).or_default().arrive(b.seq);
+        self.shared.metrics.mqtt_gaps.inc_by(lost);
+        if arrival == Arrival::Duplicate {
+            self.shared.metrics.mqtt_duplicates.inc();
+            return true;
         }
-        // Sequence 1 again: the gateway started anew. (A first message with a higher number
-        // is where this worker's session began: no gap.)
-        self.seen.insert(key, b.seq);
         if !refs {
             let now = Instant::now();
             let events: Vec<PresenceEvent> = {
