@@ -237,3 +237,91 @@ fn a_replay_published_with_a_robots_poses_localizes_at_a_worker_as_offline() {
         assert!(d[0].hypot(d[1]) < 1e-3, "{a} vs {b}");
     }
 }
+
+/// Sends SIGCONT to a process stopped with SIGSTOP when dropped (also when the test fails).
+struct Stopped(u32);
+
+impl Stopped {
+    fn stop(pid: u32) -> Stopped {
+        let ok = Command::new("kill")
+            .args(["-STOP", &pid.to_string()])
+            .status()
+            .expect("kill runs")
+            .success();
+        assert!(ok, "SIGSTOP to {pid}");
+        Stopped(pid)
+    }
+}
+
+impl Drop for Stopped {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-CONT", &self.0.to_string()])
+            .status();
+    }
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn a_proxied_readers_keepalive_loss_and_return_are_published() {
+    let broker = Mosquitto::start("");
+    let probe = Probe::connect(broker.port, "keepalive-probe", &["k/v1/events/+"]);
+    let mut sim = Proc::spawn(&["sim", "--no-http", "--listen", "127.0.0.1:0"]);
+    let upstream = sim.address("listening on ");
+    let mut proxy = Proc::spawn(&[
+        "proxy",
+        "--upstream",
+        &upstream,
+        "--listen",
+        "127.0.0.1:0",
+        "--publish",
+        &broker.url("k"),
+    ]);
+    let llrp = proxy.address("listening on ");
+    // KEEPALIVEs every 200 ms; the client itself gives up on the reader only after 5.6 s.
+    let mut client = bin()
+        .args([
+            "inventory",
+            &llrp,
+            "--keepalive-ms",
+            "200",
+            "--seconds",
+            "6",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("inventory runs");
+    std::thread::sleep(Duration::from_millis(1500));
+    // The reader hangs for 1.5 s (over three periods) with its connection open, then goes on.
+    {
+        let _hung = Stopped::stop(sim.pid());
+        std::thread::sleep(Duration::from_millis(1500));
+    }
+    assert!(client.wait().expect("inventory ends").success());
+    let keepalive: Vec<serde_json::Value> = probe
+        .drain(Duration::from_secs(2))
+        .iter()
+        .filter(|m| m.0 == "k/v1/events/reader")
+        .map(|m| serde_json::from_slice::<serde_json::Value>(&m.1).expect("JSON"))
+        .filter(|e| !e["keepalive"].is_null())
+        .collect();
+    let states: Vec<&str> = keepalive
+        .iter()
+        .map(|e| e["keepalive"]["state"].as_str().unwrap_or_default())
+        .collect();
+    assert_eq!(states, ["lost", "restored"], "{keepalive:?}");
+    for e in &keepalive {
+        assert_eq!(e["keepalive"]["periodMs"], 200, "{e}");
+        assert!(e["keepalive"]["silentMs"].as_u64() >= Some(600), "{e}");
+        assert_eq!(
+            (e["reader"].as_str(), e["v"].as_u64()),
+            (Some("reader"), Some(1))
+        );
+    }
+    assert!(
+        keepalive[1]["keepalive"]["silentMs"].as_u64() >= Some(1400),
+        "restored after the whole hang: {}",
+        keepalive[1]
+    );
+}

@@ -126,6 +126,12 @@ fn through_a_broker_restart(queue: &str) -> Outcome {
             n - got
         })
         .sum();
+    // The worker counts what is still missing once the close's grace has passed, at its
+    // connection's next event (a keep-alive ping at least every 5 s).
+    let settled = Instant::now() + llrp_gateway::fleet::seq::CLOSE_GRACE + Duration::from_secs(6);
+    while counter(http, "mqtt_gaps") == 0.0 && Instant::now() < settled {
+        std::thread::sleep(Duration::from_millis(100));
+    }
     Outcome {
         dropped,
         missing,

@@ -174,6 +174,19 @@ impl Builder {
                 self.came(&reader);
                 self.event(&reader, &data);
             }
+            Input::Keepalive {
+                reader,
+                lost,
+                period_ms,
+                silent_ms,
+            } => {
+                let link = schema::KeepaliveEvent {
+                    state: if lost { "lost" } else { "restored" }.into(),
+                    period_ms,
+                    silent_ms,
+                };
+                self.event_of(&reader, "keepalive", &link);
+            }
         }
     }
 
@@ -261,15 +274,21 @@ impl Builder {
     }
 
     fn event(&mut self, reader: &str, data: &llrp::params::ReaderEventNotificationData) {
+        self.event_of(reader, "event", data);
+    }
+
+    /// Publishes `value` as field `key` of a message on `events/{reader}`.
+    fn event_of(&mut self, reader: &str, key: &str, value: &impl serde::Serialize) {
         let rest = format!("events/{}", topic_level(reader));
         let seq = self.next_seq(reader, &rest);
-        let payload = serde_json::json!({
+        let mut payload = serde_json::json!({
             "v": VERSION,
             "gateway": self.opts.gateway,
             "reader": reader,
             "seq": seq,
-            "event": data,
         });
+        // An event of plain values always serializes.
+        payload[key] = serde_json::to_value(value).unwrap_or_default();
         self.link
             .publish(&rest, false, payload.to_string().into_bytes(), 1, true);
     }

@@ -146,6 +146,19 @@ pub struct Status {
     pub last_seq: std::collections::BTreeMap<String, u64>,
 }
 
+/// A proxied reader's keepalive link lost or restored: the `keepalive` field of a message
+/// on `PREFIX/v1/events/{reader}` (beside `v`, `gateway`, `reader` and `seq`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+pub struct KeepaliveEvent {
+    /// `lost` (no KEEPALIVE for three periods) or `restored` (one came again).
+    pub state: String,
+    /// The period expected: the client's KeepaliveSpec, or the interval seen (ms).
+    pub period_ms: u64,
+    /// Time without a KEEPALIVE (ms).
+    pub silent_ms: u64,
+}
+
 /// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds.
 pub fn rfc3339(us: u64) -> String {
     humantime::format_rfc3339_micros(UNIX_EPOCH + Duration::from_micros(us)).to_string()

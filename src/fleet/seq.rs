@@ -1,75 +1,215 @@
-//! A subscriber's view of one topic's sequence numbers from one reader: which message is
-//! new, late (it fills a gap: brokers such as NATS JetStream may redeliver out of order) or
-//! a duplicate, and how many are missing for good.
+//! A subscriber's view of one topic's sequence numbers from one reader, as a reorder buffer
+//! (sans IO: the caller passes the time). Messages are handed back for filing in sequence
+//! order: one that comes ahead of a missing number is held until the gap fills (brokers such
+//! as NATS JetStream may redeliver out of order, and a tag's reads filed out of order give
+//! another estimate), for at most [`HOLD`] and [`MAX_HELD`] messages; then the gap is
+//! skipped, and a message that still comes late into it is filed out of order. A missing
+//! number counts as lost once it is [`REORDER_WINDOW`] behind, or [`CLOSE_GRACE`] after the
+//! publisher's clean close named a last number at or past it.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
 
-/// A missing number this far behind the highest one seen is counted as lost.
+/// A skipped number this far behind the next expected one is counted as lost.
 pub const REORDER_WINDOW: u64 = 10_000;
 
-/// What a message's sequence number makes of it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Arrival {
-    /// New, or late into a gap: file it.
-    File,
-    /// Seen already (QoS 1 redelivery): skip it.
-    Duplicate,
+/// How long a message waits for an earlier missing one before the gap is skipped (as long
+/// as a live read waits for its pose, [`crate::localize::live::POSE_WAIT`]).
+pub const HOLD: Duration = Duration::from_secs(2);
+
+/// At most this many messages are held for a gap; one more skips it.
+pub const MAX_HELD: usize = 1_000;
+
+/// How long after the publisher's close messages before its last number may still come
+/// (a broker delivers topics independently: the close may overtake the last batches).
+pub const CLOSE_GRACE: Duration = Duration::from_secs(5);
+
+/// What one arrival or tick makes of the messages.
+#[derive(Debug)]
+pub struct Step<T> {
+    /// To file now, in this order.
+    pub file: Vec<T>,
+    /// The arrival, when it was seen already (QoS 1 redelivery): skip it.
+    pub duplicate: Option<T>,
+    /// Numbers now counted as lost.
+    pub lost: u64,
+    /// The arrival came ahead of a missing number and is held.
+    pub held: bool,
 }
 
-/// One topic's numbers.
-#[derive(Clone, Debug, Default)]
-pub struct Seq {
-    high: u64,
+impl<T> Default for Step<T> {
+    fn default() -> Self {
+        Step {
+            file: Vec::new(),
+            duplicate: None,
+            lost: 0,
+            held: false,
+        }
+    }
+}
+
+/// One topic's numbers and the messages held for a gap.
+#[derive(Debug)]
+pub struct Seq<T> {
+    /// The next number to file; 0 before the first message.
+    next: u64,
+    /// Numbers below `next` skipped over and not seen yet.
     missing: BTreeSet<u64>,
+    /// Messages above `next`, with when they came.
+    held: BTreeMap<u64, (T, Instant)>,
+    /// The publisher's last number and when its gaps count as lost.
+    close: Option<(u64, Instant)>,
 }
 
-impl Seq {
-    /// Message `seq` came; the arrival and the numbers now counted as lost. The first number
-    /// seen is where this subscriber's session began (no loss before it); 1 again after
-    /// higher ones is a new gateway run.
-    pub fn arrive(&mut self, seq: u64) -> (Arrival, u64) {
-        if self.high == 0 {
-            self.high = seq;
-            return (Arrival::File, 0);
+impl<T> Default for Seq<T> {
+    fn default() -> Self {
+        Seq {
+            next: 0,
+            missing: BTreeSet::new(),
+            held: BTreeMap::new(),
+            close: None,
         }
-        if seq == 1 && !self.missing.contains(&1) {
-            let lost = self.missing.len() as u64;
-            *self = Seq {
-                high: 1,
-                missing: BTreeSet::new(),
-            };
-            return (Arrival::File, lost);
-        }
-        if seq > self.high {
-            self.missing.extend(self.high + 1..seq);
-            self.high = seq;
-            let mut lost = 0;
-            while let Some(&first) = self.missing.first() {
-                if first + REORDER_WINDOW >= self.high {
-                    break;
-                }
-                self.missing.pop_first();
-                lost += 1;
+    }
+}
+
+impl<T> Seq<T> {
+    /// Message `seq` came at `now`. The first number seen is where this subscriber's session
+    /// began (no loss before it); 1 again after higher ones is a new gateway run.
+    pub fn arrive(&mut self, seq: u64, item: T, now: Instant) -> Step<T> {
+        let mut step = Step::default();
+        if self.next == 0 {
+            self.next = seq + 1;
+            step.file.push(item);
+        } else if seq == 1 && self.next > 2 && !self.missing.contains(&1) {
+            self.release_all(&mut step);
+            step.lost += std::mem::take(&mut self.missing).len() as u64;
+            self.close = None;
+            self.next = 2;
+            step.file.push(item);
+        } else if seq < self.next {
+            if self.missing.remove(&seq) {
+                step.file.push(item);
+            } else {
+                step.duplicate = Some(item);
             }
-            return (Arrival::File, lost);
-        }
-        if self.missing.remove(&seq) {
-            (Arrival::File, 0)
+        } else if seq == self.next {
+            self.next += 1;
+            step.file.push(item);
+            self.drain(&mut step);
+        } else if let std::collections::btree_map::Entry::Vacant(slot) = self.held.entry(seq) {
+            slot.insert((item, now));
+            step.held = true;
+            while self.held.len() > MAX_HELD
+                || self
+                    .held
+                    .last_key_value()
+                    .is_some_and(|(&high, _)| high - self.next >= REORDER_WINDOW)
+            {
+                self.release_first(&mut step);
+            }
         } else {
-            (Arrival::Duplicate, 0)
+            step.duplicate = Some(item);
+        }
+        self.settle(&mut step);
+        step
+    }
+
+    /// Time passed: skips the gaps messages have waited on for [`HOLD`], and counts what is
+    /// still missing [`CLOSE_GRACE`] after a close.
+    pub fn tick(&mut self, now: Instant) -> Step<T> {
+        let mut step = Step::default();
+        while self
+            .held
+            .first_key_value()
+            .is_some_and(|(_, (_, at))| now.duration_since(*at) >= HOLD)
+        {
+            self.release_first(&mut step);
+        }
+        if let Some((last, at)) = self.close {
+            if now >= at {
+                while self.held.first_key_value().is_some_and(|(&s, _)| s <= last) {
+                    self.release_first(&mut step);
+                }
+                if self.next <= last {
+                    self.missing.extend(self.next..=last);
+                    self.next = last + 1;
+                }
+                step.lost += std::mem::take(&mut self.missing).len() as u64;
+                self.close = None;
+            }
+        }
+        self.settle(&mut step);
+        step
+    }
+
+    /// The publisher's last number was `last` (its reader's clean `offline`) at `now`: what
+    /// is still missing up to it counts as lost unless it comes within [`CLOSE_GRACE`].
+    pub fn close(&mut self, last: u64, now: Instant) {
+        if self.next != 0 {
+            self.close = Some((last, now + CLOSE_GRACE));
+            let mut step = Step::default();
+            self.settle(&mut step);
         }
     }
 
-    /// The publisher's last number was `last` (its reader's clean `offline`): everything
-    /// still missing up to it is lost.
-    pub fn close(&mut self, last: u64) -> u64 {
-        if self.high == 0 {
-            return 0;
+    /// The next number to file (0 before the first message).
+    pub fn expected(&self) -> u64 {
+        self.next
+    }
+
+    /// The message held as number `seq`, if it is.
+    pub fn held_mut(&mut self, seq: u64) -> Option<&mut T> {
+        self.held.get_mut(&seq).map(|(item, _)| item)
+    }
+
+    /// Messages held now.
+    pub fn held(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Files the held messages that now follow on.
+    fn drain(&mut self, step: &mut Step<T>) {
+        while let Some(entry) = self.held.first_entry() {
+            if *entry.key() != self.next {
+                break;
+            }
+            step.file.push(entry.remove().0);
+            self.next += 1;
         }
-        let lost = self.missing.len() as u64 + last.saturating_sub(self.high);
-        self.missing.clear();
-        self.high = self.high.max(last);
-        lost
+    }
+
+    /// Skips the gap before the first held message, files it and what follows on.
+    fn release_first(&mut self, step: &mut Step<T>) {
+        if let Some((seq, (item, _))) = self.held.pop_first() {
+            self.missing.extend(self.next..seq);
+            self.next = seq + 1;
+            step.file.push(item);
+            self.drain(step);
+        }
+    }
+
+    /// Files everything held, gaps skipped.
+    fn release_all(&mut self, step: &mut Step<T>) {
+        while !self.held.is_empty() {
+            self.release_first(step);
+        }
+    }
+
+    /// Counts the numbers now too far behind, and ends a close whose numbers have all come.
+    fn settle(&mut self, step: &mut Step<T>) {
+        while let Some(&first) = self.missing.first() {
+            if first + REORDER_WINDOW >= self.next {
+                break;
+            }
+            self.missing.pop_first();
+            step.lost += 1;
+        }
+        if let Some((last, _)) = self.close {
+            let complete = self.next > last && self.missing.range(..=last).next().is_none();
+            if complete {
+                self.close = None;
+            }
+        }
     }
 }
 
@@ -77,28 +217,99 @@ impl Seq {
 mod tests {
     use super::*;
 
+    fn filed(step: &Step<u64>) -> Vec<u64> {
+        step.file.clone()
+    }
+
     #[test]
-    fn late_messages_fill_their_gap_and_only_what_never_comes_is_lost() {
+    fn a_message_ahead_of_a_gap_waits_for_it_and_both_are_filed_in_order() {
+        let t = Instant::now();
         let mut s = Seq::default();
-        assert_eq!(s.arrive(5), (Arrival::File, 0));
-        assert_eq!(s.arrive(8), (Arrival::File, 0));
-        // 6 comes late: filed, not a duplicate; 8 again is one.
-        assert_eq!(s.arrive(6), (Arrival::File, 0));
-        assert_eq!(s.arrive(8), (Arrival::Duplicate, 0));
-        assert_eq!(s.arrive(6), (Arrival::Duplicate, 0));
-        // 7 never comes: lost at the close, with 9 and 10 after the last one seen.
-        assert_eq!(s.close(10), 3);
+        assert_eq!(filed(&s.arrive(5, 5, t)), [5]);
+        let ahead = s.arrive(7, 7, t);
+        assert!(ahead.held && ahead.file.is_empty());
+        let ahead = s.arrive(8, 8, t);
+        assert!(ahead.held && ahead.file.is_empty());
+        let late = s.arrive(6, 6, t);
+        assert_eq!(filed(&late), [6, 7, 8]);
+        assert_eq!(late.lost, 0);
+        assert_eq!(s.arrive(7, 7, t).duplicate, Some(7));
+        assert_eq!(s.held(), 0);
+    }
+
+    #[test]
+    fn a_gap_that_does_not_fill_in_time_is_skipped_and_a_later_arrival_still_filed() {
+        let t = Instant::now();
+        let mut s = Seq::default();
+        s.arrive(1, 1, t);
+        assert!(s.arrive(3, 3, t).held);
+        assert!(s.tick(t + HOLD / 2).file.is_empty());
+        let step = s.tick(t + HOLD);
+        assert_eq!(filed(&step), [3]);
+        assert_eq!(step.lost, 0, "skipped, not yet lost");
+        // 2 comes late after all: filed out of order, once.
+        assert_eq!(filed(&s.arrive(2, 2, t + HOLD)), [2]);
+        assert_eq!(s.arrive(2, 2, t + HOLD).duplicate, Some(2));
+    }
+
+    #[test]
+    fn a_close_overtaken_by_its_last_messages_loses_nothing() {
+        let t = Instant::now();
+        let mut s = Seq::default();
+        s.arrive(1, 1, t);
+        s.close(3, t);
+        assert_eq!(filed(&s.arrive(2, 2, t)), [2]);
+        assert_eq!(filed(&s.arrive(3, 3, t)), [3]);
+        assert_eq!(s.tick(t + CLOSE_GRACE).lost, 0);
+    }
+
+    #[test]
+    fn what_never_comes_is_lost_after_the_close_grace() {
+        let t = Instant::now();
+        let mut s = Seq::default();
+        s.arrive(5, 5, t);
+        s.arrive(8, 8, t);
+        s.close(10, t);
+        let early = s.tick(t + CLOSE_GRACE - Duration::from_millis(1));
+        assert_eq!(early.lost, 0);
+        let step = s.tick(t + CLOSE_GRACE);
+        // 8 is filed (once its hold is over, or at the close); 6, 7, 9 and 10 never came.
+        assert_eq!([filed(&early), filed(&step)].concat(), [8]);
+        assert_eq!(step.lost, 4);
+        assert_eq!(s.arrive(11, 11, t + CLOSE_GRACE).lost, 0);
     }
 
     #[test]
     fn numbers_far_behind_are_lost_and_one_again_is_a_new_run() {
+        let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(1);
-        assert_eq!(s.arrive(3 + REORDER_WINDOW), (Arrival::File, 1));
+        s.arrive(1, 1, t);
+        let far = s.arrive(2 + REORDER_WINDOW, 0, t);
+        assert_eq!(
+            filed(&far),
+            [0],
+            "released at once: too far ahead to wait for"
+        );
+        assert_eq!(far.lost, 1);
         let mut r = Seq::default();
-        r.arrive(10);
-        r.arrive(12);
-        assert_eq!(r.arrive(1), (Arrival::File, 1));
-        assert_eq!(r.arrive(2), (Arrival::File, 0));
+        r.arrive(10, 10, t);
+        r.arrive(12, 12, t);
+        let run = r.arrive(1, 1, t);
+        assert_eq!(filed(&run), [12, 1], "the old run's held message first");
+        assert_eq!(run.lost, 1);
+        assert_eq!(filed(&r.arrive(2, 2, t)), [2]);
+    }
+
+    #[test]
+    fn no_more_than_max_held_wait_for_one_gap() {
+        let t = Instant::now();
+        let mut s = Seq::default();
+        s.arrive(1, 1, t);
+        for n in 3..3 + MAX_HELD as u64 {
+            assert!(s.arrive(n, n, t).file.is_empty());
+        }
+        let over = s.arrive(3 + MAX_HELD as u64, 0, t);
+        assert_eq!(over.file.len(), MAX_HELD + 1);
+        assert_eq!(s.held(), 0);
     }
 }

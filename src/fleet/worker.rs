@@ -10,7 +10,12 @@
 //! gap is filed (a broker may redeliver out of order, as NATS JetStream does); a missing
 //! number counts as a gap once it is far behind or the reader's clean `offline` closes the
 //! topic; a batch already seen is counted as a duplicate and skipped ([`super::seq`]). A
-//! malformed message or one on a topic not ours is counted and skipped.
+//! batch that comes ahead of a missing one is held until the gap fills or
+//! [`super::seq::HOLD`] passes, so each topic's batches are filed in sequence order whatever
+//! order the broker delivers them in. A held batch is acknowledged as it is held (a broker
+//! may deliver the missing one only once those before it are acknowledged): a worker killed
+//! while holding loses what it held, at most [`super::seq::MAX_HELD`] batches a topic. A malformed message or one on a topic not
+//! ours is counted and skipped.
 
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,7 +29,7 @@ use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
 use super::presence::{Presence, PresenceEvent};
 use super::publish::{mqtt_options, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
-use super::seq::{Arrival, Seq};
+use super::seq::{Seq, Step};
 use super::url::BrokerUrl;
 use crate::localize::live::{Input, Live, Settings};
 use crate::localize::shared::{Shared, TagJson};
@@ -117,6 +122,7 @@ impl Worker {
             live_tap: live.tap.clone(),
             shared: live.shared.clone(),
             seen: HashMap::new(),
+            ticked: Instant::now(),
             gateways: HashMap::new(),
             presence: presence.clone(),
             stopping: stopping.clone(),
@@ -174,8 +180,10 @@ struct Run {
     client: Client,
     live_tap: crate::localize::live::Tap,
     shared: Arc<Shared>,
-    /// Per (gateway, reader, topic): the sequence numbers seen.
-    seen: HashMap<(String, String, String), Seq>,
+    /// Per (gateway, reader, topic): the sequence numbers seen and the batches held.
+    seen: HashMap<(String, String, String), Seq<Held>>,
+    /// When the held batches were last looked at.
+    ticked: Instant,
     /// Each reader's gateway, from the statuses.
     gateways: HashMap<String, String>,
     presence: Arc<Mutex<Presence>>,
@@ -205,6 +213,8 @@ impl Run {
         let mut acks = 0;
         let topics = self.topics().len();
         for event in connection.iter() {
+            // Every event (a keep-alive ping at least every 5 s) gives held batches their turn.
+            self.tick(Instant::now());
             match event {
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
                     if ack
@@ -232,10 +242,7 @@ impl Run {
                         let _ = self.client.try_subscribe(topic, QoS::AtLeastOnce);
                     }
                 }
-                Ok(Event::Incoming(Packet::Publish(p))) => {
-                    self.message(&p);
-                    let _ = self.client.try_ack(&p);
-                }
+                Ok(Event::Incoming(Packet::Publish(p))) => self.message(p),
                 Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => return,
                 Ok(_) => {}
                 Err(e) => {
@@ -260,21 +267,23 @@ impl Run {
         }
     }
 
-    /// Files one message, or counts it as malformed.
-    fn message(&mut self, p: &Publish) {
+    /// Files one message (or holds a batch ahead of a gap), or counts it as malformed; a
+    /// message is acknowledged once the localizer has it, or skipped.
+    fn message(&mut self, p: Publish) {
         self.shared.metrics.mqtt_received.inc();
         let base = self.opts.url.topic(&format!("v{VERSION}/"));
-        let Some(rest) = p.topic.strip_prefix(&base) else {
+        let Some(rest) = p.topic.strip_prefix(&base).map(str::to_owned) else {
             self.shared.metrics.mqtt_malformed.inc();
+            self.ack(&p);
             return;
         };
         let levels: Vec<&str> = rest.split('/').collect();
         let ok = match levels.as_slice() {
             ["reads", s] => match s.parse::<u16>() {
-                Ok(s) if self.opts.shards.contains(&s) => self.batch(rest, &p.payload, false),
+                Ok(s) if self.opts.shards.contains(&s) => return self.batch(&rest, p, false),
                 _ => false,
             },
-            ["refs"] => self.batch(rest, &p.payload, true),
+            ["refs"] => return self.batch(&rest, p, true),
             ["status", "gateway", _] | ["status", _] => self.status(&p.payload),
             ["poses", _, _] => match crate::http::poses::parse_poses(&p.payload) {
                 Ok(poses) => {
@@ -288,11 +297,12 @@ impl Run {
         if !ok {
             self.shared.metrics.mqtt_malformed.inc();
         }
+        self.ack(&p);
     }
 
     /// Takes a reader's or gateway's status: the readers' views follow it, and a reader's
-    /// clean `offline` with its `lastSeq` counts the messages missing at the end of each of
-    /// our topics. `false` when it is not a status of the schema.
+    /// clean `offline` with its `lastSeq` closes each of our topics (what has not come by
+    /// then, or shortly after, is a gap). `false` when it is not a status of the schema.
     fn status(&mut self, payload: &[u8]) -> bool {
         let Ok(s) = serde_json::from_slice::<schema::Status>(payload) else {
             return false;
@@ -305,10 +315,11 @@ impl Run {
             Some(reader) => {
                 self.gateways.insert(reader.clone(), s.gateway.clone());
                 self.shared.update_reader(reader, |v| v.connected = online);
+                let now = Instant::now();
                 for (rest, &last) in &s.last_seq {
                     let key = (s.gateway.clone(), reader.clone(), rest.clone());
                     if let Some(seen) = self.seen.get_mut(&key) {
-                        self.shared.metrics.mqtt_gaps.inc_by(seen.close(last));
+                        seen.close(last, now);
                     }
                 }
             }
@@ -325,22 +336,73 @@ impl Run {
         true
     }
 
-    /// Files a read batch; `refs`: only the reads of tags in shards not ours (ours come on
-    /// their shard). `false` when it is not a batch of the schema.
-    fn batch(&mut self, rest: &str, payload: &[u8], refs: bool) -> bool {
-        let Ok(b) = serde_json::from_slice::<ReadBatch>(payload) else {
-            return false;
+    /// Takes a read batch in its topic's sequence order: files it and the held ones that
+    /// follow on, holds it ahead of a gap, or skips a duplicate. Malformed: counted, acked.
+    fn batch(&mut self, rest: &str, publish: Publish, refs: bool) {
+        let batch = match serde_json::from_slice::<ReadBatch>(&publish.payload) {
+            Ok(b) if b.v == VERSION => b,
+            _ => {
+                self.shared.metrics.mqtt_malformed.inc();
+                self.ack(&publish);
+                return;
+            }
         };
-        if b.v != VERSION {
-            return false;
+        let key = (batch.gateway.clone(), batch.reader.clone(), rest.to_owned());
+        let seq = batch.seq;
+        let held = Held {
+            batch,
+            refs,
+            publish: Some(publish),
+        };
+        let seen = self.seen.entry(key).or_default();
+        let expected = seen.expected();
+        let step = seen.arrive(seq, held, Instant::now());
+        if step.held {
+            // Acknowledged as it is held: a broker may hold back the missing message until
+            // the ones it delivered are (NATS: max_ack_pending per subscription).
+            if let Some(p) = seen.held_mut(seq).and_then(|h| h.publish.take()) {
+                self.ack(&p);
+            }
+            self.shared.metrics.mqtt_reordered.inc();
+            tracing::debug!(topic = rest, seq, expected, "batch ahead of a gap: held");
+        } else if seq < expected && !step.file.is_empty() {
+            tracing::debug!(topic = rest, seq, expected, "late batch filed");
         }
-        let key = (b.gateway.clone(), b.reader.clone(), rest.to_owned());
-        let (arrival, lost) = self.seen.entry(key).or_default().arrive(b.seq);
-        self.shared.metrics.mqtt_gaps.inc_by(lost);
-        if arrival == Arrival::Duplicate {
+        self.take(step);
+    }
+
+    /// Gives every topic's held batches their turn, at most every 100 ms.
+    fn tick(&mut self, now: Instant) {
+        if now.duration_since(self.ticked) < Duration::from_millis(100) {
+            return;
+        }
+        self.ticked = now;
+        let steps: Vec<Step<Held>> = self.seen.values_mut().map(|s| s.tick(now)).collect();
+        for step in steps {
+            self.take(step);
+        }
+    }
+
+    /// Files, skips and counts what a step of a topic's sequence gives.
+    fn take(&mut self, step: Step<Held>) {
+        self.shared.metrics.mqtt_gaps.inc_by(step.lost);
+        if let Some(dup) = step.duplicate {
             self.shared.metrics.mqtt_duplicates.inc();
-            return true;
+            if let Some(p) = dup.publish {
+                self.ack(&p);
+            }
         }
+        for held in step.file {
+            self.file(&held.batch, held.refs);
+            if let Some(p) = held.publish {
+                self.ack(&p);
+            }
+        }
+    }
+
+    /// Files a read batch; `refs`: only the reads of tags in shards not ours (ours come on
+    /// their shard).
+    fn file(&mut self, b: &ReadBatch, refs: bool) {
         if !refs {
             let now = Instant::now();
             let events: Vec<PresenceEvent> = {
@@ -376,7 +438,13 @@ impl Run {
         if !reads.is_empty() {
             self.offer(Input::Reads(reads));
         }
-        true
+    }
+
+    /// Acknowledges `p` to the broker.
+    fn ack(&self, p: &Publish) {
+        if let Err(e) = self.client.try_ack(p) {
+            tracing::warn!(error = %e, "acknowledgement not sent");
+        }
     }
 
     /// Hands `input` to the localizer, waiting while it is behind (the broker holds the rest).
@@ -391,6 +459,15 @@ impl Run {
             }
         }
     }
+}
+
+/// A read batch on its way to the localizer, and the message to acknowledge once it is there
+/// (`None`: acknowledged when it was held).
+#[derive(Debug)]
+struct Held {
+    batch: ReadBatch,
+    refs: bool,
+    publish: Option<Publish>,
 }
 
 /// Where a worker publishes.

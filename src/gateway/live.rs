@@ -3,6 +3,7 @@
 //! per-reader settings from a settings file.
 
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 use crate::http::launch::{launch, HttpArgs, Launched};
 use crate::localize::estimate::Estimator;
@@ -10,6 +11,7 @@ use crate::localize::live::{Input, Live, Settings, Tap};
 use crate::localize::offline::{geometry, SettingsFile};
 use crate::localize::poses::Poses;
 use crate::localize::series::Ambiguity;
+use crate::net::proxy::keepalive::{self, Change, Links};
 use crate::net::proxy::Tapped;
 
 /// The localizer options of `proxy` and `replay`.
@@ -200,41 +202,94 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
     Ok(Some(Running { live, http }))
 }
 
-/// Hands the proxy's tapped reads to the localizer until the proxy's tap closes.
-pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, tap: Tap) {
-    while let Some(t) = rx.recv().await {
-        match t {
-            Tapped::Reads(reads) => {
-                tap.offer(Input::Reads(reads));
-            }
-            Tapped::Event {
-                reader, message, ..
-            } => {
-                let llrp::MessageBody::ReaderEventNotification(n) = &message.body else {
-                    continue;
-                };
-                let data = &n.reader_event_notification_data;
-                tap.offer(Input::Event {
-                    reader: reader.clone(),
-                    data: Box::new(data.clone()),
-                });
-                let connected = if data.connection_close_event.is_some() {
-                    Some(false)
-                } else {
-                    data.connection_attempt_event
-                        .as_ref()
-                        .map(|e| e.status == llrp::enums::ConnectionAttemptStatus::Success)
-                };
-                if let Some(c) = connected {
-                    tap.offer(Input::Status {
-                        reader: reader.clone(),
-                        online: c,
-                    });
-                    tap.shared().update_reader(&reader, |v| {
-                        v.connected = c;
-                        v.inventory = if c { "client" } else { "idle" }.into();
-                    });
+/// How often the proxy's keepalive links are looked at.
+const LINK_POLL: Duration = Duration::from_millis(50);
+
+/// Hands the proxy's tapped reads and events to the localizer (and its mirrors) until the
+/// proxy's tap closes, and watches its sessions' keepalive links (`links`): a link lost or
+/// restored is logged, counted and handed on as [`Input::Keepalive`].
+pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, links: Links, tap: Tap) {
+    let mut poll = tokio::time::interval(LINK_POLL);
+    poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            t = rx.recv() => match t {
+                Some(t) => forward_one(t, &tap),
+                None => return,
+            },
+            _ = poll.tick() => {
+                for (reader, change) in links.poll(Instant::now()) {
+                    keepalive_change(&tap, &reader, change);
                 }
+            }
+        }
+    }
+}
+
+/// Logs, counts and hands on a change of `reader`'s keepalive link.
+fn keepalive_change(tap: &Tap, reader: &str, change: Change) {
+    let ms = |d: Duration| u64::try_from(d.as_millis()).unwrap_or(u64::MAX);
+    let (lost, period, silent) = match change {
+        Change::Lost { period, silent } => {
+            tap.shared().metrics.keepalive_losses.inc();
+            tracing::warn!(
+                reader,
+                period_ms = ms(period),
+                "no KEEPALIVE for {} periods: the reader's link is taken for lost",
+                keepalive::MISSES
+            );
+            (true, period, silent)
+        }
+        Change::Restored { period, silent } => {
+            tracing::info!(
+                reader,
+                silent_ms = ms(silent),
+                "KEEPALIVEs again: the reader's link is back"
+            );
+            (false, period, silent)
+        }
+    };
+    tap.offer(Input::Keepalive {
+        reader: reader.to_owned(),
+        lost,
+        period_ms: ms(period),
+        silent_ms: ms(silent),
+    });
+}
+
+/// Hands one tapped report or event on.
+fn forward_one(t: Tapped, tap: &Tap) {
+    match t {
+        Tapped::Reads(reads) => {
+            tap.offer(Input::Reads(reads));
+        }
+        Tapped::Event {
+            reader, message, ..
+        } => {
+            let llrp::MessageBody::ReaderEventNotification(n) = &message.body else {
+                return;
+            };
+            let data = &n.reader_event_notification_data;
+            tap.offer(Input::Event {
+                reader: reader.clone(),
+                data: Box::new(data.clone()),
+            });
+            let connected = if data.connection_close_event.is_some() {
+                Some(false)
+            } else {
+                data.connection_attempt_event
+                    .as_ref()
+                    .map(|e| e.status == llrp::enums::ConnectionAttemptStatus::Success)
+            };
+            if let Some(c) = connected {
+                tap.offer(Input::Status {
+                    reader: reader.clone(),
+                    online: c,
+                });
+                tap.shared().update_reader(&reader, |v| {
+                    v.connected = c;
+                    v.inventory = if c { "client" } else { "idle" }.into();
+                });
             }
         }
     }

@@ -320,7 +320,7 @@ impl Worker {
             Input::Status { reader, online } => {
                 self.shared.update_reader(&reader, |v| v.connected = online);
             }
-            Input::Event { .. } => {}
+            Input::Event { .. } | Input::Keepalive { .. } => {}
         }
     }
 

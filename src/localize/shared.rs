@@ -129,8 +129,12 @@ pub struct Metrics {
     pub mqtt_gaps: Counter,
     /// Messages received again (QoS 1 redelivery), as a worker counts them.
     pub mqtt_duplicates: Counter,
+    /// Read batches a worker held because they came ahead of a missing one.
+    pub mqtt_reordered: Counter,
     /// Connections to the broker lost.
     pub mqtt_disconnects: Counter,
+    /// Proxied readers' keepalive links taken for lost (no KEEPALIVE for three periods).
+    pub keepalive_losses: Counter,
     registry: Registry,
 }
 
@@ -162,7 +166,9 @@ impl Metrics {
             mqtt_malformed: Counter::default(),
             mqtt_gaps: Counter::default(),
             mqtt_duplicates: Counter::default(),
+            mqtt_reordered: Counter::default(),
             mqtt_disconnects: Counter::default(),
+            keepalive_losses: Counter::default(),
             registry: Registry::with_prefix("llrp_gateway"),
         };
         let mut registry = Registry::with_prefix("llrp_gateway");
@@ -194,6 +200,11 @@ impl Metrics {
             m.set_aside.clone(),
         );
         registry.register("poses", "Pose samples taken in", m.poses.clone());
+        registry.register(
+            "keepalive_losses",
+            "Proxied readers' keepalive links taken for lost",
+            m.keepalive_losses.clone(),
+        );
         registry.register(
             "estimator_seconds",
             "Compute time of one tag's estimate",
@@ -235,6 +246,11 @@ impl Metrics {
                 "mqtt_duplicates",
                 "MQTT messages received again",
                 &m.mqtt_duplicates,
+            ),
+            (
+                "mqtt_reordered",
+                "MQTT read batches held for an earlier missing one",
+                &m.mqtt_reordered,
             ),
             (
                 "mqtt_disconnects",

@@ -54,6 +54,18 @@ pub enum Input {
         /// The event.
         data: Box<llrp::params::ReaderEventNotificationData>,
     },
+    /// A proxied reader's KEEPALIVEs stopped or came back (the localizer has no use for
+    /// it; an MQTT publisher forwards it).
+    Keepalive {
+        /// The reader's name.
+        reader: String,
+        /// Lost (no KEEPALIVE for three periods), or back.
+        lost: bool,
+        /// The period expected (ms).
+        period_ms: u64,
+        /// Time without a KEEPALIVE (ms).
+        silent_ms: u64,
+    },
 }
 
 impl Input {

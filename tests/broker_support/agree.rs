@@ -88,6 +88,7 @@ pub fn two_workers_agree(url: &str, port: u16) {
                 "mqtt_received",
                 "mqtt_gaps",
                 "mqtt_duplicates",
+                "mqtt_reordered",
                 "reads",
                 "reads_set_aside",
                 "poses",

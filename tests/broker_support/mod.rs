@@ -276,7 +276,9 @@ impl Probe {
 
 /// A running nats-server with JetStream and its MQTT interface on free loopback ports (its
 /// MQTT `max_ack_pending` left at the default: set to 65,535, a session with several
-/// subscriptions got only its first one's messages).
+/// subscriptions got only its first one's messages; `ack_wait` 1 s, below the workers' hold
+/// for a gap: under load NATS delivers some QoS 1 messages only when it redelivers them,
+/// docs/fleet.md).
 pub struct Nats {
     /// Its MQTT port.
     pub port: u16,
@@ -296,7 +298,7 @@ impl Nats {
             format!(
                 "server_name: \"fleet-test\"\nlisten: 127.0.0.1:{client}\n\
                  jetstream {{ store_dir: \"{}\" }}\n\
-                 mqtt {{ listen: 127.0.0.1:{port} }}\n",
+                 mqtt {{ listen: 127.0.0.1:{port}, ack_wait: \"1s\" }}\n",
                 dir.path().join("js").display()
             ),
         )

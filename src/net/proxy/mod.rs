@@ -34,6 +34,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
+pub mod keepalive;
 mod pump;
 
 use pump::{pump, write_flushed, End, Tee};
@@ -97,6 +98,7 @@ pub enum Tapped {
 pub struct Tap {
     tx: mpsc::Sender<Tapped>,
     dropped: Arc<AtomicU64>,
+    links: keepalive::Links,
 }
 
 impl Tap {
@@ -107,9 +109,15 @@ impl Tap {
             Tap {
                 tx,
                 dropped: Arc::new(AtomicU64::new(0)),
+                links: keepalive::Links::default(),
             },
             rx,
         )
+    }
+
+    /// The sessions' keepalive links, for whoever watches them.
+    pub fn links(&self) -> keepalive::Links {
+        self.links.clone()
     }
 
     /// Reads and events dropped because the receiver was behind (or gone).
@@ -202,13 +210,14 @@ impl Proxy {
                     Ok((stream, peer)) => {
                         backoff = Duration::from_millis(10);
                         let conn = self.recorder.as_ref().map_or(0, Recorder::next_conn);
-                        self.stats.sessions.fetch_add(1, Ordering::Relaxed);
+                        let id = self.stats.sessions.fetch_add(1, Ordering::Relaxed);
                         let s = Session {
                             config: Arc::clone(&self.config),
                             recorder: self.recorder.clone(),
                             tap: self.tap.clone(),
                             stats: Arc::clone(&self.stats),
                             conn,
+                            id,
                             peer,
                         };
                         sessions.spawn(s.run(stream, shutdown.clone()));
@@ -233,6 +242,8 @@ struct Session {
     tap: Option<Tap>,
     stats: Arc<Stats>,
     conn: u32,
+    /// Numbered from 0 in the order clients came (the tap's session id).
+    id: u64,
     peer: SocketAddr,
 }
 
@@ -309,7 +320,18 @@ impl Session {
         tracing::info!(proxy = %name, client = %self.peer, "forwarding to {}", self.config.upstream);
         let reason = self.forward(client, upstream, shutdown).await;
         tracing::info!(proxy = %name, client = %self.peer, "session ended: {reason}");
+        if let Some(tap) = &self.tap {
+            tap.links.end(self.id);
+        }
         self.marker(Event::Disconnect, reason).await;
+    }
+
+    /// Tells the tap's watch of this session's keepalive link.
+    fn link(&self, note: keepalive::LinkNote) {
+        if let Some(tap) = &self.tap {
+            tap.links
+                .note(self.id, &self.config.name, note, std::time::Instant::now());
+        }
     }
 
     /// The upstream connection: TCP within the connect timeout, then the TLS handshake if

@@ -2,14 +2,19 @@
 //! tee that splits a copy of it into frames for the recording and the tap.
 
 use std::io;
+use std::time::Duration;
 
 use bytes::{Bytes, BytesMut};
-use llrp::message::{CloseConnection, MessageBody, MessageDef, ReaderEventNotification};
+use llrp::enums::KeepaliveTriggerType;
+use llrp::message::{
+    CloseConnection, Keepalive, MessageBody, MessageDef, ReaderEventNotification, SetReaderConfig,
+};
 use llrp::{FrameError, FrameHeader, FrameSplitter, Inbound, Message, Split};
 use std::sync::atomic::Ordering;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::watch;
 
+use super::keepalive::LinkNote;
 use super::{Session, Tapped, CHUNK};
 use crate::reads::{Read, ReadDecoder};
 use crate::record::writer::utc_now_us;
@@ -278,10 +283,24 @@ impl<'a> Tee<'a> {
                 if h.msg_type == CloseConnection::TYPE {
                     self.saw_close = true;
                 }
+                if h.msg_type == SetReaderConfig::TYPE && self.session.tap.is_some() {
+                    let spec = Message::decode(frame).ok().and_then(|m| match m.body {
+                        MessageBody::SetReaderConfig(c) => c.keepalive_spec,
+                        _ => None,
+                    });
+                    if let Some(k) = spec {
+                        let period = (k.keepalive_trigger_type == KeepaliveTriggerType::Periodic)
+                            .then(|| Duration::from_millis(u64::from(k.periodic_trigger_value)));
+                        self.session.link(LinkNote::Spec(period));
+                    }
+                }
             }
             Direction::FromReader => {
                 if h.msg_type == llrp::message::CloseConnectionResponse::TYPE {
                     self.saw_close_response = true;
+                }
+                if h.msg_type == Keepalive::TYPE {
+                    self.session.link(LinkNote::Keepalive);
                 }
                 if let Some(tap) = &self.session.tap {
                     let now = utc_now_us();
