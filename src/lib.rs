@@ -1,6 +1,7 @@
 //! llrp-gateway: a simulated LLRP reader backed by a physics model of a scenario, and an LLRP
 //! client and frame decoder. The LLRP codec lives in the `llrp` crate (`protocol/`).
 
+pub mod alloc;
 pub mod decode;
 pub mod fleet;
 pub mod gateway;

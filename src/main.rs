@@ -60,6 +60,10 @@ enum Command {
         /// itself would report).
         #[arg(long, value_enum, default_value_t = llrp_gateway::sim::PoseSource::Estimated)]
         poses: llrp_gateway::sim::PoseSource,
+        /// Time between two pose samples of each antenna, as a robot publishes its pose
+        /// (ms; 100 is 10 Hz).
+        #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        pose_interval_ms: u64,
         /// The localizer's estimator (docs/localize.md).
         #[arg(long, default_value = "relock")]
         estimator: llrp_gateway::localize::estimate::Estimator,
@@ -123,6 +127,7 @@ fn main() -> ExitCode {
             tls_key,
             http,
             poses,
+            pose_interval_ms,
             estimator,
             publish,
         } => run_sim(
@@ -130,6 +135,7 @@ fn main() -> ExitCode {
             SimLocalize {
                 http,
                 poses,
+                pose_interval_ms,
                 estimator,
                 publish,
             },
@@ -187,6 +193,7 @@ fn main() -> ExitCode {
 struct SimLocalize {
     http: llrp_gateway::http::launch::HttpArgs,
     poses: llrp_gateway::sim::PoseSource,
+    pose_interval_ms: u64,
     estimator: llrp_gateway::localize::estimate::Estimator,
     publish: llrp_gateway::fleet::args::PublishArgs,
 }
@@ -267,6 +274,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
                     opts.localize = Some(sim::LocalizeFeed {
                         tap: l.tap.clone(),
                         poses: localize.poses,
+                        pose_interval_us: localize.pose_interval_ms * 1000,
                     });
                     http = Some(h);
                     live = Some(l);
@@ -302,6 +310,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
             opts.localize = Some(sim::LocalizeFeed {
                 tap: tap.with_mirror(p.mirror()),
                 poses: localize.poses,
+                pose_interval_us: localize.pose_interval_ms * 1000,
             });
             eprintln!(
                 "llrp-gateway sim: publishing to {}",

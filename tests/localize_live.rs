@@ -42,6 +42,7 @@ async fn with_no_client_the_reader_inventories_by_itself_and_s1_tags_converge() 
         localize: Some(LocalizeFeed {
             tap: live.tap.clone(),
             poses: PoseSource::Truth,
+            pose_interval_us: feed::POSE_INTERVAL_US,
         }),
         ..Default::default()
     };
@@ -100,6 +101,7 @@ async fn a_client_stops_the_own_inventory_and_sees_the_reader_as_before() {
         localize: Some(LocalizeFeed {
             tap: live.tap.clone(),
             poses: PoseSource::Estimated,
+            pose_interval_us: feed::POSE_INTERVAL_US,
         }),
         ..Default::default()
     };

@@ -63,7 +63,7 @@ impl Calibration {
             for (key, series) in ingest.tag_series(epc) {
                 let (lambda, period) = (series.wavelength_m(), series.ambiguity().period());
                 let sign = sign(&key.1);
-                let residuals = series.segments().iter().flatten().map(|s| {
+                let residuals = series.samples().iter().map(|s| {
                     let d = (0..3)
                         .map(|a| (position[a] - s.antenna[a]).powi(2))
                         .sum::<f64>()

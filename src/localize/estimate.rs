@@ -167,7 +167,7 @@ fn readings(
     for (key, series) in ingest.tag_series(epc) {
         let next = tracks.len();
         let track = *tracks.entry((key.1.clone(), key.2, key.3)).or_insert(next);
-        for (segment, seg) in series.segments().iter().enumerate() {
+        for (segment, seg) in series.segments().enumerate() {
             out.extend(seg.iter().map(|s| fingerprint::Reading {
                 track,
                 segment,

@@ -131,6 +131,50 @@ impl Ingest {
         }
     }
 
+    /// Keeps tag `epc` within `bound` phases once it is over: its series thinned
+    /// ([`Ingest::thin_tag`]), and if that leaves more than three quarters of the bound
+    /// (segments of one or two phases, as of a series split at every channel visit, do not
+    /// thin), its oldest segments dropped down to half the bound ([`Ingest::trim_tag`]).
+    pub fn bound_tag(&mut self, epc: &str, bound: usize) {
+        if self.tag_samples(epc) <= bound {
+            return;
+        }
+        self.thin_tag(epc);
+        if self.tag_samples(epc) > bound / 4 * 3 {
+            self.trim_tag(epc, bound / 2);
+        }
+    }
+
+    /// Drops tag `epc`'s oldest segments, whichever series they are in, until it holds at
+    /// most `target` phases; a series left with none is forgotten.
+    pub fn trim_tag(&mut self, epc: &str, target: usize) {
+        let mut starts: Vec<(u64, usize, &Key)> = self
+            .tag_series(epc)
+            .flat_map(|(k, s)| {
+                s.segments()
+                    .map(move |seg| (seg.first().map_or(0, |x| x.t_us), seg.len(), k))
+            })
+            .collect();
+        let mut held: usize = starts.iter().map(|s| s.1).sum();
+        starts.sort_unstable_by_key(|s| s.0);
+        let mut drops: BTreeMap<Key, usize> = BTreeMap::new();
+        for (_, len, key) in starts {
+            if held <= target {
+                break;
+            }
+            held -= len;
+            *drops.entry(key.clone()).or_default() += 1;
+        }
+        for (key, n) in drops {
+            if let Some(series) = self.series.get_mut(&key) {
+                series.drop_oldest(n);
+                if series.is_empty() {
+                    self.series.remove(&key);
+                }
+            }
+        }
+    }
+
     /// Reads filed into a series.
     pub fn taken(&self) -> u64 {
         self.taken
@@ -209,7 +253,7 @@ mod tests {
         // A1 on two channels: two series; B2 and C3 one each.
         assert_eq!(ingest.series().len(), 4);
         let a1 = &ingest.series()[&("A1".to_string(), "r".to_string(), 1, 915_250_000)];
-        let seg = &a1.segments()[0];
+        let seg = a1.segments().next().expect("a segment");
         assert_eq!(seg.len(), 2);
         // The antenna position interpolated at each read: x = 0.005 and 0.015.
         assert!((seg[0].antenna[0] - 0.005).abs() < 1e-12);
@@ -218,5 +262,55 @@ mod tests {
         assert!((seg[0].yaw_rad - 5f64.to_radians()).abs() < 1e-12);
         assert!((seg[1].yaw_rad - 15f64.to_radians()).abs() < 1e-12);
         assert_eq!((seg[0].raw_phase_rad, seg[1].raw_phase_rad), (1.0, 1.1));
+    }
+
+    /// A read of phase 0.5 rad carrying its own pose: the antenna at `x` on the x axis.
+    fn posed(epc: &str, t_us: u64, x: f64, f_hz: u64) -> Read {
+        let mut r = read(epc, t_us, Some(0.5), Some(f_hz));
+        r.antenna_pose = Some(AntennaPose {
+            x,
+            y: 1.0,
+            z: 0.5,
+            yaw_deg: 0.0,
+            pitch_deg: 0.0,
+        });
+        r
+    }
+
+    #[test]
+    fn a_tag_of_two_phase_segments_stays_within_its_bound_and_keeps_its_newest_reads() {
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000);
+        let bound = 4096;
+        // Pairs of reads on 50 channels in turn, a gap longer than the series allows
+        // between visits: every segment holds two phases, which thinning cannot halve.
+        let mut most = 0;
+        for k in 0..20_000u64 {
+            let f = 902_750_000 + (k / 2 % 50) * 500_000;
+            let r = posed("A1", k * 10_000, 0.0, f);
+            ingest.push(&r);
+            ingest.bound_tag("A1", bound);
+            most = most.max(ingest.tag_samples("A1"));
+        }
+        assert!(most <= bound, "held {most}");
+        assert!(ingest.tag_samples("A1") >= bound / 2);
+        let newest = ingest
+            .tag_series("A1")
+            .filter_map(|(_, s)| s.segments().last()?.last().map(|x| x.t_us))
+            .max();
+        assert_eq!(newest, Some(19_999 * 10_000));
+    }
+
+    #[test]
+    fn a_tag_of_long_segments_is_thinned_and_keeps_its_oldest_read() {
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        // One pass, a read every 10 ms moving 1 mm: a single segment.
+        for k in 0..20_000u64 {
+            ingest.push(&posed("B2", k * 10_000, k as f64 * 0.001, 915_250_000));
+            ingest.bound_tag("B2", 4096);
+        }
+        let (_, s) = ingest.tag_series("B2").next().expect("a series");
+        assert_eq!(s.segments().len(), 1);
+        assert!(s.len() <= 4096);
+        assert_eq!(s.samples()[0].t_us, 0, "the aperture stays");
     }
 }

@@ -11,7 +11,9 @@
 //!
 //! Memory is bounded per tag: when a tag holds more than [`Settings::max_samples_per_tag`]
 //! phases, every series of it is thinned to every other sample (the newest kept), so the
-//! aperture stays and the density falls off with age.
+//! aperture stays and the density falls off with age; if that leaves more than three
+//! quarters of the bound (segments of one or two phases, which do not thin), the tag's
+//! oldest segments are dropped down to half the bound.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -40,6 +42,9 @@ pub const POSE_KEEP_US: u64 = 60_000_000;
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
+
+/// How often the live localizer gives the allocator's free memory back ([`crate::alloc`]).
+const RELEASE_EVERY: Duration = Duration::from_secs(10);
 
 /// Reader time over which read rates are counted (µs).
 const RATE_WINDOW_US: u64 = 2_000_000;
@@ -192,7 +197,12 @@ impl Worker {
     }
 
     fn run(mut self, rx: Receiver<Input>, stop: &AtomicBool) {
+        let mut released = Instant::now();
         loop {
+            if released.elapsed() >= RELEASE_EVERY {
+                crate::alloc::release_free();
+                released = Instant::now();
+            }
             if stop.load(Ordering::Relaxed) {
                 // What is there already, and no more (a simulator may still be sending).
                 for _ in 0..self.settings.tap_capacity {
@@ -396,10 +406,9 @@ impl Worker {
         self.ingest.push(&r);
         // Thinned as the reads come, not as estimates are made: what a tag holds is then a
         // function of its reads alone (two workers on different shards hold what one does).
-        if self.ingest.taken() > before
-            && self.ingest.tag_samples(&r.epc) > self.settings.max_samples_per_tag
-        {
-            self.ingest.thin_tag(&r.epc);
+        if self.ingest.taken() > before {
+            self.ingest
+                .bound_tag(&r.epc, self.settings.max_samples_per_tag);
         }
         let aside = self.ingest.set_aside();
         let aside = aside.no_phase + aside.no_frequency + aside.no_pose;

@@ -99,7 +99,7 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
         let (lambda, period) = (series.wavelength_m(), series.ambiguity().period());
         let sign = g.sign_of(&key.1);
         let track = tracks.entry((key.1.clone(), key.2)).or_default();
-        for s in series.segments().iter().flatten() {
+        for s in series.samples() {
             track.push(PoseObs {
                 t_us: s.t_us,
                 phase_rad: (sign * s.raw_phase_rad).rem_euclid(period),

@@ -1,6 +1,7 @@
 //! What the simulator hands the live localizer beside the LLRP bytes: every antenna's pose
-//! (true, or what the robot itself would report) every [`POSE_INTERVAL_US`] of simulated
-//! time, as a robot's pose feed would, and the ground truth for `GET /api/truth`.
+//! (true, or what the robot itself would report) at a fixed interval of simulated time
+//! ([`POSE_INTERVAL_US`] unless `sim --pose-interval-ms` says otherwise), as a robot's pose
+//! feed would, and the ground truth for `GET /api/truth`.
 
 use std::sync::Arc;
 
@@ -12,7 +13,7 @@ use crate::localize::shared::{Truth, TruthTag};
 use crate::physics::{AntennaPose, Model, World};
 use crate::scenario::Scenario;
 
-/// Simulated time between two pose samples of an antenna, µs.
+/// Simulated time between two pose samples of an antenna by default, µs (10 Hz).
 pub const POSE_INTERVAL_US: u64 = 100_000;
 
 /// Which poses the simulator gives the localizer (`sim --poses`).
@@ -34,23 +35,29 @@ pub struct Feed {
     references: Arc<Vec<bool>>,
     /// Simulated time of the next sample.
     next_us: u64,
+    /// Simulated time between two samples (µs).
+    interval_us: u64,
 }
 
 impl Feed {
-    /// A feed of reader `name` into `tap`, starting with the sample at or before `now_us`.
+    /// A feed of reader `name` into `tap`, a sample every `interval_us` starting with the
+    /// one at or before `now_us`.
     pub fn new(
         tap: Tap,
         name: String,
         source: PoseSource,
         references: Arc<Vec<bool>>,
+        interval_us: u64,
         now_us: u64,
     ) -> Feed {
+        let interval_us = interval_us.max(1);
         Feed {
             tap,
             name,
             source,
             references,
-            next_us: now_us / POSE_INTERVAL_US * POSE_INTERVAL_US,
+            next_us: now_us / interval_us * interval_us,
+            interval_us,
         }
     }
 
@@ -58,8 +65,9 @@ impl Feed {
     pub fn feed(&mut self, m: &Model, now_us: u64) {
         // After a long pause (the own inventory waits while a client is connected) the
         // samples restart shortly before now instead of catching up the whole pause.
-        let resume = now_us.saturating_sub(10 * POSE_INTERVAL_US) / POSE_INTERVAL_US;
-        self.next_us = self.next_us.max(resume * POSE_INTERVAL_US);
+        let every = self.interval_us;
+        let resume = now_us.saturating_sub(10 * every) / every;
+        self.next_us = self.next_us.max(resume * every);
         let mut poses = Vec::new();
         let mut last = None;
         while self.next_us <= now_us {
@@ -72,7 +80,7 @@ impl Feed {
                 poses.push(sample(&self.name, a, t, &pose));
             }
             last = Some(t);
-            self.next_us += POSE_INTERVAL_US;
+            self.next_us += every;
         }
         if poses.is_empty() {
             return;

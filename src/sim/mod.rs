@@ -63,6 +63,8 @@ pub struct LocalizeFeed {
     pub tap: Tap,
     /// Which poses it is given.
     pub poses: PoseSource,
+    /// Simulated time between two pose samples of an antenna (µs).
+    pub pose_interval_us: u64,
 }
 
 impl Default for SimOptions {
@@ -323,6 +325,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
                     spec.name.clone(),
                     l.poses,
                     references.clone(),
+                    l.pose_interval_us,
                     now_us,
                 ))
             };
