@@ -23,6 +23,24 @@ fn fixture(name: &str) -> String {
     p.to_str().expect("utf-8").to_string()
 }
 
+/// `proxy --upstream UPSTREAM --publish URL` and `extra` on a free port, once it listens; its
+/// LLRP address.
+fn publishing_proxy(upstream: &str, url: &str, extra: &[&str]) -> (Proc, String) {
+    let mut args = vec![
+        "proxy",
+        "--upstream",
+        upstream,
+        "--listen",
+        "127.0.0.1:0",
+        "--publish",
+        url,
+    ];
+    args.extend_from_slice(extra);
+    let mut proxy = Proc::spawn(&args);
+    let llrp = proxy.address("listening on ");
+    (proxy, llrp)
+}
+
 #[test]
 #[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
 fn the_proxy_publishes_its_readers_reads_events_and_statuses() {
@@ -41,18 +59,8 @@ fn the_proxy_publishes_its_readers_reads_events_and_statuses() {
         "8",
     ]);
     let upstream = sim.address("listening on ");
-    let mut proxy = Proc::spawn(&[
-        "proxy",
-        "--upstream",
-        &upstream,
-        "--listen",
-        "127.0.0.1:0",
-        "--publish",
-        &broker.url("g"),
-        "--gateway-name",
-        "edge-1",
-    ]);
-    let llrp = proxy.address("listening on ");
+    let (proxy, llrp) =
+        publishing_proxy(&upstream, &broker.url("g"), &["--gateway-name", "edge-1"]);
     let status = bin()
         .args(["inventory", &llrp, "--impinj", "--seconds", "2"])
         .stdout(Stdio::null())
@@ -268,16 +276,7 @@ fn a_proxied_readers_keepalive_loss_and_return_are_published() {
     let probe = Probe::connect(broker.port, "keepalive-probe", &["k/v1/events/+"]);
     let mut sim = Proc::spawn(&["sim", "--no-http", "--listen", "127.0.0.1:0"]);
     let upstream = sim.address("listening on ");
-    let mut proxy = Proc::spawn(&[
-        "proxy",
-        "--upstream",
-        &upstream,
-        "--listen",
-        "127.0.0.1:0",
-        "--publish",
-        &broker.url("k"),
-    ]);
-    let llrp = proxy.address("listening on ");
+    let (_proxy, llrp) = publishing_proxy(&upstream, &broker.url("k"), &[]);
     // KEEPALIVEs every 200 ms; the client itself gives up on the reader only after 5.6 s.
     let mut client = bin()
         .args([
