@@ -147,8 +147,7 @@ impl<T> Seq<T> {
     pub fn close(&mut self, last: u64, now: Instant) {
         if self.next != 0 {
             self.close = Some((last, now + CLOSE_GRACE));
-            let mut step = Step::default();
-            self.settle(&mut step);
+            self.end_complete_close();
         }
     }
 
@@ -204,9 +203,13 @@ impl<T> Seq<T> {
             self.missing.pop_first();
             step.lost += 1;
         }
+        self.end_complete_close();
+    }
+
+    /// Forgets a close whose numbers have all come.
+    fn end_complete_close(&mut self) {
         if let Some((last, _)) = self.close {
-            let complete = self.next > last && self.missing.range(..=last).next().is_none();
-            if complete {
+            if self.next > last && self.missing.range(..=last).next().is_none() {
                 self.close = None;
             }
         }

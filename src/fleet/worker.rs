@@ -366,7 +366,12 @@ impl Run {
             self.shared.metrics.mqtt_reordered.inc();
             tracing::debug!(topic = rest, seq, expected, "batch ahead of a gap: held");
         } else if seq < expected && !step.file.is_empty() {
-            tracing::debug!(topic = rest, seq, expected, "late batch filed");
+            tracing::debug!(
+                topic = rest,
+                seq,
+                expected,
+                "batch behind the next expected one filed (late into a gap, or a new run)"
+            );
         }
         self.take(step);
     }
