@@ -168,8 +168,21 @@ fn sim(scenario: Option<&Path>, addr: &str) -> Proc {
 
 /// `llrp-gateway sim` on a free loopback port; returns it and its address.
 fn sim_anywhere(scenario: Option<&Path>) -> (Proc, String) {
-    let addr = format!("127.0.0.1:{}", free_port());
-    (sim(scenario, &addr), addr)
+    let mut cmd = bin();
+    cmd.args(["sim", "--no-http", "--listen", "127.0.0.1:0"]);
+    if let Some(s) = scenario {
+        cmd.arg("--scenario").arg(s);
+    }
+    let p = Proc::spawn(cmd);
+    // The port the system gave, not one picked earlier that another process may take.
+    let line = p.wait_line("listening on");
+    let addr = line
+        .split("listening on ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .expect("an address after 'listening on'")
+        .to_string();
+    (p, addr)
 }
 
 /// Runs `llrp-gateway inventory ARGS` to its end (at most [`GUARD`]).

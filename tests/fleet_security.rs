@@ -71,9 +71,9 @@ fn batch(epc: &str) -> Vec<u8> {
 #[test]
 #[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
 fn tls_credentials_and_topic_rights_are_enforced_by_the_broker() {
-    let plain = free_port();
-    let mut ca = String::new();
+    let (mut plain, mut ca) = (0, String::new());
     let broker = Mosquitto::start_with(|port, dir| {
+        plain = free_port();
         let (ca_pem, cert, key) = pki(dir);
         ca = ca_pem.clone();
         let passwords = dir.join("passwords");

@@ -78,8 +78,9 @@ impl Mosquitto {
 
     /// Starts mosquitto with the configuration `conf(port, dir)` gives (its first listener
     /// on `port`), plus a log file in `dir` and no bound on the messages queued for a
-    /// subscriber.
-    pub fn start_with(conf: impl FnOnce(u16, &std::path::Path) -> String) -> Mosquitto {
+    /// subscriber. A port taken between [`free_port`] and mosquitto's bind (by another
+    /// test's process binding port 0) makes mosquitto exit: it is tried again on another.
+    pub fn start_with(mut conf: impl FnMut(u16, &std::path::Path) -> String) -> Mosquitto {
         let dir = tempfile::tempdir().expect("temp dir");
         // Started as root, mosquitto runs as the user `mosquitto`: it must write its log and
         // persistence here.
@@ -88,25 +89,40 @@ impl Mosquitto {
             let open = std::fs::Permissions::from_mode(0o777);
             std::fs::set_permissions(dir.path(), open).expect("chmod");
         }
-        let port = free_port();
         let path = dir.path().join("mosquitto.conf");
-        let text = format!(
-            "{}\nmax_queued_messages 1000000\nlog_dest file {}\n",
-            conf(port, dir.path()),
-            dir.path().join("mosquitto.log").display()
-        );
-        std::fs::write(&path, text).expect("writes the configuration");
         let mut m = Mosquitto {
-            port,
+            port: 0,
             child: None,
             conf: path,
             dir,
         };
-        m.run();
-        m
+        for _ in 0..5 {
+            m.port = free_port();
+            let text = format!(
+                "{}\nmax_queued_messages 1000000\nlog_dest file {}\n",
+                conf(m.port, m.dir.path()),
+                m.log().display()
+            );
+            std::fs::write(&m.conf, text).expect("writes the configuration");
+            if m.run() {
+                return m;
+            }
+        }
+        panic!("mosquitto did not start on five ports: {}", m.log_text());
     }
 
-    fn run(&mut self) {
+    fn log(&self) -> PathBuf {
+        self.dir.path().join("mosquitto.log")
+    }
+
+    fn log_text(&self) -> String {
+        std::fs::read_to_string(self.log()).unwrap_or_default()
+    }
+
+    /// Starts mosquitto and waits until its log says it runs and its port accepts; false if
+    /// it exited instead (its port was taken).
+    fn run(&mut self) -> bool {
+        let running_before = self.log_text().matches(" running").count();
         let child = Command::new(binary("mosquitto"))
             .arg("-c")
             .arg(&self.conf)
@@ -117,11 +133,20 @@ impl Mosquitto {
             .expect("mosquitto starts");
         self.child = Some(child);
         let deadline = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+        loop {
+            if let Some(Ok(Some(_))) = self.child.as_mut().map(|c| c.try_wait()) {
+                self.child = None;
+                return false;
+            }
+            let running = self.log_text().matches(" running").count() > running_before;
+            if running && std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok() {
+                return true;
+            }
             assert!(
                 Instant::now() < deadline,
-                "mosquitto did not listen on {}",
-                self.port
+                "mosquitto did not listen on {}: {}",
+                self.port,
+                self.log_text()
             );
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -147,7 +172,12 @@ impl Mosquitto {
     /// Starts it again on the same port with the same configuration.
     pub fn restart(&mut self) {
         self.stop();
-        self.run();
+        assert!(
+            self.run(),
+            "mosquitto did not restart on {}: {}",
+            self.port,
+            self.log_text()
+        );
     }
 
     /// `mqtt://127.0.0.1:PORT/prefix`.
@@ -291,36 +321,52 @@ impl Nats {
     /// Starts nats-server (Debian's package: `./scripts/install-brokers`).
     pub fn start() -> Nats {
         let dir = tempfile::tempdir().expect("temp dir");
-        let (port, client) = (free_port(), free_port());
         let conf = dir.path().join("nats.conf");
-        std::fs::write(
-            &conf,
-            format!(
-                "server_name: \"fleet-test\"\nlisten: 127.0.0.1:{client}\n\
-                 jetstream {{ store_dir: \"{}\" }}\n\
-                 mqtt {{ listen: 127.0.0.1:{port}, ack_wait: \"1s\" }}\n",
-                dir.path().join("js").display()
-            ),
-        )
-        .expect("writes the configuration");
-        let log = std::fs::File::create(dir.path().join("nats.log")).expect("log");
-        let child = Command::new(binary("nats-server"))
-            .arg("-c")
-            .arg(&conf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .expect("nats-server starts (./scripts/install-brokers)");
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(
-                Instant::now() < deadline,
-                "nats-server did not listen on {port}"
-            );
-            std::thread::sleep(Duration::from_millis(20));
+        let log_path = dir.path().join("nats.log");
+        // A port taken before nats-server binds it makes it exit: tried again on others.
+        for _ in 0..5 {
+            let (port, client) = (free_port(), free_port());
+            std::fs::write(
+                &conf,
+                format!(
+                    "server_name: \"fleet-test\"\nlisten: 127.0.0.1:{client}\n\
+                     jetstream {{ store_dir: \"{}\" }}\n\
+                     mqtt {{ listen: 127.0.0.1:{port}, ack_wait: \"1s\" }}\n",
+                    dir.path().join("js").display()
+                ),
+            )
+            .expect("writes the configuration");
+            let log = std::fs::File::create(&log_path).expect("log");
+            let mut child = Command::new(binary("nats-server"))
+                .arg("-c")
+                .arg(&conf)
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(log)
+                .spawn()
+                .expect("nats-server starts (./scripts/install-brokers)");
+            let deadline = Instant::now() + Duration::from_secs(20);
+            loop {
+                if let Ok(Some(_)) = child.try_wait() {
+                    break;
+                }
+                let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+                if log.contains("Server is ready")
+                    && std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+                {
+                    return Nats { port, child, dir };
+                }
+                assert!(
+                    Instant::now() < deadline,
+                    "nats-server did not listen on {port}: {log}"
+                );
+                std::thread::sleep(Duration::from_millis(20));
+            }
         }
-        Nats { port, child, dir }
+        panic!(
+            "nats-server did not start on five ports: {}",
+            std::fs::read_to_string(&log_path).unwrap_or_default()
+        );
     }
 
     /// `mqtt://127.0.0.1:PORT/prefix`.
