@@ -59,10 +59,13 @@ struct Problem<'a> {
     obs: &'a [Obs],
     /// Phases per segment.
     counts: Vec<usize>,
+    /// 1 over the phases per segment.
+    inverse_counts: Vec<f64>,
+    /// Each phase's s·4π/λ (rad/m).
+    k: Vec<f64>,
     /// 2: (x, y) at height `z`; 3: (x, y, z).
     dims: usize,
     z: f64,
-    sign: f64,
     p: DVector<f64>,
 }
 
@@ -75,10 +78,14 @@ impl<'a> Problem<'a> {
         }
         Problem {
             obs,
+            inverse_counts: counts.iter().map(|&c| 1.0 / c.max(1) as f64).collect(),
             counts,
+            k: obs
+                .iter()
+                .map(|o| sign * 4.0 * std::f64::consts::PI / o.wavelength_m)
+                .collect(),
             dims,
             z,
-            sign,
             p: DVector::from_column_slice(&start[..dims]),
         }
     }
@@ -111,40 +118,48 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        let mut r = DVector::from_iterator(
-            self.obs.len(),
-            self.obs.iter().map(|o| {
-                let (d, _) = self.distance(o);
-                o.phase_rad - self.sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
-            }),
-        );
+        let mut r = Vec::with_capacity(self.obs.len());
         let mut mean = vec![0.0; self.counts.len()];
-        for (o, v) in self.obs.iter().zip(r.iter()) {
-            mean[o.segment] += v / self.counts[o.segment] as f64;
+        for (o, k) in self.obs.iter().zip(&self.k) {
+            let (d, _) = self.distance(o);
+            let v = o.phase_rad - k * d;
+            mean[o.segment] += v;
+            r.push(v);
+        }
+        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
+            *m *= inv;
         }
         for (o, v) in self.obs.iter().zip(r.iter_mut()) {
             *v -= mean[o.segment];
         }
-        Some(r)
+        Some(DVector::from_vec(r))
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let mut j = DMatrix::zeros(self.obs.len(), self.dims);
+        // Column-major, filled in place: column a holds ∂r_i/∂p_a.
+        let n = self.obs.len();
+        let mut j = vec![0.0; n * self.dims];
         let mut mean = vec![[0.0; 3]; self.counts.len()];
-        for (i, o) in self.obs.iter().enumerate() {
+        for (i, (o, k)) in self.obs.iter().zip(&self.k).enumerate() {
             let (d, v) = self.distance(o);
-            let k = self.sign * 4.0 * std::f64::consts::PI / o.wavelength_m;
-            for (a, va) in v.iter().enumerate().take(self.dims) {
-                j[(i, a)] = -k * va / d;
-                mean[o.segment][a] += j[(i, a)] / self.counts[o.segment] as f64;
-            }
-        }
-        for (i, o) in self.obs.iter().enumerate() {
+            let g = -k / d;
             for a in 0..self.dims {
-                j[(i, a)] -= mean[o.segment][a];
+                let x = g * v[a];
+                j[a * n + i] = x;
+                mean[o.segment][a] += x;
             }
         }
-        Some(j)
+        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
+            for x in m.iter_mut() {
+                *x *= inv;
+            }
+        }
+        for a in 0..self.dims {
+            for (x, o) in j[a * n..(a + 1) * n].iter_mut().zip(self.obs) {
+                *x -= mean[o.segment][a];
+            }
+        }
+        Some(DMatrix::from_vec(n, self.dims, j))
     }
 }
 
