@@ -228,6 +228,19 @@ pub fn estimate_calibrated(
     g: &Geometry,
     calibration: &Calibration,
 ) -> Estimate {
+    estimate_from(ingest, epc, estimator, g, calibration, None)
+}
+
+/// [`estimate_calibrated`], with `relock` started from `hint` (the tag's last fix) instead of
+/// its grid; the other estimators ignore it.
+pub fn estimate_from(
+    ingest: &Ingest,
+    epc: &str,
+    estimator: Estimator,
+    g: &Geometry,
+    calibration: &Calibration,
+    hint: Option<[f64; 3]>,
+) -> Estimate {
     let Observed {
         obs,
         last_us: last,
@@ -256,9 +269,11 @@ pub fn estimate_calibrated(
             });
             if hi - lo >= relock::MIN_HEIGHT_SPAN_M {
                 // Antennas at several heights: the height is estimated too.
-                relock::locate3d(&obs, sign, facing, g.reach_m).map(|f| (f.position, f.covariance))
+                relock::locate3d_from(&obs, sign, facing, g.reach_m, hint)
+                    .map(|f| (f.position, f.covariance))
             } else {
-                relock::locate(&obs, g.tag_height_m, sign, facing, g.reach_m).map(planar)
+                relock::locate_from(&obs, g.tag_height_m, sign, facing, g.reach_m, hint)
+                    .map(planar)
             }
         }
         Estimator::Linear => linear::locate(&obs, g.tag_height_m, sign, facing).map(planar),

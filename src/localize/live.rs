@@ -14,6 +14,14 @@
 //! aperture stays and the density falls off with age; if that leaves more than three
 //! quarters of the bound (segments of one or two phases, which do not thin), the tag's
 //! oldest segments are dropped down to half the bound.
+//!
+//! A tag that `relock` has located (converged) is updated from its last fix instead of the
+//! grid search, which is most of an update's cost; an update that does not converge from there
+//! is done again from the grid. Such a warm estimate depends on when the updates ran, so
+//! once the tag has had no new read for [`SETTLE`] it is estimated once more from the grid,
+//! and published when that differs from the warm one by more than [`SETTLED_SAME_M`]: what a
+//! tag settles at is a function of its reads alone (two workers on different shards publish
+//! what one does).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -39,6 +47,14 @@ pub const POSE_WAIT: Duration = Duration::from_secs(2);
 /// that do not walk the path driven (all but mhekf and wls, which keep up to
 /// [`super::poses::MAX_TRACK`] samples).
 pub const POSE_KEEP_US: u64 = 60_000_000;
+
+/// A tag whose last estimate started from its previous fix is estimated again from the grid
+/// once it has had no new read for this long.
+pub const SETTLE: Duration = Duration::from_secs(1);
+
+/// A settling estimate within this of the warm one (m, on each axis) is not published again:
+/// both are the same minimum, to the solver's precision.
+pub const SETTLED_SAME_M: f64 = 1e-7;
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
@@ -152,6 +168,11 @@ struct TagState {
     /// A read came since the last estimate; with its arrival time.
     dirty_since: Option<Instant>,
     last_estimate: Option<Instant>,
+    /// The last `relock` fix, where it converged: the next update starts from it.
+    warm: Option<[f64; 3]>,
+    /// The last estimate started from the previous fix: one from the grid is owed once the
+    /// tag settles.
+    settle_due: bool,
     rate_start_us: u64,
     rate_count: u64,
 }
@@ -475,19 +496,25 @@ impl Worker {
         );
     }
 
-    /// Re-estimates dirty tags (longest waiting first) for at most `budget`.
+    /// Re-estimates dirty tags (longest waiting first), then settled ones whose last estimate
+    /// was warm, for at most `budget`; `all`: every such tag, each from the grid.
     fn estimate(&mut self, budget: Duration, all: bool) {
         let started = Instant::now();
         let now = Instant::now();
-        let mut due: Vec<(Instant, String)> = self
+        // (dirty first, since, epc, from the grid)
+        let mut due: Vec<(bool, Instant, String, bool)> = self
             .tags
             .iter()
             .filter_map(|(epc, t)| {
-                let since = t.dirty_since?;
-                let rested = t.last_estimate.map_or(true, |l| {
-                    now.duration_since(l) >= self.settings.min_interval
-                });
-                (all || rested).then(|| (since, epc.clone()))
+                if let Some(since) = t.dirty_since {
+                    let rested = t.last_estimate.map_or(true, |l| {
+                        now.duration_since(l) >= self.settings.min_interval
+                    });
+                    return (all || rested).then(|| (false, since, epc.clone(), all));
+                }
+                let last = t.last_estimate?;
+                let settled = all || now.duration_since(last) >= SETTLE;
+                (t.settle_due && settled).then(|| (true, last, epc.clone(), true))
             })
             .collect();
         due.sort();
@@ -501,32 +528,63 @@ impl Worker {
                 &self.settings.geometry,
             )
         };
-        for (since, epc) in due {
+        let relock = self.settings.estimator == Estimator::Relock;
+        for (settling, since, epc, cold) in due {
             if started.elapsed() >= budget {
                 break;
             }
+            let hint = if cold || !relock {
+                None
+            } else {
+                self.tags.get(&epc).and_then(|t| t.warm)
+            };
             let t0 = Instant::now();
-            let e = estimate::estimate_calibrated(
-                &self.ingest,
-                &epc,
-                self.settings.estimator,
-                &self.settings.geometry,
-                &calibration,
-            );
+            let run = |hint| {
+                estimate::estimate_from(
+                    &self.ingest,
+                    &epc,
+                    self.settings.estimator,
+                    &self.settings.geometry,
+                    &calibration,
+                    hint,
+                )
+            };
+            let mut e = run(hint);
+            let mut warm = hint.is_some();
+            if warm && e.state != State::Converged {
+                // Not converged from the last fix: from the grid.
+                e = run(None);
+                warm = false;
+            }
             let done = Instant::now();
             self.shared
                 .metrics
                 .estimator_seconds
                 .observe(done.duration_since(t0).as_secs_f64());
-            self.shared
-                .metrics
-                .update_latency_seconds
-                .observe(done.duration_since(since).as_secs_f64());
+            if !settling {
+                self.shared
+                    .metrics
+                    .update_latency_seconds
+                    .observe(done.duration_since(since).as_secs_f64());
+            }
+            let mut unchanged = false;
             if let Some(t) = self.tags.get_mut(&epc) {
+                // A settling estimate where the warm one already was (what the warm one
+                // converged to): nothing to tell anyone.
+                unchanged = settling
+                    && e.state == State::Converged
+                    && matches!((e.estimate, t.warm), (Some(p), Some(q))
+                        if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
                 t.dirty_since = None;
                 t.last_estimate = Some(done);
+                t.warm = e
+                    .estimate
+                    .filter(|_| relock && e.state == State::Converged);
+                t.settle_due = warm;
             }
-            self.shared.publish(e);
+            if !unchanged {
+                self.shared.publish(e);
+            }
         }
     }
 }

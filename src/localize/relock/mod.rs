@@ -240,6 +240,8 @@ struct Search {
     mid: [f64; 2],
     lo: [f64; 3],
     hi: [f64; 3],
+    /// A start instead of the grid (the tag's last fix, for a live update).
+    hint: Option<[f64; 3]>,
 }
 
 /// The points of the grid of `step` over (`lo`, `hi`) on the facing side, each with its
@@ -283,16 +285,23 @@ fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 + '_ {
 /// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
 /// phases could not tell from it: no fix.
 fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
-    let (coarse, fine) = (spread(obs, COARSE.1), spread(obs, FINE.1));
-    let start = grid_starts(
-        s,
-        &mut segment_cost(&coarse, s.sign),
-        &mut segment_cost(&fine, s.sign),
-        1,
-    )
-    .first()
-    .copied()
-    .ok_or(NoFix::InsufficientGeometry)?;
+    let inside = |h: &[f64; 3]| (0..s.dims).all(|a| h[a] >= s.lo[a] && h[a] <= s.hi[a]);
+    let start = match s.hint.filter(inside) {
+        Some(h) => [h[0], h[1], if s.dims == 3 { h[2] } else { s.z }],
+        None => {
+            let (coarse, fine) = (spread(obs, COARSE.1), spread(obs, FINE.1));
+            let starts = grid_starts(
+                s,
+                &mut segment_cost(&coarse, s.sign),
+                &mut segment_cost(&fine, s.sign),
+                1,
+            );
+            starts
+                .first()
+                .copied()
+                .ok_or(NoFix::InsufficientGeometry)?
+        }
+    };
     // A fit outside the box in height is no fix.
     let in_box = |f: Result<Solution, NoFix>| {
         f.ok().filter(|f| {
@@ -398,6 +407,19 @@ pub fn locate(
     facing: [f64; 2],
     reach_m: f64,
 ) -> Result<Fix, NoFix> {
+    locate_from(obs, z, sign, facing, reach_m, None)
+}
+
+/// [`locate`], started from `hint` (a previous fix) instead of the grid when it is given and
+/// inside the search box: a live update of a tag already located.
+pub fn locate_from(
+    obs: &[Obs],
+    z: f64,
+    sign: f64,
+    facing: [f64; 2],
+    reach_m: f64,
+    hint: Option<[f64; 3]>,
+) -> Result<Fix, NoFix> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
     let (min, max) = bounds(obs);
     let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
@@ -413,6 +435,7 @@ pub fn locate(
         mid: [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0],
         lo: [min[0] - reach_m, min[1] - reach_m, z],
         hi: [max[0] + reach_m, max[1] + reach_m, z],
+        hint,
     };
     let (p, cov, rms) = fit(obs, &search)?;
     Ok(Fix {
@@ -464,6 +487,18 @@ pub const MIN_HEIGHT_SPAN_M: f64 = 0.2;
 /// least [`MIN_HEIGHT_SPAN_M`] apart); the grid runs over the heights from the floor to a
 /// metre above the highest antenna.
 pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Result<Fix3, NoFix> {
+    locate3d_from(obs, sign, facing, reach_m, None)
+}
+
+/// [`locate3d`], started from `hint` (a previous fix) instead of the grid when it is given
+/// and inside the search box.
+pub fn locate3d_from(
+    obs: &[Obs],
+    sign: f64,
+    facing: [f64; 2],
+    reach_m: f64,
+    hint: Option<[f64; 3]>,
+) -> Result<Fix3, NoFix> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
     let (min, max) = bounds(obs);
     let aperture = (max[0] - min[0]).hypot(max[1] - min[1]);
@@ -479,6 +514,7 @@ pub fn locate3d(obs: &[Obs], sign: f64, facing: [f64; 2], reach_m: f64) -> Resul
         mid: [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0],
         lo: [min[0] - reach_m, min[1] - reach_m, 0.0],
         hi: [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
+        hint,
     };
     let (p, cov, rms) = fit(obs, &search)?;
     let mut covariance = [0.0; 9];
@@ -518,6 +554,23 @@ mod tests {
         // The mirror image on the other side, when the antenna faces that way.
         let mirror = locate(&pass([1.2, -1.6], 0.0, 1), 0.5, 1.0, [0.0, -1.0], 3.0).expect("a fix");
         assert!((mirror.position[1] + 1.6).abs() < 1e-3, "{mirror:?}");
+    }
+
+    #[test]
+    fn a_start_from_the_last_fix_lands_on_the_grids_fix() {
+        let tag = [0.8, 2.1];
+        for seed in 0..5 {
+            let obs = pass(tag, 0.1, seed);
+            let cold = locate(&obs, 0.5, 1.0, [0.0, 1.0], 3.0).expect("a fix");
+            // From 3 cm off (a fix a few reads old), in the same lobe: the same minimum.
+            let hint = [cold.position[0] + 0.03, cold.position[1] - 0.02, 0.5];
+            let warm = locate_from(&obs, 0.5, 1.0, [0.0, 1.0], 3.0, Some(hint)).expect("a fix");
+            let d = (warm.position[0] - cold.position[0]).hypot(warm.position[1] - cold.position[1]);
+            assert!(d < 1e-6, "seed {seed}: {d} m");
+            // A hint outside the search box is not taken: the grid's fix.
+            let far = locate_from(&obs, 0.5, 1.0, [0.0, 1.0], 3.0, Some([50.0, 50.0, 0.5]));
+            assert_eq!(far.expect("a fix").position, cold.position, "seed {seed}");
+        }
     }
 
     #[test]
