@@ -272,8 +272,7 @@ pub fn estimate_from(
                 relock::locate3d_from(&obs, sign, facing, g.reach_m, hint)
                     .map(|f| (f.position, f.covariance))
             } else {
-                relock::locate_from(&obs, g.tag_height_m, sign, facing, g.reach_m, hint)
-                    .map(planar)
+                relock::locate_from(&obs, g.tag_height_m, sign, facing, g.reach_m, hint).map(planar)
             }
         }
         Estimator::Linear => linear::locate(&obs, g.tag_height_m, sign, facing).map(planar),

@@ -577,9 +577,7 @@ impl Worker {
                         if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
                 t.dirty_since = None;
                 t.last_estimate = Some(done);
-                t.warm = e
-                    .estimate
-                    .filter(|_| relock && e.state == State::Converged);
+                t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
                 t.settle_due = warm;
             }
             if !unchanged {

@@ -296,10 +296,7 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
                 &mut segment_cost(&fine, s.sign),
                 1,
             );
-            starts
-                .first()
-                .copied()
-                .ok_or(NoFix::InsufficientGeometry)?
+            starts.first().copied().ok_or(NoFix::InsufficientGeometry)?
         }
     };
     // A fit outside the box in height is no fix.
@@ -565,7 +562,8 @@ mod tests {
             // From 3 cm off (a fix a few reads old), in the same lobe: the same minimum.
             let hint = [cold.position[0] + 0.03, cold.position[1] - 0.02, 0.5];
             let warm = locate_from(&obs, 0.5, 1.0, [0.0, 1.0], 3.0, Some(hint)).expect("a fix");
-            let d = (warm.position[0] - cold.position[0]).hypot(warm.position[1] - cold.position[1]);
+            let d =
+                (warm.position[0] - cold.position[0]).hypot(warm.position[1] - cold.position[1]);
             assert!(d < 1e-6, "seed {seed}: {d} m");
             // A hint outside the search box is not taken: the grid's fix.
             let far = locate_from(&obs, 0.5, 1.0, [0.0, 1.0], 3.0, Some([50.0, 50.0, 0.5]));
