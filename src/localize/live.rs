@@ -16,12 +16,12 @@
 //! oldest segments are dropped down to half the bound.
 //!
 //! A tag that `relock` has located (converged) is updated from its last fix instead of the
-//! grid search, which is most of an update's cost; an update that does not converge from there
-//! is done again from the grid. Such a warm estimate depends on when the updates ran, so
-//! once the tag has had no new read for [`SETTLE`] it is estimated once more from the grid,
-//! and published when that differs from the warm one by more than [`SETTLED_SAME_M`]: what a
-//! tag settles at is a function of its reads alone (two workers on different shards publish
-//! what one does).
+//! grid search, which is most of an update's cost; an update that does not converge from
+//! there is done again from the grid, as is one every [`REFRESH`] while the tag is read. Such
+//! a warm estimate depends on when the updates ran, so once the tag has had no new read for
+//! [`SETTLE`] it is estimated once more from the grid, and published when that differs from
+//! the warm one by more than [`SETTLED_SAME_M`]: what a tag settles at is a function of its
+//! reads alone (two workers on different shards publish what one does).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -51,6 +51,11 @@ pub const POSE_KEEP_US: u64 = 60_000_000;
 /// A tag whose last estimate started from its previous fix is estimated again from the grid
 /// once it has had no new read for this long.
 pub const SETTLE: Duration = Duration::from_secs(1);
+
+/// A tag updated from its last fix for this long, read all the while, is updated from the
+/// grid once: new reads may have moved the best fit to another lobe, which a start from the
+/// old fix would not leave.
+pub const REFRESH: Duration = Duration::from_secs(5);
 
 /// A settling estimate within this of the warm one (m, on each axis) is not published again:
 /// both are the same minimum, to the solver's precision.
@@ -170,6 +175,8 @@ struct TagState {
     last_estimate: Option<Instant>,
     /// The last `relock` fix, where it converged: the next update starts from it.
     warm: Option<[f64; 3]>,
+    /// When the tag was last estimated from the grid.
+    last_cold: Option<Instant>,
     /// The last estimate started from the previous fix: one from the grid is owed once the
     /// tag settles.
     settle_due: bool,
@@ -533,10 +540,11 @@ impl Worker {
             if started.elapsed() >= budget {
                 break;
             }
-            let hint = if cold || !relock {
-                None
-            } else {
-                self.tags.get(&epc).and_then(|t| t.warm)
+            let hint = match self.tags.get(&epc) {
+                Some(t) if !cold && relock => t
+                    .warm
+                    .filter(|_| t.last_cold.is_some_and(|c| c.elapsed() < REFRESH)),
+                _ => None,
             };
             let t0 = Instant::now();
             let run = |hint| {
@@ -579,6 +587,9 @@ impl Worker {
                 t.last_estimate = Some(done);
                 t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
                 t.settle_due = warm;
+                if !warm {
+                    t.last_cold = Some(done);
+                }
             }
             if !unchanged {
                 self.shared.publish(e);
