@@ -5,12 +5,14 @@
 //! well): 50 cm on up to 32 of the phases, then 10 cm on up to 100 within 60 cm of its best.
 //! Where a series is split, its segments are joined (`split`, ours, with [`super::join`]).
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use nalgebra::DVector;
 
 use super::join;
 
+mod problem;
 mod split;
+
+use problem::{solve, Problem, Solution};
 
 /// One unwrapped phase with where the antenna was.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,118 +51,6 @@ pub struct Fix {
 pub enum NoFix {
     /// Too few phases, or an aperture too short to fix a position.
     InsufficientGeometry,
-}
-
-/// The least-squares problem in the position alone: each segment's offset is at its best
-/// for the position (the mean residual of the segment), so residuals and Jacobian columns are
-/// centred per segment (variable projection: the offsets are linear, and the position's
-/// covariance from the centred Jacobian is its marginal covariance).
-struct Problem<'a> {
-    obs: &'a [Obs],
-    /// Phases per segment.
-    counts: Vec<usize>,
-    /// 1 over the phases per segment.
-    inverse_counts: Vec<f64>,
-    /// Each phase's s·4π/λ (rad/m).
-    k: Vec<f64>,
-    /// 2: (x, y) at height `z`; 3: (x, y, z).
-    dims: usize,
-    z: f64,
-    p: DVector<f64>,
-}
-
-impl<'a> Problem<'a> {
-    fn new(obs: &'a [Obs], dims: usize, z: f64, sign: f64, start: &[f64]) -> Problem<'a> {
-        let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-        let mut counts = vec![0; segments];
-        for o in obs {
-            counts[o.segment] += 1;
-        }
-        Problem {
-            obs,
-            inverse_counts: counts.iter().map(|&c| 1.0 / c.max(1) as f64).collect(),
-            counts,
-            k: obs
-                .iter()
-                .map(|o| sign * 4.0 * std::f64::consts::PI / o.wavelength_m)
-                .collect(),
-            dims,
-            z,
-            p: DVector::from_column_slice(&start[..dims]),
-        }
-    }
-
-    fn distance(&self, o: &Obs) -> (f64, [f64; 3]) {
-        let z = if self.dims == 3 { self.p[2] } else { self.z };
-        let d = [
-            self.p[0] - o.antenna[0],
-            self.p[1] - o.antenna[1],
-            z - o.antenna[2],
-        ];
-        (
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-9),
-            d,
-        )
-    }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.p.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.p.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        let mut r = Vec::with_capacity(self.obs.len());
-        let mut mean = vec![0.0; self.counts.len()];
-        for (o, k) in self.obs.iter().zip(&self.k) {
-            let (d, _) = self.distance(o);
-            let v = o.phase_rad - k * d;
-            mean[o.segment] += v;
-            r.push(v);
-        }
-        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
-            *m *= inv;
-        }
-        for (o, v) in self.obs.iter().zip(r.iter_mut()) {
-            *v -= mean[o.segment];
-        }
-        Some(DVector::from_vec(r))
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        // Column-major, filled in place: column a holds ∂r_i/∂p_a.
-        let n = self.obs.len();
-        let mut j = vec![0.0; n * self.dims];
-        let mut mean = vec![[0.0; 3]; self.counts.len()];
-        for (i, (o, k)) in self.obs.iter().zip(&self.k).enumerate() {
-            let (d, v) = self.distance(o);
-            let g = -k / d;
-            for a in 0..self.dims {
-                let x = g * v[a];
-                j[a * n + i] = x;
-                mean[o.segment][a] += x;
-            }
-        }
-        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
-            for x in m.iter_mut() {
-                *x *= inv;
-            }
-        }
-        for a in 0..self.dims {
-            for (x, o) in j[a * n..(a + 1) * n].iter_mut().zip(self.obs) {
-                *x -= mean[o.segment][a];
-            }
-        }
-        Some(DMatrix::from_vec(n, self.dims, j))
-    }
 }
 
 /// Residual sum of squares at (x, y) with each segment's offset at its best (the mean);
@@ -441,30 +331,6 @@ pub fn locate_from(
         rms_rad: rms,
     })
 }
-
-/// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
-/// times the residual variance) and the RMS residual. A solution outside the search box
-/// of `s` is no fix: the phases did not pin the tag down.
-fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
-    let (obs, dims, segments) = (problem.obs, problem.dims, problem.counts.len());
-    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
-    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
-    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let dof = (obs.len() - (dims + segments)).max(1) as f64;
-    let variance = r.norm_squared() / dof;
-    let info = j.transpose() * &j;
-    let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)? * variance;
-    let p = solved.p;
-    let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= s.lo[a] && p[a] <= s.hi[a]);
-    let finite = (0..dims).all(|a| p[a].is_finite() && cov[(a, a)].is_finite());
-    if !(inside && finite) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    Ok((p, cov, (r.norm_squared() / obs.len() as f64).sqrt()))
-}
-
-/// A solution: position, covariance, RMS residual.
-type Solution = (DVector<f64>, DMatrix<f64>, f64);
 
 /// A 3D estimate.
 #[derive(Clone, Debug, PartialEq)]

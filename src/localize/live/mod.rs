@@ -30,8 +30,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::calibrate::Calibration;
-use super::estimate::{self, Estimate, Estimator, Geometry, State};
+use super::estimate::{Estimate, Estimator, Geometry, State};
 use super::ingest::Ingest;
 use super::poses::{PoseSample, Poses};
 use super::series::Ambiguity;
@@ -40,6 +39,10 @@ use crate::reads::Read;
 
 pub use super::tap::{Input, Mirror, Tap};
 
+mod rounds;
+
+pub use rounds::{REFRESH, SETTLE, SETTLED_SAME_M};
+
 /// Longest a read waits for a pose at or after its time (wall-clock time at the localizer).
 pub const POSE_WAIT: Duration = Duration::from_secs(2);
 
@@ -47,19 +50,6 @@ pub const POSE_WAIT: Duration = Duration::from_secs(2);
 /// that do not walk the path driven (all but mhekf and wls, which keep up to
 /// [`super::poses::MAX_TRACK`] samples).
 pub const POSE_KEEP_US: u64 = 60_000_000;
-
-/// A tag whose last estimate started from its previous fix is estimated again from the grid
-/// once it has had no new read for this long.
-pub const SETTLE: Duration = Duration::from_secs(1);
-
-/// A tag updated from its last fix for this long, read all the while, is updated from the
-/// grid once: new reads may have moved the best fit to another lobe, which a start from the
-/// old fix would not leave.
-pub const REFRESH: Duration = Duration::from_secs(5);
-
-/// A settling estimate within this of the warm one (m, on each axis) is not published again:
-/// both are the same minimum, to the solver's precision.
-pub const SETTLED_SAME_M: f64 = 1e-7;
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
@@ -501,100 +491,6 @@ impl Worker {
                 v.recent.push_back(r);
             },
         );
-    }
-
-    /// Re-estimates dirty tags (longest waiting first), then settled ones whose last estimate
-    /// was warm, for at most `budget`; `all`: every such tag, each from the grid.
-    fn estimate(&mut self, budget: Duration, all: bool) {
-        let started = Instant::now();
-        let now = Instant::now();
-        // (dirty first, since, epc, from the grid)
-        let mut due: Vec<(bool, Instant, String, bool)> = self
-            .tags
-            .iter()
-            .filter_map(|(epc, t)| {
-                if let Some(since) = t.dirty_since {
-                    let rested = t.last_estimate.map_or(true, |l| {
-                        now.duration_since(l) >= self.settings.min_interval
-                    });
-                    return (all || rested).then(|| (false, since, epc.clone(), all));
-                }
-                let last = t.last_estimate?;
-                let settled = all || now.duration_since(last) >= SETTLE;
-                (t.settle_due && settled).then(|| (true, last, epc.clone(), true))
-            })
-            .collect();
-        due.sort();
-        // Measured once a round: the references move little between rounds.
-        let calibration = if due.is_empty() {
-            Calibration::default()
-        } else {
-            estimate::calibration(
-                &self.ingest,
-                self.settings.estimator,
-                &self.settings.geometry,
-            )
-        };
-        let relock = self.settings.estimator == Estimator::Relock;
-        for (settling, since, epc, cold) in due {
-            if started.elapsed() >= budget {
-                break;
-            }
-            let hint = match self.tags.get(&epc) {
-                Some(t) if !cold && relock => t
-                    .warm
-                    .filter(|_| t.last_cold.is_some_and(|c| c.elapsed() < REFRESH)),
-                _ => None,
-            };
-            let t0 = Instant::now();
-            let run = |hint| {
-                estimate::estimate_from(
-                    &self.ingest,
-                    &epc,
-                    self.settings.estimator,
-                    &self.settings.geometry,
-                    &calibration,
-                    hint,
-                )
-            };
-            let mut e = run(hint);
-            let mut warm = hint.is_some();
-            if warm && e.state != State::Converged {
-                // Not converged from the last fix: from the grid.
-                e = run(None);
-                warm = false;
-            }
-            let done = Instant::now();
-            self.shared
-                .metrics
-                .estimator_seconds
-                .observe(done.duration_since(t0).as_secs_f64());
-            if !settling {
-                self.shared
-                    .metrics
-                    .update_latency_seconds
-                    .observe(done.duration_since(since).as_secs_f64());
-            }
-            let mut unchanged = false;
-            if let Some(t) = self.tags.get_mut(&epc) {
-                // A settling estimate where the warm one already was (what the warm one
-                // converged to): nothing to tell anyone.
-                unchanged = settling
-                    && e.state == State::Converged
-                    && matches!((e.estimate, t.warm), (Some(p), Some(q))
-                        if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
-                t.dirty_since = None;
-                t.last_estimate = Some(done);
-                t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
-                t.settle_due = warm;
-                if !warm {
-                    t.last_cold = Some(done);
-                }
-            }
-            if !unchanged {
-                self.shared.publish(e);
-            }
-        }
     }
 }
 

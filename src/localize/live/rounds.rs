@@ -1,0 +1,117 @@
+//! Rounds of estimates: dirty tags first, longest waiting first, each from its last fix where
+//! `relock` had converged, and settled tags once more from the grid (the module above).
+
+use std::time::{Duration, Instant};
+
+use super::Worker;
+use crate::localize::calibrate::Calibration;
+use crate::localize::estimate::{self, Estimator, State};
+
+/// A tag whose last estimate started from its previous fix is estimated again from the grid
+/// once it has had no new read for this long.
+pub const SETTLE: Duration = Duration::from_secs(1);
+
+/// A tag updated from its last fix for this long, read all the while, is updated from the
+/// grid once: new reads may have moved the best fit to another lobe, which a start from the
+/// old fix would not leave.
+pub const REFRESH: Duration = Duration::from_secs(5);
+
+/// A settling estimate within this of the warm one (m, on each axis) is not published again:
+/// both are the same minimum, to the solver's precision.
+pub const SETTLED_SAME_M: f64 = 1e-7;
+
+impl Worker {
+    /// Re-estimates dirty tags (longest waiting first), then settled ones whose last estimate
+    /// was warm, for at most `budget`; `all`: every such tag, each from the grid.
+    pub(super) fn estimate(&mut self, budget: Duration, all: bool) {
+        let started = Instant::now();
+        let now = Instant::now();
+        // (dirty first, since, epc, from the grid)
+        let mut due: Vec<(bool, Instant, String, bool)> = self
+            .tags
+            .iter()
+            .filter_map(|(epc, t)| {
+                if let Some(since) = t.dirty_since {
+                    let rested = t.last_estimate.map_or(true, |l| {
+                        now.duration_since(l) >= self.settings.min_interval
+                    });
+                    return (all || rested).then(|| (false, since, epc.clone(), all));
+                }
+                let last = t.last_estimate?;
+                let settled = all || now.duration_since(last) >= SETTLE;
+                (t.settle_due && settled).then(|| (true, last, epc.clone(), true))
+            })
+            .collect();
+        due.sort();
+        // Measured once a round: the references move little between rounds.
+        let calibration = if due.is_empty() {
+            Calibration::default()
+        } else {
+            estimate::calibration(
+                &self.ingest,
+                self.settings.estimator,
+                &self.settings.geometry,
+            )
+        };
+        let relock = self.settings.estimator == Estimator::Relock;
+        for (settling, since, epc, cold) in due {
+            if started.elapsed() >= budget {
+                break;
+            }
+            let hint = match self.tags.get(&epc) {
+                Some(t) if !cold && relock => t
+                    .warm
+                    .filter(|_| t.last_cold.is_some_and(|c| c.elapsed() < REFRESH)),
+                _ => None,
+            };
+            let t0 = Instant::now();
+            let run = |hint| {
+                estimate::estimate_from(
+                    &self.ingest,
+                    &epc,
+                    self.settings.estimator,
+                    &self.settings.geometry,
+                    &calibration,
+                    hint,
+                )
+            };
+            let mut e = run(hint);
+            let mut warm = hint.is_some();
+            if warm && e.state != State::Converged {
+                // Not converged from the last fix: from the grid.
+                e = run(None);
+                warm = false;
+            }
+            let done = Instant::now();
+            self.shared
+                .metrics
+                .estimator_seconds
+                .observe(done.duration_since(t0).as_secs_f64());
+            if !settling {
+                self.shared
+                    .metrics
+                    .update_latency_seconds
+                    .observe(done.duration_since(since).as_secs_f64());
+            }
+            let mut unchanged = false;
+            if let Some(t) = self.tags.get_mut(&epc) {
+                // A settling estimate where the warm one already was (what the warm one
+                // converged to): nothing to tell anyone.
+                unchanged = settling
+                    && e.state == State::Converged
+                    && matches!((e.estimate, t.warm), (Some(p), Some(q))
+                        if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
+                t.dirty_since = None;
+                t.last_estimate = Some(done);
+                t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
+                t.settle_due = warm;
+                if !warm {
+                    t.last_cold = Some(done);
+                }
+            }
+            if !unchanged {
+                self.shared.publish(e);
+            }
+        }
+    }
+}
