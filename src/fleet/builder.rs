@@ -19,6 +19,7 @@ struct BatchRef<'a> {
     v: u32,
     gateway: &'a str,
     reader: &'a str,
+    run: u64,
     seq: u64,
     reads: &'a [TagRead],
 }
@@ -263,6 +264,7 @@ impl Builder {
                 v: VERSION,
                 gateway: &self.opts.gateway,
                 reader: &p.reader,
+                run: self.opts.run,
                 seq,
                 reads: chunk,
             };
@@ -285,6 +287,7 @@ impl Builder {
             "v": VERSION,
             "gateway": self.opts.gateway,
             "reader": reader,
+            "run": self.opts.run,
             "seq": seq,
         });
         // An event of plain values always serializes.
@@ -355,14 +358,15 @@ mod tests {
             v: VERSION,
             gateway: "gw",
             reader: "r1",
+            run: 1_764_633_000_000_000,
             seq: 7,
             reads: &reads,
         })
         .expect("serializes");
         let b: schema::ReadBatch = serde_json::from_slice(&json).expect("the schema's batch");
         assert_eq!(
-            (b.v, b.gateway.as_str(), b.reader.as_str(), b.seq),
-            (1, "gw", "r1", 7)
+            (b.v, b.gateway.as_str(), b.reader.as_str(), b.run, b.seq),
+            (1, "gw", "r1", 1_764_633_000_000_000, 7)
         );
         assert_eq!(b.reads, reads);
     }

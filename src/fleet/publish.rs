@@ -39,6 +39,8 @@ pub struct PublishOptions {
     pub url: BrokerUrl,
     /// This gateway's name (its status topic, its client id, every message's `gateway`).
     pub gateway: String,
+    /// This run of the gateway (every message's `run`): when it started, UTC µs.
+    pub run: u64,
     /// Read shards (`PREFIX/v1/reads/0` … `S-1`).
     pub shard_count: u16,
     /// Messages held while the broker is away; beyond it they are dropped and counted.
@@ -60,6 +62,7 @@ impl PublishOptions {
         PublishOptions {
             url,
             gateway: gateway.to_owned(),
+            run: crate::net::clock::utc_now_us(),
             shard_count: schema::DEFAULT_SHARDS,
             queue: 10_000,
             window: Duration::ZERO,
@@ -131,6 +134,7 @@ pub(super) struct Link {
     client: Client,
     url: BrokerUrl,
     gateway: String,
+    run: u64,
     /// Readers online, which a reconnection announces again.
     pub(super) online: Mutex<BTreeSet<String>>,
     /// The messages not yet handed to the connection (at most `queue`).
@@ -236,6 +240,7 @@ impl Link {
             status: if online { "online" } else { "offline" }.into(),
             gateway: self.gateway.clone(),
             reader: reader.map(str::to_owned),
+            run: self.run,
             last_seq,
         };
         let rest = match reader {
@@ -293,6 +298,7 @@ impl Publisher {
             status: "offline".into(),
             gateway: opts.gateway.clone(),
             reader: None,
+            run: opts.run,
             last_seq: BTreeMap::new(),
         };
         mqtt.set_last_will(LastWill::new(
@@ -311,6 +317,7 @@ impl Publisher {
             client,
             url: opts.url.clone(),
             gateway: opts.gateway.clone(),
+            run: opts.run,
             online: Mutex::new(BTreeSet::new()),
             outbox: Mutex::new(VecDeque::new()),
             queue: opts.queue.max(1),

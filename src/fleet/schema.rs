@@ -119,6 +119,10 @@ pub struct ReadBatch {
     pub gateway: String,
     /// The reader that read them.
     pub reader: String,
+    /// The gateway's run: when it started, UTC µs since the Unix epoch (0 or absent: not
+    /// named).
+    #[serde(default)]
+    pub run: u64,
     /// This reader's message number on this topic, from 1 in each gateway run: a gap is a
     /// lost message, a repeat a redelivery.
     pub seq: u64,
@@ -140,6 +144,9 @@ pub struct Status {
     /// The reader, for a reader's status.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reader: Option<String>,
+    /// The gateway's run (as in [`ReadBatch::run`]), which `last_seq` counts in.
+    #[serde(default)]
+    pub run: u64,
     /// On a reader's clean `offline`: the last `seq` it published on each topic (the topic
     /// under `PREFIX/v1/`), so a subscriber can tell it has everything.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
@@ -233,5 +240,14 @@ mod tests {
             },
             r
         );
+    }
+
+    #[test]
+    fn a_batch_that_names_no_run_parses_as_run_zero() {
+        let b: ReadBatch = serde_json::from_str(
+            r#"{"v": 1, "gateway": "g", "reader": "r", "seq": 3, "reads": []}"#,
+        )
+        .expect("parses");
+        assert_eq!((b.run, b.seq), (0, 3));
     }
 }

@@ -5,7 +5,9 @@
 //! another estimate), for at most [`HOLD`] and [`MAX_HELD`] messages; then the gap is
 //! skipped, and a message that still comes late into it is filed out of order. A missing
 //! number counts as lost once it is [`REORDER_WINDOW`] behind, or [`CLOSE_GRACE`] after the
-//! publisher's clean close named a last number at or past it.
+//! publisher's clean close named a last number at or past it. Numbers count from 1 in each
+//! publisher run (the messages' `run`): a newer run starts the count again, and a message of
+//! an older run that comes late is filed out of order.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -51,6 +53,8 @@ impl<T> Default for Step<T> {
 /// One topic's numbers and the messages held for a gap.
 #[derive(Debug)]
 pub struct Seq<T> {
+    /// The publisher run whose numbers these are (0: the publisher names none).
+    run: u64,
     /// The next number to file; 0 before the first message.
     next: u64,
     /// Numbers below `next` skipped over and not seen yet.
@@ -64,6 +68,7 @@ pub struct Seq<T> {
 impl<T> Default for Seq<T> {
     fn default() -> Self {
         Seq {
+            run: 0,
             next: 0,
             missing: BTreeSet::new(),
             held: BTreeMap::new(),
@@ -73,17 +78,27 @@ impl<T> Default for Seq<T> {
 }
 
 impl<T> Seq<T> {
-    /// Message `seq` came at `now`. The first number seen is where this subscriber's session
-    /// began (no loss before it); 1 again after higher ones is a new gateway run.
-    pub fn arrive(&mut self, seq: u64, item: T, now: Instant) -> Step<T> {
+    /// Message `seq` of publisher run `run` came at `now`. The first number seen is where
+    /// this subscriber's session began (no loss before it). A newer run counts from 1 again:
+    /// what the last one left missing is lost, and what it held is filed. From a publisher
+    /// that names no run (`run` 0), 1 again after higher numbers is taken for a new run.
+    pub fn arrive(&mut self, run: u64, seq: u64, item: T, now: Instant) -> Step<T> {
         let mut step = Step::default();
+        if self.next != 0 && run != 0 && run < self.run {
+            // Late from an earlier run: its numbers are no longer kept.
+            step.file.push(item);
+            return step;
+        }
+        if self.next != 0 && run > self.run {
+            self.new_run(&mut step);
+            self.next = 1;
+        }
+        self.run = run;
         if self.next == 0 {
             self.next = seq + 1;
             step.file.push(item);
-        } else if seq == 1 && self.next > 2 && !self.missing.contains(&1) {
-            self.release_all(&mut step);
-            step.lost += std::mem::take(&mut self.missing).len() as u64;
-            self.close = None;
+        } else if run == 0 && seq == 1 && self.next > 2 && !self.missing.contains(&1) {
+            self.new_run(&mut step);
             self.next = 2;
             step.file.push(item);
         } else if seq < self.next {
@@ -142,10 +157,11 @@ impl<T> Seq<T> {
         step
     }
 
-    /// The publisher's last number was `last` (its reader's clean `offline`) at `now`: what
-    /// is still missing up to it counts as lost unless it comes within [`CLOSE_GRACE`].
-    pub fn close(&mut self, last: u64, now: Instant) {
-        if self.next != 0 {
+    /// The publisher's run `run` ended at number `last` (its reader's clean `offline`) at
+    /// `now`: what is still missing up to it counts as lost unless it comes within
+    /// [`CLOSE_GRACE`]. The close of another run than the one being counted changes nothing.
+    pub fn close(&mut self, run: u64, last: u64, now: Instant) {
+        if self.next != 0 && run == self.run {
             self.close = Some((last, now + CLOSE_GRACE));
             self.end_complete_close();
         }
@@ -187,6 +203,13 @@ impl<T> Seq<T> {
         }
     }
 
+    /// Ends the run being counted: files what it held, counts what it left missing.
+    fn new_run(&mut self, step: &mut Step<T>) {
+        self.release_all(step);
+        step.lost += std::mem::take(&mut self.missing).len() as u64;
+        self.close = None;
+    }
+
     /// Files everything held, gaps skipped.
     fn release_all(&mut self, step: &mut Step<T>) {
         while !self.held.is_empty() {
@@ -220,6 +243,9 @@ impl<T> Seq<T> {
 mod tests {
     use super::*;
 
+    /// A publisher run.
+    const R: u64 = 1_796_000_000_000_000;
+
     fn filed(step: &Step<u64>) -> Vec<u64> {
         step.file.clone()
     }
@@ -228,15 +254,15 @@ mod tests {
     fn a_message_ahead_of_a_gap_waits_for_it_and_both_are_filed_in_order() {
         let t = Instant::now();
         let mut s = Seq::default();
-        assert_eq!(filed(&s.arrive(5, 5, t)), [5]);
-        let ahead = s.arrive(7, 7, t);
+        assert_eq!(filed(&s.arrive(R, 5, 5, t)), [5]);
+        let ahead = s.arrive(R, 7, 7, t);
         assert!(ahead.held && ahead.file.is_empty());
-        let ahead = s.arrive(8, 8, t);
+        let ahead = s.arrive(R, 8, 8, t);
         assert!(ahead.held && ahead.file.is_empty());
-        let late = s.arrive(6, 6, t);
+        let late = s.arrive(R, 6, 6, t);
         assert_eq!(filed(&late), [6, 7, 8]);
         assert_eq!(late.lost, 0);
-        assert_eq!(s.arrive(7, 7, t).duplicate, Some(7));
+        assert_eq!(s.arrive(R, 7, 7, t).duplicate, Some(7));
         assert_eq!(s.held(), 0);
     }
 
@@ -244,25 +270,25 @@ mod tests {
     fn a_gap_that_does_not_fill_in_time_is_skipped_and_a_later_arrival_still_filed() {
         let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(1, 1, t);
-        assert!(s.arrive(3, 3, t).held);
+        s.arrive(R, 1, 1, t);
+        assert!(s.arrive(R, 3, 3, t).held);
         assert!(s.tick(t + HOLD / 2).file.is_empty());
         let step = s.tick(t + HOLD);
         assert_eq!(filed(&step), [3]);
         assert_eq!(step.lost, 0, "skipped, not yet lost");
         // 2 comes late after all: filed out of order, once.
-        assert_eq!(filed(&s.arrive(2, 2, t + HOLD)), [2]);
-        assert_eq!(s.arrive(2, 2, t + HOLD).duplicate, Some(2));
+        assert_eq!(filed(&s.arrive(R, 2, 2, t + HOLD)), [2]);
+        assert_eq!(s.arrive(R, 2, 2, t + HOLD).duplicate, Some(2));
     }
 
     #[test]
     fn a_close_overtaken_by_its_last_messages_loses_nothing() {
         let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(1, 1, t);
-        s.close(3, t);
-        assert_eq!(filed(&s.arrive(2, 2, t)), [2]);
-        assert_eq!(filed(&s.arrive(3, 3, t)), [3]);
+        s.arrive(R, 1, 1, t);
+        s.close(R, 3, t);
+        assert_eq!(filed(&s.arrive(R, 2, 2, t)), [2]);
+        assert_eq!(filed(&s.arrive(R, 3, 3, t)), [3]);
         assert_eq!(s.tick(t + CLOSE_GRACE).lost, 0);
     }
 
@@ -270,48 +296,81 @@ mod tests {
     fn what_never_comes_is_lost_after_the_close_grace() {
         let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(5, 5, t);
-        s.arrive(8, 8, t);
-        s.close(10, t);
+        s.arrive(R, 5, 5, t);
+        s.arrive(R, 8, 8, t);
+        s.close(R, 10, t);
         let early = s.tick(t + CLOSE_GRACE - Duration::from_millis(1));
         assert_eq!(early.lost, 0);
         let step = s.tick(t + CLOSE_GRACE);
         // 8 is filed (once its hold is over, or at the close); 6, 7, 9 and 10 never came.
         assert_eq!([filed(&early), filed(&step)].concat(), [8]);
         assert_eq!(step.lost, 4);
-        assert_eq!(s.arrive(11, 11, t + CLOSE_GRACE).lost, 0);
+        assert_eq!(s.arrive(R, 11, 11, t + CLOSE_GRACE).lost, 0);
     }
 
     #[test]
-    fn numbers_far_behind_are_lost_and_one_again_is_a_new_run() {
+    fn numbers_far_behind_are_lost() {
         let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(1, 1, t);
-        let far = s.arrive(2 + REORDER_WINDOW, 0, t);
+        s.arrive(R, 1, 1, t);
+        let far = s.arrive(R, 2 + REORDER_WINDOW, 0, t);
         assert_eq!(
             filed(&far),
             [0],
             "released at once: too far ahead to wait for"
         );
         assert_eq!(far.lost, 1);
+    }
+
+    #[test]
+    fn a_newer_run_counts_from_one_again_and_a_late_message_of_the_old_run_is_filed() {
+        let t = Instant::now();
         let mut r = Seq::default();
-        r.arrive(10, 10, t);
-        r.arrive(12, 12, t);
-        let run = r.arrive(1, 1, t);
+        r.arrive(R, 10, 10, t);
+        r.arrive(R, 12, 12, t);
+        // The new run's first message to come is its second: it waits for its first.
+        let second = r.arrive(R + 1, 2, 2, t);
+        assert_eq!(filed(&second), [12], "the old run's held message is filed");
+        assert_eq!(second.lost, 1, "11 never came");
+        assert!(second.held);
+        assert_eq!(filed(&r.arrive(R + 1, 1, 1, t)), [1, 2]);
+        // A redelivery of the old run's 10, after the new run began: filed out of order
+        // (that run's numbers are no longer kept), the new run's count untouched.
+        let late = r.arrive(R, 10, 10, t);
+        assert_eq!(
+            (filed(&late), late.lost, late.duplicate),
+            (vec![10], 0, None)
+        );
+        assert_eq!(r.expected(), 3);
+        // Within one run, 1 again is a redelivery, not a new run.
+        assert_eq!(r.arrive(R + 1, 1, 1, t).duplicate, Some(1));
+        // The old run's close does not close the new run's count.
+        r.close(R, 12, t);
+        r.arrive(R + 1, 5, 5, t);
+        assert_eq!(r.tick(t + CLOSE_GRACE).lost, 0);
+    }
+
+    #[test]
+    fn from_a_publisher_naming_no_run_one_again_is_a_new_run() {
+        let t = Instant::now();
+        let mut r = Seq::default();
+        r.arrive(0, 10, 10, t);
+        r.arrive(0, 12, 12, t);
+        let run = r.arrive(0, 1, 1, t);
         assert_eq!(filed(&run), [12, 1], "the old run's held message first");
         assert_eq!(run.lost, 1);
-        assert_eq!(filed(&r.arrive(2, 2, t)), [2]);
+        assert_eq!(filed(&r.arrive(0, 2, 2, t)), [2]);
     }
 
     #[test]
     fn no_more_than_max_held_wait_for_one_gap() {
         let t = Instant::now();
         let mut s = Seq::default();
-        s.arrive(1, 1, t);
+        s.arrive(R, 1, 1, t);
         for n in 3..3 + MAX_HELD as u64 {
-            assert!(s.arrive(n, n, t).file.is_empty());
+            assert!(s.arrive(R, n, n, t).file.is_empty());
         }
-        let over = s.arrive(3 + MAX_HELD as u64, 0, t);
+        let over = s.arrive(R, 3 + MAX_HELD as u64, 0, t);
         assert_eq!(over.file.len(), MAX_HELD + 1);
         assert_eq!(s.held(), 0);
     }

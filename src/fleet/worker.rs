@@ -319,7 +319,7 @@ impl Run {
                 for (rest, &last) in &s.last_seq {
                     let key = (s.gateway.clone(), reader.clone(), rest.clone());
                     if let Some(seen) = self.seen.get_mut(&key) {
-                        seen.close(last, now);
+                        seen.close(s.run, last, now);
                     }
                 }
             }
@@ -348,7 +348,7 @@ impl Run {
             }
         };
         let key = (batch.gateway.clone(), batch.reader.clone(), rest.to_owned());
-        let seq = batch.seq;
+        let (run, seq) = (batch.run, batch.seq);
         let held = Held {
             batch,
             refs,
@@ -356,7 +356,7 @@ impl Run {
         };
         let seen = self.seen.entry(key).or_default();
         let expected = seen.expected();
-        let step = seen.arrive(seq, held, Instant::now());
+        let step = seen.arrive(run, seq, held, Instant::now());
         if step.held {
             // Acknowledged as it is held: a broker may hold back the missing message until
             // the ones it delivered are (NATS: max_ack_pending per subscription).
