@@ -107,6 +107,11 @@ fn latency(port: u16, filter: &str, seconds: f64) {
     let mut connection = connect(port, filter);
     let end = Instant::now() + Duration::from_secs_f64(seconds);
     let mut ages: Vec<f64> = Vec::new();
+    // With MQTT_SUBSCRIBER_AGES=FILE: every estimate's arrival (s from the start) and age (ms).
+    let mut dump = std::env::var_os("MQTT_SUBSCRIBER_AGES")
+        .and_then(|path| std::fs::File::create(path).ok())
+        .map(std::io::BufWriter::new);
+    let start = Instant::now();
     while Instant::now() < end {
         let Ok(Ok(Event::Incoming(Packet::Publish(p)))) =
             connection.recv_timeout(Duration::from_millis(100))
@@ -126,7 +131,13 @@ fn latency(port: u16, filter: &str, seconds: f64) {
         let now = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_micros() as u64);
-        ages.push(now.saturating_sub(seen) as f64 / 1000.0);
+        let age = now.saturating_sub(seen) as f64 / 1000.0;
+        if let Some(out) = dump.as_mut() {
+            use std::io::Write;
+            let epc = v["epc"].as_str().unwrap_or_default();
+            let _ = writeln!(out, "{:.4}\t{age:.2}\t{epc}", start.elapsed().as_secs_f64());
+        }
+        ages.push(age);
     }
     ages.sort_by(f64::total_cmp);
     let q = |f: f64| {

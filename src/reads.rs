@@ -71,6 +71,29 @@ pub struct AntennaPose {
     pub pitch_deg: f64,
 }
 
+/// Where a reader's source knows them (a simulator), the pose of each antenna at a read's
+/// time: `(antenna, read time in UTC µs) → pose`.
+#[derive(Clone)]
+pub struct PoseAt(std::sync::Arc<dyn Fn(u16, u64) -> Option<AntennaPose> + Send + Sync>);
+
+impl PoseAt {
+    /// Poses from `f`.
+    pub fn new(f: impl Fn(u16, u64) -> Option<AntennaPose> + Send + Sync + 'static) -> PoseAt {
+        PoseAt(std::sync::Arc::new(f))
+    }
+
+    /// The pose of `antenna` at `t_us` (UTC µs), if known.
+    pub fn at(&self, antenna: u16, t_us: u64) -> Option<AntennaPose> {
+        (self.0)(antenna, t_us)
+    }
+}
+
+impl std::fmt::Debug for PoseAt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PoseAt(..)")
+    }
+}
+
 /// The columns of the CSV output, in order.
 pub const CSV_HEADER: &str = "epc,reader,antenna,t_us,last_seen_us,phase_rad,rssi_dbm,channel_index,channel_frequency_hz,doppler_hz";
 
@@ -103,6 +126,8 @@ pub struct ReadDecoder {
     hop_table: Option<HopTable>,
     /// The hop table came from the reader's capabilities (not overridden by a fallback).
     from_reader: bool,
+    /// Stamps each read with its antenna's pose.
+    poses: Option<PoseAt>,
 }
 
 /// Why a frame gave no reads.
@@ -127,6 +152,12 @@ impl ReadDecoder {
         if !self.from_reader {
             self.hop_table = table;
         }
+        self
+    }
+
+    /// Stamps each read with its antenna's pose from `poses` (where the source knows it).
+    pub fn with_poses(mut self, poses: Option<PoseAt>) -> Self {
+        self.poses = poses;
         self
     }
 
@@ -200,17 +231,18 @@ impl ReadDecoder {
             .zip(self.hop_table.as_ref())
             .and_then(|(c, t)| t.frequency_khz(c))
             .map(|khz| u64::from(khz) * 1000);
+        let antenna = r.antenna_id.unwrap_or(0);
         Read {
             epc: hex_upper(r.epc),
             reader: self.reader.clone(),
-            antenna: r.antenna_id.unwrap_or(0),
+            antenna,
             t_us,
             phase_rad: r.phase_angle.map(units::phase_to_radians),
             rssi_dbm,
             channel_index: r.channel_index,
             channel_frequency_hz,
             doppler_hz: r.doppler_frequency.map(units::doppler_to_hz),
-            antenna_pose: None,
+            antenna_pose: self.poses.as_ref().and_then(|p| p.at(antenna, t_us)),
             last_seen_us,
         }
     }
@@ -221,13 +253,20 @@ impl ReadDecoder {
 pub struct Decoders(std::collections::HashMap<String, ReadDecoder>);
 
 impl Decoders {
-    /// Reader `name` advertises `hop_table` (its decoder keeps what it has learnt).
-    pub fn register(&mut self, name: &str, hop_table: Option<llrp::units::HopTable>) {
+    /// Reader `name` advertises `hop_table`, and its source knows its antennas' poses where
+    /// `poses` is given (its decoder keeps what it has learnt).
+    pub fn register(
+        &mut self,
+        name: &str,
+        hop_table: Option<llrp::units::HopTable>,
+        poses: Option<PoseAt>,
+    ) {
         let d = self
             .0
             .remove(name)
             .unwrap_or_else(|| ReadDecoder::new(Some(name.to_owned())))
-            .with_fallback_table(hop_table);
+            .with_fallback_table(hop_table)
+            .with_poses(poses);
         self.0.insert(name.to_owned(), d);
     }
 

@@ -109,9 +109,10 @@ impl Builder {
                 name,
                 hop_table,
                 clock_offset_us,
+                poses,
                 ..
             } => {
-                self.decoders.register(&name, hop_table);
+                self.decoders.register(&name, hop_table, poses);
                 self.offsets.insert(name.clone(), clock_offset_us);
                 self.came(&name);
             }

@@ -108,6 +108,7 @@ impl Worker {
                 hop_table: None,
                 antennas: Vec::new(),
                 clock_offset_us: *offset,
+                poses: None,
             });
         }
         let stopping = Arc::new(AtomicBool::new(false));

@@ -168,6 +168,7 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
             hop_table: None,
             antennas: Vec::new(),
             clock_offset_us: *offset,
+            poses: None,
         });
     }
     let samples = poses.samples();

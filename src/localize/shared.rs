@@ -112,8 +112,10 @@ pub struct Metrics {
     pub poses: Counter,
     /// Compute time of one tag's estimate (s).
     pub estimator_seconds: Histogram,
-    /// From a read's arrival at the localizer to its tag's updated estimate (s).
+    /// From a read's filing (its pose in) to its tag's updated estimate (s).
     pub update_latency_seconds: Histogram,
+    /// From a read's arrival at the localizer to its filing: the wait for its pose (s).
+    pub pose_wait_seconds: Histogram,
     /// MQTT messages handed to the broker connection.
     pub mqtt_published: Counter,
     /// Reads, poses and messages the MQTT publisher dropped (its tap or its queue full).
@@ -159,6 +161,7 @@ impl Metrics {
             poses: Counter::default(),
             estimator_seconds: buckets(),
             update_latency_seconds: buckets(),
+            pose_wait_seconds: buckets(),
             mqtt_published: Counter::default(),
             mqtt_dropped: Counter::default(),
             mqtt_dropped_messages: Counter::default(),
@@ -212,8 +215,13 @@ impl Metrics {
         );
         registry.register(
             "update_latency_seconds",
-            "From a read's arrival at the localizer to its tag's updated estimate",
+            "From a read's filing (its pose in) to its tag's updated estimate",
             m.update_latency_seconds.clone(),
+        );
+        registry.register(
+            "pose_wait_seconds",
+            "From a read's arrival at the localizer to its filing: the wait for its pose",
+            m.pose_wait_seconds.clone(),
         );
         let mqtt = [
             (

@@ -25,6 +25,9 @@ pub enum Input {
         antennas: Vec<u16>,
         /// Reader time − robot time for its poses (µs).
         clock_offset_us: i64,
+        /// Its antennas' poses at its reads, where the source knows them (a simulator):
+        /// its reads then need no pose sample.
+        poses: Option<crate::reads::PoseAt>,
     },
     /// Whole LLRP frames reader `reader` sent to its client.
     Frames {

@@ -11,6 +11,7 @@ use crate::localize::poses::PoseSample;
 use crate::localize::series::Ambiguity;
 use crate::localize::shared::{Truth, TruthTag};
 use crate::physics::{AntennaPose, Model, World};
+use crate::reads::PoseAt;
 use crate::scenario::Scenario;
 
 /// Simulated time between two pose samples of an antenna by default, µs (10 Hz).
@@ -102,6 +103,29 @@ impl Feed {
             self.tap.shared().set_truth(truth);
         }
     }
+}
+
+/// The antennas' poses at any read of the reader on `model` whose clock starts at `utc0`
+/// (UTC µs), true or as the robot reports them: what the simulator stamps its reads with.
+pub fn pose_at(model: Arc<Model>, source: PoseSource, utc0: u64) -> PoseAt {
+    PoseAt::new(move |antenna, t_us| {
+        if antenna == 0 || antenna > model.antenna_count() {
+            return None;
+        }
+        let t = t_us.checked_sub(utc0)?;
+        let pose = match source {
+            PoseSource::Truth => model.antenna_pose(antenna, t),
+            PoseSource::Estimated => model.estimated_pose(antenna, t),
+        };
+        let [x, y, z] = pose.position;
+        Some(crate::reads::AntennaPose {
+            x,
+            y,
+            z,
+            yaw_deg: pose.yaw_rad.to_degrees(),
+            pitch_deg: pose.pitch_rad.to_degrees(),
+        })
+    })
 }
 
 /// A pose as the pose file and the API write it.

@@ -318,6 +318,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
                 }),
                 antennas: (1..=model.antenna_count()).collect(),
                 clock_offset_us: i64::try_from(utc0).unwrap_or(i64::MAX),
+                poses: Some(feed::pose_at(model.clone(), l.poses, utc0)),
             });
             let feed = |now_us| {
                 own::feed_fn(feed::Feed::new(

@@ -165,8 +165,8 @@ struct TagState {
     last_estimate: Option<Instant>,
     /// The last `relock` fix, where it converged: the next update starts from it.
     warm: Option<[f64; 3]>,
-    /// When the tag was last estimated from the grid.
-    last_cold: Option<Instant>,
+    /// When the first update from the previous fix since the last from the grid ran.
+    warm_since: Option<Instant>,
     /// The last estimate started from the previous fix: one from the grid is owed once the
     /// tag settles.
     settle_due: bool,
@@ -282,8 +282,9 @@ impl Worker {
                 hop_table,
                 antennas,
                 clock_offset_us,
+                poses,
             } => {
-                self.decoders.register(&name, hop_table);
+                self.decoders.register(&name, hop_table, poses);
                 self.ingest.poses_mut().set_offset(&name, clock_offset_us);
                 self.shared.update_reader(&name, |v| {
                     for a in antennas {
@@ -389,7 +390,11 @@ impl Worker {
             self.waiting.push_back((r, now));
         }
         while self.waiting.len() > MAX_WAITING {
-            if let Some((r, _)) = self.waiting.pop_front() {
+            if let Some((r, at)) = self.waiting.pop_front() {
+                self.shared
+                    .metrics
+                    .pose_wait_seconds
+                    .observe(at.elapsed().as_secs_f64());
                 self.file(r);
             }
         }
@@ -410,6 +415,10 @@ impl Worker {
                     .is_some_and(|t| t >= r.t_us)
                 || at.elapsed() >= POSE_WAIT;
             if ready {
+                self.shared
+                    .metrics
+                    .pose_wait_seconds
+                    .observe(at.elapsed().as_secs_f64());
                 self.file(r);
             } else {
                 keep.push_back((r, at));

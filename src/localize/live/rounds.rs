@@ -11,10 +11,17 @@ use crate::localize::estimate::{self, Estimator, State};
 /// once it has had no new read for this long.
 pub const SETTLE: Duration = Duration::from_secs(1);
 
-/// A tag updated from its last fix for this long, read all the while, is updated from the
-/// grid once: new reads may have moved the best fit to another lobe, which a start from the
-/// old fix would not leave.
+/// A tag updated from its last fix for this long (since its first such update after the last
+/// from the grid) is updated from the grid once: new reads may have moved the best fit to
+/// another lobe, which a start from the old fix would not leave. A tag settled from the grid
+/// and read again later (a robot's next pass) starts from its fix again.
 pub const REFRESH: Duration = Duration::from_secs(5);
+
+/// Most compute a round spends on refreshes from the grid ([`REFRESH`]); a refresh due
+/// beyond it waits for a later round, the update starting from the last fix meanwhile (the
+/// tags of a pass would otherwise all be due at once, and hold up every update for as long
+/// as their grid searches take).
+pub const REFRESH_BUDGET: Duration = Duration::from_millis(5);
 
 /// A settling estimate within this of the warm one (m, on each axis) is not published again:
 /// both are the same minimum, to the solver's precision.
@@ -54,15 +61,21 @@ impl Worker {
             )
         };
         let relock = self.settings.estimator == Estimator::Relock;
+        let mut refreshing = Duration::ZERO;
         for (settling, since, epc, cold) in due {
             if started.elapsed() >= budget {
                 break;
             }
-            let hint = match self.tags.get(&epc) {
-                Some(t) if !cold && relock => t
-                    .warm
-                    .filter(|_| t.last_cold.is_some_and(|c| c.elapsed() < REFRESH)),
-                _ => None,
+            let (hint, refresh) = match self.tags.get(&epc) {
+                Some(t) if !cold && relock && t.warm.is_some() => {
+                    let due = t.warm_since.is_some_and(|w| w.elapsed() >= REFRESH);
+                    if due && refreshing < REFRESH_BUDGET {
+                        (None, true)
+                    } else {
+                        (t.warm, false)
+                    }
+                }
+                _ => (None, false),
             };
             let t0 = Instant::now();
             let run = |hint| {
@@ -83,6 +96,9 @@ impl Worker {
                 warm = false;
             }
             let done = Instant::now();
+            if refresh {
+                refreshing += done.duration_since(t0);
+            }
             self.shared
                 .metrics
                 .estimator_seconds
@@ -105,9 +121,11 @@ impl Worker {
                 t.last_estimate = Some(done);
                 t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
                 t.settle_due = warm;
-                if !warm {
-                    t.last_cold = Some(done);
-                }
+                t.warm_since = if warm {
+                    t.warm_since.or(Some(t0))
+                } else {
+                    None
+                };
             }
             if !unchanged {
                 self.shared.publish(e);
