@@ -10,7 +10,9 @@
 //! `mqtt_subscriber latency PORT FILTER SECONDS` — for SECONDS, takes each estimate published
 //! on FILTER (one element of `GET /api/tags`) and its age on arrival, the wall clock minus the
 //! tag's newest read (`last_seen`, UTC µs; meaningful for a simulator at real time), and prints
-//! `{"estimates", "p50_ms", "p99_ms", "max_ms"}`.
+//! `{"estimates", "p50_ms", "p99_ms", "max_ms"}`. With a second filter READS (read batches),
+//! also the age of each read on arrival there, the wall clock minus its `firstSeenUs`:
+//! `"reads"`, `"read_p50_ms"`, `"read_p99_ms"`.
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -31,23 +33,33 @@ struct LlrpkitRead {
     at: f64,
 }
 
+fn utc_now_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
+}
+
 fn usage() -> ! {
     eprintln!(
-        "usage: mqtt_subscriber reads PORT FILTER batch|llrpkit SECONDS\n       mqtt_subscriber latency PORT FILTER SECONDS"
+        "usage: mqtt_subscriber reads PORT FILTER batch|llrpkit SECONDS\n       mqtt_subscriber latency PORT FILTER SECONDS [READS]"
     );
     std::process::exit(2)
 }
 
 fn connect(port: u16, filter: &str) -> rumqttc::Connection {
+    connect_qos(port, filter, QoS::AtLeastOnce, "")
+}
+
+fn connect_qos(port: u16, filter: &str, qos: QoS, tag: &str) -> rumqttc::Connection {
     let mut o = MqttOptions::new(
-        format!("bench-subscriber-{}", std::process::id()),
+        format!("bench-subscriber-{}{tag}", std::process::id()),
         "127.0.0.1",
         port,
     );
     o.set_max_packet_size(1 << 22, 1 << 22);
     o.set_keep_alive(Duration::from_secs(30));
     let (client, connection) = Client::new(o, 1000);
-    if client.subscribe(filter, QoS::AtLeastOnce).is_err() {
+    if client.subscribe(filter, qos).is_err() {
         eprintln!("mqtt_subscriber: cannot subscribe");
         std::process::exit(1);
     }
@@ -103,8 +115,32 @@ fn reads(port: u16, filter: &str, format: &str, seconds: f64) {
     );
 }
 
-fn latency(port: u16, filter: &str, seconds: f64) {
+fn latency(port: u16, filter: &str, seconds: f64, reads_filter: Option<&str>) {
     let mut connection = connect(port, filter);
+    // The reads on a connection of their own, at QoS 0: they never hold up the estimates.
+    let sampler = reads_filter.map(|r| {
+        let mut c = connect_qos(port, r, QoS::AtMostOnce, "-reads");
+        let end = Instant::now() + Duration::from_secs_f64(seconds);
+        std::thread::spawn(move || {
+            let mut ages = Vec::new();
+            while Instant::now() < end {
+                let Ok(Ok(Event::Incoming(Packet::Publish(p)))) =
+                    c.recv_timeout(Duration::from_millis(100))
+                else {
+                    continue;
+                };
+                if let Ok(b) = serde_json::from_slice::<ReadBatch>(&p.payload) {
+                    let now = utc_now_us();
+                    ages.extend(
+                        b.reads
+                            .iter()
+                            .map(|r| now.saturating_sub(r.first_seen_us) as f64 / 1000.0),
+                    );
+                }
+            }
+            ages
+        })
+    });
     let end = Instant::now() + Duration::from_secs_f64(seconds);
     let mut ages: Vec<f64> = Vec::new();
     // With MQTT_SUBSCRIBER_AGES=FILE: every estimate's arrival (s from the start) and age (ms).
@@ -122,15 +158,14 @@ fn latency(port: u16, filter: &str, seconds: f64) {
         if p.retain {
             continue;
         }
+
         let Ok(v) = serde_json::from_slice::<serde_json::Value>(&p.payload) else {
             continue;
         };
         let Some(seen) = v["last_seen"].as_u64() else {
             continue;
         };
-        let now = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| d.as_micros() as u64);
+        let now = utc_now_us();
         let age = now.saturating_sub(seen) as f64 / 1000.0;
         if let Some(out) = dump.as_mut() {
             use std::io::Write;
@@ -140,20 +175,27 @@ fn latency(port: u16, filter: &str, seconds: f64) {
         ages.push(age);
     }
     ages.sort_by(f64::total_cmp);
-    let q = |f: f64| {
-        if ages.is_empty() {
+    let mut read_ages = sampler
+        .and_then(|s| s.join().ok())
+        .unwrap_or_default();
+    read_ages.sort_by(f64::total_cmp);
+    let q = |v: &[f64], f: f64| {
+        if v.is_empty() {
             0.0
         } else {
-            ages[((ages.len() - 1) as f64 * f).round() as usize]
+            v[((v.len() - 1) as f64 * f).round() as usize]
         }
     };
     println!(
         "{}",
         serde_json::json!({
             "estimates": ages.len(),
-            "p50_ms": q(0.5),
-            "p99_ms": q(0.99),
+            "p50_ms": q(&ages, 0.5),
+            "p99_ms": q(&ages, 0.99),
             "max_ms": ages.last().copied().unwrap_or(0.0),
+            "reads": read_ages.len(),
+            "read_p50_ms": q(&read_ages, 0.5),
+            "read_p99_ms": q(&read_ages, 0.99),
         })
     );
 }
@@ -171,7 +213,8 @@ fn main() {
         ["reads", p, filter, format @ ("batch" | "llrpkit"), s] => {
             reads(port(p), filter, format, secs(s))
         }
-        ["latency", p, filter, s] => latency(port(p), filter, secs(s)),
+        ["latency", p, filter, s] => latency(port(p), filter, secs(s), None),
+        ["latency", p, filter, s, reads] => latency(port(p), filter, secs(s), Some(reads)),
         _ => usage(),
     }
 }
