@@ -1,7 +1,8 @@
 //! What the simulator hands the live localizer beside the LLRP bytes: every antenna's pose
 //! (true, or what the robot itself would report) at a fixed interval of simulated time
 //! ([`POSE_INTERVAL_US`] unless `sim --pose-interval-ms` says otherwise), as a robot's pose
-//! feed would, and the ground truth for `GET /api/truth`.
+//! feed would, the same pose at each read to stamp the reads with ([`pose_at`]), and the
+//! ground truth for `GET /api/truth`.
 
 use std::sync::Arc;
 

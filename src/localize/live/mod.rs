@@ -3,7 +3,8 @@
 //! reads into phase series, re-estimates the tags whose series changed and publishes the
 //! estimates to [`Shared`].
 //!
-//! A read whose antenna has no pose at or after the read's time yet waits (a robot's pose
+//! A read that carries its antenna's pose is filed at once. One whose antenna has no pose at
+//! or after the read's time yet waits (a robot's pose
 //! may arrive after the reads it explains, and over MQTT on another topic) until one comes,
 //! for at most [`POSE_WAIT`], or until [`MAX_WAITING`] reads wait; then it is filed or set
 //! aside. Whether a read waits depends on its own time and the poses alone, not on other
@@ -17,7 +18,7 @@
 //!
 //! A tag that `relock` has located (converged) is updated from its last fix instead of the
 //! grid search, which is most of an update's cost; an update that does not converge from
-//! there is done again from the grid, as is one every [`REFRESH`] while the tag is read. Such
+//! there is done again from the grid, as is one after [`REFRESH`] of such updates. Such
 //! a warm estimate depends on when the updates ran, so once the tag has had no new read for
 //! [`SETTLE`] it is estimated once more from the grid, and published when that differs from
 //! the warm one by more than [`SETTLED_SAME_M`]: what a tag settles at is a function of its

@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::Worker;
+use super::{TagState, Worker};
 use crate::localize::calibrate::Calibration;
 use crate::localize::estimate::{self, Estimator, State};
 
@@ -67,14 +67,7 @@ impl Worker {
                 break;
             }
             let (hint, refresh) = match self.tags.get(&epc) {
-                Some(t) if !cold && relock && t.warm.is_some() => {
-                    let due = t.warm_since.is_some_and(|w| w.elapsed() >= REFRESH);
-                    if due && refreshing < REFRESH_BUDGET {
-                        (None, true)
-                    } else {
-                        (t.warm, false)
-                    }
-                }
+                Some(t) if !cold && relock => start(t, Instant::now(), refreshing),
                 _ => (None, false),
             };
             let t0 = Instant::now();
@@ -131,5 +124,54 @@ impl Worker {
                 self.shared.publish(e);
             }
         }
+    }
+}
+
+/// Where an update of `t` starts at `now`, when the round has spent `refreshing` on refreshes
+/// so far: from its last fix, or from the grid (`None`; `true` when that is a refresh).
+fn start(t: &TagState, now: Instant, refreshing: Duration) -> (Option<[f64; 3]>, bool) {
+    let Some(fix) = t.warm else {
+        return (None, false);
+    };
+    let due = t
+        .warm_since
+        .is_some_and(|w| now.duration_since(w) >= REFRESH);
+    if due && refreshing < REFRESH_BUDGET {
+        (None, true)
+    } else {
+        (Some(fix), false)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn updates_start_from_the_fix_until_a_refresh_is_due_and_the_round_can_afford_it() {
+        let now = Instant::now();
+        let fix = [1.0, 2.0, 0.5];
+        let mut t = TagState {
+            warm: Some(fix),
+            ..TagState::default()
+        };
+        // Settled from the grid, read again on a later pass: from the fix.
+        assert_eq!(start(&t, now, Duration::ZERO), (Some(fix), false));
+        // Updated from the fix for less than REFRESH: still from the fix.
+        let Some(before) = now.checked_sub(REFRESH / 2) else {
+            return;
+        };
+        t.warm_since = Some(before);
+        assert_eq!(start(&t, now, Duration::ZERO), (Some(fix), false));
+        // For REFRESH: from the grid, unless the round spent its refresh budget already.
+        let Some(long_ago) = now.checked_sub(REFRESH) else {
+            return;
+        };
+        t.warm_since = Some(long_ago);
+        assert_eq!(start(&t, now, Duration::ZERO), (None, true));
+        assert_eq!(start(&t, now, REFRESH_BUDGET), (Some(fix), false));
+        // No converged fix: from the grid, not as a refresh.
+        t.warm = None;
+        assert_eq!(start(&t, now, Duration::ZERO), (None, false));
     }
 }
