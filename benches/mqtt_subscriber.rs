@@ -175,9 +175,7 @@ fn latency(port: u16, filter: &str, seconds: f64, reads_filter: Option<&str>) {
         ages.push(age);
     }
     ages.sort_by(f64::total_cmp);
-    let mut read_ages = sampler
-        .and_then(|s| s.join().ok())
-        .unwrap_or_default();
+    let mut read_ages = sampler.and_then(|s| s.join().ok()).unwrap_or_default();
     read_ages.sort_by(f64::total_cmp);
     let q = |v: &[f64], f: f64| {
         if v.is_empty() {
