@@ -452,6 +452,54 @@ mod tests {
     }
 
     #[test]
+    fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
+        use llrp::params::{AntennaId, FirstSeenTimestampUtc};
+        let report = |antenna: u16, t_us: u64| {
+            let data = llrp::params::TagReportData {
+                epc: llrp::params::Epc::Epc96(llrp::params::Epc96([0xAB; 12])),
+                antenna_id: Some(AntennaId(antenna)),
+                first_seen_timestamp_utc: Some(FirstSeenTimestampUtc(t_us)),
+                ..Default::default()
+            };
+            Message::new(
+                1,
+                RoAccessReport {
+                    tag_report_data: vec![data],
+                    ..Default::default()
+                },
+            )
+            .to_bytes()
+            .to_vec()
+        };
+        // Antenna 1 moves along x at 1 m/s from t = 1 s; there is no antenna 2.
+        let poses = PoseAt::new(|antenna, t_us| {
+            (antenna == 1).then(|| AntennaPose {
+                x: t_us.saturating_sub(1_000_000) as f64 * 1e-6,
+                y: 2.0,
+                z: 0.5,
+                yaw_deg: 90.0,
+                pitch_deg: 0.0,
+            })
+        });
+        let mut d = ReadDecoder::new(Some("r".into())).with_poses(Some(poses));
+        let mut out = Vec::new();
+        d.frame(&report(1, 3_500_000), 0, &mut out)
+            .expect("decodes");
+        d.frame(&report(2, 3_500_000), 0, &mut out)
+            .expect("decodes");
+        let p = out[0].antenna_pose.expect("antenna 1's pose");
+        assert_eq!((p.x, p.y, p.yaw_deg), (2.5, 2.0, 90.0));
+        assert_eq!(out[1].antenna_pose, None, "no pose known for antenna 2");
+        // Without poses, none.
+        let mut plain = ReadDecoder::new(None);
+        out.clear();
+        plain
+            .frame(&report(1, 3_500_000), 0, &mut out)
+            .expect("decodes");
+        assert_eq!(out[0].antenna_pose, None);
+    }
+
+    #[test]
     fn an_epc_of_other_than_96_bits_is_read_from_epc_data() {
         use llrp::codec::BitVec;
         use llrp::message::RoAccessReport;

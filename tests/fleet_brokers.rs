@@ -100,3 +100,47 @@ fn presence_events_tell_arrivals_moves_and_departures_with_positions() {
         );
     }
 }
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn the_simulators_reads_carry_their_antennas_pose_and_its_messages_one_run() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("s");
+    let probe = Probe::connect(
+        broker.port,
+        "stamp-probe",
+        &["s/v1/reads/+", "s/v1/status/+"],
+    );
+    {
+        let _sim = publishing_sim(&url, &["--poses", "truth"]);
+        std::thread::sleep(Duration::from_secs(2));
+    }
+    let (mut runs, mut xs) = (std::collections::BTreeSet::new(), Vec::new());
+    for (topic, payload, _) in probe.drain(Duration::from_secs(1)) {
+        let v: serde_json::Value = serde_json::from_slice(&payload).expect("JSON");
+        if topic.starts_with("s/v1/status/gateway/") {
+            continue;
+        }
+        runs.insert(v["run"].as_u64().expect("a run in every reader's message"));
+        for r in v["reads"].as_array().into_iter().flatten() {
+            let pose = &r["antennaPose"];
+            assert!(
+                ["x", "y", "z", "yaw_deg", "pitch_deg"]
+                    .iter()
+                    .all(|k| pose[k].is_f64()),
+                "a read without its antenna's pose: {r}"
+            );
+            xs.push(pose["x"].as_f64().unwrap_or_default());
+        }
+    }
+    assert!(xs.len() > 10, "{} reads", xs.len());
+    // S1's antenna is on a robot: the pose is the one at each read, not one for all.
+    let spread =
+        xs.iter().copied().fold(f64::MIN, f64::max) - xs.iter().copied().fold(f64::MAX, f64::min);
+    assert!(spread > 0.1, "the antenna moved {spread} m over the reads");
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    assert!(
+        runs.first().is_some_and(|&r| r > 1_700_000_000_000_000),
+        "{runs:?}"
+    );
+}
