@@ -64,6 +64,10 @@ enum Command {
         /// (ms; 100 is 10 Hz).
         #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
         pose_interval_ms: u64,
+        /// Do not stamp each read with its antenna's pose at the read (the localizer and
+        /// MQTT workers then wait for a pose sample at or after each read).
+        #[arg(long)]
+        no_read_poses: bool,
         /// The localizer's estimator (docs/localize.md).
         #[arg(long, default_value = "relock")]
         estimator: llrp_gateway::localize::estimate::Estimator,
@@ -128,6 +132,7 @@ fn main() -> ExitCode {
             http,
             poses,
             pose_interval_ms,
+            no_read_poses,
             estimator,
             publish,
         } => run_sim(
@@ -136,6 +141,7 @@ fn main() -> ExitCode {
                 http,
                 poses,
                 pose_interval_ms,
+                read_poses: !no_read_poses,
                 estimator,
                 publish,
             },
@@ -194,6 +200,7 @@ struct SimLocalize {
     http: llrp_gateway::http::launch::HttpArgs,
     poses: llrp_gateway::sim::PoseSource,
     pose_interval_ms: u64,
+    read_poses: bool,
     estimator: llrp_gateway::localize::estimate::Estimator,
     publish: llrp_gateway::fleet::args::PublishArgs,
 }
@@ -275,6 +282,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
                         tap: l.tap.clone(),
                         poses: localize.poses,
                         pose_interval_us: localize.pose_interval_ms * 1000,
+                        read_poses: localize.read_poses,
                     });
                     http = Some(h);
                     live = Some(l);
@@ -311,6 +319,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
                 tap: tap.with_mirror(p.mirror()),
                 poses: localize.poses,
                 pose_interval_us: localize.pose_interval_ms * 1000,
+                read_poses: localize.read_poses,
             });
             eprintln!(
                 "llrp-gateway sim: publishing to {}",

@@ -34,6 +34,17 @@ fn live_for(scenario: &llrp_gateway::scenario::Scenario) -> Live {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_no_client_the_reader_inventories_by_itself_and_s1_tags_converge() {
+    own_inventory_converges(true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn s1_tags_converge_on_pose_samples_alone_when_reads_carry_no_pose() {
+    own_inventory_converges(false).await;
+}
+
+/// S1 inventoried by the simulator itself; `read_poses`: its reads carry their antenna's pose
+/// (else the localizer interpolates the 10 Hz pose samples).
+async fn own_inventory_converges(read_poses: bool) {
     let scenario = s1();
     let live = live_for(&scenario);
     let opts = SimOptions {
@@ -43,6 +54,7 @@ async fn with_no_client_the_reader_inventories_by_itself_and_s1_tags_converge() 
             tap: live.tap.clone(),
             poses: PoseSource::Truth,
             pose_interval_us: feed::POSE_INTERVAL_US,
+            read_poses,
         }),
         ..Default::default()
     };
@@ -102,6 +114,7 @@ async fn a_client_stops_the_own_inventory_and_sees_the_reader_as_before() {
             tap: live.tap.clone(),
             poses: PoseSource::Estimated,
             pose_interval_us: feed::POSE_INTERVAL_US,
+            read_poses: true,
         }),
         ..Default::default()
     };

@@ -65,6 +65,8 @@ pub struct LocalizeFeed {
     pub poses: PoseSource,
     /// Simulated time between two pose samples of an antenna (µs).
     pub pose_interval_us: u64,
+    /// Each read is stamped with its antenna's pose at the read.
+    pub read_poses: bool,
 }
 
 impl Default for SimOptions {
@@ -318,7 +320,9 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
                 }),
                 antennas: (1..=model.antenna_count()).collect(),
                 clock_offset_us: i64::try_from(utc0).unwrap_or(i64::MAX),
-                poses: Some(feed::pose_at(model.clone(), l.poses, utc0)),
+                poses: l
+                    .read_poses
+                    .then(|| feed::pose_at(model.clone(), l.poses, utc0)),
             });
             let feed = |now_us| {
                 own::feed_fn(feed::Feed::new(
