@@ -32,7 +32,6 @@ pub const MAX_BATCH_READS: usize = 1000;
 
 /// Reads waiting for their batch's window to close, per topic.
 struct Pending {
-    reader: String,
     reads: Vec<TagRead>,
     since: Instant,
 }
@@ -46,20 +45,30 @@ pub(super) struct Builder {
     offsets: HashMap<String, i64>,
     /// Per reader, per topic (under `v1/`), the last sequence number used.
     seqs: BTreeMap<String, BTreeMap<String, u64>>,
-    pending: BTreeMap<(String, String), Pending>,
+    /// Per reader, per topic (under `v1/`): the reads waiting for their window.
+    pending: HashMap<String, HashMap<String, Pending>>,
+    /// When the first pending window closes.
+    next_due: Option<Instant>,
+    /// `reads/{shard}` for every shard.
+    shard_topics: Vec<String>,
     /// Poses waiting for their window to close, per topic (under `v1/`).
     pending_poses: BTreeMap<String, (Vec<PoseSample>, Instant)>,
 }
 
 impl Builder {
     pub(super) fn new(opts: PublishOptions, link: Arc<Link>) -> Builder {
+        let shard_topics = (0..opts.shard_count.max(1))
+            .map(|s| format!("reads/{s}"))
+            .collect();
         Builder {
             opts,
             link,
             decoders: crate::reads::Decoders::default(),
             offsets: HashMap::new(),
             seqs: BTreeMap::new(),
-            pending: BTreeMap::new(),
+            pending: HashMap::new(),
+            next_due: None,
+            shard_topics,
             pending_poses: BTreeMap::new(),
         }
     }
@@ -146,8 +155,12 @@ impl Builder {
                         }
                     }
                 }
-                for reads in reports {
-                    self.reads(&reader, reads);
+                if self.opts.window.is_zero() {
+                    for reads in reports {
+                        self.reads(&reader, reads);
+                    }
+                } else {
+                    self.reads(&reader, reports.concat());
                 }
                 for e in events {
                     self.event(&reader, &e);
@@ -215,56 +228,103 @@ impl Builder {
             return;
         }
         self.came(reader);
-        let mut by_topic: BTreeMap<String, Vec<TagRead>> = BTreeMap::new();
+        let now = Instant::now();
+        let window = self.opts.window;
+        if !self.pending.contains_key(reader) {
+            self.pending.insert(reader.to_owned(), HashMap::new());
+        }
+        let Some(topics) = self.pending.get_mut(reader) else {
+            return;
+        };
+        let mut touched: Vec<usize> = Vec::new();
+        let mut refs = false;
+        let mut add = |topic: &str, read: TagRead| {
+            let p = match topics.get_mut(topic) {
+                Some(p) => p,
+                None => topics.entry(topic.to_owned()).or_insert(Pending {
+                    reads: Vec::new(),
+                    since: now,
+                }),
+            };
+            if p.reads.is_empty() {
+                p.since = now;
+            }
+            p.reads.push(read);
+        };
         for r in &reads {
             let t = TagRead::from_read(r);
-            let shard = schema::shard(&r.epc, self.opts.shard_count);
             if self.opts.references.contains(&r.epc) {
-                by_topic.entry("refs".into()).or_default().push(t.clone());
+                add("refs", t.clone());
+                refs = true;
             }
-            by_topic
-                .entry(format!("reads/{shard}"))
-                .or_default()
-                .push(t);
+            let shard = usize::from(schema::shard(&r.epc, self.opts.shard_count));
+            if let Some(topic) = self.shard_topics.get(shard) {
+                add(topic, t);
+                if !touched.contains(&shard) {
+                    touched.push(shard);
+                }
+            }
         }
-        for (rest, reads) in by_topic {
-            let key = (reader.to_owned(), rest);
-            let p = self.pending.entry(key.clone()).or_insert_with(|| Pending {
-                reader: reader.to_owned(),
-                reads: Vec::new(),
-                since: Instant::now(),
-            });
-            p.reads.extend(reads);
-            if self.opts.window.is_zero() || p.reads.len() >= MAX_BATCH_READS {
-                self.send(&key);
+        let mut send: Vec<String> = Vec::new();
+        let full = |p: Option<&Pending>| p.is_some_and(|p| p.reads.len() >= MAX_BATCH_READS);
+        if refs && (window.is_zero() || full(topics.get("refs"))) {
+            send.push("refs".into());
+        }
+        for shard in touched {
+            let topic = &self.shard_topics[shard];
+            if window.is_zero() || full(topics.get(topic.as_str())) {
+                send.push(topic.clone());
             }
+        }
+        let due = now + window;
+        self.next_due = Some(self.next_due.map_or(due, |d| d.min(due)));
+        for topic in send {
+            self.send(reader, &topic);
         }
     }
 
     /// Sends the batches whose window has closed (all with `all`), poses too.
     fn flush(&mut self, all: bool) {
         self.flush_poses(all);
-        let due: Vec<(String, String)> = self
-            .pending
-            .iter()
-            .filter(|(_, p)| all || p.since.elapsed() >= self.opts.window)
-            .map(|(k, _)| k.clone())
-            .collect();
-        for k in due {
-            self.send(&k);
+        let now = Instant::now();
+        if !all && self.next_due.map_or(true, |d| now < d) {
+            return;
+        }
+        let window = self.opts.window;
+        let mut due: Vec<(String, String)> = Vec::new();
+        let mut next: Option<Instant> = None;
+        for (reader, topics) in &self.pending {
+            for (topic, p) in topics {
+                if p.reads.is_empty() {
+                    continue;
+                }
+                if all || now.duration_since(p.since) >= window {
+                    due.push((reader.clone(), topic.clone()));
+                } else {
+                    let at = p.since + window;
+                    next = Some(next.map_or(at, |n| n.min(at)));
+                }
+            }
+        }
+        self.next_due = next;
+        for (reader, topic) in due {
+            self.send(&reader, &topic);
         }
     }
 
-    fn send(&mut self, key: &(String, String)) {
-        let Some(p) = self.pending.remove(key) else {
+    /// Publishes what waits for `reader` on `rest`, in messages of at most
+    /// [`MAX_BATCH_READS`] reads.
+    fn send(&mut self, reader: &str, rest: &str) {
+        let Some(p) = self.pending.get_mut(reader).and_then(|t| t.get_mut(rest)) else {
             return;
         };
-        for chunk in p.reads.chunks(MAX_BATCH_READS) {
-            let seq = self.next_seq(&p.reader, &key.1);
+        let reads = std::mem::take(&mut p.reads);
+        for chunk in reads.chunks(MAX_BATCH_READS) {
+            let seq = self.next_seq(reader, rest);
             let batch = BatchRef {
                 v: VERSION,
                 gateway: &self.opts.gateway,
-                reader: &p.reader,
+                reader,
                 run: self.opts.run,
                 seq,
                 reads: chunk,
@@ -272,7 +332,7 @@ impl Builder {
             // A batch of plain values always serializes.
             let payload = serde_json::to_vec(&batch).unwrap_or_default();
             self.link
-                .publish(&key.1, false, payload, chunk.len() as u64, true);
+                .publish(rest, false, payload, chunk.len() as u64, true);
         }
     }
 
