@@ -388,13 +388,22 @@ mod tests {
     }
 
     fn report_on_channel(channel: u16) -> Vec<u8> {
-        use llrp::message::RoAccessReport;
-        use llrp::params::{ChannelIndex, Epc, Epc96, TagReportData};
-        let data = TagReportData {
-            epc: Epc::Epc96(Epc96([0xAB; 12])),
-            channel_index: Some(ChannelIndex(channel)),
+        report(llrp::params::TagReportData {
+            channel_index: Some(llrp::params::ChannelIndex(channel)),
+            ..tag_ab()
+        })
+    }
+
+    /// A TagReportData of EPC AB…AB and nothing else.
+    fn tag_ab() -> llrp::params::TagReportData {
+        llrp::params::TagReportData {
+            epc: llrp::params::Epc::Epc96(llrp::params::Epc96([0xAB; 12])),
             ..Default::default()
-        };
+        }
+    }
+
+    /// An RO_ACCESS_REPORT frame of `data`.
+    fn report(data: llrp::params::TagReportData) -> Vec<u8> {
         Message::new(
             1,
             RoAccessReport {
@@ -455,21 +464,11 @@ mod tests {
     fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
         use llrp::params::{AntennaId, FirstSeenTimestampUtc};
         let report = |antenna: u16, t_us: u64| {
-            let data = llrp::params::TagReportData {
-                epc: llrp::params::Epc::Epc96(llrp::params::Epc96([0xAB; 12])),
+            report(llrp::params::TagReportData {
                 antenna_id: Some(AntennaId(antenna)),
                 first_seen_timestamp_utc: Some(FirstSeenTimestampUtc(t_us)),
-                ..Default::default()
-            };
-            Message::new(
-                1,
-                RoAccessReport {
-                    tag_report_data: vec![data],
-                    ..Default::default()
-                },
-            )
-            .to_bytes()
-            .to_vec()
+                ..tag_ab()
+            })
         };
         // Antenna 1 moves along x at 1 m/s from t = 1 s; there is no antenna 2.
         let poses = PoseAt::new(|antenna, t_us| {

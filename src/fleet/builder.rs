@@ -270,8 +270,7 @@ impl Builder {
         if refs && (window.is_zero() || full(topics.get("refs"))) {
             send.push("refs".into());
         }
-        for shard in touched {
-            let topic = &self.shard_topics[shard];
+        for topic in touched.into_iter().filter_map(|s| self.shard_topics.get(s)) {
             if window.is_zero() || full(topics.get(topic.as_str())) {
                 send.push(topic.clone());
             }
