@@ -67,7 +67,8 @@ pub struct TagRead {
     /// Doppler frequency in Hz (ours: ImpinjRFDopplerFrequency).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub doppler_hz: Option<f64>,
-    /// The antenna's pose at the read, where the publisher knows it (ours; metres, degrees).
+    /// The antenna's pose at the read, where the publisher knows it (ours; metres to the µm,
+    /// degrees to 1e-4).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub antenna_pose: Option<AntennaPose>,
 }
@@ -87,7 +88,13 @@ impl TagRead {
             first_seen_us: r.t_us,
             channel_index: r.channel_index,
             doppler_hz: r.doppler_hz,
-            antenna_pose: r.antenna_pose,
+            antenna_pose: r.antenna_pose.map(|p| AntennaPose {
+                x: round_to(p.x, 1e6),
+                y: round_to(p.y, 1e6),
+                z: round_to(p.z, 1e6),
+                yaw_deg: round_to(p.yaw_deg, 1e4),
+                pitch_deg: round_to(p.pitch_deg, 1e4),
+            }),
         }
     }
 
@@ -166,6 +173,11 @@ pub struct KeepaliveEvent {
     pub silent_ms: u64,
 }
 
+/// `v` rounded to a multiple of `1 / per`: shorter JSON, far below any pose's precision.
+fn round_to(v: f64, per: f64) -> f64 {
+    (v * per).round() / per
+}
+
 /// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds.
 pub fn rfc3339(us: u64) -> String {
     humantime::format_rfc3339_micros(UNIX_EPOCH + Duration::from_micros(us)).to_string()
@@ -239,6 +251,34 @@ mod tests {
                 ..again
             },
             r
+        );
+    }
+
+    #[test]
+    fn an_antenna_pose_goes_to_the_broker_to_the_micrometre() {
+        let r = Read {
+            epc: "AB".into(),
+            reader: None,
+            antenna: 1,
+            t_us: 1,
+            phase_rad: None,
+            rssi_dbm: None,
+            channel_index: None,
+            channel_frequency_hz: None,
+            doppler_hz: None,
+            antenna_pose: Some(AntennaPose {
+                x: 12.345_678_901_234_567,
+                y: -3.000_000_4,
+                z: 1.000_000_000_000_000_2,
+                yaw_deg: 89.999_999_999_999_99,
+                pitch_deg: -10.123_456,
+            }),
+            last_seen_us: None,
+        };
+        let json = serde_json::to_string(&TagRead::from_read(&r)).expect("serializes");
+        assert!(
+            json.contains(r#""antennaPose":{"x":12.345679,"y":-3.0,"z":1.0,"yaw_deg":90.0,"pitch_deg":-10.1235}"#),
+            "{json}"
         );
     }
 
