@@ -105,27 +105,10 @@ pub(super) async fn events(
 
 #[cfg(test)]
 mod tests {
-    use std::collections::VecDeque;
-
     use super::*;
-    use crate::localize::estimate::{Estimate, State};
 
     fn view(epc: &str) -> Arc<TagView> {
-        Arc::new(TagView {
-            estimate: Estimate {
-                epc: epc.into(),
-                estimator: "relock",
-                estimate: None,
-                covariance: None,
-                samples: 0,
-                state: State::InsufficientGeometry,
-                last_update_us: 0,
-            },
-            last_seen_us: 0,
-            reads: 0,
-            reads_per_s: 0.0,
-            recent: VecDeque::new(),
-        })
+        Arc::new(TagView::unseen(epc, "relock"))
     }
 
     #[tokio::test]

@@ -41,6 +41,27 @@ pub struct TagView {
     pub recent: VecDeque<Read>,
 }
 
+impl TagView {
+    /// A tag `epc` taken in by `estimator` with no read and no estimate yet.
+    pub fn unseen(epc: &str, estimator: &'static str) -> TagView {
+        TagView {
+            estimate: Estimate {
+                epc: epc.to_owned(),
+                estimator,
+                estimate: None,
+                covariance: None,
+                samples: 0,
+                state: super::estimate::State::InsufficientGeometry,
+                last_update_us: 0,
+            },
+            last_seen_us: 0,
+            reads: 0,
+            reads_per_s: 0.0,
+            recent: VecDeque::new(),
+        }
+    }
+}
+
 /// One antenna of a reader and its newest pose.
 #[derive(Clone, Debug, Serialize)]
 pub struct AntennaView {

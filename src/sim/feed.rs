@@ -29,6 +29,16 @@ pub enum PoseSource {
     Estimated,
 }
 
+impl PoseSource {
+    /// The pose of `antenna` of `m` at simulated time `t_us`, as this source gives it.
+    fn pose(self, m: &Model, antenna: u16, t_us: u64) -> AntennaPose {
+        match self {
+            PoseSource::Truth => m.antenna_pose(antenna, t_us),
+            PoseSource::Estimated => m.estimated_pose(antenna, t_us),
+        }
+    }
+}
+
 /// Reader `name`'s pose and truth feed.
 pub struct Feed {
     tap: Tap,
@@ -75,10 +85,7 @@ impl Feed {
         while self.next_us <= now_us {
             let t = self.next_us;
             for a in 1..=m.antenna_count() {
-                let pose = match self.source {
-                    PoseSource::Truth => m.antenna_pose(a, t),
-                    PoseSource::Estimated => m.estimated_pose(a, t),
-                };
+                let pose = self.source.pose(m, a, t);
                 poses.push(sample(&self.name, a, t, &pose));
             }
             last = Some(t);
@@ -113,11 +120,7 @@ pub fn pose_at(model: Arc<Model>, source: PoseSource, utc0: u64) -> PoseAt {
         if antenna == 0 || antenna > model.antenna_count() {
             return None;
         }
-        let t = t_us.checked_sub(utc0)?;
-        let pose = match source {
-            PoseSource::Truth => model.antenna_pose(antenna, t),
-            PoseSource::Estimated => model.estimated_pose(antenna, t),
-        };
+        let pose = source.pose(&model, antenna, t_us.checked_sub(utc0)?);
         let [x, y, z] = pose.position;
         Some(crate::reads::AntennaPose {
             x,

@@ -31,7 +31,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::estimate::{Estimate, Estimator, Geometry, State};
+use super::estimate::{Estimator, Geometry};
 use super::ingest::Ingest;
 use super::poses::{PoseSample, Poses};
 use super::series::Ambiguity;
@@ -474,21 +474,7 @@ impl Worker {
         let epc = r.epc.clone();
         self.shared.update_tag(
             &epc,
-            || TagView {
-                estimate: Estimate {
-                    epc: epc.clone(),
-                    estimator,
-                    estimate: None,
-                    covariance: None,
-                    samples: 0,
-                    state: State::InsufficientGeometry,
-                    last_update_us: 0,
-                },
-                last_seen_us: 0,
-                reads: 0,
-                reads_per_s: 0.0,
-                recent: VecDeque::new(),
-            },
+            || TagView::unseen(&epc, estimator),
             |v| {
                 v.reads += 1;
                 v.last_seen_us = v.last_seen_us.max(r.t_us);

@@ -149,7 +149,8 @@ mod tests {
 
     #[test]
     fn updates_start_from_the_fix_until_a_refresh_is_due_and_the_round_can_afford_it() {
-        let now = Instant::now();
+        // Later than now by more than REFRESH: the times before it below all exist.
+        let now = Instant::now() + 2 * REFRESH;
         let fix = [1.0, 2.0, 0.5];
         let mut t = TagState {
             warm: Some(fix),
@@ -158,16 +159,10 @@ mod tests {
         // Settled from the grid, read again on a later pass: from the fix.
         assert_eq!(start(&t, now, Duration::ZERO), (Some(fix), false));
         // Updated from the fix for less than REFRESH: still from the fix.
-        let Some(before) = now.checked_sub(REFRESH / 2) else {
-            return;
-        };
-        t.warm_since = Some(before);
+        t.warm_since = Some(now - REFRESH / 2);
         assert_eq!(start(&t, now, Duration::ZERO), (Some(fix), false));
         // For REFRESH: from the grid, unless the round spent its refresh budget already.
-        let Some(long_ago) = now.checked_sub(REFRESH) else {
-            return;
-        };
-        t.warm_since = Some(long_ago);
+        t.warm_since = Some(now - REFRESH);
         assert_eq!(start(&t, now, Duration::ZERO), (None, true));
         assert_eq!(start(&t, now, REFRESH_BUDGET), (Some(fix), false));
         // No converged fix: from the grid, not as a refresh.
