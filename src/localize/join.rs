@@ -22,6 +22,31 @@ use nalgebra::{DMatrix, SymmetricEigen};
 
 use super::relock::Obs;
 
+/// Defines a function that runs an `#[inline(always)]` kernel compiled for AVX2 where the CPU
+/// has it (eight `f32` lanes where the x86-64 baseline, SSE2, has four), and as built
+/// elsewhere. The same operations in the same order either way (no fused multiply–add), so
+/// the results are the same to the bit.
+macro_rules! wide {
+    ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),*) $(-> $ret:ty)? = $kernel:ident) => {
+        $(#[$m])*
+        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2")]
+                unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
+                    $kernel($($arg),*)
+                }
+                if std::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU has AVX2, checked just above.
+                    return unsafe { avx2($($arg),*) };
+                }
+            }
+            $kernel($($arg),*)
+        }
+    };
+}
+pub(crate) use wide;
+
 /// A weak direction is searched when its σ is at least this (m).
 pub const SEARCH_MIN_SIGMA_M: f64 = 0.005;
 /// Farthest from the fix the coherence is searched, along each weak direction (m).
@@ -144,25 +169,47 @@ impl Evaluator {
         let [px, py, pz] = [0, 1, 2].map(|a| (p[a] - self.origin[a]) as f32);
         // Slices of one length, so that no bounds check stands between the loop and vector
         // instructions.
-        let n = self.ax.len();
-        let (ax, ay, az) = (&self.ax[..n], &self.ay[..n], &self.az[..n]);
-        let (theta, k) = (&self.theta[..n], &self.k[..n]);
-        let (cos, sin) = (&mut self.cos[..n], &mut self.sin[..n]);
-        for i in 0..n {
-            let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
-            let d = (dx * dx + dy * dy + dz * dz).sqrt();
-            let (s, c) = sin_cos_f32(theta[i] - k[i] * d);
-            sin[i] = s;
-            cos[i] = c;
-        }
+        residuals(
+            [px, py, pz],
+            [&self.ax, &self.ay, &self.az, &self.theta, &self.k],
+            &mut self.sin,
+            &mut self.cos,
+        );
+        let (cos, sin) = (&self.cos, &self.sin);
         self.runs
             .iter()
             .map(|r| {
                 let re: f32 = cos[r.clone()].iter().sum();
                 let im: f32 = sin[r.clone()].iter().sum();
-                f64::from(re).hypot(f64::from(im))
+                // The squares of f32 sums are exact in f64, so this is as good as `hypot`
+                // (which is a libm call) to an ulp.
+                let (re, im) = (f64::from(re), f64::from(im));
+                (re * re + im * im).sqrt()
             })
             .sum()
+    }
+}
+
+wide! {
+    /// The sin and cos of each phase's residual at `p` (relative to the evaluator's origin)
+    /// into `sin` and `cos`; `columns` are the antennas' x, y, z, θ and k, all of one length.
+    fn residuals(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mut [f32]) = residuals_kernel
+}
+
+#[inline(always)]
+fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mut [f32]) {
+    let [px, py, pz] = p;
+    // Slices of one length, so that no bounds check stands between the loop and vector
+    // instructions.
+    let n = columns[0].len();
+    let [ax, ay, az, theta, k] = columns.map(|c| &c[..n]);
+    let (sin, cos) = (&mut sin[..n], &mut cos[..n]);
+    for i in 0..n {
+        let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
+        let d = (dx * dx + dy * dy + dz * dz).sqrt();
+        let (s, c) = sin_cos_f32(theta[i] - k[i] * d);
+        sin[i] = s;
+        cos[i] = c;
     }
 }
 

@@ -180,13 +180,10 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         Some(h) => [h[0], h[1], if s.dims == 3 { h[2] } else { s.z }],
         None => {
             let (coarse, fine) = (spread(obs, COARSE.1), spread(obs, FINE.1));
-            let starts = grid_starts(
-                s,
-                &mut segment_cost(&coarse, s.sign),
-                &mut segment_cost(&fine, s.sign),
-                1,
-            );
-            starts.first().copied().ok_or(NoFix::InsufficientGeometry)?
+            let best = coarse_starts(s, &mut segment_cost(&coarse, s.sign), 1);
+            let best = best.first().copied().ok_or(NoFix::InsufficientGeometry)?;
+            let mut fine_cost = segment_cost(&fine, s.sign);
+            refine(s, best, &mut fine_cost)
         }
     };
     // A fit outside the box in height is no fix.
@@ -225,11 +222,11 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
 const JOIN_ABOVE_SIGMA_M: f64 = 0.02;
 
 /// The best points of the coarse grid (`coarse` cost), up to `starts` of them at least
-/// 1.5 steps apart, each moved to the best of the fine grid around it (`fine` cost).
-fn grid_starts(
+/// 1.5 steps apart, best first; each is moved to the best of the fine grid around it by
+/// [`refine`] when it is tried.
+fn coarse_starts(
     s: &Search,
     coarse: &mut dyn FnMut([f64; 3]) -> f64,
-    fine: &mut dyn FnMut([f64; 3]) -> f64,
     starts: usize,
 ) -> Vec<[f64; 3]> {
     let mut points = grid(s, s.lo, s.hi, COARSE.0, coarse);
@@ -243,24 +240,24 @@ fn grid_starts(
             chosen.push(p);
         }
     }
-    let r = FINE.0 * FINE_HALF_STEPS;
     chosen
+}
+
+/// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`.
+fn refine(s: &Search, c: [f64; 3], fine: &mut dyn FnMut([f64; 3]) -> f64) -> [f64; 3] {
+    let r = FINE.0 * FINE_HALF_STEPS;
+    let (lo, hi) = if s.dims == 3 {
+        (
+            [c[0] - r, c[1] - r, (c[2] - r).max(s.lo[2])],
+            [c[0] + r, c[1] + r, (c[2] + r).min(s.hi[2])],
+        )
+    } else {
+        ([c[0] - r, c[1] - r, s.z], [c[0] + r, c[1] + r, s.z])
+    };
+    grid(s, lo, hi, FINE.0, fine)
         .into_iter()
-        .map(|c| {
-            let (lo, hi) = if s.dims == 3 {
-                (
-                    [c[0] - r, c[1] - r, (c[2] - r).max(s.lo[2])],
-                    [c[0] + r, c[1] + r, (c[2] + r).min(s.hi[2])],
-                )
-            } else {
-                ([c[0] - r, c[1] - r, s.z], [c[0] + r, c[1] + r, s.z])
-            };
-            grid(s, lo, hi, FINE.0, fine)
-                .into_iter()
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .map_or(c, |(_, p)| p)
-        })
-        .collect()
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(c, |(_, p)| p)
 }
 
 /// The position of a solution's parameters.

@@ -13,7 +13,9 @@
 //!    the next start, and when none is, a box of [`WIDE_BOX_M`] around the best fit; the most
 //!    coherent fit wins.
 
-use super::{distance, grid_starts, position, solve, NoFix, Obs, Problem, Search, Solution};
+use super::{
+    coarse_starts, distance, position, refine, solve, NoFix, Obs, Problem, Search, Solution,
+};
 use super::{COARSE, FINE};
 use crate::localize::join;
 
@@ -86,30 +88,52 @@ impl PairCost {
     }
 
     fn at(&self, p: [f64; 3]) -> f64 {
-        let [px, py, pz] = [0, 1, 2].map(|a| (p[a] - self.origin[a]) as f32);
-        let [ax, ay, az, bx, by, bz, th, k] = &self.columns;
-        // Lanes summed apart and slices of one length: the loop runs in vector registers.
-        let mut acc = [0.0f32; join::LANES];
-        let n = ax.len();
-        let (ax, ay, az, bx, by, bz) = (&ax[..n], &ay[..n], &az[..n], &bx[..n], &by[..n], &bz[..n]);
-        let (th, k) = (&th[..n], &k[..n]);
-        for i in 0..n {
-            let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
-            let da = (dx * dx + dy * dy + dz * dz).sqrt();
-            let (dx, dy, dz) = (px - bx[i], py - by[i], pz - bz[i]);
-            let db = (dx * dx + dy * dy + dz * dz).sqrt();
-            let (_, c) = join::sin_cos_f32(th[i] - k[i] * (db - da));
-            acc[i % join::LANES] += 1.0 - c;
-        }
-        acc.iter().map(|&v| f64::from(v)).sum()
+        let p = [0, 1, 2].map(|a| (p[a] - self.origin[a]) as f32);
+        let c = &self.columns;
+        pair_cost(
+            [
+                c[0].as_slice(),
+                &c[1],
+                &c[2],
+                &c[3],
+                &c[4],
+                &c[5],
+                &c[6],
+                &c[7],
+            ],
+            p,
+        )
     }
+}
+
+join::wide! {
+    /// [`PairCost::at`] over its columns, at `p` relative to its origin.
+    fn pair_cost(columns: [&[f32]; 8], p: [f32; 3]) -> f64 = pair_cost_kernel
+}
+
+#[inline(always)]
+fn pair_cost_kernel(columns: [&[f32]; 8], p: [f32; 3]) -> f64 {
+    let [px, py, pz] = p;
+    // Lanes summed apart and slices of one length: the loop runs in vector registers.
+    let mut acc = [0.0f32; join::LANES];
+    let n = columns[0].len();
+    let [ax, ay, az, bx, by, bz, th, k] = columns.map(|c| &c[..n]);
+    for i in 0..n {
+        let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
+        let da = (dx * dx + dy * dy + dz * dz).sqrt();
+        let (dx, dy, dz) = (px - bx[i], py - by[i], pz - bz[i]);
+        let db = (dx * dx + dy * dy + dz * dz).sqrt();
+        let (_, c) = join::sin_cos_f32(th[i] - k[i] * (db - da));
+        acc[i % join::LANES] += 1.0 - c;
+    }
+    acc.iter().map(|&v| f64::from(v)).sum()
 }
 
 /// The fit of a tag with split series, as the module describes it.
 pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     let coarse = PairCost::new(&pairs(obs, s.sign, COARSE.1));
     let fine = PairCost::new(&pairs(obs, s.sign, FINE.1));
-    let starts = grid_starts(s, &mut |p| coarse.at(p), &mut |p| fine.at(p), STARTS);
+    let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
     let (dims, sign) = (s.dims, s.sign);
     // The phases with each calibrated antenna's series in one group: what a fit is judged by.
     let joint: Vec<Obs> = obs
@@ -121,6 +145,7 @@ pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         .collect();
     let mut best: Option<(f64, Solution)> = None;
     for c in starts {
+        let c = refine(s, c, &mut |p| fine.at(p));
         let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
         let Ok(fit) = join_from(obs, q, s) else {
             continue;
