@@ -1,6 +1,7 @@
 //! A subscriber's view of one topic's sequence numbers from one reader, as a reorder buffer
 //! (sans IO: the caller passes the time). Messages are handed back for filing in sequence
-//! order: one that comes ahead of a missing number is held until the gap fills (brokers such
+//! order, from the first this subscriber sees (those before it that come later, as the first
+//! messages of a broker's redelivery may, are filed once each, out of order): one that comes ahead of a missing number is held until the gap fills (brokers such
 //! as NATS JetStream may redeliver out of order, and a tag's reads filed out of order give
 //! another estimate), for at most [`HOLD`] and [`MAX_HELD`] messages; then the gap is
 //! skipped, and a message that still comes late into it is filed out of order. A missing
@@ -15,9 +16,10 @@ use std::time::{Duration, Instant};
 /// A skipped number this far behind the next expected one is counted as lost.
 pub const REORDER_WINDOW: u64 = 10_000;
 
-/// How long a message waits for an earlier missing one before the gap is skipped (as long
-/// as a live read waits for its pose, [`crate::localize::live::POSE_WAIT`]).
-pub const HOLD: Duration = Duration::from_secs(2);
+/// How long a message waits for an earlier missing one before the gap is skipped: a broker
+/// redelivers what it held back after its acknowledgement wait (NATS JetStream: `ack_wait`,
+/// 30 s by default, 1 s in the tests), and on a busy host that took more than 2 s.
+pub const HOLD: Duration = Duration::from_secs(5);
 
 /// At most this many messages are held for a gap; one more skips it.
 pub const MAX_HELD: usize = 1_000;
@@ -37,6 +39,9 @@ pub struct Step<T> {
     pub lost: u64,
     /// The arrival came ahead of a missing number and is held.
     pub held: bool,
+    /// The arrival is filed behind messages that follow it (late into a skipped gap, from
+    /// before the first number seen, or of an earlier run).
+    pub late: bool,
 }
 
 impl<T> Default for Step<T> {
@@ -46,6 +51,7 @@ impl<T> Default for Step<T> {
             duplicate: None,
             lost: 0,
             held: false,
+            late: false,
         }
     }
 }
@@ -63,6 +69,10 @@ pub struct Seq<T> {
     held: BTreeMap<u64, (T, Instant)>,
     /// The publisher's last number and when its gaps count as lost.
     close: Option<(u64, Instant)>,
+    /// The first number this subscriber saw, when its count began mid-run (0 otherwise).
+    first: u64,
+    /// Numbers below `first` that came since (filed once each), at most [`REORDER_WINDOW`].
+    early: BTreeSet<u64>,
 }
 
 impl<T> Default for Seq<T> {
@@ -73,13 +83,16 @@ impl<T> Default for Seq<T> {
             missing: BTreeSet::new(),
             held: BTreeMap::new(),
             close: None,
+            first: 0,
+            early: BTreeSet::new(),
         }
     }
 }
 
 impl<T> Seq<T> {
     /// Message `seq` of publisher run `run` came at `now`. The first number seen is where
-    /// this subscriber's session began (no loss before it). A newer run counts from 1 again:
+    /// this subscriber's session began (no loss before it; what comes from before it is filed
+    /// once). A newer run counts from 1 again:
     /// what the last one left missing is lost, and what it held is filed. From a publisher
     /// that names no run (`run` 0), 1 again after higher numbers is taken for a new run.
     pub fn arrive(&mut self, run: u64, seq: u64, item: T, now: Instant) -> Step<T> {
@@ -87,6 +100,7 @@ impl<T> Seq<T> {
         if self.next != 0 && run != 0 && run < self.run {
             // Late from an earlier run: its numbers are no longer kept.
             step.file.push(item);
+            step.late = true;
             return step;
         }
         if self.next != 0 && run > self.run {
@@ -96,14 +110,19 @@ impl<T> Seq<T> {
         self.run = run;
         if self.next == 0 {
             self.next = seq + 1;
+            self.first = seq;
             step.file.push(item);
         } else if run == 0 && seq == 1 && self.next > 2 && !self.missing.contains(&1) {
             self.new_run(&mut step);
             self.next = 2;
             step.file.push(item);
         } else if seq < self.next {
-            if self.missing.remove(&seq) {
+            if self.missing.remove(&seq) || (seq < self.first && self.early.insert(seq)) {
                 step.file.push(item);
+                step.late = true;
+                if self.early.len() > REORDER_WINDOW as usize {
+                    self.early.pop_first();
+                }
             } else {
                 step.duplicate = Some(item);
             }
@@ -206,6 +225,8 @@ impl<T> Seq<T> {
     /// Ends the run being counted: files what it held, counts what it left missing.
     fn new_run(&mut self, step: &mut Step<T>) {
         self.release_all(step);
+        self.first = 0;
+        self.early.clear();
         step.lost += std::mem::take(&mut self.missing).len() as u64;
         self.close = None;
     }
@@ -360,6 +381,23 @@ mod tests {
         assert_eq!(filed(&run), [12, 1], "the old run's held message first");
         assert_eq!(run.lost, 1);
         assert_eq!(filed(&r.arrive(0, 2, 2, t)), [2]);
+    }
+
+    #[test]
+    fn messages_before_the_first_seen_that_come_later_are_filed_once() {
+        let t = Instant::now();
+        let mut s = Seq::default();
+        // The broker delivered 3 first, then 1 and 2 (and 1 again).
+        assert_eq!(filed(&s.arrive(R, 3, 3, t)), [3]);
+        assert_eq!(filed(&s.arrive(R, 1, 1, t)), [1]);
+        assert_eq!(s.arrive(R, 1, 1, t).duplicate, Some(1));
+        assert_eq!(filed(&s.arrive(R, 2, 2, t)), [2]);
+        assert_eq!(filed(&s.arrive(R, 4, 4, t)), [4]);
+        assert_eq!(s.arrive(R, 3, 3, t).duplicate, Some(3));
+        assert_eq!(s.tick(t + CLOSE_GRACE).lost, 0);
+        // A new run counts from its own first message.
+        assert_eq!(filed(&s.arrive(R + 1, 1, 1, t)), [1]);
+        assert_eq!(s.arrive(R + 1, 1, 1, t).duplicate, Some(1));
     }
 
     #[test]

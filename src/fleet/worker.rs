@@ -366,12 +366,13 @@ impl Run {
             }
             self.shared.metrics.mqtt_reordered.inc();
             tracing::debug!(topic = rest, seq, expected, "batch ahead of a gap: held");
-        } else if seq < expected && !step.file.is_empty() {
+        } else if step.late {
+            self.shared.metrics.mqtt_filed_late.inc();
             tracing::debug!(
                 topic = rest,
                 seq,
                 expected,
-                "batch behind the next expected one filed (late into a gap, or a new run)"
+                "batch filed behind later ones (late into a skipped gap, from before the first seen, or of an earlier run)"
             );
         }
         self.take(step);

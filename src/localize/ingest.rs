@@ -52,7 +52,7 @@ impl Ingest {
         }
     }
 
-    /// Takes one read (reads of one series in time order).
+    /// Takes one read (a read older than its series' newest is put in its place in time).
     pub fn push(&mut self, read: &Read) {
         let Some(phase) = read.phase_rad else {
             self.set_aside.no_phase += 1;

@@ -107,30 +107,19 @@ impl Series {
         self.wavelength_m / 4.0 * self.ambiguity.period() / std::f64::consts::TAU
     }
 
-    /// Adds a read (in time order) of reported phase `phase_rad` with the antenna at
-    /// `antenna`, its yaw `yaw_rad`.
+    /// Adds a read of reported phase `phase_rad` with the antenna at `antenna`, its yaw
+    /// `yaw_rad`. A read older than the newest held is put in its place in time, and the
+    /// series comes out as it would have had the reads come in time order (a broker may
+    /// deliver a tag's reads late; only phases thinned away before it came can differ).
     pub fn push(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3, yaw_rad: f64) {
-        let period = self.ambiguity.period();
-        let folded = phase_rad.rem_euclid(period);
-        let limit = self.motion_limit_m();
+        if self.samples.last().is_some_and(|last| t_us < last.t_us) {
+            self.insert_late(t_us, phase_rad, antenna, yaw_rad);
+            return;
+        }
+        let folded = phase_rad.rem_euclid(self.ambiguity.period());
         let unwrapped = match self.samples.last().copied() {
-            Some(prev) if t_us >= prev.t_us => {
-                let moved = distance(prev.antenna, antenna);
-                let gap = t_us - prev.t_us;
-                if moved >= limit {
-                    self.splits_motion += 1;
-                    None
-                } else if gap > self.max_gap_us {
-                    self.splits_gap += 1;
-                    None
-                } else {
-                    // The nearest turn of `folded` to the previous unwrapped phase.
-                    let step =
-                        (folded - prev.phase_rad + period / 2.0).rem_euclid(period) - period / 2.0;
-                    Some(prev.phase_rad + step)
-                }
-            }
-            _ => None,
+            Some(prev) => self.link(&prev, t_us, folded, antenna),
+            None => None,
         };
         if unwrapped.is_none() {
             self.starts.push(self.samples.len());
@@ -142,6 +131,103 @@ impl Series {
             yaw_rad,
             raw_phase_rad: phase_rad,
         });
+    }
+
+    /// The unwrapped phase of a read at `t_us` (`folded` onto the ambiguity's period, the
+    /// antenna at `antenna`) that follows `prev` in its segment, or `None` when it starts a
+    /// new one (the split counted).
+    fn link(&mut self, prev: &Sample, t_us: u64, folded: f64, antenna: Vec3) -> Option<f64> {
+        let period = self.ambiguity.period();
+        if distance(prev.antenna, antenna) >= self.motion_limit_m() {
+            self.splits_motion += 1;
+            None
+        } else if t_us - prev.t_us > self.max_gap_us {
+            self.splits_gap += 1;
+            None
+        } else {
+            // The nearest turn of `folded` to the previous unwrapped phase.
+            let step = (folded - prev.phase_rad + period / 2.0).rem_euclid(period) - period / 2.0;
+            Some(prev.phase_rad + step)
+        }
+    }
+
+    /// Undoes the count of the split between `prev` and `next`, if there was one.
+    fn unlink(&mut self, prev: &Sample, next: &Sample) {
+        if distance(prev.antenna, next.antenna) >= self.motion_limit_m() {
+            self.splits_motion = self.splits_motion.saturating_sub(1);
+        } else if next.t_us.saturating_sub(prev.t_us) > self.max_gap_us {
+            self.splits_gap = self.splits_gap.saturating_sub(1);
+        }
+    }
+
+    /// Puts a read older than the newest in its place: the links to the samples either side
+    /// are made again, and the segment that follows it unwrapped again behind it.
+    fn insert_late(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3, yaw_rad: f64) {
+        let period = self.ambiguity.period();
+        let at = self.samples.partition_point(|s| s.t_us <= t_us);
+        let next = self.samples[at];
+        let prev = at.checked_sub(1).map(|i| self.samples[i]);
+        let next_started = self.starts.binary_search(&at).is_ok();
+        if let (Some(p), true) = (prev, next_started) {
+            self.unlink(&p, &next);
+        }
+        let folded = phase_rad.rem_euclid(period);
+        let unwrapped = match prev {
+            Some(p) => self.link(&p, t_us, folded, antenna),
+            None => None,
+        };
+        let new = Sample {
+            t_us,
+            phase_rad: unwrapped.unwrap_or(folded),
+            antenna,
+            yaw_rad,
+            raw_phase_rad: phase_rad,
+        };
+        let next_folded = next.raw_phase_rad.rem_euclid(period);
+        let next_phase = self.link(&new, next.t_us, next_folded, next.antenna);
+        // The segment `next` now begins or continues, up to the next start after it.
+        let end = self
+            .starts
+            .iter()
+            .copied()
+            .find(|&s| s > at)
+            .unwrap_or(self.samples.len());
+        // Each step again as in time order (the same operations, so the same bits), unless
+        // it lands on another turn than before: then thinning had left too long a step to
+        // unwrap, and the step as it was stands.
+        let mut before = next.phase_rad;
+        self.samples[at].phase_rad = next_phase.unwrap_or(next_folded);
+        for j in at + 1..end {
+            let (prev, s) = (self.samples[j - 1].phase_rad, self.samples[j]);
+            let was = s.phase_rad - before;
+            before = s.phase_rad;
+            let folded = s.raw_phase_rad.rem_euclid(period);
+            let step = (folded - prev + period / 2.0).rem_euclid(period) - period / 2.0;
+            let step = if (step - was).abs() < period / 2.0 {
+                step
+            } else {
+                was
+            };
+            self.samples[j].phase_rad = prev + step;
+        }
+        self.samples.insert(at, new);
+        // Starts after the new sample move up by one; the new one and `next` (now at + 1)
+        // start segments when their links failed.
+        self.starts.retain(|&s| s != at);
+        for s in &mut self.starts {
+            if *s > at {
+                *s += 1;
+            }
+        }
+        let mut fresh = Vec::with_capacity(2);
+        if unwrapped.is_none() {
+            fresh.push(at);
+        }
+        if next_phase.is_none() {
+            fresh.push(at + 1);
+        }
+        let k = self.starts.partition_point(|&s| s < at);
+        self.starts.splice(k..k, fresh);
     }
 
     /// Phases held, over all segments.
@@ -298,6 +384,44 @@ mod tests {
             s.segments().map(<[Sample]>::len).collect::<Vec<_>>(),
             vec![3, 1, 1]
         );
+    }
+
+    #[test]
+    fn reads_that_come_late_give_the_series_of_reads_in_time_order() {
+        use rand::seq::SliceRandom;
+        use rand::SeedableRng;
+        // A pass with a long gap and a jump beyond λ/4 in it: three segments in time order.
+        let mut reads: Vec<(u64, f64, Vec3)> = Vec::new();
+        for k in 0..300u64 {
+            let x = -1.5 + 0.01 * k as f64 + if k >= 200 { 0.2 } else { 0.0 };
+            let t = k * 20_000 + if k >= 100 { 2_000_000 } else { 0 };
+            let a = [x, 1.0, 0.0];
+            reads.push((t, reported(a, 0.7), a));
+        }
+        let mut ordered = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
+        for &(t, phi, a) in &reads {
+            ordered.push(t, phi, a, 0.0);
+        }
+        assert_eq!(ordered.segments().len(), 3);
+        assert_eq!(ordered.splits(), (1, 1));
+        for seed in 0..20 {
+            // Blocks of up to 40 reads delivered in a shuffled order, as batches may be.
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let mut blocks: Vec<&[(u64, f64, Vec3)]> =
+                reads.chunks(1 + seed as usize * 2).collect();
+            blocks.shuffle(&mut rng);
+            let mut late = Series::new(LAMBDA, Ambiguity::None, 1_000_000);
+            for &(t, phi, a) in blocks.concat().iter() {
+                late.push(t, phi, a, 0.0);
+            }
+            assert_eq!(late.splits(), ordered.splits(), "seed {seed}");
+            let lens = |s: &Series| s.segments().map(<[Sample]>::len).collect::<Vec<_>>();
+            assert_eq!(lens(&late), lens(&ordered), "seed {seed}");
+            for (x, y) in late.samples().iter().zip(ordered.samples()) {
+                // The same bits: two workers must agree to the last digit.
+                assert_eq!(x, y, "seed {seed}");
+            }
+        }
     }
 
     #[test]

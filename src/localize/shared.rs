@@ -154,6 +154,8 @@ pub struct Metrics {
     pub mqtt_duplicates: Counter,
     /// Read batches a worker held because they came ahead of a missing one.
     pub mqtt_reordered: Counter,
+    /// Read batches a worker filed behind later ones (they came after their gap was skipped).
+    pub mqtt_filed_late: Counter,
     /// Connections to the broker lost.
     pub mqtt_disconnects: Counter,
     /// Proxied readers' keepalive links taken for lost (no KEEPALIVE for three periods).
@@ -191,6 +193,7 @@ impl Metrics {
             mqtt_gaps: Counter::default(),
             mqtt_duplicates: Counter::default(),
             mqtt_reordered: Counter::default(),
+            mqtt_filed_late: Counter::default(),
             mqtt_disconnects: Counter::default(),
             keepalive_losses: Counter::default(),
             registry: Registry::with_prefix("llrp_gateway"),
@@ -280,6 +283,11 @@ impl Metrics {
                 "mqtt_reordered",
                 "MQTT read batches held for an earlier missing one",
                 &m.mqtt_reordered,
+            ),
+            (
+                "mqtt_filed_late",
+                "MQTT read batches filed behind later ones",
+                &m.mqtt_filed_late,
             ),
             (
                 "mqtt_disconnects",
