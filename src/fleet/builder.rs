@@ -132,8 +132,10 @@ impl Builder {
             } => {
                 self.came(&reader);
                 let decoder = self.decoders.of(&reader);
-                // The reads of each RO_ACCESS_REPORT apart: without a window, a message each.
-                let mut reports: Vec<Vec<Read>> = Vec::new();
+                // The reads of each RO_ACCESS_REPORT apart: without a window, a message each;
+                // with one, all in one list.
+                let apart = self.opts.window.is_zero();
+                let mut reports: Vec<Vec<Read>> = vec![Vec::new()];
                 let mut events = Vec::new();
                 for frame in crate::reads::frames(&bytes) {
                     let Ok(frame) = frame else {
@@ -147,20 +149,15 @@ impl Builder {
                                 events.push(n.reader_event_notification_data);
                             }
                         }
-                    } else {
-                        let mut reads = Vec::new();
-                        let _ = decoder.frame(frame, now_utc_us, &mut reads);
-                        if !reads.is_empty() {
-                            reports.push(reads);
+                    } else if let Some(reads) = reports.last_mut() {
+                        let _ = decoder.frame(frame, now_utc_us, reads);
+                        if apart && !reads.is_empty() {
+                            reports.push(Vec::new());
                         }
                     }
                 }
-                if self.opts.window.is_zero() {
-                    for reads in reports {
-                        self.reads(&reader, reads);
-                    }
-                } else {
-                    self.reads(&reader, reports.concat());
+                for reads in reports {
+                    self.reads(&reader, reads);
                 }
                 for e in events {
                     self.event(&reader, &e);
@@ -251,13 +248,14 @@ impl Builder {
             }
             p.reads.push(read);
         };
-        for r in &reads {
-            let t = TagRead::from_read(r);
-            if self.opts.references.contains(&r.epc) {
+        for r in reads {
+            let reference = self.opts.references.contains(&r.epc);
+            let shard = usize::from(schema::shard(&r.epc, self.opts.shard_count));
+            let t = TagRead::from_owned(r);
+            if reference {
                 add("refs", t.clone());
                 refs = true;
             }
-            let shard = usize::from(schema::shard(&r.epc, self.opts.shard_count));
             if let Some(topic) = self.shard_topics.get(shard) {
                 add(topic, t);
                 if !touched.contains(&shard) {

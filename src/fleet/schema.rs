@@ -76,8 +76,18 @@ pub struct TagRead {
 impl TagRead {
     /// The broker's form of `r`.
     pub fn from_read(r: &Read) -> TagRead {
+        TagRead::with_epc(r, r.epc.clone())
+    }
+
+    /// The broker's form of `r`, its EPC moved rather than copied.
+    pub fn from_owned(mut r: Read) -> TagRead {
+        let epc = std::mem::take(&mut r.epc);
+        TagRead::with_epc(&r, epc)
+    }
+
+    fn with_epc(r: &Read, epc_hex: String) -> TagRead {
         TagRead {
-            epc_hex: r.epc.clone(),
+            epc_hex,
             antenna_port: r.antenna,
             peak_rssi_cdbm: r.rssi_dbm.map(|d| (d * 100.0).round() as i32),
             phase_angle: r.phase_rad.map(f64::to_degrees),

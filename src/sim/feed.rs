@@ -5,6 +5,7 @@
 //! ground truth for `GET /api/truth`.
 
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use crate::localize::estimate::ReaderGeometry;
 use crate::localize::live::{Input, Settings, Tap};
@@ -17,6 +18,10 @@ use crate::scenario::Scenario;
 
 /// Simulated time between two pose samples of an antenna by default, µs (10 Hz).
 pub const POSE_INTERVAL_US: u64 = 100_000;
+
+/// Wall time between two updates of the ground truth at most: at `--speed max` the pose
+/// samples come thousands of times a second, and nobody reads the truth that often.
+pub const TRUTH_EVERY: Duration = Duration::from_millis(50);
 
 /// Which poses the simulator gives the localizer (`sim --poses`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -49,6 +54,10 @@ pub struct Feed {
     next_us: u64,
     /// Simulated time between two samples (µs).
     interval_us: u64,
+    /// The tags' EPCs (hex), made at the first truth.
+    epcs: Vec<String>,
+    /// When the truth was last set.
+    truth_at: Option<Instant>,
 }
 
 impl Feed {
@@ -70,10 +79,13 @@ impl Feed {
             references,
             next_us: now_us / interval_us * interval_us,
             interval_us,
+            epcs: Vec::new(),
+            truth_at: None,
         }
     }
 
-    /// Sends the samples due up to simulated time `now_us`, and the truth at the newest.
+    /// Sends the samples due up to simulated time `now_us`, and the truth at the newest (at
+    /// most every [`TRUTH_EVERY`]).
     pub fn feed(&mut self, m: &Model, now_us: u64) {
         // After a long pause (the own inventory waits while a client is connected) the
         // samples restart shortly before now instead of catching up the whole pause.
@@ -95,11 +107,20 @@ impl Feed {
             return;
         }
         self.tap.offer(Input::Poses(poses));
+        if self.truth_at.is_some_and(|at| at.elapsed() < TRUTH_EVERY) {
+            return;
+        }
         if let Some(t) = last {
+            self.truth_at = Some(Instant::now());
+            if self.epcs.len() != m.tag_count() {
+                self.epcs = (0..m.tag_count())
+                    .map(|k| crate::reads::hex_upper(m.tag_epc(k).as_bytes()))
+                    .collect();
+            }
             let truth = Truth {
                 tags: (0..m.tag_count())
                     .map(|k| TruthTag {
-                        epc: crate::reads::hex_upper(m.tag_epc(k).as_bytes()),
+                        epc: self.epcs[k].clone(),
                         position: m.tag_position(k, t),
                         reference: self.references.get(k).copied().unwrap_or(false),
                     })
