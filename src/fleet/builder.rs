@@ -53,6 +53,21 @@ pub(super) struct Builder {
     shard_topics: Vec<String>,
     /// Poses waiting for their window to close, per topic (under `v1/`).
     pending_poses: BTreeMap<String, (Vec<PoseSample>, Instant)>,
+    /// JSON bytes a read and a pose sample took in the last message of each: a message's
+    /// buffer is made that big at once (grown as serde_json writes, it was copied a dozen
+    /// times).
+    json_per: [usize; 2],
+}
+
+/// `value` as JSON into a buffer made for `items` of `per` bytes each; `per` becomes what
+/// one took this time.
+fn to_json(value: &impl serde::Serialize, items: usize, per: &mut usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(items * *per + 256);
+    // Reads and pose samples are plain values (finite numbers, strings): they always
+    // serialize, and into a Vec nothing can fail.
+    let _ = serde_json::to_writer(&mut out, value);
+    *per = out.len() / items.max(1) + 16;
+    out
 }
 
 impl Builder {
@@ -70,6 +85,7 @@ impl Builder {
             next_due: None,
             shard_topics,
             pending_poses: BTreeMap::new(),
+            json_per: [512, 256],
         }
     }
 
@@ -326,8 +342,7 @@ impl Builder {
                 seq,
                 reads: chunk,
             };
-            // A batch of plain values always serializes.
-            let payload = serde_json::to_vec(&batch).unwrap_or_default();
+            let payload = to_json(&batch, chunk.len(), &mut self.json_per[0]);
             self.link
                 .publish(rest, false, payload, chunk.len() as u64, true);
         }
@@ -384,8 +399,7 @@ impl Builder {
             let Some((poses, _)) = self.pending_poses.remove(&rest) else {
                 continue;
             };
-            // Pose samples of finite numbers always serialize.
-            let payload = serde_json::to_vec(&poses).unwrap_or_default();
+            let payload = to_json(&poses, poses.len(), &mut self.json_per[1]);
             self.link
                 .publish(&rest, false, payload, poses.len() as u64, false);
         }
