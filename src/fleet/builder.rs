@@ -331,7 +331,10 @@ impl Builder {
         let Some(p) = self.pending.get_mut(reader).and_then(|t| t.get_mut(rest)) else {
             return;
         };
-        let reads = std::mem::take(&mut p.reads);
+        // The next window's reads go into a list as long as this one's (grown from empty,
+        // it was copied a dozen times a window).
+        let room = p.reads.len();
+        let reads = std::mem::replace(&mut p.reads, Vec::with_capacity(room));
         for chunk in reads.chunks(MAX_BATCH_READS) {
             let seq = self.next_seq(reader, rest);
             let batch = BatchRef {

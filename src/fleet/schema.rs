@@ -22,21 +22,28 @@ pub fn shard(epc_hex: &str, count: u16) -> u16 {
     const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
     const PRIME: u64 = 0x0000_0100_0000_01b3;
     let fold = |h: u64, b: u8| (h ^ u64::from(b)).wrapping_mul(PRIME);
-    let hash = match decode_hex(epc_hex) {
-        Some(bytes) => bytes.into_iter().fold(OFFSET, fold),
-        None => epc_hex.bytes().fold(OFFSET, fold),
+    let digits = epc_hex.as_bytes();
+    let hex =
+        !digits.is_empty() && digits.len() % 2 == 0 && digits.iter().all(u8::is_ascii_hexdigit);
+    let hash = if hex {
+        digits
+            .chunks_exact(2)
+            .map(|pair| (nibble(pair[0]) << 4) | nibble(pair[1]))
+            .fold(OFFSET, fold)
+    } else {
+        digits.iter().copied().fold(OFFSET, fold)
     };
     (hash % u64::from(count.max(1))) as u16
 }
 
-fn decode_hex(s: &str) -> Option<Vec<u8>> {
-    if s.len() % 2 != 0 || s.is_empty() {
-        return None;
+/// The value of a hex digit (0 for anything else).
+fn nibble(d: u8) -> u8 {
+    match d {
+        b'0'..=b'9' => d - b'0',
+        b'a'..=b'f' => d - b'a' + 10,
+        b'A'..=b'F' => d - b'A' + 10,
+        _ => 0,
     }
-    (0..s.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
-        .collect()
 }
 
 /// One tag read on the broker.
