@@ -1,14 +1,15 @@
 //! A subscriber's view of one topic's sequence numbers from one reader, as a reorder buffer
 //! (sans IO: the caller passes the time). Messages are handed back for filing in sequence
 //! order, from the first this subscriber sees (those before it that come later, as the first
-//! messages of a broker's redelivery may, are filed once each, out of order): one that comes ahead of a missing number is held until the gap fills (brokers such
-//! as NATS JetStream may redeliver out of order, and a tag's reads filed out of order give
-//! another estimate), for at most [`HOLD`] and [`MAX_HELD`] messages; then the gap is
-//! skipped, and a message that still comes late into it is filed out of order. A missing
-//! number counts as lost once it is [`REORDER_WINDOW`] behind, or [`CLOSE_GRACE`] after the
-//! publisher's clean close named a last number at or past it. Numbers count from 1 in each
-//! publisher run (the messages' `run`): a newer run starts the count again, and a message of
-//! an older run that comes late is filed out of order.
+//! messages of a broker's redelivery may, are filed once each, out of order): one that comes
+//! ahead of a missing number is held until the gap fills (brokers such as NATS JetStream may
+//! redeliver out of order, and a tag's reads filed out of order give another estimate), for
+//! at most [`HOLD`] and [`MAX_HELD`] messages; then the gap is skipped, and a message that
+//! still comes late into it is filed out of order. A missing number counts as lost once it
+//! is [`REORDER_WINDOW`] behind, or [`CLOSE_GRACE`] after the publisher's clean close named a
+//! last number at or past it. Numbers count from 1 in each publisher run (the messages'
+//! `run`): a newer run starts the count again, and a message of an older run that comes late
+//! is filed out of order.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};

@@ -48,6 +48,12 @@ pub struct Sample {
     pub raw_phase_rad: f64,
 }
 
+/// The step from unwrapped phase `prev` to the nearest turn of `folded` (a phase folded onto
+/// `period`): within ±period/2.
+fn step(folded: f64, prev: f64, period: f64) -> f64 {
+    (folded - prev + period / 2.0).rem_euclid(period) - period / 2.0
+}
+
 /// Default longest time between two reads of one segment (µs): the motion check is what
 /// keeps unwrapping right for a static tag; the gap bounds how long a tag may go unread
 /// (moved by hand, a pose feed that stalled) before its phases start afresh. A slow robot
@@ -145,9 +151,7 @@ impl Series {
             self.splits_gap += 1;
             None
         } else {
-            // The nearest turn of `folded` to the previous unwrapped phase.
-            let step = (folded - prev.phase_rad + period / 2.0).rem_euclid(period) - period / 2.0;
-            Some(prev.phase_rad + step)
+            Some(prev.phase_rad + step(folded, prev.phase_rad, period))
         }
     }
 
@@ -165,6 +169,7 @@ impl Series {
     fn insert_late(&mut self, t_us: u64, phase_rad: f64, antenna: Vec3, yaw_rad: f64) {
         let period = self.ambiguity.period();
         let at = self.samples.partition_point(|s| s.t_us <= t_us);
+        // In range: the newest sample is later than `t_us` (the caller's test).
         let next = self.samples[at];
         let prev = at.checked_sub(1).map(|i| self.samples[i]);
         let next_started = self.starts.binary_search(&at).is_ok();
@@ -201,14 +206,13 @@ impl Series {
             let (prev, s) = (self.samples[j - 1].phase_rad, self.samples[j]);
             let was = s.phase_rad - before;
             before = s.phase_rad;
-            let folded = s.raw_phase_rad.rem_euclid(period);
-            let step = (folded - prev + period / 2.0).rem_euclid(period) - period / 2.0;
-            let step = if (step - was).abs() < period / 2.0 {
-                step
+            let now = step(s.raw_phase_rad.rem_euclid(period), prev, period);
+            let now = if (now - was).abs() < period / 2.0 {
+                now
             } else {
                 was
             };
-            self.samples[j].phase_rad = prev + step;
+            self.samples[j].phase_rad = prev + now;
         }
         self.samples.insert(at, new);
         // Starts after the new sample move up by one; the new one and `next` (now at + 1)
