@@ -48,6 +48,15 @@ pub struct Sample {
     pub raw_phase_rad: f64,
 }
 
+/// Why a series starts a new segment between two reads.
+#[derive(Clone, Copy)]
+enum Split {
+    /// The antenna moved too far to unwrap.
+    Motion,
+    /// Too long passed.
+    Gap,
+}
+
 /// The step from unwrapped phase `prev` to the nearest turn of `folded` (a phase folded onto
 /// `period`): within ±period/2.
 fn step(folded: f64, prev: f64, period: f64) -> f64 {
@@ -139,28 +148,44 @@ impl Series {
         });
     }
 
+    /// Why a read at `t_us` with the antenna at `antenna` cannot follow `prev` in its
+    /// segment, if it cannot: the antenna moved λ/4 (λ/8) or more, or too long passed.
+    fn split(&self, prev: &Sample, t_us: u64, antenna: Vec3) -> Option<Split> {
+        if distance(prev.antenna, antenna) >= self.motion_limit_m() {
+            Some(Split::Motion)
+        } else if t_us.saturating_sub(prev.t_us) > self.max_gap_us {
+            Some(Split::Gap)
+        } else {
+            None
+        }
+    }
+
+    /// The split counter of `why`.
+    fn counter(&mut self, why: Split) -> &mut u64 {
+        match why {
+            Split::Motion => &mut self.splits_motion,
+            Split::Gap => &mut self.splits_gap,
+        }
+    }
+
     /// The unwrapped phase of a read at `t_us` (`folded` onto the ambiguity's period, the
     /// antenna at `antenna`) that follows `prev` in its segment, or `None` when it starts a
     /// new one (the split counted).
     fn link(&mut self, prev: &Sample, t_us: u64, folded: f64, antenna: Vec3) -> Option<f64> {
-        let period = self.ambiguity.period();
-        if distance(prev.antenna, antenna) >= self.motion_limit_m() {
-            self.splits_motion += 1;
-            None
-        } else if t_us - prev.t_us > self.max_gap_us {
-            self.splits_gap += 1;
-            None
-        } else {
-            Some(prev.phase_rad + step(folded, prev.phase_rad, period))
+        match self.split(prev, t_us, antenna) {
+            Some(why) => {
+                *self.counter(why) += 1;
+                None
+            }
+            None => Some(prev.phase_rad + step(folded, prev.phase_rad, self.ambiguity.period())),
         }
     }
 
     /// Undoes the count of the split between `prev` and `next`, if there was one.
     fn unlink(&mut self, prev: &Sample, next: &Sample) {
-        if distance(prev.antenna, next.antenna) >= self.motion_limit_m() {
-            self.splits_motion = self.splits_motion.saturating_sub(1);
-        } else if next.t_us.saturating_sub(prev.t_us) > self.max_gap_us {
-            self.splits_gap = self.splits_gap.saturating_sub(1);
+        if let Some(why) = self.split(prev, next.t_us, next.antenna) {
+            let n = self.counter(why);
+            *n = n.saturating_sub(1);
         }
     }
 
