@@ -7,7 +7,7 @@ use rand::{Rng, SeedableRng};
 
 use super::bench::{score, simulate, Run};
 use super::estimate::Estimator;
-use crate::scenario::Scenario;
+use crate::scenario::{Mount, Scenario};
 
 /// One variant of S3.
 #[derive(Clone, Debug, PartialEq)]
@@ -53,8 +53,24 @@ pub fn variants() -> Vec<Variant> {
 }
 
 /// S3 as variant `v`, run `run`: S3's room, tag and robot, with `v`'s noise and robots, each
-/// robot on 30 random waypoints from a random start (seeded by the run).
+/// robot on 30 random waypoints from a random start (seeded by the run); in a swarm, the
+/// robots not the first to find the tag head for it once it is found ([`tell_the_swarm`]).
 pub fn scenario(base: &str, v: &Variant, run: u64) -> Result<Scenario, String> {
+    let (mut s, mut rng) = drawn(base, v, run)?;
+    if v.robots > 1 {
+        let first = Scenario::from_json(&s.to_string()).map_err(|e| e.to_string())?;
+        tell_the_swarm(&first, &mut s, &mut rng);
+    }
+    Scenario::from_json(&s.to_string()).map_err(|e| e.to_string())
+}
+
+/// The variant's scenario (JSON) with every robot on its own random search, and the random
+/// source it was drawn from, to go on with.
+fn drawn(
+    base: &str,
+    v: &Variant,
+    run: u64,
+) -> Result<(serde_json::Value, rand_chacha::ChaCha8Rng), String> {
     let mut s: serde_json::Value = serde_json::from_str(base).map_err(|e| e.to_string())?;
     let seed = s["seed"].as_u64().unwrap_or(0) + run;
     s["seed"] = seed.into();
@@ -79,7 +95,99 @@ pub fn scenario(base: &str, v: &Variant, run: u64) -> Result<Scenario, String> {
         readers.push(reader);
     }
     s["readers"] = readers.into();
-    Scenario::from_json(&s.to_string()).map_err(|e| e.to_string())
+    Ok((s, rng))
+}
+
+/// Every this many seconds of a drive is looked at for the tag's first detection.
+const LOOK_S: f64 = 0.05;
+
+/// Radius (m) of the search round the tag by the robots told where it is (ours, within
+/// \[M\]'s 2 m range: the synthetic swarms of `wls`'s tests use the same).
+const SEARCH_RADIUS_M: f64 = 1.8;
+
+/// \[M\] §IV: "If one of the robots finds the tag while it is within the range of the RFID
+/// signal, it sends its location to the other robot, which immediately points to the
+/// communicated location." The finder is the robot whose antenna first comes within range of
+/// the tag on the true drives; from that moment every other robot ends its leg where it is and
+/// searches on random points within [`SEARCH_RADIUS_M`] of the tag, as many as the waypoints it
+/// had left (ours: \[M\] says no more; the location sent is the true one, not the finder's
+/// first estimate). The finder keeps to its own search.
+fn tell_the_swarm(first: &Scenario, s: &mut serde_json::Value, rng: &mut rand_chacha::ChaCha8Rng) {
+    use crate::physics::robot::RobotTrajectory;
+    let Some(tag) = first.tags.first().map(|t| t.position) else {
+        return;
+    };
+    // Each robot's true drive (the odometry noise drawn here is not used), the antenna's
+    // offset and range.
+    let mut drives = Vec::new();
+    for r in &first.readers {
+        let Some(a) = r.antennas.first() else {
+            return;
+        };
+        let Mount::Robot { robot, offset } = &a.mount else {
+            return;
+        };
+        let mut quiet = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+        drives.push((
+            RobotTrajectory::simulate(robot, &mut quiet),
+            robot.clone(),
+            offset.position,
+            a.range_m,
+        ));
+    }
+    let antenna = |pose: [f64; 3], o: [f64; 3]| {
+        let (c, sn) = (pose[2].cos(), pose[2].sin());
+        [
+            pose[0] + c * o[0] - sn * o[1],
+            pose[1] + sn * o[0] + c * o[1],
+            o[2],
+        ]
+    };
+    let in_range = |drive: &RobotTrajectory, o: [f64; 3], range: f64, t: f64| {
+        let p = antenna(drive.true_pose(t), o);
+        (p[0] - tag[0]).hypot(p[1] - tag[1]).hypot(p[2] - tag[2]) <= range
+    };
+    let found = drives
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (d, _, o, range))| {
+            let steps = (d.duration_s() / LOOK_S).ceil() as usize;
+            (0..=steps)
+                .map(|k| k as f64 * LOOK_S)
+                .find(|&t| in_range(d, *o, *range, t))
+                .map(|t| (t, i))
+        });
+    let Some((t_found, finder)) = found.min_by(|a, b| a.0.total_cmp(&b.0)) else {
+        return;
+    };
+    for (i, (drive, robot, _, _)) in drives.iter().enumerate() {
+        if i == finder || t_found >= drive.duration_s() {
+            continue;
+        }
+        // The waypoints reached by then, the same rule as the drive's.
+        let mut reached = 0;
+        let mut t = 0.0;
+        while t <= t_found && reached < robot.waypoints.len() {
+            let (p, w) = (drive.true_pose(t), robot.waypoints[reached]);
+            if (w[0] - p[0]).hypot(w[1] - p[1]) <= robot.tolerance_m * 1.5 {
+                reached += 1;
+            } else {
+                t += LOOK_S;
+            }
+        }
+        let here = drive.true_pose(t_found);
+        let mut waypoints: Vec<[f64; 2]> = robot.waypoints[..reached].to_vec();
+        waypoints.push([here[0], here[1]]);
+        for _ in reached..robot.waypoints.len() {
+            let (r, a) = (
+                SEARCH_RADIUS_M * rng.gen::<f64>().sqrt(),
+                rng.gen::<f64>() * std::f64::consts::TAU,
+            );
+            waypoints.push([tag[0] + r * a.cos(), tag[1] + r * a.sin()]);
+        }
+        s["readers"][i]["antennas"][0]["mount"]["robot"]["waypoints"] =
+            serde_json::json!(waypoints);
+    }
 }
 
 /// One variant's result over its runs (m).
@@ -131,4 +239,82 @@ pub fn run_variant(base: &str, v: &Variant, runs: usize) -> Result<Outcome, Stri
         mean,
         median,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S3: &str = include_str!("../../fixtures/scenarios/s3.json");
+
+    /// Equal to a nanometre (a scenario's numbers go through JSON text once more).
+    fn same(a: &[f64; 2], b: &[f64; 2]) -> bool {
+        (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9
+    }
+
+    fn waypoints(s: &serde_json::Value, r: usize) -> Vec<[f64; 2]> {
+        serde_json::from_value(
+            s["readers"][r]["antennas"][0]["mount"]["robot"]["waypoints"].clone(),
+        )
+        .expect("waypoints")
+    }
+
+    #[test]
+    fn the_robots_the_finder_tells_head_for_the_tag_and_search_round_it() {
+        let v = Variant {
+            name: "5 robots".into(),
+            sigma_rad: 0.2,
+            k: 1e-5,
+            robots: 5,
+        };
+        for run in 0..3 {
+            let (own, _) = drawn(S3, &v, run).expect("drawn");
+            let told = scenario(S3, &v, run).expect("told");
+            let tag = told.tags[0].position;
+            let mut unchanged = 0;
+            for (r, reader) in told.readers.iter().enumerate() {
+                let Mount::Robot { robot, .. } = &reader.antennas[0].mount else {
+                    panic!("run {run}: robot {r} is not on a robot");
+                };
+                let before = waypoints(&own, r);
+                // The legs driven before the call, the spot it was at, then the search.
+                let k = robot
+                    .waypoints
+                    .iter()
+                    .zip(&before)
+                    .take_while(|(a, b)| same(a, b))
+                    .count();
+                if k == before.len() && robot.waypoints.len() == k {
+                    unchanged += 1;
+                    continue;
+                }
+                assert_eq!(
+                    robot.waypoints.len(),
+                    before.len() + 1,
+                    "run {run}, robot {r}"
+                );
+                for w in &robot.waypoints[k + 1..] {
+                    let d = (w[0] - tag[0]).hypot(w[1] - tag[1]);
+                    assert!(
+                        d <= SEARCH_RADIUS_M,
+                        "run {run}, robot {r}: {w:?} {d} m out"
+                    );
+                }
+            }
+            assert_eq!(
+                unchanged, 1,
+                "run {run}: only the finder keeps its own search"
+            );
+        }
+        // One robot has nobody to tell.
+        let one = Variant { robots: 1, ..v };
+        let (own, _) = drawn(S3, &one, 0).expect("drawn");
+        let alone = scenario(S3, &one, 0).expect("scenario");
+        let Mount::Robot { robot, .. } = &alone.readers[0].antennas[0].mount else {
+            panic!("not on a robot");
+        };
+        let before = waypoints(&own, 0);
+        assert_eq!(robot.waypoints.len(), before.len());
+        assert!(robot.waypoints.iter().zip(&before).all(|(a, b)| same(a, b)));
+    }
 }

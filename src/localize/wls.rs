@@ -20,6 +20,9 @@ pub struct Settings {
     pub link_probability: f64,
     /// Seed of the random connectivity graph; default 0.
     pub seed: u64,
+    /// Mahalanobis distance² beyond which a robot's fix counts as contradicted by the others';
+    /// default 13.82, χ² with 2 degrees of freedom at 0.999.
+    pub gate: f64,
     /// Each robot's filter.
     pub filter: mhekf::Settings,
 }
@@ -30,6 +33,7 @@ impl Default for Settings {
             rounds: 50,
             link_probability: 0.5,
             seed: 0,
+            gate: 13.82,
             filter: mhekf::Settings::default(),
         }
     }
@@ -38,13 +42,16 @@ impl Default for Settings {
 /// How the exchange went.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConsensusReport {
-    /// Robots with a fix of the tag: the nodes.
+    /// Robots with a fix of the tag whose information was combined: the nodes.
     pub robots: usize,
+    /// Robots with a fix that withdrew it as contradicted by the others'.
+    pub withdrawn: usize,
     /// Links of the connectivity graph.
     pub edges: usize,
     /// Rounds run.
     pub rounds: usize,
-    /// Messages sent: one (F_i, a_i) per node per neighbour per round, rounds × edges × 2.
+    /// Messages sent: one (F_i, a_i) per node per neighbour per round, rounds × edges × 2, for
+    /// every exchange, plus the flooding of each check's largest statistic ((n − 1) × edges × 2).
     pub messages: u64,
     /// Largest distance of a node's estimate from the centralised WLS solution (m).
     pub disagreement: f64,
@@ -126,9 +133,35 @@ pub fn consensus(nodes: &mut [Node], edges: &[(usize, usize)], rounds: usize) {
     }
 }
 
+/// How far a robot's own fix `own` is from the rest of the `n` robots' combined one, which
+/// it has from its consensus state `agreed` (n·F̄ − F_i, n·ā − a_i): the Mahalanobis distance²
+/// of the difference under the sum of both covariances; 0 where either cannot be inverted.
+fn disagreement_with_the_rest(own: &Node, agreed: &Node, n: usize) -> f64 {
+    let rest_f = agreed.information * n as f64 - own.information;
+    let rest_a = agreed.state * n as f64 - own.state;
+    let (Some(own_c), Some(rest_c)) = (own.information.try_inverse(), rest_f.try_inverse()) else {
+        return 0.0;
+    };
+    let d = own_c * own.state - rest_c * rest_a;
+    match (own_c + rest_c).try_inverse() {
+        Some(s) => {
+            let m2 = (d.transpose() * s * d)[(0, 0)];
+            if m2.is_finite() {
+                m2
+            } else {
+                0.0
+            }
+        }
+        None => 0.0,
+    }
+}
+
 /// The tag at height `z` from several robots' reads: per robot, its tracks (one antenna each,
 /// in time order), each run through [`mhekf::locate`]. The robots with a fix exchange their
-/// information; the result is the first such robot's node, its covariance (n·F_i)⁻¹.
+/// information; a robot whose fix the others' contradict (Mahalanobis distance² above
+/// `s.gate`) withdraws, one at a time while three or more remain, and the rest exchange again
+/// (ours: \[M\] combines every fix). The result is the first remaining robot's node, its
+/// covariance (n·F_i)⁻¹.
 pub fn locate(
     robots: &[Vec<Vec<PoseObs>>],
     z: f64,
@@ -150,21 +183,47 @@ pub fn locate(
             .collect();
         nodes.extend(Node::from_fixes(&fixes));
     }
-    let n = nodes.len();
-    if n == 0 {
+    if nodes.is_empty() {
         return Err(NoFix::InsufficientGeometry);
     }
-    let (f_sum, a_sum) = nodes
+    // Consensus over the robots still in; while three or more are, the one whose own fix
+    // disagrees most with the others' (and beyond the gate) withdraws and the rest start over.
+    let own = nodes;
+    let mut active: Vec<usize> = (0..own.len()).collect();
+    let mut messages = 0u64;
+    let (nodes, edges) = loop {
+        let mut work: Vec<Node> = active.iter().map(|&i| own[i]).collect();
+        let edges = graph(work.len(), s.link_probability, s.seed);
+        consensus(&mut work, &edges, s.rounds);
+        messages += (s.rounds * edges.len() * 2) as u64;
+        if work.len() < 3 {
+            break (work, edges);
+        }
+        // The largest statistic reaches every node by flooding: n − 1 rounds at most.
+        messages += ((work.len() - 1) * edges.len() * 2) as u64;
+        let worst = work
+            .iter()
+            .zip(&active)
+            .map(|(nd, &i)| disagreement_with_the_rest(&own[i], nd, work.len()))
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        match worst {
+            Some((k, m2)) if m2 > s.gate => {
+                active.remove(k);
+            }
+            _ => break (work, edges),
+        }
+    };
+    let n = nodes.len();
+    let (f_sum, a_sum) = active
         .iter()
-        .fold((Matrix2::zeros(), Vector2::zeros()), |(f, a), nd: &Node| {
-            (f + nd.information, a + nd.state)
+        .fold((Matrix2::zeros(), Vector2::zeros()), |(f, a), &i| {
+            (f + own[i].information, a + own[i].state)
         });
     let central = f_sum
         .try_inverse()
         .map(|inv| inv * a_sum)
         .ok_or(NoFix::InsufficientGeometry)?;
-    let edges = graph(n, s.link_probability, s.seed);
-    consensus(&mut nodes, &edges, s.rounds);
     let mut disagreement: f64 = 0.0;
     for nd in &nodes {
         let e = nd.estimate().ok_or(NoFix::InsufficientGeometry)?;
@@ -181,9 +240,10 @@ pub fn locate(
     }
     let report = ConsensusReport {
         robots: n,
+        withdrawn: own.len() - n,
         edges: edges.len(),
         rounds: s.rounds,
-        messages: (s.rounds * edges.len() * 2) as u64,
+        messages,
         disagreement,
     };
     let fix = Fix {
@@ -295,8 +355,9 @@ mod tests {
         let (fix, report) = locate(&robots, tag[2], -1.0, None, &s).expect("a fix");
         let (err, _) = error(&fix, tag);
         assert!(err < 1e-3, "{err} m: {fix:?}");
-        assert_eq!(report.robots, 3);
-        assert_eq!(report.messages, 200 * report.edges as u64 * 2);
+        assert_eq!((report.robots, report.withdrawn), (3, 0));
+        // The exchange, then the flooding of the one check's largest statistic (n − 1 rounds).
+        assert_eq!(report.messages, (200 + 2) * report.edges as u64 * 2);
         assert!(report.disagreement < 1e-6, "{report:?}");
         // One robot: no exchange, its own WLS.
         let (alone, report) = locate(&robots[..1], tag[2], -1.0, None, &s).expect("a fix");
@@ -339,8 +400,7 @@ mod tests {
         for seed in 0..seeds {
             let robots = swarm(tag, 5, 1500, 0.2, 1e-5, seed);
             let (fix, report) = locate(&robots, tag[2], -1.0, None, &s).expect("a fix");
-            assert_eq!(report.robots, 5);
-            assert_eq!(report.messages, 50 * report.edges as u64 * 2);
+            assert_eq!(report.robots + report.withdrawn, 5);
             five += error(&fix, tag).0;
             let (alone, _) = locate(&robots[..1], tag[2], -1.0, None, &s).expect("a fix");
             one += error(&alone, tag).0;
@@ -348,6 +408,37 @@ mod tests {
         let (one, five) = (one / seeds as f64, five / seeds as f64);
         assert!(five < one, "five robots {five} m, one {one} m");
         assert!(five <= 0.03, "five robots {five} m");
+    }
+
+    #[test]
+    fn a_robot_whose_fix_the_others_contradict_withdraws() {
+        // Four robots read the tag; a fifth's reads are of a spot 35 cm away (two range
+        // cycles at 867 MHz: the wrong hypothesis a filter can settle on), with as tight a fix.
+        let tag = [0.0, 0.0, 0.5];
+        let s = Settings {
+            filter: mhekf::Settings {
+                k_r: 0.0,
+                k_l: 0.0,
+                ..mhekf::Settings::default()
+            },
+            ..Settings::default()
+        };
+        let mut robots = swarm(tag, 4, 1000, 0.05, 0.0, 3);
+        let elsewhere = [0.35, 0.0, 0.5];
+        robots.push(swarm(elsewhere, 1, 1000, 0.05, 0.0, 4).remove(0));
+        let (fix, report) = locate(&robots, tag[2], -1.0, None, &s).expect("a fix");
+        assert_eq!((report.robots, report.withdrawn), (4, 1), "{report:?}");
+        let (err, _) = error(&fix, tag);
+        assert!(err < 0.005, "{err} m with the fifth withdrawn");
+        // Without the check the fifth pulls the combined fix toward its spot.
+        let all = Settings {
+            gate: f64::INFINITY,
+            ..s
+        };
+        let (fix, report) = locate(&robots, tag[2], -1.0, None, &all).expect("a fix");
+        assert_eq!((report.robots, report.withdrawn), (5, 0));
+        let (err, _) = error(&fix, tag);
+        assert!(err > 0.03, "{err} m with all five combined");
     }
 
     #[test]
