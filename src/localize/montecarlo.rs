@@ -54,7 +54,7 @@ pub fn variants() -> Vec<Variant> {
 
 /// S3 as variant `v`, run `run`: S3's room, tag and robot, with `v`'s noise and robots, each
 /// robot on 30 random waypoints from a random start (seeded by the run); in a swarm, the
-/// robots not the first to find the tag head for it once it is found ([`tell_the_swarm`]).
+/// robots not the first to find the tag head for it once it is found (\[M\] §IV).
 pub fn scenario(base: &str, v: &Variant, run: u64) -> Result<Scenario, String> {
     let (mut s, mut rng) = drawn(base, v, run)?;
     if v.robots > 1 {

@@ -260,6 +260,18 @@ mod tests {
     use crate::localize::mhekf::synth::{error, run};
     use std::f64::consts::TAU;
 
+    /// The default exchange with filters told the odometry is exact.
+    fn exact_odometry() -> Settings {
+        Settings {
+            filter: mhekf::Settings {
+                k_r: 0.0,
+                k_l: 0.0,
+                ..mhekf::Settings::default()
+            },
+            ..Settings::default()
+        }
+    }
+
     /// `n` robots' single tracks round `tag`, each from its own start.
     fn swarm(
         tag: [f64; 3],
@@ -343,13 +355,8 @@ mod tests {
     fn a_noise_free_tag_is_recovered_within_a_millimetre() {
         let tag = [2.0, 1.0, 0.5];
         let s = Settings {
-            filter: mhekf::Settings {
-                k_r: 0.0,
-                k_l: 0.0,
-                ..mhekf::Settings::default()
-            },
             rounds: 200,
-            ..Settings::default()
+            ..exact_odometry()
         };
         let robots = swarm(tag, 3, 1500, 0.0, 0.0, 1);
         let (fix, report) = locate(&robots, tag[2], -1.0, None, &s).expect("a fix");
@@ -371,14 +378,7 @@ mod tests {
     fn with_phase_noise_the_error_stays_within_the_covariance() {
         // σ_φ = 0.2 rad, exact poses (the filters told so), three robots.
         let tag = [0.0, 0.0, 0.5];
-        let s = Settings {
-            filter: mhekf::Settings {
-                k_r: 0.0,
-                k_l: 0.0,
-                ..mhekf::Settings::default()
-            },
-            ..Settings::default()
-        };
+        let s = exact_odometry();
         let mut within = 0;
         for seed in 0..20 {
             let robots = swarm(tag, 3, 1000, 0.2, 0.0, seed);
@@ -415,14 +415,7 @@ mod tests {
         // Four robots read the tag; a fifth's reads are of a spot 35 cm away (two range
         // cycles at 867 MHz: the wrong hypothesis a filter can settle on), with as tight a fix.
         let tag = [0.0, 0.0, 0.5];
-        let s = Settings {
-            filter: mhekf::Settings {
-                k_r: 0.0,
-                k_l: 0.0,
-                ..mhekf::Settings::default()
-            },
-            ..Settings::default()
-        };
+        let s = exact_odometry();
         let mut robots = swarm(tag, 4, 1000, 0.05, 0.0, 3);
         let elsewhere = [0.35, 0.0, 0.5];
         robots.push(swarm(elsewhere, 1, 1000, 0.05, 0.0, 4).remove(0));
