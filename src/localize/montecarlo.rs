@@ -130,7 +130,7 @@ fn tell_the_swarm(first: &Scenario, s: &mut serde_json::Value, rng: &mut rand_ch
         let mut quiet = rand_chacha::ChaCha8Rng::seed_from_u64(0);
         drives.push((
             RobotTrajectory::simulate(robot, &mut quiet),
-            robot.clone(),
+            robot,
             offset.position,
             a.range_m,
         ));

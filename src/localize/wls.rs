@@ -143,17 +143,11 @@ fn disagreement_with_the_rest(own: &Node, agreed: &Node, n: usize) -> f64 {
         return 0.0;
     };
     let d = own_c * own.state - rest_c * rest_a;
-    match (own_c + rest_c).try_inverse() {
-        Some(s) => {
-            let m2 = (d.transpose() * s * d)[(0, 0)];
-            if m2.is_finite() {
-                m2
-            } else {
-                0.0
-            }
-        }
-        None => 0.0,
-    }
+    (own_c + rest_c)
+        .try_inverse()
+        .map(|s| (d.transpose() * s * d)[(0, 0)])
+        .filter(|m2| m2.is_finite())
+        .unwrap_or(0.0)
 }
 
 /// The tag at height `z` from several robots' reads: per robot, its tracks (one antenna each,
