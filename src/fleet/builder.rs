@@ -7,22 +7,12 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use super::json;
 use super::publish::{lock, topic_level, Link, PublishOptions};
 use super::schema::{self, TagRead, VERSION};
 use crate::localize::live::Input;
 use crate::localize::poses::PoseSample;
 use crate::reads::Read;
-
-/// A [`ReadBatch`](super::schema::ReadBatch) serialized without copying its reads.
-#[derive(serde::Serialize)]
-struct BatchRef<'a> {
-    v: u32,
-    gateway: &'a str,
-    reader: &'a str,
-    run: u64,
-    seq: u64,
-    reads: &'a [TagRead],
-}
 
 /// LLRP's message type of READER_EVENT_NOTIFICATION.
 const READER_EVENT_NOTIFICATION: u16 = 63;
@@ -30,10 +20,59 @@ const READER_EVENT_NOTIFICATION: u16 = 63;
 /// Most reads in one batch message.
 pub const MAX_BATCH_READS: usize = 1000;
 
-/// Reads waiting for their batch's window to close, per topic.
+/// Reads waiting for their batch's window to close, on one topic, already JSON.
+#[derive(Default)]
 struct Pending {
-    reads: Vec<TagRead>,
-    since: Instant,
+    /// The reads as [`json::tag_read`] writes them, comma-separated (kept between batches,
+    /// so its room is made once).
+    json: Vec<u8>,
+    /// How many reads `json` holds.
+    count: usize,
+    /// When the first of them came.
+    since: Option<Instant>,
+}
+
+impl Pending {
+    fn push(&mut self, read: &TagRead, now: Instant) {
+        if self.count == 0 {
+            self.since = Some(now);
+        } else {
+            self.json.push(b',');
+        }
+        json::tag_read(&mut self.json, read);
+        self.count += 1;
+    }
+}
+
+/// Where a read waits: its shard's batch, or the reference tags' (`refs`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Slot {
+    Refs,
+    Shard(usize),
+}
+
+/// One reader's pending batches.
+struct ReaderPending {
+    /// Per shard.
+    shards: Vec<Pending>,
+    /// The reference tags'.
+    refs: Pending,
+}
+
+impl ReaderPending {
+    fn new(shards: usize) -> ReaderPending {
+        ReaderPending {
+            shards: (0..shards).map(|_| Pending::default()).collect(),
+            refs: Pending::default(),
+        }
+    }
+
+    fn slot(&mut self, slot: Slot) -> Option<&mut Pending> {
+        match slot {
+            Slot::Refs => Some(&mut self.refs),
+            Slot::Shard(s) => self.shards.get_mut(s),
+        }
+    }
 }
 
 /// The publishing thread: turns inputs into messages.
@@ -45,18 +84,19 @@ pub(super) struct Builder {
     offsets: HashMap<String, i64>,
     /// Per reader, per topic (under `v1/`), the last sequence number used.
     seqs: BTreeMap<String, BTreeMap<String, u64>>,
-    /// Per reader, per topic (under `v1/`): the reads waiting for their window.
-    pending: HashMap<String, HashMap<String, Pending>>,
+    /// Per reader: the reads waiting for their window.
+    pending: HashMap<String, ReaderPending>,
     /// When the first pending window closes.
     next_due: Option<Instant>,
     /// `reads/{shard}` for every shard.
     shard_topics: Vec<String>,
+    /// The reads' `lastSeenTime`s.
+    clock: schema::Rfc3339Clock,
     /// Poses waiting for their window to close, per topic (under `v1/`).
     pending_poses: BTreeMap<String, (Vec<PoseSample>, Instant)>,
-    /// JSON bytes a read and a pose sample took in the last message of each: a message's
-    /// buffer is made that big at once (grown as serde_json writes, it was copied a dozen
-    /// times).
-    json_per: [usize; 2],
+    /// JSON bytes a pose sample took in the last message: a message's buffer is made that
+    /// big at once (grown as serde_json writes, it was copied a dozen times).
+    pose_json_per: usize,
 }
 
 /// `value` as JSON into a buffer made for `items` of `per` bytes each; `per` becomes what
@@ -84,8 +124,9 @@ impl Builder {
             pending: HashMap::new(),
             next_due: None,
             shard_topics,
+            clock: schema::Rfc3339Clock::default(),
             pending_poses: BTreeMap::new(),
-            json_per: [512, 256],
+            pose_json_per: 256,
         }
     }
 
@@ -242,58 +283,43 @@ impl Builder {
         }
         self.came(reader);
         let now = Instant::now();
-        let window = self.opts.window;
-        if !self.pending.contains_key(reader) {
-            self.pending.insert(reader.to_owned(), HashMap::new());
-        }
-        let Some(topics) = self.pending.get_mut(reader) else {
-            return;
-        };
-        let mut touched: Vec<usize> = Vec::new();
-        let mut refs = false;
-        let mut add = |topic: &str, read: TagRead| {
-            let p = match topics.get_mut(topic) {
-                Some(p) => p,
-                None => topics.entry(topic.to_owned()).or_insert(Pending {
-                    reads: Vec::new(),
-                    since: now,
-                }),
-            };
-            if p.reads.is_empty() {
-                p.since = now;
-            }
-            p.reads.push(read);
-        };
+        // The reader's batches, out of the map while its reads go in.
+        let (name, mut batches) = self.pending.remove_entry(reader).unwrap_or_else(|| {
+            (
+                reader.to_owned(),
+                ReaderPending::new(self.shard_topics.len()),
+            )
+        });
+        let mut touched: Vec<Slot> = Vec::new();
         for r in reads {
             let reference = self.opts.references.contains(&r.epc);
-            let shard = usize::from(schema::shard(&r.epc, self.opts.shard_count));
-            let t = TagRead::from_owned(r);
-            if reference {
-                add("refs", t.clone());
-                refs = true;
-            }
-            if let Some(topic) = self.shard_topics.get(shard) {
-                add(topic, t);
-                if !touched.contains(&shard) {
-                    touched.push(shard);
+            let shard = Slot::Shard(usize::from(schema::shard(&r.epc, self.opts.shard_count)));
+            let t = TagRead::from_owned(r, &mut self.clock);
+            for slot in [reference.then_some(Slot::Refs), Some(shard)]
+                .into_iter()
+                .flatten()
+            {
+                let Some(p) = batches.slot(slot) else {
+                    continue;
+                };
+                p.push(&t, now);
+                if p.count >= MAX_BATCH_READS {
+                    self.send(&name, slot, p);
+                } else if !touched.contains(&slot) {
+                    touched.push(slot);
                 }
             }
         }
-        let mut send: Vec<String> = Vec::new();
-        let full = |p: Option<&Pending>| p.is_some_and(|p| p.reads.len() >= MAX_BATCH_READS);
-        if refs && (window.is_zero() || full(topics.get("refs"))) {
-            send.push("refs".into());
-        }
-        for topic in touched.into_iter().filter_map(|s| self.shard_topics.get(s)) {
-            if window.is_zero() || full(topics.get(topic.as_str())) {
-                send.push(topic.clone());
+        if self.opts.window.is_zero() {
+            for slot in touched {
+                if let Some(p) = batches.slot(slot) {
+                    self.send(&name, slot, p);
+                }
             }
         }
-        let due = now + window;
+        self.pending.insert(name, batches);
+        let due = now + self.opts.window;
         self.next_due = Some(self.next_due.map_or(due, |d| d.min(due)));
-        for topic in send {
-            self.send(reader, &topic);
-        }
     }
 
     /// Sends the batches whose window has closed (all with `all`), poses too.
@@ -304,51 +330,60 @@ impl Builder {
             return;
         }
         let window = self.opts.window;
-        let mut due: Vec<(String, String)> = Vec::new();
         let mut next: Option<Instant> = None;
-        for (reader, topics) in &self.pending {
-            for (topic, p) in topics {
-                if p.reads.is_empty() {
+        let readers: Vec<String> = self.pending.keys().cloned().collect();
+        for reader in readers {
+            let Some(mut batches) = self.pending.remove(&reader) else {
+                continue;
+            };
+            let slots = (0..batches.shards.len())
+                .map(Slot::Shard)
+                .chain([Slot::Refs]);
+            for slot in slots {
+                let Some(p) = batches.slot(slot) else {
                     continue;
-                }
-                if all || now.duration_since(p.since) >= window {
-                    due.push((reader.clone(), topic.clone()));
+                };
+                let Some(since) = p.since.filter(|_| p.count > 0) else {
+                    continue;
+                };
+                if all || now.duration_since(since) >= window {
+                    self.send(&reader, slot, p);
                 } else {
-                    let at = p.since + window;
+                    let at = since + window;
                     next = Some(next.map_or(at, |n| n.min(at)));
                 }
             }
+            self.pending.insert(reader, batches);
         }
         self.next_due = next;
-        for (reader, topic) in due {
-            self.send(&reader, &topic);
-        }
     }
 
-    /// Publishes what waits for `reader` on `rest`, in messages of at most
-    /// [`MAX_BATCH_READS`] reads.
-    fn send(&mut self, reader: &str, rest: &str) {
-        let Some(p) = self.pending.get_mut(reader).and_then(|t| t.get_mut(rest)) else {
+    /// Publishes the reads `p` holds for `reader` on `slot`'s topic as one message.
+    fn send(&mut self, reader: &str, slot: Slot, p: &mut Pending) {
+        if p.count == 0 {
             return;
-        };
-        // The next window's reads go into a list as long as this one's (grown from empty,
-        // it was copied a dozen times a window).
-        let room = p.reads.len();
-        let reads = std::mem::replace(&mut p.reads, Vec::with_capacity(room));
-        for chunk in reads.chunks(MAX_BATCH_READS) {
-            let seq = self.next_seq(reader, rest);
-            let batch = BatchRef {
-                v: VERSION,
-                gateway: &self.opts.gateway,
-                reader,
-                run: self.opts.run,
-                seq,
-                reads: chunk,
-            };
-            let payload = to_json(&batch, chunk.len(), &mut self.json_per[0]);
-            self.link
-                .publish(rest, false, payload, chunk.len() as u64, true);
         }
+        let rest = match slot {
+            Slot::Refs => "refs".to_owned(),
+            Slot::Shard(s) => match self.shard_topics.get(s) {
+                Some(topic) => topic.clone(),
+                None => return,
+            },
+        };
+        let seq = self.next_seq(reader, &rest);
+        let head = json::Head {
+            v: VERSION,
+            gateway: &self.opts.gateway,
+            reader,
+            run: self.opts.run,
+            seq,
+        };
+        let payload = json::batch(&head, &p.json);
+        let count = p.count as u64;
+        p.json.clear();
+        p.count = 0;
+        p.since = None;
+        self.link.publish(&rest, false, payload, count, true);
     }
 
     fn event(&mut self, reader: &str, data: &llrp::params::ReaderEventNotificationData) {
@@ -402,47 +437,9 @@ impl Builder {
             let Some((poses, _)) = self.pending_poses.remove(&rest) else {
                 continue;
             };
-            let payload = to_json(&poses, poses.len(), &mut self.json_per[1]);
+            let payload = to_json(&poses, poses.len(), &mut self.pose_json_per);
             self.link
                 .publish(&rest, false, payload, poses.len() as u64, false);
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_batch_serialized_by_reference_parses_as_the_schemas_batch() {
-        let read = crate::reads::Read {
-            epc: "E2801160600002049ACB0065".into(),
-            reader: Some("r1".into()),
-            antenna: 2,
-            t_us: 1_764_633_600_000_001,
-            phase_rad: Some(0.5),
-            rssi_dbm: Some(-60.0),
-            channel_index: Some(1),
-            channel_frequency_hz: Some(865_700_000),
-            doppler_hz: None,
-            antenna_pose: None,
-            last_seen_us: None,
-        };
-        let reads = [TagRead::from_read(&read)];
-        let json = serde_json::to_vec(&BatchRef {
-            v: VERSION,
-            gateway: "gw",
-            reader: "r1",
-            run: 1_764_633_000_000_000,
-            seq: 7,
-            reads: &reads,
-        })
-        .expect("serializes");
-        let b: schema::ReadBatch = serde_json::from_slice(&json).expect("the schema's batch");
-        assert_eq!(
-            (b.v, b.gateway.as_str(), b.reader.as_str(), b.run, b.seq),
-            (1, "gw", "r1", 1_764_633_000_000_000, 7)
-        );
-        assert_eq!(b.reads, reads);
     }
 }

@@ -5,6 +5,7 @@
 
 pub mod args;
 mod builder;
+mod json;
 pub mod presence;
 pub mod publish;
 pub mod schema;

@@ -83,16 +83,19 @@ pub struct TagRead {
 impl TagRead {
     /// The broker's form of `r`.
     pub fn from_read(r: &Read) -> TagRead {
-        TagRead::with_epc(r, r.epc.clone())
+        let last_seen_time = rfc3339(r.last_seen_us.unwrap_or(r.t_us));
+        TagRead::with_epc(r, r.epc.clone(), last_seen_time)
     }
 
-    /// The broker's form of `r`, its EPC moved rather than copied.
-    pub fn from_owned(mut r: Read) -> TagRead {
+    /// The broker's form of `r`, its EPC moved rather than copied and its time written by
+    /// `clock`.
+    pub fn from_owned(mut r: Read, clock: &mut Rfc3339Clock) -> TagRead {
         let epc = std::mem::take(&mut r.epc);
-        TagRead::with_epc(&r, epc)
+        let last_seen_time = clock.format(r.last_seen_us.unwrap_or(r.t_us));
+        TagRead::with_epc(&r, epc, last_seen_time)
     }
 
-    fn with_epc(r: &Read, epc_hex: String) -> TagRead {
+    fn with_epc(r: &Read, epc_hex: String, last_seen_time: String) -> TagRead {
         TagRead {
             epc_hex,
             antenna_port: r.antenna,
@@ -101,7 +104,7 @@ impl TagRead {
             frequency: r
                 .channel_frequency_hz
                 .and_then(|hz| u32::try_from(hz / 1000).ok()),
-            last_seen_time: rfc3339(r.last_seen_us.unwrap_or(r.t_us)),
+            last_seen_time,
             first_seen_us: r.t_us,
             channel_index: r.channel_index,
             doppler_hz: r.doppler_hz,
@@ -200,9 +203,63 @@ pub fn rfc3339(us: u64) -> String {
     humantime::format_rfc3339_micros(UNIX_EPOCH + Duration::from_micros(us)).to_string()
 }
 
+/// [`rfc3339`] for times that come in order: the date and time of day made once a second.
+#[derive(Debug, Default)]
+pub struct Rfc3339Clock {
+    /// The second `prefix` is of.
+    second: Option<u64>,
+    /// Its RFC 3339 text up to the fraction.
+    prefix: String,
+}
+
+impl Rfc3339Clock {
+    /// `us` (UTC µs since the Unix epoch) as [`rfc3339`] writes it.
+    pub fn format(&mut self, us: u64) -> String {
+        let second = us / 1_000_000;
+        if self.second != Some(second) {
+            let whole = rfc3339(second * 1_000_000);
+            let Some(dot) = whole.rfind('.') else {
+                return rfc3339(us);
+            };
+            self.prefix = whole[..dot].to_owned();
+            self.second = Some(second);
+        }
+        let mut text = String::with_capacity(self.prefix.len() + 8);
+        text.push_str(&self.prefix);
+        text.push('.');
+        let micros = us % 1_000_000;
+        for place in [100_000, 10_000, 1_000, 100, 10, 1] {
+            text.push(char::from(b'0' + (micros / place % 10) as u8));
+        }
+        text.push('Z');
+        text
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_clock_writes_what_rfc3339_writes() {
+        let mut clock = Rfc3339Clock::default();
+        for us in [
+            0,
+            1,
+            999_999,
+            1_000_000,
+            951_782_399_999_999, // 2000-02-28T23:59:59.999999Z
+            951_782_400_000_000,
+            951_868_800_123_456, // 2000-03-01 (2000 was a leap year)
+            1_764_633_600_000_001,
+            1_764_633_600_999_999,
+            1_764_633_601_000_000,
+            1_764_633_600_000_002,   // back a second
+            253_402_300_799_999_999, // 9999-12-31T23:59:59.999999Z
+        ] {
+            assert_eq!(clock.format(us), rfc3339(us), "{us}");
+        }
+    }
 
     #[test]
     fn shards_by_fnv1a_64_of_the_epc_bytes() {
