@@ -5,6 +5,11 @@
 //! only modulo λ/2, so one filter runs per whole number of half wavelengths up to the reach,
 //! weighted by how well it explains the phases; the heaviest gives the tag,
 //! x_T = x + ρ cos(θ − β), y_T = y + ρ sin(θ − β), with covariance J P Jᵀ.
+//!
+//! Ours, beyond \[M\]: a filter whose predicted phase has spread over more than one cycle
+//! (the robot back in range after driving out of it on odometry alone) does not take the
+//! nearest cycle for the right one: it splits into one filter per cycle within 3σ of its
+//! prediction, each weighted by its innovation, and the phases that follow decide.
 
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::{PI, TAU};
@@ -57,6 +62,8 @@ pub struct Settings {
     pub min_reads: usize,
     /// A hypothesis this far (natural log of weight) under the heaviest is dropped; default 1000.
     pub prune_log_weight: f64,
+    /// Most hypotheses kept (the heaviest) when filters split; default 256.
+    pub max_hypotheses: usize,
 }
 
 impl Default for Settings {
@@ -72,6 +79,7 @@ impl Default for Settings {
             phase_offset_rad: 0.0,
             min_reads: 10,
             prune_log_weight: 1000.0,
+            max_hypotheses: 256,
         }
     }
 }
@@ -79,6 +87,26 @@ impl Default for Settings {
 /// Angle `a` wrapped onto [−p/2, p/2).
 fn wrap(a: f64, p: f64) -> f64 {
     (a + p / 2.0).rem_euclid(p) - p / 2.0
+}
+
+/// The innovations a read's wrapped innovation `nu` may stand for, given its predicted
+/// variance `sv` and the phase's period: `nu` itself, and `nu + k·period` for every other
+/// cycle within 3σ of the prediction, where one read can tell cycles apart at all (the
+/// phase noise's own 3σ, `sigma_phi_rad`, within half a period); otherwise `nu` alone.
+pub(crate) fn cycles(nu: f64, sv: f64, period: f64, sigma_phi_rad: f64) -> Vec<f64> {
+    let mut out = vec![nu];
+    let reach = 3.0 * sv.sqrt();
+    if !(3.0 * sigma_phi_rad < period / 2.0 && reach.is_finite()) {
+        return out;
+    }
+    let most = (reach / period).ceil() as i32;
+    for k in (-most..=most).filter(|&k| k != 0) {
+        let other = nu + f64::from(k) * period;
+        if other.abs() <= reach {
+            out.push(other);
+        }
+    }
+    out
 }
 
 /// Range hypotheses n_max = ⌈ρ_max / (λP/4π)⌉: ⌈2ρ_max/λ⌉ without the π ambiguity (\[M\]).
@@ -296,6 +324,7 @@ pub fn locate(
     let r2 = s.sigma_phi_rad.powi(2).max(1e-12);
     for (k, o) in obs.iter().enumerate().skip(start + 1) {
         let (u, omega, q) = step(k);
+        let mut split: Vec<Hypothesis> = Vec::new();
         for h in &mut hyps {
             let (xi, f, g) = predict(&h.xi, u, omega);
             let w = g * to_wheels;
@@ -312,16 +341,25 @@ pub fn locate(
             let gain = p * hrow.transpose() / sv;
             let ikh = M5::identity() - gain * hrow;
             let p = ikh * p * ikh.transpose() + gain * gain.transpose() * r2;
-            let mut xi = xi + gain * nu;
-            xi[1] = wrap(xi[1], TAU);
-            xi[4] = wrap(xi[4], TAU);
-            h.xi = xi;
-            h.p = (p + p.transpose()) / 2.0;
-            h.log_w -= 0.5 * nu * nu / sv;
-            if !(h.xi[0] > 1e-3 && h.log_w.is_finite() && h.p.iter().all(|v| v.is_finite())) {
-                h.log_w = f64::NEG_INFINITY;
-            }
+            let p = (p + p.transpose()) / 2.0;
+            let updated = |nu: f64| {
+                let mut xi = xi + gain * nu;
+                xi[1] = wrap(xi[1], TAU);
+                xi[4] = wrap(xi[4], TAU);
+                let log_w = h.log_w - 0.5 * nu * nu / sv;
+                let ok = xi[0] > 1e-3 && log_w.is_finite() && p.iter().all(|v| v.is_finite());
+                Hypothesis {
+                    xi,
+                    p,
+                    log_w: if ok { log_w } else { f64::NEG_INFINITY },
+                }
+            };
+            let mut innovations = cycles(nu, sv, o.period_rad, s.sigma_phi_rad).into_iter();
+            let own = innovations.next().unwrap_or(nu);
+            split.extend(innovations.map(updated).filter(|b| b.log_w.is_finite()));
+            *h = updated(own);
         }
+        hyps.append(&mut split);
         if !o.read {
             continue;
         }
@@ -330,6 +368,10 @@ pub fn locate(
             .map(|h| h.log_w)
             .fold(f64::NEG_INFINITY, f64::max);
         hyps.retain(|h| h.log_w >= best - s.prune_log_weight);
+        if hyps.len() > s.max_hypotheses.max(1) {
+            hyps.sort_by(|a, b| b.log_w.total_cmp(&a.log_w));
+            hyps.truncate(s.max_hypotheses.max(1));
+        }
         if hyps.is_empty() {
             return Err(NoFix::InsufficientGeometry);
         }

@@ -185,3 +185,24 @@ fn the_drive_before_the_first_read_is_in_the_fix_covariance() {
     let (b, _) = error(&driven, tag);
     assert!(a < 0.02 && b < 0.05, "{a} {b}");
 }
+
+#[test]
+fn a_prediction_spread_over_cycles_stands_for_each_cycle_within_three_sigma() {
+    // Tight: the wrapped innovation alone.
+    assert_eq!(cycles(0.3, 0.2f64.powi(2), TAU, 0.2), vec![0.3]);
+    // σ = 1.5 rad: 3σ = 4.5 rad reaches neither 0.3 − 2π = −5.98 nor 0.3 + 2π = 6.58.
+    assert_eq!(cycles(0.3, 1.5f64.powi(2), TAU, 0.2), vec![0.3]);
+    // σ = 2.5 rad: 3σ = 7.5 rad takes one cycle each way.
+    let two = cycles(0.3, 2.5f64.powi(2), TAU, 0.2);
+    assert_eq!(two.len(), 3);
+    assert!(two.iter().any(|v| (v - (0.3 - TAU)).abs() < 1e-12));
+    assert!(two.iter().any(|v| (v - (0.3 + TAU)).abs() < 1e-12));
+    // σ = 2π: every cycle within 3σ = 6π of the prediction, six of them.
+    let wide = cycles(-3.0, TAU.powi(2), TAU, 0.2);
+    assert!(wide.iter().all(|v| v.abs() <= 3.0 * TAU + 1e-12));
+    assert_eq!(wide.len(), 6);
+    // With the π ambiguity the cycles are π apart.
+    assert_eq!(cycles(0.1, 1.2f64.powi(2), PI, 0.2).len(), 3);
+    // Phase noise whose own 3σ passes half a period: one read tells no cycle from another.
+    assert_eq!(cycles(0.3, 2.5f64.powi(2), TAU, PI / 2.0), vec![0.3]);
+}
