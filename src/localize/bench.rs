@@ -9,6 +9,7 @@ use super::estimate::{estimate_all, Estimate, Estimator, Geometry};
 use super::ingest::Ingest;
 use super::live::Settings;
 use super::poses::{PoseSample, Poses};
+use super::refine::{localize_refined, PoseErrorModel};
 use crate::physics::{AntennaPose, Model, World};
 use crate::reader::session::Now;
 use crate::reader::{Reader, ReaderProfile};
@@ -39,6 +40,31 @@ pub struct Run {
     /// Every antenna's phase offset φ0 is 0 on every channel (a calibrated reader): what the
     /// EKF and WLS of \[M\] assume.
     pub calibrated: bool,
+    /// The robots' pose error as the scenario states it, where they report a localization
+    /// stack's pose (`localized`): what [`super::refine`] assumes.
+    pub pose_error: Option<PoseErrorModel>,
+}
+
+/// Which poses a run is localized on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseSource {
+    /// The true antenna poses.
+    True,
+    /// The poses the robots report.
+    Estimated,
+    /// The poses the robots report, refined from the tags' phases ([`super::refine`]).
+    Refined,
+}
+
+impl PoseSource {
+    /// Its name in the tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseSource::True => "true",
+            PoseSource::Estimated => "estimated",
+            PoseSource::Refined => "estimated, refined",
+        }
+    }
 }
 
 /// How long a scenario runs: until its slowest robot has driven its path (a 2 s margin),
@@ -102,6 +128,19 @@ pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) ->
     let settings = crate::sim::feed::settings(scenario, Settings::default());
     let mut truth = Vec::new();
     let mut calibrated = true;
+    let pose_error = scenario
+        .readers
+        .iter()
+        .flat_map(|r| &r.antennas)
+        .find_map(|a| match &a.mount {
+            Mount::Robot { robot, .. }
+                if robot.pose_estimate.kind == crate::scenario::PoseEstimateKind::Localized =>
+            {
+                let e = &robot.pose_estimate;
+                Some(PoseErrorModel::new(e.position_sigma_m, e.correlation_s))
+            }
+            _ => None,
+        });
     for (i, spec) in scenario.readers.iter().enumerate() {
         let model = std::sync::Arc::new(Model::in_world(&world, scenario, i));
         if i == 0 {
@@ -167,6 +206,7 @@ pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) ->
         settings,
         seconds,
         calibrated,
+        pose_error,
     }
 }
 
@@ -203,21 +243,41 @@ pub fn score(run: &Run, estimator: Estimator, estimated: bool) -> Scores {
 
 /// [`score`], told the reference tags only when `references` is set.
 pub fn score_with(run: &Run, estimator: Estimator, estimated: bool, references: bool) -> Scores {
-    let poses = if estimated {
-        run.estimated_poses.clone()
+    let source = if estimated {
+        PoseSource::Estimated
     } else {
-        run.true_poses.clone()
+        PoseSource::True
     };
+    score_on(run, estimator, source, references)
+}
+
+/// [`score_with`] on the poses `source` names; refined poses fall back to the estimated ones
+/// where the scenario states no pose error.
+pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references: bool) -> Scores {
     let mut g: Geometry = run.settings.geometry.clone();
     if !references {
         g.references.clear();
     }
     let start = Instant::now();
-    let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us);
-    for r in &run.reads {
-        ingest.push(r);
-    }
-    let estimates = estimate_all(&ingest, estimator, &g);
+    let estimates = match (source, run.pose_error) {
+        (PoseSource::Refined, Some(m)) => {
+            let settings = (run.settings.ambiguity, run.settings.max_gap_us);
+            let poses = &run.estimated_poses;
+            localize_refined(&run.reads, poses, settings, estimator, &g, &m).0
+        }
+        _ => {
+            let poses = if source == PoseSource::True {
+                run.true_poses.clone()
+            } else {
+                run.estimated_poses.clone()
+            };
+            let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us);
+            for r in &run.reads {
+                ingest.push(r);
+            }
+            estimate_all(&ingest, estimator, &g)
+        }
+    };
     let seconds = start.elapsed().as_secs_f64();
     let mut errors = Vec::new();
     let mut read = 0;
@@ -242,7 +302,7 @@ pub fn score_with(run: &Run, estimator: Estimator, estimated: bool, references: 
     let (mean, median, max, std) = stats(&mut errors);
     Scores {
         estimator,
-        poses: if estimated { "estimated" } else { "true" },
+        poses: source.name(),
         located: errors.len(),
         read,
         mean,

@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use super::bench::{applicable, duration_s, score_with, simulate_with, Inventory, Scores};
+use super::bench::{
+    applicable, duration_s, score_on, simulate_with, Inventory, PoseSource, Scores,
+};
 use super::estimate::Estimator;
 use crate::scenario::Scenario;
 
@@ -103,9 +105,13 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             .map_or(0, |i| i + 1);
         rows.insert(at, (Estimator::Relock, false));
     }
+    let mut sources = vec![PoseSource::True, PoseSource::Estimated];
+    if run.pose_error.is_some() {
+        sources.push(PoseSource::Refined);
+    }
     for (e, told) in rows {
-        for estimated in [false, true] {
-            let sc = score_with(&run, e, estimated, told);
+        for &source in &sources {
+            let sc = score_on(&run, e, source, told);
             let mm = |v: f64| {
                 if v.is_finite() {
                     format!("{:.1}", v * 1e3)
@@ -130,7 +136,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
                 mm(sc.std),
                 sc.seconds * 1e3
             );
-            if e == Estimator::Relock && told {
+            if e == Estimator::Relock && told && source != PoseSource::Refined {
                 relock.push(sc);
             }
         }

@@ -31,6 +31,7 @@ pub mod observe;
 pub mod offline;
 pub mod plot;
 pub mod poses;
+pub mod refine;
 pub mod relock;
 pub mod series;
 pub mod shared;

@@ -126,6 +126,22 @@ impl Poses {
         }
     }
 
+    /// These poses with each sample replaced by `f` of it and its reader's clock offset
+    /// (reader time − robot time, µs); `f` keeps its time.
+    pub fn mapped(&self, f: impl Fn(&PoseSample, i64) -> PoseSample) -> Poses {
+        let mut out = self.clone();
+        for ((reader, _), track) in out.tracks.iter_mut() {
+            let offset = self.offsets.get(reader).copied().unwrap_or(0);
+            for s in track.iter_mut() {
+                *s = PoseSample {
+                    t_us: s.t_us,
+                    ..f(s, offset)
+                };
+            }
+        }
+        out
+    }
+
     /// Every sample held, track by track.
     pub fn samples(&self) -> Vec<PoseSample> {
         self.tracks.values().flatten().cloned().collect()
