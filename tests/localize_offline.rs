@@ -181,6 +181,49 @@ fn a_reads_file_with_antenna_poses_gives_the_recordings_estimates() {
 }
 
 #[test]
+fn the_robots_pose_error_in_the_settings_refines_its_poses_and_the_tags_come_closer() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rec = fixture("s1-report-per-read.jsonl");
+    let poses = fixture("s1-report-per-read.poses.jsonl");
+    let plain = fixture("s1-report-per-read.settings.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&plain).expect("settings")).expect("JSON");
+    // S1's own pose estimate (docs/scenarios.md): σ 15 mm, correlated over 2 s.
+    v["pose_error"] = serde_json::json!({"sigma_m": 0.015, "correlation_s": 2.0});
+    let refined = dir.path().join("refined.json");
+    std::fs::write(&refined, v.to_string()).expect("writes");
+    let mean = |settings: &Path, estimator: &str| {
+        let out = dir.path().join("estimates.json");
+        let (ok, json, stderr) = localize(
+            &[
+                rec.to_str().expect("utf-8"),
+                "--poses",
+                poses.to_str().expect("utf-8"),
+                "--settings",
+                settings.to_str().expect("utf-8"),
+                "--estimator",
+                estimator,
+            ],
+            &out,
+        );
+        assert!(ok, "{stderr}");
+        let e = errors(&json.expect("estimates written"));
+        e.iter().sum::<f64>() / e.len() as f64
+    };
+    // docs/localize.md: relock 32.5 → 16.8 mm, linear 16.5 → 13.9 mm.
+    let (relock, relock_refined) = (mean(&plain, "relock"), mean(&refined, "relock"));
+    assert!(
+        relock_refined < 0.020 && relock_refined < 0.6 * relock,
+        "relock {relock} → {relock_refined} m"
+    );
+    let (linear, linear_refined) = (mean(&plain, "linear"), mean(&refined, "linear"));
+    assert!(
+        linear_refined < 0.015 && linear_refined < linear,
+        "linear {linear} → {linear_refined} m"
+    );
+}
+
+#[test]
 fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("out.json");
@@ -221,6 +264,14 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
             "readers.left.facing: must be a non-zero direction",
         ),
         (r#"{"readers": {"left": {"gain": 1}}}"#, "gain"),
+        (
+            r#"{"pose_error": {"sigma_m": -0.01, "correlation_s": 2}}"#,
+            "pose_error.sigma_m: must be a positive number",
+        ),
+        (
+            r#"{"pose_error": {"sigma_m": 0.01, "correlation_s": 0}}"#,
+            "pose_error.correlation_s: must be a positive number",
+        ),
     ] {
         std::fs::write(&settings, body).expect("writes");
         let (ok, _, stderr) = localize(

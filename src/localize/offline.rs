@@ -15,6 +15,7 @@ use serde::Deserialize;
 use super::estimate::{self, Estimate, Estimator, Geometry, ReaderGeometry};
 use super::ingest::{Ingest, SetAside};
 use super::poses::{PoseError, Poses};
+use super::refine::{refine, PoseErrorModel};
 use super::series::Ambiguity;
 use super::shared::{TagJson, TagsJson};
 use crate::reads::{Read, ReadDecoder};
@@ -105,6 +106,19 @@ pub struct SettingsFile {
     /// Per reader name, its own phase sign and facing (the keys above for the others).
     #[serde(default)]
     pub readers: BTreeMap<String, ReaderSettings>,
+    /// The robot's pose error, where its poses come from a localization stack: the poses
+    /// are then refined from the tags' phases ([`super::refine`]).
+    pub pose_error: Option<PoseErrorSettings>,
+}
+
+/// The pose error of the settings file's `pose_error`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PoseErrorSettings {
+    /// σ of the error in x and in y (m).
+    pub sigma_m: f64,
+    /// Its correlation time (s).
+    pub correlation_s: f64,
 }
 
 /// One reader's own settings in the settings file.
@@ -164,6 +178,21 @@ impl SettingsFile {
         for (name, r) in &s.readers {
             check_sign(r.phase_sign).map_err(|e| bad(format!("readers.{name}.phase_sign: {e}")))?;
             check_facing(r.facing).map_err(|e| bad(format!("readers.{name}.facing: {e}")))?;
+        }
+        if let Some(e) = &s.pose_error {
+            let positive = |v: f64| v.is_finite() && v > 0.0;
+            if !positive(e.sigma_m) {
+                let v = e.sigma_m;
+                return Err(bad(format!(
+                    "pose_error.sigma_m: must be a positive number, got {v}"
+                )));
+            }
+            if !positive(e.correlation_s) {
+                let v = e.correlation_s;
+                return Err(bad(format!(
+                    "pose_error.correlation_s: must be a positive number, got {v}"
+                )));
+            }
         }
         for (i, r) in s.references.iter().enumerate() {
             let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
@@ -304,6 +333,20 @@ pub fn localize(
         s.1 = s.1.max(r.t_us);
         s.2 += 1;
         progress(Progress::Read);
+    }
+    if let Some(e) = &file.pose_error {
+        // The poses refined once from the tags `linear` locates, the reads filed again.
+        let tags: BTreeMap<String, [f64; 3]> =
+            estimate::estimate_all(&ingest, Estimator::Linear, &g)
+                .into_iter()
+                .filter_map(|e| Some((e.epc, e.estimate?)))
+                .collect();
+        let m = PoseErrorModel::new(e.sigma_m, e.correlation_s);
+        let corrected = refine(&ingest, ingest.poses(), &tags, &|r| g.sign_of(r), &m);
+        ingest = Ingest::new(corrected, ambiguity, super::series::DEFAULT_MAX_GAP_US);
+        for r in &reads {
+            ingest.push(r);
+        }
     }
     let epcs: Vec<String> = ingest.tags().map(String::from).collect();
     let mut estimates: BTreeMap<String, Estimate> = BTreeMap::new();
