@@ -15,7 +15,7 @@ use serde::Deserialize;
 use super::estimate::{self, Estimate, Estimator, Geometry, ReaderGeometry};
 use super::ingest::{Ingest, SetAside};
 use super::poses::{PoseError, Poses};
-use super::refine::{refine, PoseErrorModel};
+use super::refine::{refined_poses, PoseErrorModel};
 use super::series::Ambiguity;
 use super::shared::{TagJson, TagsJson};
 use crate::reads::{Read, ReadDecoder};
@@ -335,14 +335,9 @@ pub fn localize(
         progress(Progress::Read);
     }
     if let Some(e) = &file.pose_error {
-        // The poses refined once from the tags `linear` locates, the reads filed again.
-        let tags: BTreeMap<String, [f64; 3]> =
-            estimate::estimate_all(&ingest, Estimator::Linear, &g)
-                .into_iter()
-                .filter_map(|e| Some((e.epc, e.estimate?)))
-                .collect();
+        // The poses refined once, the reads filed again.
         let m = PoseErrorModel::new(e.sigma_m, e.correlation_s);
-        let corrected = refine(&ingest, ingest.poses(), &tags, &|r| g.sign_of(r), &m);
+        let corrected = refined_poses(&ingest, &g, &m);
         ingest = Ingest::new(corrected, ambiguity, super::series::DEFAULT_MAX_GAP_US);
         for r in &reads {
             ingest.push(r);

@@ -181,10 +181,18 @@ pub fn refine(
     })
 }
 
-/// Every tag of `reads` located by `estimator` on `poses` refined once: the tags first
-/// located by `linear` (the estimator a pose error throws least, docs/localize.md), the poses
-/// corrected from them, then every tag located again. Returns the estimates and the
-/// corrected poses.
+/// `ingest`'s poses refined once from the tags `linear` locates on them (the estimator a
+/// pose error throws least, docs/localize.md).
+pub fn refined_poses(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> Poses {
+    let tags: BTreeMap<String, [f64; 3]> = estimate_all(ingest, Estimator::Linear, g)
+        .into_iter()
+        .filter_map(|e| Some((e.epc, e.estimate?)))
+        .collect();
+    refine(ingest, ingest.poses(), &tags, &|r| g.sign_of(r), m)
+}
+
+/// Every tag of `reads` located by `estimator` on `poses` refined once ([`refined_poses`]).
+/// Returns the estimates and the corrected poses.
 pub fn localize_refined(
     reads: &[Read],
     poses: &Poses,
@@ -200,12 +208,7 @@ pub fn localize_refined(
         }
         ingest
     };
-    let first = ingest_on(poses.clone());
-    let tags: BTreeMap<String, [f64; 3]> = estimate_all(&first, Estimator::Linear, g)
-        .into_iter()
-        .filter_map(|e| Some((e.epc, e.estimate?)))
-        .collect();
-    let corrected = refine(&first, poses, &tags, &|r| g.sign_of(r), m);
+    let corrected = refined_poses(&ingest_on(poses.clone()), g, m);
     let ingest = ingest_on(corrected.clone());
     (estimate_all(&ingest, estimator, g), corrected)
 }
