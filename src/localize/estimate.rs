@@ -119,6 +119,12 @@ impl std::str::FromStr for Estimator {
     }
 }
 
+/// `p` lies within twice `reach_m` (horizontally) of an antenna position of `obs`.
+fn near_the_path(p: &[f64; 3], obs: &[relock::Obs], reach_m: f64) -> bool {
+    obs.iter()
+        .any(|o| (p[0] - o.antenna[0]).hypot(p[1] - o.antenna[1]) <= 2.0 * reach_m)
+}
+
 /// Tag `epc`'s MHEKF fix: one filter bank per track, the fix with the least covariance trace.
 fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
     let s = mhekf::Settings {
@@ -282,6 +288,15 @@ pub fn estimate_from(
         Estimator::Mhekf => mhekf_tag(ingest, epc, g).map(planar),
         Estimator::Wls => wls_tag(ingest, epc, g).map(planar),
     };
+    // A fix farther than twice the reach from every antenna position that read the tag is
+    // a solver gone astray (a degenerate geometry, bad poses), not an estimate.
+    let fix = fix.and_then(|(p, c)| {
+        if near_the_path(&p, &obs, g.reach_m) {
+            Ok((p, c))
+        } else {
+            Err(relock::NoFix::InsufficientGeometry)
+        }
+    });
     match fix {
         Ok((position, covariance)) => Estimate {
             estimate: Some(position),
@@ -320,6 +335,18 @@ pub fn estimate_all(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fix_far_beyond_reach_of_every_antenna_is_no_fix() {
+        let obs = crate::localize::synthetic::passes([0.0, 1.0, 0.5], &[0.5], (0.0, 0.0), 0.0, 1);
+        // The pass runs along y = 0 from x = −1 m to 1.99 m; reach 3 m.
+        assert!(near_the_path(&[0.5, 1.0, 0.5], &obs, 3.0));
+        assert!(near_the_path(&[-1.0, 5.99, 0.5], &obs, 3.0));
+        assert!(!near_the_path(&[-1.0, 6.01, 0.5], &obs, 3.0));
+        assert!(!near_the_path(&[1.2e10, 0.0, 0.5], &obs, 3.0));
+        assert!(!near_the_path(&[f64::NAN, 0.0, 0.5], &obs, 3.0));
+        assert!(!near_the_path(&[0.0, 0.0, 0.5], &[], 3.0));
+    }
     use crate::localize::poses::Poses;
     use crate::localize::series::Ambiguity;
     use crate::localize::synthetic;
