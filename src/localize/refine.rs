@@ -117,24 +117,18 @@ fn smooth(res: &[Residual], m: &PoseErrorModel) -> Vec<(u64, Vector2<f64>)> {
         filtered.push((x, p));
     }
     let mut out = vec![(0, Vector2::zeros()); res.len()];
-    let Some(&(mut xs, mut ps)) = filtered.last() else {
+    // The smoothed means only: the correction needs no covariance.
+    let Some(&(mut xs, _)) = filtered.last() else {
         return out;
     };
     for i in (0..res.len()).rev() {
         if i + 1 < res.len() {
             let (xf, pf) = filtered[i];
             let (xp, pp, phi) = predicted[i + 1];
-            match pp.try_inverse() {
-                Some(inv) => {
-                    let c = pf * phi * inv;
-                    xs = xf + c * (xs - xp);
-                    ps = pf + c * (ps - pp) * c.transpose();
-                }
-                None => {
-                    xs = xf;
-                    ps = pf;
-                }
-            }
+            xs = match pp.try_inverse() {
+                Some(inv) => xf + pf * phi * inv * (xs - xp),
+                None => xf,
+            };
         }
         out[i] = (res[i].t_us, xs);
     }
