@@ -179,8 +179,7 @@ impl Evaluator {
         self.runs
             .iter()
             .map(|r| {
-                let re: f32 = cos[r.clone()].iter().sum();
-                let im: f32 = sin[r.clone()].iter().sum();
+                let (re, im) = (sum_f32(&cos[r.clone()]), sum_f32(&sin[r.clone()]));
                 // The squares of f32 sums are exact in f64, so this is as good as `hypot`
                 // (which is a libm call) to an ulp.
                 let (re, im) = (f64::from(re), f64::from(im));
@@ -199,51 +198,78 @@ wide! {
 #[inline(always)]
 fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mut [f32]) {
     let [px, py, pz] = p;
-    // Slices of one length, so that no bounds check stands between the loop and vector
-    // instructions.
-    let n = columns[0].len();
-    let [ax, ay, az, theta, k] = columns.map(|c| &c[..n]);
-    let (sin, cos) = (&mut sin[..n], &mut cos[..n]);
-    for i in 0..n {
-        let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
-        let d = (dx * dx + dy * dy + dz * dz).sqrt();
-        let (s, c) = sin_cos_f32(theta[i] - k[i] * d);
-        sin[i] = s;
-        cos[i] = c;
+    // Chunks of LANES in arrays of LANES: the loop runs in vector registers with no scalar
+    // remainder (the columns are padded to a multiple of LANES).
+    for i in (0..columns[0].len() / LANES).map(|c| c * LANES) {
+        let (ax, ay, az) = (
+            lanes(columns[0], i),
+            lanes(columns[1], i),
+            lanes(columns[2], i),
+        );
+        let (theta, k) = (lanes(columns[3], i), lanes(columns[4], i));
+        let (mut s, mut c) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for l in 0..LANES {
+            let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
+            let d = (dx * dx + dy * dy + dz * dz).sqrt();
+            (s[l], c[l]) = sin_cos_f32(theta[l] - k[l] * d);
+        }
+        sin[i..i + LANES].copy_from_slice(&s);
+        cos[i..i + LANES].copy_from_slice(&c);
     }
 }
 
+/// The LANES values of `column` from `i`.
+#[inline(always)]
+pub(crate) fn lanes(column: &[f32], i: usize) -> &[f32; LANES] {
+    // The callers' columns are padded to a multiple of LANES and `i` is a multiple of
+    // LANES below their length: the slice is LANES long.
+    column[i..i + LANES]
+        .try_into()
+        .expect("a chunk of LANES values")
+}
+
+/// Σ `v`, in LANES partial sums (so that it runs in vector registers) and then the rest.
+#[inline(always)]
+fn sum_f32(v: &[f32]) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let chunks = v.chunks_exact(LANES);
+    let rest: f32 = chunks.remainder().iter().sum();
+    for chunk in chunks {
+        for l in 0..LANES {
+            acc[l] += chunk[l];
+        }
+    }
+    acc.iter().sum::<f32>() + rest
+}
+
 /// sin and cos of `x` (|x| up to 10⁴ rad) within 2e-6, branch-free so that it vectorizes:
-/// `x` reduced by whole turns to [−π, π] (2π split in two constants, Cody–Waite), then
-/// Taylor polynomials to the 15th (sin) and 16th (cos) power.
+/// `x` reduced by whole half turns to [−π/2, π/2] (π split in two constants, Cody–Waite),
+/// Taylor polynomials to the 11th (sin) and 12th (cos) power, and the signs flipped for an
+/// odd count of half turns.
 #[inline(always)]
 pub(crate) fn sin_cos_f32(x: f32) -> (f32, f32) {
     // 1.5·2²³: adding and subtracting it rounds to the nearest integer (|v| < 2²²).
     const ROUND: f32 = 12_582_912.0;
-    const TAU_HI: f32 = 6.281_25;
-    const TAU_LO: f32 = (std::f64::consts::TAU - 6.281_25) as f32;
-    let q = (x * (1.0 / std::f32::consts::TAU) + ROUND) - ROUND;
-    let r = (x - q * TAU_HI) - q * TAU_LO;
+    // π in two parts; PI_HI has 8 significant bits, so q·PI_HI is exact for |q| < 2¹⁶.
+    const PI_HI: f32 = 3.140_625;
+    const PI_LO: f32 = (std::f64::consts::PI - 3.140_625) as f32;
+    let q = (x * std::f32::consts::FRAC_1_PI + ROUND) - ROUND;
+    let r = (x - q * PI_HI) - q * PI_LO;
     let r2 = r * r;
     let s = r
         * (1.0
             + r2 * (-1.0 / 6.0
                 + r2 * (1.0 / 120.0
-                    + r2 * (-1.0 / 5040.0
-                        + r2 * (1.0 / 362_880.0
-                            + r2 * (-1.0 / 39_916_800.0
-                                + r2 * (1.0 / 6_227_020_800.0
-                                    - r2 * (1.0 / 1_307_674_368_000.0))))))));
+                    + r2 * (-1.0 / 5040.0 + r2 * (1.0 / 362_880.0 - r2 * (1.0 / 39_916_800.0))))));
     let c = 1.0
         + r2 * (-0.5
             + r2 * (1.0 / 24.0
                 + r2 * (-1.0 / 720.0
                     + r2 * (1.0 / 40_320.0
-                        + r2 * (-1.0 / 3_628_800.0
-                            + r2 * (1.0 / 479_001_600.0
-                                + r2 * (-1.0 / 87_178_291_200.0
-                                    + r2 * (1.0 / 20_922_789_888_000.0))))))));
-    (s, c)
+                        + r2 * (-1.0 / 3_628_800.0 + r2 * (1.0 / 479_001_600.0))))));
+    // (−1)^q: 1 − 2·(q mod 2), from q's integer value.
+    let sign = 1.0 - 2.0 * ((q as i32) & 1) as f32;
+    (s * sign, c * sign)
 }
 
 /// The point of best coherence near `start` along the weak axes of `covariance` (`dims`×`dims`,
@@ -338,15 +364,23 @@ pub fn search_box(
     let mut at = Evaluator::new(obs, phases, sign);
     let n = (half / step).round() as i32;
     let nz = if dims == 3 { n } else { 0 };
+    let point = |i: i32, j: i32, k: i32, h: f64| {
+        [
+            centre[0] + f64::from(i) * h,
+            centre[1] + f64::from(j) * h,
+            centre[2] + f64::from(k) * h,
+        ]
+    };
+    if n >= 4 {
+        // Large boxes in two levels ([`best_in_box`]); a small one is cheaper whole.
+        return best_in_box(centre, [n, n, nz], step, BOX_TOP, &mut |p| Some(at.sum(p)))
+            .map_or(centre, |b| b.1);
+    }
     let mut best = (f64::MIN, centre);
     for i in -n..=n {
         for j in -n..=n {
             for k in -nz..=nz {
-                let p = [
-                    centre[0] + f64::from(i) * step,
-                    centre[1] + f64::from(j) * step,
-                    centre[2] + f64::from(k) * step,
-                ];
+                let p = point(i, j, k, step);
                 let c = at.sum(p);
                 if c > best.0 {
                     best = (c, p);
@@ -355,6 +389,60 @@ pub fn search_box(
         }
     }
     best.1
+}
+
+/// Points of a large box's first level whose neighbours [`search_box`] searches.
+const BOX_TOP: usize = 16;
+
+/// The point of the grid `centre` + (i, j, k)·`step`, |i|, |j|, |k| up to `half`, where
+/// `score` is highest (`None`: a point not to consider), found in two levels: the grid of
+/// twice the step, then the neighbours at the step of its `top` best points. Where a half
+/// count is under 2, that axis is searched at the step throughout.
+pub fn best_in_box(
+    centre: [f64; 3],
+    half: [i32; 3],
+    step: f64,
+    top: usize,
+    score: &mut dyn FnMut([f64; 3]) -> Option<f64>,
+) -> Option<(f64, [f64; 3])> {
+    let at =
+        |c: [f64; 3], d: [i32; 3], h: [f64; 3]| [0, 1, 2].map(|a| c[a] + f64::from(d[a]) * h[a]);
+    // Axes of 2 half steps or more are searched at twice the step first.
+    let coarse_half = half.map(|n| if n >= 2 { n / 2 } else { n });
+    let coarse_step = half.map(|n| if n >= 2 { 2.0 * step } else { step });
+    let mut points = Vec::new();
+    for i in -coarse_half[0]..=coarse_half[0] {
+        for j in -coarse_half[1]..=coarse_half[1] {
+            for k in -coarse_half[2]..=coarse_half[2] {
+                let p = at(centre, [i, j, k], coarse_step);
+                if let Some(v) = score(p) {
+                    points.push((v, p));
+                }
+            }
+        }
+    }
+    points.sort_by(|a, b| b.0.total_cmp(&a.0));
+    points.truncate(top);
+    let mut best = points.first().copied();
+    let near = half.map(|n| i32::from(n >= 2));
+    for &(_, p) in &points {
+        for i in -near[0]..=near[0] {
+            for j in -near[1]..=near[1] {
+                for k in -near[2]..=near[2] {
+                    if (i, j, k) == (0, 0, 0) {
+                        continue;
+                    }
+                    let q = at(p, [i, j, k], [step; 3]);
+                    if let Some(v) = score(q) {
+                        if best.map_or(true, |b| v > b.0) {
+                            best = Some((v, q));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    best
 }
 
 /// `obs` with every segment whose offset at `p` is within a quarter period of its group's
@@ -474,6 +562,25 @@ mod tests {
             let fast = coherence(&obs, p, 1.0);
             assert!((fast - exact(p)).abs() < 1e-4, "{p:?}: {fast} {}", exact(p));
         }
+    }
+
+    #[test]
+    fn the_two_level_box_finds_a_peak_between_its_coarse_points() {
+        // A peak at an odd step (not on the first level's grid of twice the step), and a
+        // higher one in a region the score leaves out.
+        let peak = [0.03, -0.05, 0.07];
+        let mut score = |p: [f64; 3]| {
+            (p[0] < 0.15).then(|| -((0..3).map(|a| (p[a] - peak[a]).powi(2)).sum::<f64>()))
+        };
+        let (_, best) = best_in_box([0.0; 3], [8, 8, 8], 0.01, 4, &mut score).expect("a point");
+        for a in 0..3 {
+            assert!((best[a] - peak[a]).abs() < 1e-9, "{best:?}");
+        }
+        // A flat axis (half 0) stays at the centre's coordinate.
+        let (_, flat) = best_in_box([0.0, 0.0, 0.5], [8, 8, 0], 0.01, 4, &mut score).unwrap();
+        assert_eq!(flat[2], 0.5);
+        // Nothing to consider: no point.
+        assert!(best_in_box([0.0; 3], [4, 4, 4], 0.01, 4, &mut |_| None).is_none());
     }
 
     #[test]

@@ -53,44 +53,103 @@ pub enum NoFix {
     InsufficientGeometry,
 }
 
-/// Residual sum of squares at (x, y) with each segment's offset at its best (the mean);
-/// `sum` and `n` are scratch space of one entry per segment.
-#[allow(clippy::too_many_arguments)]
-fn cost(
-    obs: &[Obs],
-    z: f64,
-    sign: f64,
-    x: f64,
-    y: f64,
-    sum: &mut [f64],
-    sq: &mut [f64],
-    n: &mut [usize],
-) -> f64 {
-    sum.fill(0.0);
-    sq.fill(0.0);
-    n.fill(0);
-    for o in obs {
-        let d =
-            ((x - o.antenna[0]).powi(2) + (y - o.antenna[1]).powi(2) + (z - o.antenna[2]).powi(2))
-                .sqrt();
-        let r = o.phase_rad - sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m;
-        sum[o.segment] += r;
-        sq[o.segment] += r * r;
-        n[o.segment] += 1;
+/// The residual sum of squares of some phases at any point, each segment's offset at its best
+/// (the segment's mean residual): in `f32`, structure of arrays, so that the residuals are
+/// computed in vector registers as the coherence is ([`join`]); then each segment's sum of
+/// squared deviations from its mean.
+struct SegmentCost {
+    /// The point the antenna positions are taken relative to.
+    origin: [f64; 3],
+    /// The antennas' x, y, z, θ less its segment's mean θ, and s·4π/λ; padded to a multiple
+    /// of LANES.
+    columns: [Vec<f32>; 5],
+    /// The phases are in segment order: where each segment's run of them is.
+    runs: Vec<std::ops::Range<usize>>,
+    /// Scratch: each phase's residual.
+    residuals: Vec<f32>,
+}
+
+impl SegmentCost {
+    fn new(obs: &[Obs], sign: f64) -> SegmentCost {
+        let mut sorted: Vec<&Obs> = obs.iter().collect();
+        sorted.sort_by_key(|o| o.segment);
+        let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+        for (i, o) in sorted.iter().enumerate() {
+            match runs.last_mut() {
+                Some(r) if sorted[r.start].segment == o.segment => r.end = i + 1,
+                _ => runs.push(i..i + 1),
+            }
+        }
+        let origin = sorted.first().map_or([0.0; 3], |o| o.antenna);
+        let padded = sorted.len().div_ceil(join::LANES) * join::LANES;
+        let mut columns: [Vec<f32>; 5] = std::array::from_fn(|_| vec![0.0; padded]);
+        for r in &runs {
+            let mean = sorted[r.clone()].iter().map(|o| o.phase_rad).sum::<f64>() / r.len() as f64;
+            for i in r.clone() {
+                let o = sorted[i];
+                for a in 0..3 {
+                    columns[a][i] = (o.antenna[a] - origin[a]) as f32;
+                }
+                columns[3][i] = (o.phase_rad - mean) as f32;
+                columns[4][i] = (sign * 4.0 * std::f64::consts::PI / o.wavelength_m) as f32;
+            }
+        }
+        SegmentCost {
+            origin,
+            columns,
+            runs,
+            residuals: vec![0.0; padded],
+        }
     }
-    // Σ(r − mean)² = Σr² − (Σr)²/n per segment.
-    sum.iter()
-        .zip(sq.iter())
-        .zip(n.iter())
-        .map(|((s, q), &k)| if k == 0 { 0.0 } else { q - s * s / k as f64 })
-        .sum()
+
+    /// The cost at `p`.
+    fn at(&mut self, p: [f64; 3]) -> f64 {
+        let p = [0, 1, 2].map(|a| (p[a] - self.origin[a]) as f32);
+        let c = &self.columns;
+        residuals(
+            [c[0].as_slice(), &c[1], &c[2], &c[3], &c[4]],
+            p,
+            &mut self.residuals,
+        );
+        let r = &self.residuals;
+        self.runs
+            .iter()
+            .map(|run| {
+                let v = &r[run.clone()];
+                // Two passes: the residuals share a large common part (s·4πd/λ), which a
+                // one-pass Σr² − (Σr)²/n would cancel in f32.
+                let mean = v.iter().sum::<f32>() / v.len() as f32;
+                f64::from(v.iter().map(|x| (x - mean) * (x - mean)).sum::<f32>())
+            })
+            .sum()
+    }
+}
+
+join::wide! {
+    /// Each phase's residual θ − s·4πd/λ at `p` (relative to the origin) into `out`.
+    fn residuals(columns: [&[f32]; 5], p: [f32; 3], out: &mut [f32]) = residuals_kernel
+}
+
+#[inline(always)]
+fn residuals_kernel(columns: [&[f32]; 5], p: [f32; 3], out: &mut [f32]) {
+    let [px, py, pz] = p;
+    for i in (0..columns[0].len() / join::LANES).map(|c| c * join::LANES) {
+        let lanes = |c: usize| join::lanes(columns[c], i);
+        let (ax, ay, az, theta, k) = (lanes(0), lanes(1), lanes(2), lanes(3), lanes(4));
+        let mut r = [0.0f32; join::LANES];
+        for l in 0..join::LANES {
+            let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
+            r[l] = theta[l] - k[l] * (dx * dx + dy * dy + dz * dz).sqrt();
+        }
+        out[i..i + join::LANES].copy_from_slice(&r);
+    }
 }
 
 /// The start's coarse grid: step (m) and most phases looked at.
 const COARSE: (f64, usize) = (0.5, 32);
 /// The fine grid around the coarse best: step (m), most phases, and steps either side.
 const FINE: (f64, usize) = (0.1, 100);
-const FINE_HALF_STEPS: f64 = 6.0;
+const FINE_HALF_STEPS: i32 = 6;
 
 /// Up to about `max` of `obs` for the start's grids, evenly spread within each segment and at
 /// least [`GRID_MIN_PER_SEGMENT`] of each segment taken (a segment's offset takes one of its
@@ -161,10 +220,9 @@ fn grid(
 }
 
 /// The per-segment cost of `obs` as a grid's cost.
-fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 + '_ {
-    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-    let (mut sum, mut sq, mut n) = (vec![0.0; segments], vec![0.0; segments], vec![0; segments]);
-    move |p| cost(obs, p[2], sign, p[0], p[1], &mut sum, &mut sq, &mut n)
+fn segment_cost(obs: &[Obs], sign: f64) -> impl FnMut([f64; 3]) -> f64 {
+    let mut cost = SegmentCost::new(obs, sign);
+    move |p| cost.at(p)
 }
 
 /// The fit of `obs` in `s`: a coarse grid (COARSE) of the per-segment cost over the box, a
@@ -213,7 +271,9 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     match (in_box(split::fit(obs, s)), separate) {
         (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
         (Some(joined), _) => Ok(joined),
-        (None, separate) => separate.ok_or(NoFix::InsufficientGeometry),
+        // Separate offsets leave the tag loose (above) and no joining brings its phases
+        // together: the phases do not fix it.
+        (None, _) => Err(NoFix::InsufficientGeometry),
     }
 }
 
@@ -245,20 +305,17 @@ fn coarse_starts(
 
 /// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`.
 fn refine(s: &Search, c: [f64; 3], fine: &mut dyn FnMut([f64; 3]) -> f64) -> [f64; 3] {
-    let r = FINE.0 * FINE_HALF_STEPS;
-    let (lo, hi) = if s.dims == 3 {
-        (
-            [c[0] - r, c[1] - r, (c[2] - r).max(s.lo[2])],
-            [c[0] + r, c[1] + r, (c[2] + r).min(s.hi[2])],
-        )
-    } else {
-        ([c[0] - r, c[1] - r, s.z], [c[0] + r, c[1] + r, s.z])
+    let n = FINE_HALF_STEPS;
+    let half = [n, n, if s.dims == 3 { n } else { 0 }];
+    let mut score = |p: [f64; 3]| {
+        let facing = (p[0] - s.mid[0]) * s.facing[0] + (p[1] - s.mid[1]) * s.facing[1];
+        (facing >= 0.0 && p[2] >= s.lo[2] && p[2] <= s.hi[2]).then(|| -fine(p))
     };
-    grid(s, lo, hi, FINE.0, fine)
-        .into_iter()
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or(c, |(_, p)| p)
+    join::best_in_box(c, half, FINE.0, FINE_TOP, &mut score).map_or(c, |b| b.1)
 }
+
+/// Points of the fine grid's first level (twice its step) whose neighbours are searched.
+const FINE_TOP: usize = 8;
 
 /// The position of a solution's parameters.
 fn position(p: &DVector<f64>, s: &Search) -> [f64; 3] {
@@ -403,6 +460,35 @@ mod tests {
     /// Passes at the heights `zs`, offsets 0.4 apart.
     fn passes(tag: [f64; 3], zs: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
         synthetic::passes(tag, zs, (0.0, 0.4), noise, seed)
+    }
+
+    #[test]
+    fn the_vector_segment_cost_agrees_with_the_exact_one() {
+        // Segments of uneven lengths (padding), phases far from zero.
+        let mut obs = pass([1.2, 1.6], 0.2, 4);
+        obs.truncate(obs.len() - 5);
+        for (i, o) in obs.iter_mut().enumerate() {
+            o.segment = (i / 7) % 9;
+            o.phase_rad += 300.0 + 2.0 * o.segment as f64;
+        }
+        let exact = |p: [f64; 3]| {
+            let mut by: Vec<Vec<f64>> = vec![Vec::new(); 9];
+            for o in &obs {
+                let d = distance(p, o.antenna);
+                by[o.segment].push(o.phase_rad - 4.0 * std::f64::consts::PI * d / o.wavelength_m);
+            }
+            by.iter()
+                .map(|r| {
+                    let mean = r.iter().sum::<f64>() / r.len() as f64;
+                    r.iter().map(|x| (x - mean).powi(2)).sum::<f64>()
+                })
+                .sum::<f64>()
+        };
+        let mut fast = SegmentCost::new(&obs, 1.0);
+        for p in [[1.2, 1.6, 0.5], [0.4, 2.3, 0.5], [-1.0, 0.8, 1.5]] {
+            let (f, e) = (fast.at(p), exact(p));
+            assert!((f - e).abs() <= 1e-4 * e.max(1.0), "{p:?}: {f} {e}");
+        }
     }
 
     #[test]

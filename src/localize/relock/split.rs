@@ -114,17 +114,22 @@ join::wide! {
 #[inline(always)]
 fn pair_cost_kernel(columns: [&[f32]; 8], p: [f32; 3]) -> f64 {
     let [px, py, pz] = p;
-    // Lanes summed apart and slices of one length: the loop runs in vector registers.
+    // Chunks of LANES in arrays of LANES, lanes summed apart: the loop runs in vector
+    // registers (a loop over the whole slice leaves LLVM a scalar remainder, and summing into
+    // `acc[i % LANES]` kept it scalar).
     let mut acc = [0.0f32; join::LANES];
-    let n = columns[0].len();
-    let [ax, ay, az, bx, by, bz, th, k] = columns.map(|c| &c[..n]);
-    for i in 0..n {
-        let (dx, dy, dz) = (px - ax[i], py - ay[i], pz - az[i]);
-        let da = (dx * dx + dy * dy + dz * dz).sqrt();
-        let (dx, dy, dz) = (px - bx[i], py - by[i], pz - bz[i]);
-        let db = (dx * dx + dy * dy + dz * dz).sqrt();
-        let (_, c) = join::sin_cos_f32(th[i] - k[i] * (db - da));
-        acc[i % join::LANES] += 1.0 - c;
+    for i in (0..columns[0].len() / join::LANES).map(|c| c * join::LANES) {
+        let lanes = |c: usize| join::lanes(columns[c], i);
+        let (ax, ay, az, bx, by, bz) = (lanes(0), lanes(1), lanes(2), lanes(3), lanes(4), lanes(5));
+        let (th, k) = (lanes(6), lanes(7));
+        for l in 0..join::LANES {
+            let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
+            let da = (dx * dx + dy * dy + dz * dz).sqrt();
+            let (dx, dy, dz) = (px - bx[l], py - by[l], pz - bz[l]);
+            let db = (dx * dx + dy * dy + dz * dz).sqrt();
+            let (_, c) = join::sin_cos_f32(th[l] - k[l] * (db - da));
+            acc[l] += 1.0 - c;
+        }
     }
     acc.iter().map(|&v| f64::from(v)).sum()
 }
@@ -164,11 +169,23 @@ pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     }
     // No start was coherent: a wider box around the best fit.
     let q = join::search_box(obs, position(&fit.0, s), (dims, WIDE_BOX_M, 0.05, 60), sign);
-    match join_from(obs, q, s) {
-        Ok(wide) if join::coherence(&joint, position(&wide.0, s), sign) > score => Ok(wide),
-        _ => Ok(fit),
+    let (score, fit) = match join_from(obs, q, s) {
+        Ok(wide) => match join::coherence(&joint, position(&wide.0, s), sign) {
+            w if w > score => (w, wide),
+            _ => (score, fit),
+        },
+        Err(_) => (score, fit),
+    };
+    // Phases that no joining brings near agreement do not fix the tag: no estimate, not a
+    // guess.
+    if score < INCOHERENT {
+        return Err(NoFix::InsufficientGeometry);
     }
+    Ok(fit)
 }
+
+/// A fit on split series whose phases are less coherent than this at its best is no fix.
+const INCOHERENT: f64 = 0.45;
 
 /// Half-width of the box searched when no start gave a coherent fit (m).
 const WIDE_BOX_M: f64 = 0.75;
@@ -269,6 +286,24 @@ mod tests {
             let fix = locate3d(&obs, 1.0, [0.0, 1.0], 3.0).expect("a fix");
             assert!(error(fix.position, tag) < 0.01, "seed {seed}: {fix:?}");
         }
+    }
+
+    #[test]
+    fn phases_no_joining_brings_together_are_no_fix() {
+        // The short segments of a tag, each phase then replaced by an unrelated one: no
+        // position explains them, and the fit says so rather than guess.
+        let mut obs = short_segments([0.3, 1.1, 1.0], 0.0, 1, true);
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        for o in &mut obs {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            o.phase_rad = (x % 10_000) as f64 / 10_000.0 * std::f64::consts::TAU;
+        }
+        assert_eq!(
+            locate3d(&obs, 1.0, [0.0, 1.0], 3.0),
+            Err(NoFix::InsufficientGeometry)
+        );
     }
 
     #[test]
