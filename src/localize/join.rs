@@ -339,11 +339,19 @@ fn best_on(
     let mut at = Evaluator::new(obs, phases, sign);
     let (v0, h0, n0) = plan[0];
     let (v1, h1, n1) = plan.get(1).copied().unwrap_or(([0.0; 3], 0.0, 0));
+    let point = |a: f64, b: f64| [0, 1, 2].map(|k| centre[k] + a * h0 * v0[k] + b * h1 * v1[k]);
+    // A plane of more points than two levels take ([`best_in_box`]) is searched in two.
+    let full = (2 * n0 + 1) * (2 * n1 + 1);
+    let levels = (2 * (n0 / 2) + 1) * (2 * (n1 / 2) + 1) + BOX_TOP as i32 * 8;
+    if n1 > 0 && levels < full {
+        let mut score = |q: [f64; 3]| Some(at.sum(point(q[0], q[1])));
+        return best_in_box([0.0; 3], [n0, n1, 0], 1.0, BOX_TOP, &mut score)
+            .map_or(centre, |b| point(b.1[0], b.1[1]));
+    }
     let mut best = (at.sum(centre), centre);
     for i in -n0..=n0 {
         for j in -n1..=n1 {
-            let p = [0, 1, 2]
-                .map(|a| centre[a] + f64::from(i) * h0 * v0[a] + f64::from(j) * h1 * v1[a]);
+            let p = point(f64::from(i), f64::from(j));
             let c = at.sum(p);
             if c > best.0 {
                 best = (c, p);
