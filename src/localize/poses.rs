@@ -8,7 +8,7 @@
 //! sample, after the last, or between two samples further apart than the reach has no pose
 //! ([`Poses::at`] gives `None`): it is set aside and counted, never guessed.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::BufRead;
 
 use serde::{Deserialize, Serialize};
@@ -62,7 +62,7 @@ pub const CSV_HEADER: &str = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg";
 pub struct Poses {
     /// Per reader, per antenna, samples in time order (by reader first, so that a lookup
     /// takes the reader's name as it is, without a copy).
-    tracks: HashMap<String, HashMap<u16, Vec<PoseSample>>>,
+    tracks: HashMap<String, BTreeMap<u16, Vec<PoseSample>>>,
     /// Per reader, reader time − robot time (µs).
     offsets: HashMap<String, i64>,
     /// Longest gap between two samples a read may fall in (µs).
@@ -108,7 +108,7 @@ impl Poses {
     /// Adds a sample (kept in time order; a sample at a time already held replaces it).
     pub fn add(&mut self, p: PoseSample) {
         if !self.tracks.contains_key(&p.reader) {
-            self.tracks.insert(p.reader.clone(), HashMap::new());
+            self.tracks.insert(p.reader.clone(), BTreeMap::new());
         }
         // The reader's map is there: inserted just above where it was not.
         let track = self
@@ -278,7 +278,7 @@ impl Poses {
         t_us: u64,
     ) -> Option<(u64, &PoseSample, Option<(&PoseSample, f64)>)> {
         let track = self.track_of(reader, antenna)?;
-        let offset = self.offsets.get(reader).copied().unwrap_or(0);
+        let offset = self.offset(reader);
         let t = i128::from(t_us) - i128::from(offset);
         let t = u64::try_from(t).ok()?;
         let i = track.partition_point(|s| s.t_us <= t);
@@ -295,6 +295,14 @@ impl Poses {
         Some((t, before, Some((after, f))))
     }
 
+    /// `reader`'s clock offset (reader time − robot time, µs; 0 when not set).
+    fn offset(&self, reader: &str) -> i64 {
+        if self.offsets.is_empty() {
+            return 0;
+        }
+        self.offsets.get(reader).copied().unwrap_or(0)
+    }
+
     /// The samples of `reader`'s `antenna`.
     fn track_of(&self, reader: &str, antenna: u16) -> Option<&Vec<PoseSample>> {
         self.tracks.get(reader)?.get(&antenna)
@@ -302,7 +310,7 @@ impl Poses {
 
     /// Every track.
     fn all_tracks(&self) -> impl Iterator<Item = &Vec<PoseSample>> {
-        self.tracks.values().flat_map(HashMap::values)
+        self.tracks.values().flat_map(BTreeMap::values)
     }
 }
 
