@@ -36,6 +36,9 @@ pub struct Ingest {
     series: BTreeMap<Key, Series>,
     set_aside: SetAside,
     taken: u64,
+    /// Scratch for a read's key: its strings' buffers are kept, so that finding a series
+    /// already held copies no name into a new allocation.
+    key: Key,
 }
 
 impl Ingest {
@@ -49,6 +52,7 @@ impl Ingest {
             series: BTreeMap::new(),
             set_aside: SetAside::default(),
             taken: 0,
+            key: Key::default(),
         }
     }
 
@@ -71,11 +75,24 @@ impl Ingest {
             self.set_aside.no_pose += 1;
             return;
         };
-        let (ambiguity, max_gap) = (self.ambiguity, self.max_gap_us);
-        self.series
-            .entry((read.epc.clone(), reader.to_string(), read.antenna, f_hz))
-            .or_insert_with(|| Series::new(SPEED_OF_LIGHT / f_hz as f64, ambiguity, max_gap))
-            .push(read.t_us, phase, position, yaw_deg.to_radians());
+        let key = &mut self.key;
+        key.0.clear();
+        key.0.push_str(&read.epc);
+        key.1.clear();
+        key.1.push_str(reader);
+        (key.2, key.3) = (read.antenna, f_hz);
+        let series = match self.series.get_mut(&self.key) {
+            Some(series) => series,
+            None => {
+                let series = Series::new(
+                    SPEED_OF_LIGHT / f_hz as f64,
+                    self.ambiguity,
+                    self.max_gap_us,
+                );
+                self.series.entry(self.key.clone()).or_insert(series)
+            }
+        };
+        series.push(read.t_us, phase, position, yaw_deg.to_radians());
         self.taken += 1;
     }
 
