@@ -20,32 +20,8 @@
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
+use super::lanes::{lanes, runs, sin_cos_f32, sum_f32, wide, LANES};
 use super::relock::Obs;
-
-/// Defines a function that runs an `#[inline(always)]` kernel compiled for AVX2 where the CPU
-/// has it (eight `f32` lanes where the x86-64 baseline, SSE2, has four), and as built
-/// elsewhere. The same operations in the same order either way (no fused multiply–add), so
-/// the results are the same to the bit.
-macro_rules! wide {
-    ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),*) $(-> $ret:ty)? = $kernel:ident) => {
-        $(#[$m])*
-        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx2")]
-                unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
-                    $kernel($($arg),*)
-                }
-                if std::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2, checked just above.
-                    return unsafe { avx2($($arg),*) };
-                }
-            }
-            $kernel($($arg),*)
-        }
-    };
-}
-pub(crate) use wide;
 
 /// A weak direction is searched when its σ is at least this (m).
 pub const SEARCH_MIN_SIGMA_M: f64 = 0.005;
@@ -101,10 +77,6 @@ pub fn coherence(obs: &[Obs], p: [f64; 3], sign: f64) -> f64 {
     Evaluator::new(obs, usize::MAX, sign).sum(p) / obs.len().max(1) as f64
 }
 
-/// Lanes of the evaluator's chunks: the phases are padded to a multiple of this, so the
-/// compiler turns the per-lane loops into vector instructions.
-pub(crate) const LANES: usize = 8;
-
 /// The summed coherence of up to `phases` of a tag's phases (evenly spread), at any point:
 /// the residuals' sin and cos in `f32`, structure of arrays, branch-free, so that the loop
 /// over the phases runs in vector registers (the coherence searches are most of relock's
@@ -133,13 +105,7 @@ impl Evaluator {
         let mut sub: Vec<&Obs> = obs.iter().step_by(stride).collect();
         // Each group's phases together: summed in registers, not through memory.
         sub.sort_by_key(|o| o.group);
-        let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
-        for (i, o) in sub.iter().enumerate() {
-            match runs.last_mut() {
-                Some(r) if sub[r.start].group == o.group => r.end = i + 1,
-                _ => runs.push(i..i + 1),
-            }
-        }
+        let runs = runs(&sub, |o| o.group);
         let origin = sub.first().map_or([0.0; 3], |o| o.antenna);
         let padded = sub.len().div_ceil(LANES) * LANES;
         let mut e = Evaluator {
@@ -216,60 +182,6 @@ fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mu
         sin[i..i + LANES].copy_from_slice(&s);
         cos[i..i + LANES].copy_from_slice(&c);
     }
-}
-
-/// The LANES values of `column` from `i`.
-#[inline(always)]
-pub(crate) fn lanes(column: &[f32], i: usize) -> &[f32; LANES] {
-    // The callers' columns are padded to a multiple of LANES and `i` is a multiple of
-    // LANES below their length: the slice is LANES long.
-    column[i..i + LANES]
-        .try_into()
-        .expect("a chunk of LANES values")
-}
-
-/// Σ `v`, in LANES partial sums (so that it runs in vector registers) and then the rest.
-#[inline(always)]
-fn sum_f32(v: &[f32]) -> f32 {
-    let mut acc = [0.0f32; LANES];
-    let chunks = v.chunks_exact(LANES);
-    let rest: f32 = chunks.remainder().iter().sum();
-    for chunk in chunks {
-        for l in 0..LANES {
-            acc[l] += chunk[l];
-        }
-    }
-    acc.iter().sum::<f32>() + rest
-}
-
-/// sin and cos of `x` (|x| up to 10⁴ rad) within 2e-6, branch-free so that it vectorizes:
-/// `x` reduced by whole half turns to [−π/2, π/2] (π split in two constants, Cody–Waite),
-/// Taylor polynomials to the 11th (sin) and 12th (cos) power, and the signs flipped for an
-/// odd count of half turns.
-#[inline(always)]
-pub(crate) fn sin_cos_f32(x: f32) -> (f32, f32) {
-    // 1.5·2²³: adding and subtracting it rounds to the nearest integer (|v| < 2²²).
-    const ROUND: f32 = 12_582_912.0;
-    // π in two parts; PI_HI has 8 significant bits, so q·PI_HI is exact for |q| < 2¹⁶.
-    const PI_HI: f32 = 3.140_625;
-    const PI_LO: f32 = (std::f64::consts::PI - 3.140_625) as f32;
-    let q = (x * std::f32::consts::FRAC_1_PI + ROUND) - ROUND;
-    let r = (x - q * PI_HI) - q * PI_LO;
-    let r2 = r * r;
-    let s = r
-        * (1.0
-            + r2 * (-1.0 / 6.0
-                + r2 * (1.0 / 120.0
-                    + r2 * (-1.0 / 5040.0 + r2 * (1.0 / 362_880.0 - r2 * (1.0 / 39_916_800.0))))));
-    let c = 1.0
-        + r2 * (-0.5
-            + r2 * (1.0 / 24.0
-                + r2 * (-1.0 / 720.0
-                    + r2 * (1.0 / 40_320.0
-                        + r2 * (-1.0 / 3_628_800.0 + r2 * (1.0 / 479_001_600.0))))));
-    // (−1)^q: 1 − 2·(q mod 2), from q's integer value.
-    let sign = 1.0 - 2.0 * ((q as i32) & 1) as f32;
-    (s * sign, c * sign)
 }
 
 /// The point of best coherence near `start` along the weak axes of `covariance` (`dims`×`dims`,
@@ -372,13 +284,6 @@ pub fn search_box(
     let mut at = Evaluator::new(obs, phases, sign);
     let n = (half / step).round() as i32;
     let nz = if dims == 3 { n } else { 0 };
-    let point = |i: i32, j: i32, k: i32, h: f64| {
-        [
-            centre[0] + f64::from(i) * h,
-            centre[1] + f64::from(j) * h,
-            centre[2] + f64::from(k) * h,
-        ]
-    };
     if n >= 4 {
         // Large boxes in two levels ([`best_in_box`]); a small one is cheaper whole.
         return best_in_box(centre, [n, n, nz], step, BOX_TOP, &mut |p| Some(at.sum(p)))
@@ -388,7 +293,11 @@ pub fn search_box(
     for i in -n..=n {
         for j in -n..=n {
             for k in -nz..=nz {
-                let p = point(i, j, k, step);
+                let p = [
+                    centre[0] + f64::from(i) * step,
+                    centre[1] + f64::from(j) * step,
+                    centre[2] + f64::from(k) * step,
+                ];
                 let c = at.sum(p);
                 if c > best.0 {
                     best = (c, p);
@@ -528,20 +437,6 @@ mod tests {
             o.phase_rad += std::f64::consts::TAU * ((i / 30) % 4) as f64;
         }
         obs
-    }
-
-    #[test]
-    fn the_fast_sin_cos_matches_libm() {
-        for i in -1_000_000..=1_000_000 {
-            let x = i as f32 * 1e-2 + 0.123_456;
-            let (s, c) = sin_cos_f32(x);
-            let exact = f64::from(x);
-            assert!(
-                (f64::from(s) - exact.sin()).abs() < 2e-6
-                    && (f64::from(c) - exact.cos()).abs() < 2e-6,
-                "{x}: {s} {c}"
-            );
-        }
     }
 
     #[test]

@@ -22,6 +22,7 @@ pub mod geometry;
 pub mod hyperbolic;
 pub mod ingest;
 pub mod join;
+mod lanes;
 pub mod linear;
 pub mod live;
 pub mod loci3d;

@@ -7,7 +7,7 @@
 
 use nalgebra::DVector;
 
-use super::join;
+use super::{join, lanes};
 
 mod problem;
 mod split;
@@ -73,15 +73,9 @@ impl SegmentCost {
     fn new(obs: &[Obs], sign: f64) -> SegmentCost {
         let mut sorted: Vec<&Obs> = obs.iter().collect();
         sorted.sort_by_key(|o| o.segment);
-        let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
-        for (i, o) in sorted.iter().enumerate() {
-            match runs.last_mut() {
-                Some(r) if sorted[r.start].segment == o.segment => r.end = i + 1,
-                _ => runs.push(i..i + 1),
-            }
-        }
+        let runs = lanes::runs(&sorted, |o| o.segment);
         let origin = sorted.first().map_or([0.0; 3], |o| o.antenna);
-        let padded = sorted.len().div_ceil(join::LANES) * join::LANES;
+        let padded = sorted.len().div_ceil(lanes::LANES) * lanes::LANES;
         let mut columns: [Vec<f32>; 5] = std::array::from_fn(|_| vec![0.0; padded]);
         for r in &runs {
             let mean = sorted[r.clone()].iter().map(|o| o.phase_rad).sum::<f64>() / r.len() as f64;
@@ -125,7 +119,7 @@ impl SegmentCost {
     }
 }
 
-join::wide! {
+lanes::wide! {
     /// Each phase's residual θ − s·4πd/λ at `p` (relative to the origin) into `out`.
     fn residuals(columns: [&[f32]; 5], p: [f32; 3], out: &mut [f32]) = residuals_kernel
 }
@@ -133,15 +127,15 @@ join::wide! {
 #[inline(always)]
 fn residuals_kernel(columns: [&[f32]; 5], p: [f32; 3], out: &mut [f32]) {
     let [px, py, pz] = p;
-    for i in (0..columns[0].len() / join::LANES).map(|c| c * join::LANES) {
-        let lanes = |c: usize| join::lanes(columns[c], i);
+    for i in (0..columns[0].len() / lanes::LANES).map(|c| c * lanes::LANES) {
+        let lanes = |c: usize| lanes::lanes(columns[c], i);
         let (ax, ay, az, theta, k) = (lanes(0), lanes(1), lanes(2), lanes(3), lanes(4));
-        let mut r = [0.0f32; join::LANES];
-        for l in 0..join::LANES {
+        let mut r = [0.0f32; lanes::LANES];
+        for l in 0..lanes::LANES {
             let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
             r[l] = theta[l] - k[l] * (dx * dx + dy * dy + dz * dz).sqrt();
         }
-        out[i..i + join::LANES].copy_from_slice(&r);
+        out[i..i + lanes::LANES].copy_from_slice(&r);
     }
 }
 

@@ -17,7 +17,7 @@ use super::{
     coarse_starts, distance, position, refine, solve, NoFix, Obs, Problem, Search, Solution,
 };
 use super::{COARSE, FINE};
-use crate::localize::join;
+use crate::localize::{join, lanes};
 
 /// Starts tried (the best grid points at least 1.5 grid steps apart).
 const STARTS: usize = 4;
@@ -74,7 +74,7 @@ struct PairCost {
 impl PairCost {
     fn new(pairs: &[Pair]) -> PairCost {
         let origin = pairs.first().map_or([0.0; 3], |q| q.a);
-        let padded = pairs.len().div_ceil(join::LANES) * join::LANES;
+        let padded = pairs.len().div_ceil(lanes::LANES) * lanes::LANES;
         let mut columns: [Vec<f32>; 8] = std::array::from_fn(|_| vec![0.0; padded]);
         for (i, q) in pairs.iter().enumerate() {
             for a in 0..3 {
@@ -106,7 +106,7 @@ impl PairCost {
     }
 }
 
-join::wide! {
+lanes::wide! {
     /// [`PairCost::at`] over its columns, at `p` relative to its origin.
     fn pair_cost(columns: [&[f32]; 8], p: [f32; 3]) -> f64 = pair_cost_kernel
 }
@@ -117,17 +117,17 @@ fn pair_cost_kernel(columns: [&[f32]; 8], p: [f32; 3]) -> f64 {
     // Chunks of LANES in arrays of LANES, lanes summed apart: the loop runs in vector
     // registers (a loop over the whole slice leaves LLVM a scalar remainder, and summing into
     // `acc[i % LANES]` kept it scalar).
-    let mut acc = [0.0f32; join::LANES];
-    for i in (0..columns[0].len() / join::LANES).map(|c| c * join::LANES) {
-        let lanes = |c: usize| join::lanes(columns[c], i);
+    let mut acc = [0.0f32; lanes::LANES];
+    for i in (0..columns[0].len() / lanes::LANES).map(|c| c * lanes::LANES) {
+        let lanes = |c: usize| lanes::lanes(columns[c], i);
         let (ax, ay, az, bx, by, bz) = (lanes(0), lanes(1), lanes(2), lanes(3), lanes(4), lanes(5));
         let (th, k) = (lanes(6), lanes(7));
-        for l in 0..join::LANES {
+        for l in 0..lanes::LANES {
             let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
             let da = (dx * dx + dy * dy + dz * dz).sqrt();
             let (dx, dy, dz) = (px - bx[l], py - by[l], pz - bz[l]);
             let db = (dx * dx + dy * dy + dz * dz).sqrt();
-            let (_, c) = join::sin_cos_f32(th[l] - k[l] * (db - da));
+            let (_, c) = lanes::sin_cos_f32(th[l] - k[l] * (db - da));
             acc[l] += 1.0 - c;
         }
     }
