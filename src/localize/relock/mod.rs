@@ -265,8 +265,8 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     match (in_box(split::fit(obs, s)), separate) {
         (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
         (Some(joined), _) => Ok(joined),
-        // Separate offsets leave the tag loose (above) and no joining brings its phases
-        // together: the phases do not fix it.
+        // Separate offsets leave the tag loose (above), and no joined fit stands (its phases
+        // incoherent, or it is the mirror image under the floor): the phases do not fix it.
         (None, _) => Err(NoFix::InsufficientGeometry),
     }
 }
