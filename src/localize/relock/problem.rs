@@ -22,6 +22,9 @@ pub(super) struct Problem<'a> {
     dims: usize,
     z: f64,
     p: DVector<f64>,
+    /// Each phase's antenna-to-position vector and its length at `p` (the residuals and the
+    /// Jacobian of one position share them).
+    to: Vec<([f64; 3], f64)>,
 }
 
 impl<'a> Problem<'a> {
@@ -37,7 +40,7 @@ impl<'a> Problem<'a> {
         for o in obs {
             counts[o.segment] += 1;
         }
-        Problem {
+        let mut problem = Problem {
             obs,
             inverse_counts: counts.iter().map(|&c| 1.0 / c.max(1) as f64).collect(),
             counts,
@@ -48,20 +51,24 @@ impl<'a> Problem<'a> {
             dims,
             z,
             p: DVector::from_column_slice(&start[..dims]),
-        }
+            to: Vec::with_capacity(obs.len()),
+        };
+        problem.update();
+        problem
     }
 
-    fn distance(&self, o: &Obs) -> (f64, [f64; 3]) {
+    /// Each phase's vector from its antenna to the position, and its length (at least 1 nm).
+    fn update(&mut self) {
         let z = if self.dims == 3 { self.p[2] } else { self.z };
-        let d = [
-            self.p[0] - o.antenna[0],
-            self.p[1] - o.antenna[1],
-            z - o.antenna[2],
-        ];
-        (
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-9),
-            d,
-        )
+        let (x, y) = (self.p[0], self.p[1]);
+        self.to.clear();
+        self.to.extend(self.obs.iter().map(|o| {
+            let v = [x - o.antenna[0], y - o.antenna[1], z - o.antenna[2]];
+            (
+                v,
+                (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-9),
+            )
+        }));
     }
 }
 
@@ -72,6 +79,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn set_params(&mut self, x: &DVector<f64>) {
         self.p.copy_from(x);
+        self.update();
     }
 
     fn params(&self) -> DVector<f64> {
@@ -81,8 +89,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     fn residuals(&self) -> Option<DVector<f64>> {
         let mut r = Vec::with_capacity(self.obs.len());
         let mut mean = vec![0.0; self.counts.len()];
-        for (o, k) in self.obs.iter().zip(&self.k) {
-            let (d, _) = self.distance(o);
+        for ((o, k), &(_, d)) in self.obs.iter().zip(&self.k).zip(&self.to) {
             let v = o.phase_rad - k * d;
             mean[o.segment] += v;
             r.push(v);
@@ -101,8 +108,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         let n = self.obs.len();
         let mut j = vec![0.0; n * self.dims];
         let mut mean = vec![[0.0; 3]; self.counts.len()];
-        for (i, (o, k)) in self.obs.iter().zip(&self.k).enumerate() {
-            let (d, v) = self.distance(o);
+        for (i, ((o, k), &(v, d))) in self.obs.iter().zip(&self.k).zip(&self.to).enumerate() {
             let g = -k / d;
             for a in 0..self.dims {
                 let x = g * v[a];
