@@ -138,7 +138,7 @@ impl Poses {
     pub fn mapped(&self, f: impl Fn(&PoseSample, i64) -> PoseSample) -> Poses {
         let mut out = self.clone();
         for (reader, antennas) in out.tracks.iter_mut() {
-            let offset = self.offsets.get(reader).copied().unwrap_or(0);
+            let offset = self.offset(reader);
             for s in antennas.values_mut().flatten() {
                 *s = PoseSample {
                     t_us: s.t_us,
@@ -173,7 +173,7 @@ impl Poses {
         reader: &str,
         antenna: u16,
     ) -> impl Iterator<Item = (u64, &'a PoseSample)> + 'a {
-        let offset = i128::from(self.offsets.get(reader).copied().unwrap_or(0));
+        let offset = i128::from(self.offset(reader));
         self.track_of(reader, antenna)
             .into_iter()
             .flatten()
@@ -183,7 +183,7 @@ impl Poses {
     /// Reader time (µs) of the newest sample of `reader`'s `antenna`, if any.
     pub fn newest(&self, reader: &str, antenna: u16) -> Option<u64> {
         let last = self.track_of(reader, antenna)?.last()?;
-        let offset = self.offsets.get(reader).copied().unwrap_or(0);
+        let offset = self.offset(reader);
         u64::try_from(i128::from(last.t_us) + i128::from(offset)).ok()
     }
 
@@ -240,16 +240,16 @@ impl Poses {
         let Some((after, f)) = after else {
             return Some(before.clone());
         };
-        let lerp = |a: f64, b: f64| a + (b - a) * f;
+        let ([x, y, z], yaw_deg, pitch_deg) = blend(before, after, f);
         Some(PoseSample {
             t_us: t,
             reader: before.reader.clone(),
             antenna,
-            x: lerp(before.x, after.x),
-            y: lerp(before.y, after.y),
-            z: lerp(before.z, after.z),
-            yaw_deg: yaw_between(before, after, f),
-            pitch_deg: lerp(before.pitch_deg, after.pitch_deg),
+            x,
+            y,
+            z,
+            yaw_deg,
+            pitch_deg,
         })
     }
 
@@ -259,13 +259,8 @@ impl Poses {
         let Some((after, f)) = after else {
             return Some(([before.x, before.y, before.z], before.yaw_deg));
         };
-        let lerp = |a: f64, b: f64| a + (b - a) * f;
-        let position = [
-            lerp(before.x, after.x),
-            lerp(before.y, after.y),
-            lerp(before.z, after.z),
-        ];
-        Some((position, yaw_between(before, after, f)))
+        let (position, yaw_deg, _) = blend(before, after, f);
+        Some((position, yaw_deg))
     }
 
     /// Robot time of reader time `t_us`, and the sample at it, or the samples around it with
@@ -314,11 +309,14 @@ impl Poses {
     }
 }
 
-/// The yaw (°, in [−180, 180)) a fraction `f` of the way from `a`'s to `b`'s, the short way
-/// round.
-fn yaw_between(a: &PoseSample, b: &PoseSample, f: f64) -> f64 {
+/// The position (m), yaw and pitch (°) a fraction `f` of the way from `a` to `b`; the yaw in
+/// [−180, 180), turned the short way round.
+fn blend(a: &PoseSample, b: &PoseSample, f: f64) -> ([f64; 3], f64, f64) {
+    let lerp = |u: f64, v: f64| u + (v - u) * f;
     let turn = (b.yaw_deg - a.yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
-    (a.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0
+    let yaw = (a.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0;
+    let position = [lerp(a.x, b.x), lerp(a.y, b.y), lerp(a.z, b.z)];
+    (position, yaw, lerp(a.pitch_deg, b.pitch_deg))
 }
 
 /// A CSV row under `columns` as a sample.
