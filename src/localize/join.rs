@@ -71,10 +71,11 @@ fn model(o: &Obs, p: [f64; 3], sign: f64) -> f64 {
     sign * 4.0 * std::f64::consts::PI * d / o.wavelength_m
 }
 
-/// The coherence of `obs` at `p`: Σ over the groups of |Σ exp(i·2π/P·(θ − s·4πd/λ))|, over
-/// the count of phases (1: every group's residuals equal modulo its period).
+/// The coherence of `obs` at `p`: Σ over the groups of |Σ w·exp(i·2π/P·(θ − s·4πd/λ))|, over
+/// Σ w (1: every group's residuals equal modulo its period), w the reads a phase stands for.
 pub fn coherence(obs: &[Obs], p: [f64; 3], sign: f64) -> f64 {
-    Evaluator::new(obs, usize::MAX, sign).sum(p) / obs.len().max(1) as f64
+    let reads: f64 = obs.iter().map(|o| o.weight).sum();
+    Evaluator::new(obs, usize::MAX, sign).sum(p) / reads.max(1.0)
 }
 
 /// The summed coherence of up to `phases` of a tag's phases (evenly spread), at any point:
@@ -92,6 +93,8 @@ struct Evaluator {
     theta: Vec<f32>,
     /// 2π/P·s·4π/λ (rad/m).
     k: Vec<f32>,
+    /// The reads each phase stands for (0 for padding).
+    w: Vec<f32>,
     /// The phases are in group order: where each group's run of them is.
     runs: Vec<std::ops::Range<usize>>,
     /// Scratch: each phase's cos and sin.
@@ -115,6 +118,7 @@ impl Evaluator {
             az: vec![0.0; padded],
             theta: vec![0.0; padded],
             k: vec![0.0; padded],
+            w: vec![0.0; padded],
             runs,
             cos: vec![0.0; padded],
             sin: vec![0.0; padded],
@@ -126,6 +130,7 @@ impl Evaluator {
             e.az[i] = (o.antenna[2] - origin[2]) as f32;
             e.theta[i] = (o.phase_rad * scale).rem_euclid(std::f64::consts::TAU) as f32;
             e.k[i] = (scale * sign * 4.0 * std::f64::consts::PI / o.wavelength_m) as f32;
+            e.w[i] = o.weight as f32;
         }
         e
     }
@@ -137,7 +142,7 @@ impl Evaluator {
         // instructions.
         residuals(
             [px, py, pz],
-            [&self.ax, &self.ay, &self.az, &self.theta, &self.k],
+            [&self.ax, &self.ay, &self.az, &self.theta, &self.k, &self.w],
             &mut self.sin,
             &mut self.cos,
         );
@@ -156,13 +161,14 @@ impl Evaluator {
 }
 
 wide! {
-    /// The sin and cos of each phase's residual at `p` (relative to the evaluator's origin)
-    /// into `sin` and `cos`; `columns` are the antennas' x, y, z, θ and k, all of one length.
-    fn residuals(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mut [f32]) = residuals_kernel
+    /// The sin and cos of each phase's residual at `p` (relative to the evaluator's origin),
+    /// times its weight, into `sin` and `cos`; `columns` are the antennas' x, y, z, θ, k and
+    /// the weights, all of one length.
+    fn residuals(p: [f32; 3], columns: [&[f32]; 6], sin: &mut [f32], cos: &mut [f32]) = residuals_kernel
 }
 
 #[inline(always)]
-fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mut [f32]) {
+fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 6], sin: &mut [f32], cos: &mut [f32]) {
     let [px, py, pz] = p;
     // Chunks of LANES in arrays of LANES: the loop runs in vector registers with no scalar
     // remainder (the columns are padded to a multiple of LANES).
@@ -172,12 +178,17 @@ fn residuals_kernel(p: [f32; 3], columns: [&[f32]; 5], sin: &mut [f32], cos: &mu
             lanes(columns[1], i),
             lanes(columns[2], i),
         );
-        let (theta, k) = (lanes(columns[3], i), lanes(columns[4], i));
+        let (theta, k, w) = (
+            lanes(columns[3], i),
+            lanes(columns[4], i),
+            lanes(columns[5], i),
+        );
         let (mut s, mut c) = ([0.0f32; LANES], [0.0f32; LANES]);
         for l in 0..LANES {
             let (dx, dy, dz) = (px - ax[l], py - ay[l], pz - az[l]);
             let d = (dx * dx + dy * dy + dz * dz).sqrt();
-            (s[l], c[l]) = sin_cos_f32(theta[l] - k[l] * d);
+            let (sl, cl) = sin_cos_f32(theta[l] - k[l] * d);
+            (s[l], c[l]) = (w[l] * sl, w[l] * cl);
         }
         sin[i..i + LANES].copy_from_slice(&s);
         cos[i..i + LANES].copy_from_slice(&c);
@@ -370,20 +381,20 @@ pub fn join(obs: &[Obs], p: [f64; 3], sign: f64) -> (Vec<Obs>, usize) {
     let groups = obs.iter().map(|o| o.group + 1).max().unwrap_or(0);
     // Each segment's mean residual (its best offset), group and period.
     let mut sum = vec![0.0; segments];
-    let mut count = vec![0usize; segments];
+    let mut count = vec![0.0; segments];
     let mut info: Vec<Option<(usize, f64)>> = vec![None; segments];
     for o in obs {
-        sum[o.segment] += o.phase_rad - model(o, p, sign);
-        count[o.segment] += 1;
+        sum[o.segment] += o.weight * (o.phase_rad - model(o, p, sign));
+        count[o.segment] += o.weight;
         info[o.segment] = Some((o.group, o.period_rad));
     }
     // The group's offset: the circular mean of its segments' offsets, weighted by phases.
     let (mut re, mut im) = (vec![0.0; groups], vec![0.0; groups]);
     for k in 0..segments {
         if let Some((g, period)) = info[k] {
-            let c = sum[k] / count[k] as f64 * std::f64::consts::TAU / period;
-            re[g] += count[k] as f64 * c.cos();
-            im[g] += count[k] as f64 * c.sin();
+            let c = sum[k] / count[k] * std::f64::consts::TAU / period;
+            re[g] += count[k] * c.cos();
+            im[g] += count[k] * c.sin();
         }
     }
     // Each segment's new number and its shift (whole periods).
@@ -394,7 +405,7 @@ pub fn join(obs: &[Obs], p: [f64; 3], sign: f64) -> (Vec<Obs>, usize) {
         let Some((g, period)) = info[k] else {
             continue;
         };
-        let c = sum[k] / count[k] as f64;
+        let c = sum[k] / count[k];
         let centre = im[g].atan2(re[g]) * period / std::f64::consts::TAU;
         let turns = ((c - centre) / period).round();
         let deviation = c - centre - turns * period;

@@ -313,6 +313,8 @@ mod tests {
                     group: 0,
                     joint: 0,
                     period_rad: std::f64::consts::TAU,
+                    weight: 1.0,
+                    scatter_rad2: 0.0,
                 }
             })
             .collect();

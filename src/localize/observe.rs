@@ -62,6 +62,8 @@ pub fn calibrated_observations(
                     group,
                     joint,
                     period_rad,
+                    weight: 1.0,
+                    scatter_rad2: 0.0,
                 });
             }
         }

@@ -39,6 +39,8 @@ pub fn passes(
                 group: s,
                 joint: s,
                 period_rad: std::f64::consts::TAU,
+                weight: 1.0,
+                scatter_rad2: 0.0,
             });
         }
     }

@@ -9,13 +9,20 @@ use super::{NoFix, Obs, Search};
 /// The least-squares problem in the position alone: each segment's offset is at its best
 /// for the position (the mean residual of the segment), so residuals and Jacobian columns are
 /// centred per segment (variable projection: the offsets are linear, and the position's
-/// covariance from the centred Jacobian is its marginal covariance).
+/// covariance from the centred Jacobian is its marginal covariance). A bin of reads
+/// ([`Obs::weight`]) counts as its reads: its residual is weighted by the square root of
+/// their count.
 pub(super) struct Problem<'a> {
     obs: &'a [Obs],
-    /// Phases per segment.
-    counts: Vec<usize>,
-    /// 1 over the phases per segment.
-    inverse_counts: Vec<f64>,
+    /// Segments.
+    segments: usize,
+    /// 1 over the reads per segment.
+    inverse_weights: Vec<f64>,
+    /// Each phase's √weight.
+    root_weights: Vec<f64>,
+    /// Reads, and the bins' scatter (rad²), over all phases.
+    reads: f64,
+    scatter_rad2: f64,
     /// Each phase's s·4π/λ (rad/m).
     k: Vec<f64>,
     /// 2: (x, y) at height `z`; 3: (x, y, z).
@@ -36,14 +43,20 @@ impl<'a> Problem<'a> {
         start: &[f64],
     ) -> Problem<'a> {
         let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-        let mut counts = vec![0; segments];
+        let mut weights = vec![0.0; segments];
         for o in obs {
-            counts[o.segment] += 1;
+            weights[o.segment] += o.weight;
         }
         let mut problem = Problem {
             obs,
-            inverse_counts: counts.iter().map(|&c| 1.0 / c.max(1) as f64).collect(),
-            counts,
+            segments,
+            inverse_weights: weights
+                .iter()
+                .map(|&w| if w > 0.0 { 1.0 / w } else { 0.0 })
+                .collect(),
+            root_weights: obs.iter().map(|o| o.weight.sqrt()).collect(),
+            reads: weights.iter().sum(),
+            scatter_rad2: obs.iter().map(|o| o.scatter_rad2).sum(),
             k: obs
                 .iter()
                 .map(|o| sign * 4.0 * std::f64::consts::PI / o.wavelength_m)
@@ -88,17 +101,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn residuals(&self) -> Option<DVector<f64>> {
         let mut r = Vec::with_capacity(self.obs.len());
-        let mut mean = vec![0.0; self.counts.len()];
+        let mut mean = vec![0.0; self.segments];
         for ((o, k), &(_, d)) in self.obs.iter().zip(&self.k).zip(&self.to) {
             let v = o.phase_rad - k * d;
-            mean[o.segment] += v;
+            mean[o.segment] += o.weight * v;
             r.push(v);
         }
-        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
+        for (m, inv) in mean.iter_mut().zip(&self.inverse_weights) {
             *m *= inv;
         }
-        for (o, v) in self.obs.iter().zip(r.iter_mut()) {
-            *v -= mean[o.segment];
+        for ((o, v), w) in self.obs.iter().zip(r.iter_mut()).zip(&self.root_weights) {
+            *v = w * (*v - mean[o.segment]);
         }
         Some(DVector::from_vec(r))
     }
@@ -107,23 +120,24 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         // Column-major, filled in place: column a holds ∂r_i/∂p_a.
         let n = self.obs.len();
         let mut j = vec![0.0; n * self.dims];
-        let mut mean = vec![[0.0; 3]; self.counts.len()];
+        let mut mean = vec![[0.0; 3]; self.segments];
         for (i, ((o, k), &(v, d))) in self.obs.iter().zip(&self.k).zip(&self.to).enumerate() {
             let g = -k / d;
             for a in 0..self.dims {
                 let x = g * v[a];
                 j[a * n + i] = x;
-                mean[o.segment][a] += x;
+                mean[o.segment][a] += o.weight * x;
             }
         }
-        for (m, inv) in mean.iter_mut().zip(&self.inverse_counts) {
+        for (m, inv) in mean.iter_mut().zip(&self.inverse_weights) {
             for x in m.iter_mut() {
                 *x *= inv;
             }
         }
         for a in 0..self.dims {
-            for (x, o) in j[a * n..(a + 1) * n].iter_mut().zip(self.obs) {
-                *x -= mean[o.segment][a];
+            let column = j[a * n..(a + 1) * n].iter_mut();
+            for ((x, o), w) in column.zip(self.obs).zip(&self.root_weights) {
+                *x = w * (*x - mean[o.segment][a]);
             }
         }
         Some(DMatrix::from_vec(n, self.dims, j))
@@ -131,15 +145,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 }
 
 /// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
-/// times the residual variance) and the RMS residual. A solution outside the search box
-/// of `s` is no fix: the phases did not pin the tag down.
+/// times the residual variance) and the RMS residual, both per read (a bin's scatter
+/// counted). A solution outside the search box of `s` is no fix: the phases did not pin the
+/// tag down.
 pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
-    let (obs, dims, segments) = (problem.obs, problem.dims, problem.counts.len());
+    let (dims, segments) = (problem.dims, problem.segments);
+    let (reads, scatter) = (problem.reads, problem.scatter_rad2);
     let (solved, _report) = solver().minimize(problem);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let dof = (obs.len() - (dims + segments)).max(1) as f64;
-    let variance = r.norm_squared() / dof;
+    let squares = r.norm_squared() + scatter;
+    let variance = squares / (reads - (dims + segments) as f64).max(1.0);
     let info = j.transpose() * &j;
     let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)? * variance;
     let p = solved.p;
@@ -148,7 +164,7 @@ pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix>
     if !(inside && finite) {
         return Err(NoFix::InsufficientGeometry);
     }
-    Ok((p, cov, (r.norm_squared() / obs.len() as f64).sqrt()))
+    Ok((p, cov, (squares / reads.max(1.0)).sqrt()))
 }
 
 /// Levenberg–Marquardt with the relative tolerances at 1e-8 (the crate's default, 30 machine
