@@ -5,7 +5,9 @@
 //! its time ([`Poses::at`]). Reads without a phase, a channel frequency or a pose are set aside
 //! and counted by reason, never guessed.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
+
+use rustc_hash::FxHashMap;
 
 use super::poses::Poses;
 use super::series::{Ambiguity, Series};
@@ -33,12 +35,15 @@ pub struct Ingest {
     poses: Poses,
     ambiguity: Ambiguity,
     max_gap_us: u64,
-    series: BTreeMap<Key, Series>,
+    /// The series, each with its key, in no order.
+    series: Vec<(Key, Series)>,
+    /// Each tag's series (where they are in `series`), in key order, by EPC: a read's series
+    /// is found by one hash of its EPC and a scan of its tag's few series, with no key built.
+    by_tag: FxHashMap<String, Vec<usize>>,
+    /// The tags with series, in EPC order.
+    tags: BTreeSet<String>,
     set_aside: SetAside,
     taken: u64,
-    /// Scratch for a read's key: its strings' buffers are kept, so that finding a series
-    /// already held copies no name into a new allocation.
-    key: Key,
 }
 
 impl Ingest {
@@ -49,10 +54,11 @@ impl Ingest {
             poses,
             ambiguity,
             max_gap_us,
-            series: BTreeMap::new(),
+            series: Vec::new(),
+            by_tag: FxHashMap::default(),
+            tags: BTreeSet::new(),
             set_aside: SetAside::default(),
             taken: 0,
-            key: Key::default(),
         }
     }
 
@@ -75,49 +81,52 @@ impl Ingest {
             self.set_aside.no_pose += 1;
             return;
         };
-        let key = &mut self.key;
-        key.0.clear();
-        key.0.push_str(&read.epc);
-        key.1.clear();
-        key.1.push_str(reader);
-        (key.2, key.3) = (read.antenna, f_hz);
-        let series = match self.series.get_mut(&self.key) {
-            Some(series) => series,
-            None => {
-                let series = Series::new(
-                    SPEED_OF_LIGHT / f_hz as f64,
-                    self.ambiguity,
-                    self.max_gap_us,
-                );
-                self.series.entry(self.key.clone()).or_insert(series)
-            }
-        };
-        series.push(read.t_us, phase, position, yaw_deg.to_radians());
+        let found = self.by_tag.get(read.epc.as_str()).and_then(|of_tag| {
+            of_tag.iter().copied().find(|&i| {
+                let k = &self.series[i].0;
+                (k.2, k.3) == (read.antenna, f_hz) && k.1 == reader
+            })
+        });
+        let key = || (read.epc.clone(), reader.to_string(), read.antenna, f_hz);
+        let i = found.unwrap_or_else(|| self.add_series(key()));
+        self.series[i]
+            .1
+            .push(read.t_us, phase, position, yaw_deg.to_radians());
         self.taken += 1;
     }
 
-    /// The series, by key.
-    pub fn series(&self) -> &BTreeMap<Key, Series> {
-        &self.series
+    /// A new series under `key`: where it is.
+    fn add_series(&mut self, key: Key) -> usize {
+        let i = self.series.len();
+        let wavelength = SPEED_OF_LIGHT / key.3 as f64;
+        let series = Series::new(wavelength, self.ambiguity, self.max_gap_us);
+        if !self.by_tag.contains_key(&key.0) {
+            self.tags.insert(key.0.clone());
+        }
+        let of_tag = self.by_tag.entry(key.0.clone()).or_default();
+        let at = of_tag.partition_point(|&j| self.series[j].0 < key);
+        of_tag.insert(at, i);
+        self.series.push((key, series));
+        i
     }
 
-    /// The series of tag `epc`, by key.
-    pub fn tag_series<'a>(&'a self, epc: &'a str) -> impl Iterator<Item = (&'a Key, &'a Series)> {
-        self.series
-            .range((epc.to_string(), String::new(), 0, 0)..)
-            .take_while(move |(k, _)| k.0 == epc)
+    /// Every series, in key order.
+    pub fn series(&self) -> impl Iterator<Item = (&Key, &Series)> {
+        self.tags().flat_map(|epc| self.tag_series(epc))
+    }
+
+    /// The series of tag `epc`, in key order.
+    pub fn tag_series<'a>(&'a self, epc: &str) -> impl Iterator<Item = (&'a Key, &'a Series)> {
+        let of_tag = self.by_tag.get(epc).map_or(&[][..], Vec::as_slice);
+        of_tag.iter().map(|&i| {
+            let (key, series) = &self.series[i];
+            (key, series)
+        })
     }
 
     /// The tags with at least one series, in EPC order.
     pub fn tags(&self) -> impl Iterator<Item = &str> {
-        let mut last: Option<&str> = None;
-        self.series.keys().filter_map(move |k| {
-            let epc = k.0.as_str();
-            (last != Some(epc)).then(|| {
-                last = Some(epc);
-                epc
-            })
-        })
+        self.tags.iter().map(String::as_str)
     }
 
     /// The pose tracks reads are joined with.
@@ -137,11 +146,8 @@ impl Ingest {
 
     /// Halves the phases held for tag `epc` ([`Series::thin`] on each of its series).
     pub fn thin_tag(&mut self, epc: &str) {
-        let keys: Vec<Key> = self.tag_series(epc).map(|(k, _)| k.clone()).collect();
-        for k in keys {
-            if let Some(s) = self.series.get_mut(&k) {
-                s.thin();
-            }
+        for &i in self.by_tag.get(epc).map_or(&[][..], Vec::as_slice) {
+            self.series[i].1.thin();
         }
     }
 
@@ -162,29 +168,53 @@ impl Ingest {
     /// Drops tag `epc`'s oldest segments, whichever series they are in, until it holds at
     /// most `target` phases; a series left with none is forgotten.
     pub fn trim_tag(&mut self, epc: &str, target: usize) {
-        let mut starts: Vec<(u64, usize, &Key)> = self
-            .tag_series(epc)
-            .flat_map(|(k, s)| {
-                s.segments()
-                    .map(move |seg| (seg.first().map_or(0, |x| x.t_us), seg.len(), k))
+        let of_tag = self.by_tag.get(epc).map_or(&[][..], Vec::as_slice);
+        let mut starts: Vec<(u64, usize, usize)> = of_tag
+            .iter()
+            .flat_map(|&i| {
+                self.series[i]
+                    .1
+                    .segments()
+                    .map(move |seg| (seg.first().map_or(0, |x| x.t_us), seg.len(), i))
             })
             .collect();
         let mut held: usize = starts.iter().map(|s| s.1).sum();
         starts.sort_unstable_by_key(|s| s.0);
-        let mut drops: BTreeMap<Key, usize> = BTreeMap::new();
-        for (_, len, key) in starts {
+        let mut drops: BTreeMap<usize, usize> = BTreeMap::new();
+        for (_, len, i) in starts {
             if held <= target {
                 break;
             }
             held -= len;
-            *drops.entry(key.clone()).or_default() += 1;
+            *drops.entry(i).or_default() += 1;
         }
-        for (key, n) in drops {
-            if let Some(series) = self.series.get_mut(&key) {
-                series.drop_oldest(n);
-                if series.is_empty() {
-                    self.series.remove(&key);
-                }
+        // From the last place down, so that a removal moves no series still to be trimmed.
+        for (i, n) in drops.into_iter().rev() {
+            let series = &mut self.series[i].1;
+            series.drop_oldest(n);
+            if series.is_empty() {
+                self.remove_series(i);
+            }
+        }
+    }
+
+    /// Forgets the series at `i`; the last series takes its place.
+    fn remove_series(&mut self, i: usize) {
+        let (key, _) = self.series.swap_remove(i);
+        if let Some(of_tag) = self.by_tag.get_mut(&key.0) {
+            of_tag.retain(|&j| j != i);
+            if of_tag.is_empty() {
+                self.by_tag.remove(&key.0);
+                self.tags.remove(&key.0);
+            }
+        }
+        let moved_from = self.series.len();
+        let Some((moved, _)) = self.series.get(i) else {
+            return; // it was the last
+        };
+        if let Some(of_tag) = self.by_tag.get_mut(&moved.0) {
+            for j in of_tag.iter_mut().filter(|j| **j == moved_from) {
+                *j = i;
             }
         }
     }
@@ -265,8 +295,12 @@ mod tests {
             }
         );
         // A1 on two channels: two series; B2 and C3 one each.
-        assert_eq!(ingest.series().len(), 4);
-        let a1 = &ingest.series()[&("A1".to_string(), "r".to_string(), 1, 915_250_000)];
+        assert_eq!(ingest.series().count(), 4);
+        let key = ("A1".to_string(), "r".to_string(), 1, 915_250_000);
+        let (_, a1) = ingest
+            .series()
+            .find(|(k, _)| **k == key)
+            .expect("A1's series");
         let seg = a1.segments().next().expect("a segment");
         assert_eq!(seg.len(), 2);
         // The antenna position interpolated at each read: x = 0.005 and 0.015.
@@ -312,6 +346,34 @@ mod tests {
             .filter_map(|(_, s)| s.segments().last()?.last().map(|x| x.t_us))
             .max();
         assert_eq!(newest, Some(19_999 * 10_000));
+    }
+
+    #[test]
+    fn a_trimmed_tags_emptied_series_is_forgotten_and_the_others_still_found() {
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000);
+        let (f1, f2) = (902_750_000, 903_250_000);
+        // A1's series on f1 first (oldest), then B2's on f1 and f2, then A1's on f2.
+        ingest.push(&posed("A1", 0, 0.0, f1));
+        ingest.push(&posed("B2", 10, 0.0, f1));
+        ingest.push(&posed("B2", 20, 0.0, f2));
+        for k in 0..4 {
+            ingest.push(&posed("A1", 100_000 + k * 10, 0.0, f2));
+        }
+        // Down to 4 phases: A1's oldest segment, all of its f1 series, goes.
+        ingest.trim_tag("A1", 4);
+        fn channels(ingest: &Ingest, epc: &str) -> Vec<(u64, usize)> {
+            let of_tag = ingest.tag_series(epc);
+            of_tag.map(|(k, s)| (k.3, s.len())).collect()
+        }
+        assert_eq!(channels(&ingest, "A1"), vec![(f2, 4)]);
+        assert_eq!(channels(&ingest, "B2"), vec![(f1, 1), (f2, 1)]);
+        // A read of the series moved into the forgotten one's place goes to it.
+        ingest.push(&posed("B2", 30, 0.0, f2));
+        ingest.push(&posed("A1", 100_100, 0.0, f1));
+        assert_eq!(channels(&ingest, "B2"), vec![(f1, 1), (f2, 2)]);
+        assert_eq!(channels(&ingest, "A1"), vec![(f1, 1), (f2, 4)]);
+        assert_eq!(ingest.tags().collect::<Vec<_>>(), vec!["A1", "B2"]);
+        assert_eq!(ingest.series().count(), 4);
     }
 
     #[test]

@@ -8,9 +8,10 @@
 //! sample, after the last, or between two samples further apart than the reach has no pose
 //! ([`Poses::at`] gives `None`): it is set aside and counted, never guessed.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::io::BufRead;
 
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 /// One pose sample: a line of the pose file.
@@ -62,9 +63,9 @@ pub const CSV_HEADER: &str = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg";
 pub struct Poses {
     /// Per reader, per antenna, samples in time order (by reader first, so that a lookup
     /// takes the reader's name as it is, without a copy).
-    tracks: HashMap<String, BTreeMap<u16, Vec<PoseSample>>>,
+    tracks: FxHashMap<String, BTreeMap<u16, Vec<PoseSample>>>,
     /// Per reader, reader time − robot time (µs).
-    offsets: HashMap<String, i64>,
+    offsets: FxHashMap<String, i64>,
     /// Longest gap between two samples a read may fall in (µs).
     reach_us: u64,
     /// Samples older than this behind their track's newest are dropped (µs); `None`: kept
@@ -276,8 +277,7 @@ impl Poses {
         let offset = self.offset(reader);
         let t = i128::from(t_us) - i128::from(offset);
         let t = u64::try_from(t).ok()?;
-        let i = track.partition_point(|s| s.t_us <= t);
-        // `i` samples are at or before `t`.
+        let i = at_or_before(track, t);
         let before = track.get(i.checked_sub(1)?)?;
         if before.t_us == t {
             return Some((t, before, None));
@@ -307,6 +307,35 @@ impl Poses {
     fn all_tracks(&self) -> impl Iterator<Item = &Vec<PoseSample>> {
         self.tracks.values().flat_map(BTreeMap::values)
     }
+}
+
+/// How many of `track`'s samples (in time order) are at or before `t`: first where the
+/// track's mean interval puts `t` (right, or next to it, on a track sampled at a steady
+/// rate), else by binary search.
+fn at_or_before(track: &[PoseSample], t: u64) -> usize {
+    let (Some(first), Some(last)) = (track.first(), track.last()) else {
+        return 0;
+    };
+    if t < first.t_us {
+        return 0;
+    }
+    if t >= last.t_us {
+        return track.len();
+    }
+    // first ≤ t < last, so the span is positive and the guess under len − 1 (a float's
+    // rounding is caught by the checks below).
+    let f = (t - first.t_us) as f64 / (last.t_us - first.t_us) as f64;
+    let guess = (f * (track.len() - 1) as f64) as usize;
+    let fits = |i: usize| track[i].t_us <= t && track[i + 1].t_us > t;
+    for i in [Some(guess), guess.checked_sub(1), Some(guess + 1)]
+        .into_iter()
+        .flatten()
+    {
+        if i < track.len() - 1 && fits(i) {
+            return i + 1;
+        }
+    }
+    track.partition_point(|s| s.t_us <= t)
 }
 
 /// The position (m), yaw and pitch (°) a fraction `f` of the way from `a` to `b`; the yaw in
@@ -419,6 +448,24 @@ mod tests {
             z: 0.5,
             yaw_deg,
             pitch_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_guessed_sample_is_the_one_a_binary_search_finds() {
+        // Steady (100 ms), jittered, with a long gap, and with repeated times.
+        let steady: Vec<u64> = (0..50).map(|k| 1_000 + k * 100_000).collect();
+        let jittered: Vec<u64> = (0..50).map(|k| k * 100_000 + (k * 7919) % 40_000).collect();
+        let mut gapped = steady.clone();
+        gapped.extend((0..10).map(|k| 60_000_000 + k * 50_000));
+        let repeated = vec![0, 0, 10, 10, 10, 20, 50, 50];
+        for times in [steady, jittered, gapped, repeated, vec![5], vec![]] {
+            let track: Vec<PoseSample> = times.iter().map(|&t| sample(t, 0.0, 0.0)).collect();
+            let end = times.last().copied().unwrap_or(0) + 200_000;
+            for t in (0..end).step_by(997).chain(times.iter().copied()) {
+                let want = track.partition_point(|s| s.t_us <= t);
+                assert_eq!(at_or_before(&track, t), want, "t {t} in {times:?}");
+            }
         }
     }
 
