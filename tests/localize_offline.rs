@@ -1,7 +1,8 @@
 //! `llrp-gateway localize` over the shipped S1 recording (a report per read) with the robot's
 //! own pose file and its settings file: every tag converges, within the figures
 //! docs/localize.md gives; a reads file carrying each read's `antenna_pose` gives the same
-//! estimates; bad files are refused naming the line or field.
+//! estimates; bad files are refused naming the line or field. And `bench localize` names an
+//! estimator asked for that does not apply to its scenario, and why.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -293,4 +294,33 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
     let (ok, _, stderr) = localize(&[reads.to_str().expect("utf-8")], &out);
     assert!(!ok && stderr.contains("line 2"), "{stderr}");
     assert!(!out.exists(), "nothing is written for a bad input");
+}
+
+#[test]
+fn bench_localize_names_an_estimator_that_does_not_apply() {
+    let bench = |estimators: &[&str]| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"));
+        cmd.args(["bench", "localize", "--scenario", "S1", "--live-speed", "0"]);
+        for e in estimators {
+            cmd.args(["--estimator", e]);
+        }
+        let out = cmd.output().expect("runs");
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        (out.status.success(), stdout, stderr)
+    };
+    // S1's reader is not calibrated: mhekf alone is refused, saying why, with no table.
+    let (ok, stdout, stderr) = bench(&["mhekf"]);
+    assert!(!ok, "{stdout}");
+    assert!(
+        stderr.contains("mhekf does not apply to") && stderr.contains("not calibrated"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("| estimator |"), "{stdout}");
+    // Beside one that applies, it is named and the other's rows are there.
+    let (ok, stdout, stderr) = bench(&["mhekf", "linear"]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("mhekf does not apply to"), "{stderr}");
+    assert!(stdout.contains("| linear | true | 10/10 |"), "{stdout}");
+    assert!(!stdout.contains("| mhekf"), "{stdout}");
 }

@@ -336,6 +336,15 @@ fn stats(v: &mut [f64]) -> (f64, f64, f64, f64) {
 /// antennas at two heights or more, fingerprinting with reference tags, the EKF and WLS of
 /// \[M\] with a calibrated reader (φ0 = 0).
 pub fn applicable(run: &Run) -> Vec<Estimator> {
+    Estimator::ALL
+        .iter()
+        .copied()
+        .filter(|&e| why_not(run, e).is_none())
+        .collect()
+}
+
+/// Why estimator `e` does not apply to `run`, if it does not.
+pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
     let mut heights: Vec<f64> = run
         .true_poses
         .first_samples()
@@ -344,14 +353,14 @@ pub fn applicable(run: &Run) -> Vec<Estimator> {
         .collect();
     heights.sort_by(f64::total_cmp);
     heights.dedup();
-    Estimator::ALL
-        .iter()
-        .copied()
-        .filter(|&e| match e {
-            Estimator::Loci3d => heights.len() >= 2,
-            Estimator::Fingerprint => run.truth.iter().any(|t| t.2),
-            Estimator::Mhekf | Estimator::Wls => run.calibrated,
-            _ => true,
-        })
-        .collect()
+    match e {
+        Estimator::Loci3d if heights.len() < 2 => Some("its antennas are all at one height"),
+        Estimator::Fingerprint if !run.truth.iter().any(|t| t.2) => {
+            Some("it has no reference tags")
+        }
+        Estimator::Mhekf | Estimator::Wls if !run.calibrated => {
+            Some("its reader is not calibrated (φ0 = 0 on every channel)")
+        }
+        _ => None,
+    }
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use super::bench::{
-    applicable, duration_s, score_on, simulate_with, Inventory, PoseSource, Scores,
+    applicable, duration_s, score_on, simulate_with, why_not, Inventory, PoseSource, Scores,
 };
 use super::estimate::Estimator;
 use crate::scenario::Scenario;
@@ -98,6 +98,17 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         run.truth.len() - tags,
         started.elapsed().as_secs_f64()
     );
+    for &e in &args.estimators {
+        if let Some(why) = why_not(&run, e) {
+            eprintln!(
+                "llrp-gateway bench localize: {e} does not apply to '{}': {why}",
+                s.name
+            );
+        }
+    }
+    if !args.estimators.is_empty() && args.estimators.iter().all(|&e| why_not(&run, e).is_some()) {
+        return ExitCode::FAILURE;
+    }
     println!("| estimator | poses | located | mean (mm) | median (mm) | max (mm) | std (mm) | compute (ms) |");
     println!("|---|---|---|---|---|---|---|---|");
     let mut relock: Vec<Scores> = Vec::new();
