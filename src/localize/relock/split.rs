@@ -1,8 +1,9 @@
 //! Phase ReLock on split series (ours): the segments of each series joined, then the series
 //! of calibrated antennas ([`super::super::calibrate`]) joined into one group ([`join`]).
 //!
-//! 1. Grids on the phase differences of consecutive reads of a series ([`pairs`]), which hold
-//!    across its splits, give up to [`STARTS`] starts.
+//! 1. The fit with separate offsets (loose, but near the tag) is the first start; grids on
+//!    the phase differences of consecutive reads of a series ([`pairs`]), which hold across
+//!    its splits, give up to [`STARTS`] more, computed only when that one is not taken.
 //! 2. Around each, in the grid's order, the most coherent point within [`START_BOX_M`]
 //!    ([`join::search_box`], each series its own group, 4 cm steps on 80 phases).
 //! 3. From a start: 2.5 cm steps within 5 cm, the segments of each series joined there
@@ -134,11 +135,9 @@ fn pair_cost_kernel(columns: [&[f32]; 8], p: [f32; 3]) -> f64 {
     acc.iter().map(|&v| f64::from(v)).sum()
 }
 
-/// The fit of a tag with split series, as the module describes it.
-pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
-    let coarse = PairCost::new(&pairs(obs, s.sign, COARSE.1));
-    let fine = PairCost::new(&pairs(obs, s.sign, FINE.1));
-    let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
+/// The fit of a tag with split series, as the module describes it; `near`: the position of
+/// the fit with separate offsets, the first start.
+pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Solution, NoFix> {
     let (dims, sign) = (s.dims, s.sign);
     // The phases with each calibrated antenna's series in one group: what a fit is judged by.
     let joint: Vec<Obs> = obs
@@ -149,6 +148,19 @@ pub(super) fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         })
         .collect();
     let mut best: Option<(f64, Solution)> = None;
+    if let Some(c) = near {
+        let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
+        if let Ok(fit) = join_from(obs, q, s) {
+            let score = join::coherence(&joint, position(&fit.0, s), sign);
+            if score >= COHERENT {
+                return Ok(fit);
+            }
+            best = Some((score, fit));
+        }
+    }
+    let coarse = PairCost::new(&pairs(obs, s.sign, COARSE.1));
+    let fine = PairCost::new(&pairs(obs, s.sign, FINE.1));
+    let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
     for c in starts {
         let c = refine(s, c, &mut |p| fine.at(p));
         let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
