@@ -285,9 +285,9 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
             return Ok(sep.clone());
         }
     }
+    let near = separate.as_ref().map(|f| position(&f.0, s));
     // Joined segments must explain the phases about as well as separate offsets do: over a
     // pose track that drifts (odometry), one offset does not hold for long.
-    let near = separate.as_ref().map(|f| position(&f.0, s));
     match (in_box(split::fit(obs, s, near)), separate) {
         (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
         (Some(joined), _) => Ok(joined),

@@ -147,22 +147,18 @@ pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Sol
             ..*o
         })
         .collect();
+    // The grid's starts, each refined when its turn comes, computed only if `near` is not
+    // taken.
+    let grid = std::iter::once(()).flat_map(|()| {
+        let coarse = PairCost::new(&pairs(obs, sign, COARSE.1));
+        let fine = PairCost::new(&pairs(obs, sign, FINE.1));
+        let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
+        starts
+            .into_iter()
+            .map(move |c| refine(s, c, &mut |p| fine.at(p)))
+    });
     let mut best: Option<(f64, Solution)> = None;
-    if let Some(c) = near {
-        let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
-        if let Ok(fit) = join_from(obs, q, s) {
-            let score = join::coherence(&joint, position(&fit.0, s), sign);
-            if score >= COHERENT {
-                return Ok(fit);
-            }
-            best = Some((score, fit));
-        }
-    }
-    let coarse = PairCost::new(&pairs(obs, s.sign, COARSE.1));
-    let fine = PairCost::new(&pairs(obs, s.sign, FINE.1));
-    let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
-    for c in starts {
-        let c = refine(s, c, &mut |p| fine.at(p));
+    for c in near.into_iter().chain(grid) {
         let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
         let Ok(fit) = join_from(obs, q, s) else {
             continue;
