@@ -5,8 +5,8 @@ use super::{lanes, Obs};
 
 /// The residual sum of squares of some phases at any point, each segment's offset at its best
 /// (the segment's mean residual): in `f32`, structure of arrays, so that the residuals are
-/// computed in vector registers as the coherence is ([`crate::localize::join`]); then each segment's sum of
-/// squared deviations from its mean.
+/// computed in vector registers as the coherence is ([`crate::localize::join`]); then each
+/// segment's sum of squared deviations from its mean.
 struct SegmentCost {
     /// The point the antenna positions are taken relative to.
     origin: [f64; 3],
