@@ -100,9 +100,7 @@ impl Ingest {
         let i = self.series.len();
         let wavelength = SPEED_OF_LIGHT / key.3 as f64;
         let series = Series::new(wavelength, self.ambiguity, self.max_gap_us);
-        if !self.by_tag.contains_key(&key.0) {
-            self.tags.insert(key.0.clone());
-        }
+        self.tags.insert(key.0.clone());
         let of_tag = self.by_tag.entry(key.0.clone()).or_default();
         let at = of_tag.partition_point(|&j| self.series[j].0 < key);
         of_tag.insert(at, i);

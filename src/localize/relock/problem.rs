@@ -14,9 +14,7 @@ use super::{NoFix, Obs, Search};
 /// their count.
 pub(super) struct Problem<'a> {
     obs: &'a [Obs],
-    /// Segments.
-    segments: usize,
-    /// 1 over the reads per segment.
+    /// 1 over the reads per segment (one entry a segment).
     inverse_weights: Vec<f64>,
     /// Each phase's √weight.
     root_weights: Vec<f64>,
@@ -49,7 +47,6 @@ impl<'a> Problem<'a> {
         }
         let mut problem = Problem {
             obs,
-            segments,
             inverse_weights: weights
                 .iter()
                 .map(|&w| if w > 0.0 { 1.0 / w } else { 0.0 })
@@ -101,7 +98,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn residuals(&self) -> Option<DVector<f64>> {
         let mut r = Vec::with_capacity(self.obs.len());
-        let mut mean = vec![0.0; self.segments];
+        let mut mean = vec![0.0; self.inverse_weights.len()];
         for ((o, k), &(_, d)) in self.obs.iter().zip(&self.k).zip(&self.to) {
             let v = o.phase_rad - k * d;
             mean[o.segment] += o.weight * v;
@@ -120,7 +117,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         // Column-major, filled in place: column a holds ∂r_i/∂p_a.
         let n = self.obs.len();
         let mut j = vec![0.0; n * self.dims];
-        let mut mean = vec![[0.0; 3]; self.segments];
+        let mut mean = vec![[0.0; 3]; self.inverse_weights.len()];
         for (i, ((o, k), &(v, d))) in self.obs.iter().zip(&self.k).zip(&self.to).enumerate() {
             let g = -k / d;
             for a in 0..self.dims {
@@ -149,7 +146,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 /// counted). A solution outside the search box of `s` is no fix: the phases did not pin the
 /// tag down.
 pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
-    let (dims, segments) = (problem.dims, problem.segments);
+    let (dims, segments) = (problem.dims, problem.inverse_weights.len());
     let (reads, scatter) = (problem.reads, problem.scatter_rad2);
     let (solved, _report) = solver().minimize(problem);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
