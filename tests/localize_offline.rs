@@ -265,6 +265,7 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
             "readers.left.facing: must be a non-zero direction",
         ),
         (r#"{"readers": {"left": {"gain": 1}}}"#, "gain"),
+        (r#"{"min_rssi_dbm": "weak"}"#, "min_rssi_dbm"),
         (
             r#"{"pose_error": {"sigma_m": -0.01, "correlation_s": 2}}"#,
             "pose_error.sigma_m: must be a positive number",
@@ -294,6 +295,61 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
     let (ok, _, stderr) = localize(&[reads.to_str().expect("utf-8")], &out);
     assert!(!ok && stderr.contains("line 2"), "{stderr}");
     assert!(!out.exists(), "nothing is written for a bad input");
+}
+
+#[test]
+fn reads_under_the_settings_rssi_floor_are_set_aside_and_counted() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("out.json");
+    let rec = fixture("s1-report-per-read.jsonl");
+    let poses = fixture("s1-report-per-read.poses.jsonl");
+    let settings = dir.path().join("settings.json");
+    let run = |floor: f64| {
+        std::fs::write(
+            &settings,
+            format!(
+                r#"{{"phase_sign": 1, "clock_offsets_us": {{"s1-reader": 1796166070735126}}, "min_rssi_dbm": {floor}}}"#
+            ),
+        )
+        .expect("writes");
+        let (ok, json, stderr) = localize(
+            &[
+                rec.to_str().expect("utf-8"),
+                "--poses",
+                poses.to_str().expect("utf-8"),
+                "--settings",
+                settings.to_str().expect("utf-8"),
+            ],
+            &out,
+        );
+        assert!(ok, "{stderr}");
+        // Tags located: a tag all of whose reads were set aside is listed without a position.
+        let tags = json.expect("estimates")["tags"]
+            .as_array()
+            .expect("tags")
+            .iter()
+            .filter(|t| !t["estimate"].is_null())
+            .count();
+        // "… from N reads (M set aside: … K under the RSSI floor)"
+        let number_before = |what: &str| -> u64 {
+            let head = &stderr[..stderr.find(what).expect(what)];
+            let word = head.split_whitespace().last().expect("a number");
+            word.parse().expect("a number")
+        };
+        (
+            tags,
+            number_before(" reads ("),
+            number_before(" under the RSSI floor"),
+        )
+    };
+    // No S1 read is as strong as 0 dBm: every one is set aside, and no tag is located.
+    let (tags, taken, weak) = run(0.0);
+    assert_eq!((tags, taken), (0, 0));
+    assert!(weak > 0);
+    // A floor under every read sets none aside: the same reads are filed, every tag located.
+    let (tags, taken, none) = run(-200.0);
+    assert_eq!((tags, none), (10, 0));
+    assert!(taken > 0 && taken <= weak, "{taken} of {weak}");
 }
 
 #[test]

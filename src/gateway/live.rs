@@ -139,6 +139,7 @@ pub fn settings_from(file: &SettingsFile, poses: &Poses, estimator: Estimator) -
         } else {
             Ambiguity::None
         },
+        min_rssi_dbm: file.min_rssi_dbm,
         ..Settings::default()
     }
 }

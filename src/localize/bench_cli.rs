@@ -43,6 +43,9 @@ pub struct BenchLocalizeArgs {
     /// Only these estimators (repeatable; default: every one that applies).
     #[arg(long = "estimator")]
     pub estimators: Vec<Estimator>,
+    /// Set aside reads weaker than this (dBm), as the settings file's `min_rssi_dbm` does.
+    #[arg(long, allow_hyphen_values = true)]
+    pub min_rssi: Option<f64>,
 }
 
 /// The scenario `name` (a fixture's name or a file).
@@ -78,6 +81,10 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
+    if let Some(v) = args.min_rssi.filter(|v| !v.is_finite()) {
+        eprintln!("llrp-gateway bench localize: --min-rssi {v}: not a finite number");
+        return ExitCode::FAILURE;
+    }
     let seconds = args.seconds.unwrap_or_else(|| duration_s(&s));
     eprintln!(
         "llrp-gateway bench localize: scenario '{}', {seconds:.0} s simulated...",
@@ -88,7 +95,8 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         mode: args.mode,
         session: args.session,
     };
-    let run = simulate_with(&s, seconds, inventory);
+    let mut run = simulate_with(&s, seconds, inventory);
+    run.settings.min_rssi_dbm = args.min_rssi;
     let tags = run.truth.iter().filter(|t| !t.2).count();
     println!(
         "Scenario '{}': {} reads of {} tags ({} reference tags) in {seconds:.0} s simulated ({:.1} s to simulate)\n",
@@ -98,6 +106,17 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         run.truth.len() - tags,
         started.elapsed().as_secs_f64()
     );
+    if let Some(floor) = args.min_rssi {
+        let weak = run
+            .reads
+            .iter()
+            .filter(|r| r.rssi_dbm.is_some_and(|v| v < floor))
+            .count();
+        println!(
+            "Reads weaker than {floor} dBm set aside: {weak} of {}\n",
+            run.reads.len()
+        );
+    }
     for &e in &args.estimators {
         if let Some(why) = why_not(&run, e) {
             eprintln!(

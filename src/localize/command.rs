@@ -107,13 +107,14 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
     }
     let a = outcome.set_aside;
     eprintln!(
-        "llrp-gateway localize: {} tags from {} reads ({} set aside: {} without phase, {} without channel frequency, {} without a pose)",
+        "llrp-gateway localize: {} tags from {} reads ({} set aside: {} without phase, {} without channel frequency, {} without a pose, {} under the RSSI floor)",
         outcome.tags.tags.len(),
         outcome.taken,
-        a.no_phase + a.no_frequency + a.no_pose,
+        a.total(),
         a.no_phase,
         a.no_frequency,
-        a.no_pose
+        a.no_pose,
+        a.weak
     );
     Ok(())
 }

@@ -27,6 +27,15 @@ pub struct SetAside {
     pub no_frequency: u64,
     /// No pose within reach of the read's time.
     pub no_pose: u64,
+    /// Its RSSI was under the floor ([`Ingest::with_min_rssi`]).
+    pub weak: u64,
+}
+
+impl SetAside {
+    /// Reads set aside for any reason.
+    pub fn total(&self) -> u64 {
+        self.no_phase + self.no_frequency + self.no_pose + self.weak
+    }
 }
 
 /// Every series of the reads taken in so far.
@@ -35,6 +44,8 @@ pub struct Ingest {
     poses: Poses,
     ambiguity: Ambiguity,
     max_gap_us: u64,
+    /// Reads weaker than this (dBm) are set aside.
+    min_rssi_dbm: Option<f64>,
     /// The series, each with its key, in no order.
     series: Vec<(Key, Series)>,
     /// Each tag's series (where they are in `series`), in key order, by EPC: a read's series
@@ -54,6 +65,7 @@ impl Ingest {
             poses,
             ambiguity,
             max_gap_us,
+            min_rssi_dbm: None,
             series: Vec::new(),
             by_tag: FxHashMap::default(),
             tags: BTreeSet::new(),
@@ -62,8 +74,21 @@ impl Ingest {
         }
     }
 
+    /// These series with reads whose RSSI is under `dbm` set aside (counted, never filed): a
+    /// weak read's phase is noisy enough to slip the unwrapping. A read without RSSI is kept.
+    pub fn with_min_rssi(mut self, dbm: Option<f64>) -> Ingest {
+        self.min_rssi_dbm = dbm;
+        self
+    }
+
     /// Takes one read (a read older than its series' newest is put in its place in time).
     pub fn push(&mut self, read: &Read) {
+        if let (Some(floor), Some(rssi)) = (self.min_rssi_dbm, read.rssi_dbm) {
+            if rssi < floor {
+                self.set_aside.weak += 1;
+                return;
+            }
+        }
         let Some(phase) = read.phase_rad else {
             self.set_aside.no_phase += 1;
             return;
@@ -289,7 +314,8 @@ mod tests {
             SetAside {
                 no_phase: 1,
                 no_frequency: 1,
-                no_pose: 1
+                no_pose: 1,
+                weak: 0
             }
         );
         // A1 on two channels: two series; B2 and C3 one each.
@@ -308,6 +334,38 @@ mod tests {
         assert!((seg[0].yaw_rad - 5f64.to_radians()).abs() < 1e-12);
         assert!((seg[1].yaw_rad - 15f64.to_radians()).abs() < 1e-12);
         assert_eq!((seg[0].raw_phase_rad, seg[1].raw_phase_rad), (1.0, 1.1));
+    }
+
+    #[test]
+    fn reads_under_the_rssi_floor_are_set_aside_and_counted() {
+        let mut ingest =
+            Ingest::new(Poses::new(), Ambiguity::None, 1_000_000).with_min_rssi(Some(-65.0));
+        let with = |t_us: u64, rssi: Option<f64>| Read {
+            rssi_dbm: rssi,
+            ..posed("A1", t_us, 0.001 * t_us as f64 / 1000.0, 915_250_000)
+        };
+        for (t, rssi) in [
+            (0, Some(-50.0)),
+            (1_000, Some(-65.0)),
+            (2_000, Some(-65.01)),
+            (3_000, Some(-80.0)),
+            (4_000, None),
+        ] {
+            ingest.push(&with(t, rssi));
+        }
+        // At the floor and above, and without RSSI: filed; under it: set aside.
+        assert_eq!(ingest.taken(), 3);
+        assert_eq!(ingest.set_aside().weak, 2);
+        assert_eq!(ingest.set_aside().total(), 2);
+        let (_, series) = ingest.series().next().expect("A1's series");
+        let times: Vec<u64> = series.samples().iter().map(|s| s.t_us).collect();
+        assert_eq!(times, [0, 1_000, 4_000]);
+        // No floor: every read filed.
+        let mut all = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        for t in [2_000, 3_000] {
+            all.push(&with(t, Some(-80.0)));
+        }
+        assert_eq!((all.taken(), all.set_aside().weak), (2, 0));
     }
 
     /// A read of phase 0.5 rad carrying its own pose: the antenna at `x` on the x axis.

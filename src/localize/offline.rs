@@ -97,6 +97,8 @@ pub struct SettingsFile {
     /// The reader reports phase with Impinj's π ambiguity.
     #[serde(default)]
     pub pi_ambiguity: bool,
+    /// Reads weaker than this (dBm) are set aside: their phase noise slips the unwrapping.
+    pub min_rssi_dbm: Option<f64>,
     /// Reference tags at known positions (fingerprinting).
     #[serde(default)]
     pub references: Vec<ReferenceTag>,
@@ -165,6 +167,9 @@ impl SettingsFile {
         let s: SettingsFile = serde_path_to_error::deserialize(&mut de)
             .map_err(|e| bad(format!("{}: {}", e.path(), e.inner())))?;
         check_sign(s.phase_sign).map_err(|e| bad(format!("phase_sign: {e}")))?;
+        if let Some(v) = s.min_rssi_dbm.filter(|v| !v.is_finite()) {
+            return Err(bad(format!("min_rssi_dbm: not a finite number: {v}")));
+        }
         if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
             return Err(bad(format!("tag_height_m: not a finite number: {h}")));
         }
@@ -326,7 +331,11 @@ pub fn localize(
     // merged reads file, may not be).
     reads.sort_by_key(|r| r.t_us);
     let mut stats: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
-    let mut ingest = Ingest::new(poses, ambiguity, super::series::DEFAULT_MAX_GAP_US);
+    let ingest_on = |poses: Poses| {
+        Ingest::new(poses, ambiguity, super::series::DEFAULT_MAX_GAP_US)
+            .with_min_rssi(file.min_rssi_dbm)
+    };
+    let mut ingest = ingest_on(poses);
     for r in &reads {
         ingest.push(r);
         let s = stats.entry(r.epc.clone()).or_insert((r.t_us, r.t_us, 0));
@@ -338,7 +347,7 @@ pub fn localize(
         // The poses refined once, the reads filed again.
         let m = PoseErrorModel::new(e.sigma_m, e.correlation_s);
         let corrected = refined_poses(&ingest, &g, &m);
-        ingest = Ingest::new(corrected, ambiguity, super::series::DEFAULT_MAX_GAP_US);
+        ingest = ingest_on(corrected);
         for r in &reads {
             ingest.push(r);
         }

@@ -190,13 +190,13 @@ pub fn refined_poses(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> Poses
 pub fn localize_refined(
     reads: &[Read],
     poses: &Poses,
-    settings: (Ambiguity, u64),
+    settings: (Ambiguity, u64, Option<f64>),
     estimator: Estimator,
     g: &Geometry,
     m: &PoseErrorModel,
 ) -> (Vec<Estimate>, Poses) {
     let ingest_on = |poses: Poses| {
-        let mut ingest = Ingest::new(poses, settings.0, settings.1);
+        let mut ingest = Ingest::new(poses, settings.0, settings.1).with_min_rssi(settings.2);
         for r in reads {
             ingest.push(r);
         }

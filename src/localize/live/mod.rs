@@ -72,6 +72,8 @@ pub struct Settings {
     pub ambiguity: Ambiguity,
     /// Longest gap between two reads of one series segment (µs).
     pub max_gap_us: u64,
+    /// Reads weaker than this (dBm) are set aside ([`super::ingest::Ingest::with_min_rssi`]).
+    pub min_rssi_dbm: Option<f64>,
     /// Longest gap between two pose samples a read may be interpolated in (µs).
     pub pose_reach_us: u64,
     /// A tag is re-estimated at most this often.
@@ -102,6 +104,7 @@ impl Default for Settings {
             },
             ambiguity: Ambiguity::None,
             max_gap_us: super::series::DEFAULT_MAX_GAP_US,
+            min_rssi_dbm: None,
             pose_reach_us: super::poses::DEFAULT_REACH_US,
             min_interval: Duration::from_millis(50),
             compute_budget: Duration::from_millis(50),
@@ -202,7 +205,8 @@ impl Worker {
             .with_reach(settings.pose_reach_us)
             .with_keep(keep);
         Worker {
-            ingest: Ingest::new(poses, settings.ambiguity, settings.max_gap_us),
+            ingest: Ingest::new(poses, settings.ambiguity, settings.max_gap_us)
+                .with_min_rssi(settings.min_rssi_dbm),
             settings,
             shared,
             decoders: crate::reads::Decoders::default(),
@@ -439,7 +443,7 @@ impl Worker {
                 .bound_tag(&r.epc, self.settings.max_samples_per_tag);
         }
         let aside = self.ingest.set_aside();
-        let aside = aside.no_phase + aside.no_frequency + aside.no_pose;
+        let aside = aside.total();
         if aside > self.set_aside_seen {
             self.shared
                 .metrics
