@@ -275,9 +275,7 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
         _ => {
             let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us)
                 .with_min_rssi(run.settings.min_rssi_dbm);
-            for r in &run.reads {
-                ingest.push(r);
-            }
+            ingest.extend(&run.reads);
             estimate_all(&ingest, estimator, &g)
         }
     };

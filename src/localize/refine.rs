@@ -197,9 +197,7 @@ pub fn localize_refined(
 ) -> (Vec<Estimate>, Poses) {
     let ingest_on = |poses: Poses| {
         let mut ingest = Ingest::new(poses, settings.0, settings.1).with_min_rssi(settings.2);
-        for r in reads {
-            ingest.push(r);
-        }
+        ingest.extend(reads);
         ingest
     };
     let corrected = refined_poses(&ingest_on(poses.clone()), g, m);

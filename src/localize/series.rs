@@ -60,7 +60,28 @@ enum Split {
 /// The step from unwrapped phase `prev` to the nearest turn of `folded` (a phase folded onto
 /// `period`): within ±period/2.
 fn step(folded: f64, prev: f64, period: f64) -> f64 {
-    (folded - prev + period / 2.0).rem_euclid(period) - period / 2.0
+    // Whole periods off by a floor, not `rem_euclid` (a libm fmod, a good part of filing a
+    // read): `prev` grows along a segment, so the difference is not near one period.
+    let x = folded - prev + period / 2.0;
+    let mut r = x - (x / period).floor() * period;
+    if r >= period {
+        r -= period;
+    } else if r < 0.0 {
+        r += period;
+    }
+    r - period / 2.0
+}
+
+/// `phase` onto [0, `period`): a reported phase already is, or is one period above it
+/// (π ambiguity), both exact without a libm fmod.
+fn fold(phase: f64, period: f64) -> f64 {
+    if (0.0..period).contains(&phase) {
+        phase
+    } else if (period..2.0 * period).contains(&phase) {
+        phase - period
+    } else {
+        phase.rem_euclid(period)
+    }
 }
 
 /// Default longest time between two reads of one segment (µs): the motion check is what
@@ -131,7 +152,7 @@ impl Series {
             self.insert_late(t_us, phase_rad, antenna, yaw_rad);
             return;
         }
-        let folded = phase_rad.rem_euclid(self.ambiguity.period());
+        let folded = fold(phase_rad, self.ambiguity.period());
         let unwrapped = match self.samples.last().copied() {
             Some(prev) => self.link(&prev, t_us, folded, antenna),
             None => None,
@@ -335,6 +356,26 @@ impl Series {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_step_and_the_fold_agree_with_rem_euclid() {
+        for period in [std::f64::consts::TAU, std::f64::consts::PI] {
+            for k in -4000..4000 {
+                let prev = f64::from(k) * 0.0731;
+                for folded in [0.0, 0.3, 1.7, 3.1, period - 1e-12] {
+                    let want = (folded - prev + period / 2.0).rem_euclid(period) - period / 2.0;
+                    let got = step(folded, prev, period);
+                    // Equal, or both ends of the half-open range at a rounding boundary.
+                    let same =
+                        (got - want).abs() < 1e-12 || ((got - want).abs() - period).abs() < 1e-9;
+                    assert!(same, "{folded} {prev} {period}: {got} {want}");
+                    assert!((-period / 2.0..period / 2.0).contains(&got), "{got}");
+                }
+                let phase = f64::from(k) * 0.0137;
+                assert_eq!(fold(phase, period), phase.rem_euclid(period), "{phase}");
+            }
+        }
+    }
 
     #[test]
     fn thinning_keeps_each_segments_ends_and_allocates_nothing_in_steady_state() {

@@ -15,6 +15,8 @@ struct SegmentCost {
     columns: [Vec<f32>; 5],
     /// Each phase's weight (reads), 0 for padding.
     weights: Vec<f32>,
+    /// Each segment's summed weight.
+    totals: Vec<f32>,
     /// The phases are in segment order: where each segment's run of them is.
     runs: Vec<std::ops::Range<usize>>,
     /// Scratch: each phase's residual.
@@ -30,9 +32,11 @@ impl SegmentCost {
         let padded = sorted.len().div_ceil(lanes::LANES) * lanes::LANES;
         let mut columns: [Vec<f32>; 5] = std::array::from_fn(|_| vec![0.0; padded]);
         let mut weights = vec![0.0; padded];
+        let mut totals = Vec::with_capacity(runs.len());
         for r in &runs {
             let run = &sorted[r.clone()];
             let total: f64 = run.iter().map(|o| o.weight).sum();
+            totals.push(total as f32);
             let mean = run.iter().map(|o| o.weight * o.phase_rad).sum::<f64>() / total;
             for i in r.clone() {
                 let o = sorted[i];
@@ -48,6 +52,7 @@ impl SegmentCost {
             origin,
             columns,
             weights,
+            totals,
             runs,
             residuals: vec![0.0; padded],
         }
@@ -65,14 +70,20 @@ impl SegmentCost {
         let (r, w) = (&self.residuals, &self.weights);
         self.runs
             .iter()
-            .map(|run| {
+            .zip(&self.totals)
+            .map(|(run, &total)| {
                 let (v, w) = (&r[run.clone()], &w[run.clone()]);
-                // Two passes: the residuals share a large common part (s·4πd/λ), which a
-                // one-pass Σr² − (Σr)²/n would cancel in f32.
-                let total = w.iter().sum::<f32>();
-                let mean = v.iter().zip(w).map(|(x, w)| w * x).sum::<f32>() / total;
-                let squares = v.iter().zip(w).map(|(x, w)| w * (x - mean) * (x - mean));
-                f64::from(squares.sum::<f32>())
+                // One pass, on the residuals less the segment's first: they share a large
+                // common part (s·4πd/λ), which Σr² − (Σr)²/W would cancel in f32; less one of
+                // them, what is left is of the size of their spread.
+                let first = v[0];
+                let (mut sum, mut squares) = (0.0f32, 0.0f32);
+                for (x, w) in v.iter().zip(w) {
+                    let d = x - first;
+                    sum += w * d;
+                    squares += w * d * d;
+                }
+                f64::from((squares - sum * sum / total).max(0.0))
             })
             .sum()
     }

@@ -2,7 +2,8 @@
 //! that best explain the unwrapped phases, θ_i ≈ s·4π·d_i/λ_i + c_k, by Levenberg–Marquardt
 //! (the `levenberg-marquardt` crate on `nalgebra`), started from the best point of a grid on
 //! the side the antenna faces (the mirror image about a straight path explains the phases as
-//! well): 50 cm on up to 32 of the phases, then 10 cm on up to 100 within 60 cm of its best.
+//! well): 50 cm on up to 32 of the phases (in two levels: 1 m, then 50 cm around the best),
+//! then 10 cm on up to 100 within 60 cm of its best.
 //! Where a series is split, its segments are joined (`split`, ours, with [`super::join`]).
 
 use nalgebra::DVector;
@@ -210,6 +211,25 @@ fn coarse_starts(
     coarse: &mut dyn FnMut([f64; 3]) -> f64,
     starts: usize,
 ) -> Vec<[f64; 3]> {
+    if starts == 1 {
+        // One start: the grid in two levels (twice the step, then the step around the best).
+        let centre = [0, 1, 2].map(|a| (s.lo[a] + s.hi[a]) / 2.0);
+        let half = [0, 1, 2].map(|a| ((s.hi[a] - s.lo[a]) / 2.0 / COARSE.0).ceil() as i32);
+        let half = if s.dims == 2 {
+            [half[0], half[1], 0]
+        } else {
+            half
+        };
+        let mut score = |p: [f64; 3]| {
+            let facing = (p[0] - s.mid[0]) * s.facing[0] + (p[1] - s.mid[1]) * s.facing[1];
+            let inside = (0..s.dims).all(|a| p[a] >= s.lo[a] - 1e-9 && p[a] <= s.hi[a] + 1e-9);
+            (facing >= 0.0 && inside).then(|| -coarse(p))
+        };
+        return join::best_in_box(centre, half, COARSE.0, COARSE_TOP, &mut score)
+            .map(|b| b.1)
+            .into_iter()
+            .collect();
+    }
     let mut points = grid(s, s.lo, s.hi, COARSE.0, coarse);
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut chosen: Vec<[f64; 3]> = Vec::new();
@@ -223,6 +243,9 @@ fn coarse_starts(
     }
     chosen
 }
+
+/// Points of the coarse grid's first level (twice its step) whose neighbours are searched.
+const COARSE_TOP: usize = 16;
 
 /// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`.
 fn refine(s: &Search, c: [f64; 3], fine: &mut dyn FnMut([f64; 3]) -> f64) -> [f64; 3] {
