@@ -36,6 +36,23 @@ fn localize(args: &[&str], output: &Path) -> (bool, Option<serde_json::Value>, S
     )
 }
 
+/// Runs `localize` on the shipped S1 recording with its pose file and the settings file
+/// `settings`.
+fn localize_s1(settings: &Path, output: &Path) -> (bool, Option<serde_json::Value>, String) {
+    let rec = fixture("s1-report-per-read.jsonl");
+    let poses = fixture("s1-report-per-read.poses.jsonl");
+    localize(
+        &[
+            rec.to_str().expect("utf-8"),
+            "--poses",
+            poses.to_str().expect("utf-8"),
+            "--settings",
+            settings.to_str().expect("utf-8"),
+        ],
+        output,
+    )
+}
+
 /// S1's true tag positions, by EPC.
 fn truth() -> Vec<(String, [f64; 3])> {
     let text = std::fs::read_to_string(
@@ -78,19 +95,8 @@ fn errors(estimates: &serde_json::Value) -> Vec<f64> {
 fn the_s1_recording_with_the_robots_poses_localizes_every_tag_as_documented() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("estimates.json");
-    let rec = fixture("s1-report-per-read.jsonl");
-    let poses = fixture("s1-report-per-read.poses.jsonl");
     let settings = fixture("s1-report-per-read.settings.json");
-    let (ok, json, stderr) = localize(
-        &[
-            rec.to_str().expect("utf-8"),
-            "--poses",
-            poses.to_str().expect("utf-8"),
-            "--settings",
-            settings.to_str().expect("utf-8"),
-        ],
-        &out,
-    );
+    let (ok, json, stderr) = localize_s1(&settings, &out);
     assert!(ok, "{stderr}");
     assert!(stderr.contains("10 tags from"), "{stderr}");
     let json = json.expect("estimates written");
@@ -301,8 +307,6 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
 fn reads_under_the_settings_rssi_floor_are_set_aside_and_counted() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("out.json");
-    let rec = fixture("s1-report-per-read.jsonl");
-    let poses = fixture("s1-report-per-read.poses.jsonl");
     let settings = dir.path().join("settings.json");
     let run = |floor: f64| {
         std::fs::write(
@@ -312,16 +316,7 @@ fn reads_under_the_settings_rssi_floor_are_set_aside_and_counted() {
             ),
         )
         .expect("writes");
-        let (ok, json, stderr) = localize(
-            &[
-                rec.to_str().expect("utf-8"),
-                "--poses",
-                poses.to_str().expect("utf-8"),
-                "--settings",
-                settings.to_str().expect("utf-8"),
-            ],
-            &out,
-        );
+        let (ok, json, stderr) = localize_s1(&settings, &out);
         assert!(ok, "{stderr}");
         // Tags located: a tag all of whose reads were set aside is listed without a position.
         let tags = json.expect("estimates")["tags"]

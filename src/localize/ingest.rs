@@ -87,8 +87,9 @@ impl Ingest {
         }
     }
 
-    /// These series with reads whose RSSI is under `dbm` set aside (counted, never filed): a
-    /// weak read's phase is noisy enough to slip the unwrapping. A read without RSSI is kept.
+    /// This ingest with every read whose RSSI is under `dbm` set aside (counted, never
+    /// filed): a weak read's phase is noisy enough to slip the unwrapping. A read without RSSI
+    /// is kept.
     pub fn with_min_rssi(mut self, dbm: Option<f64>) -> Ingest {
         self.min_rssi_dbm = dbm;
         self
@@ -287,6 +288,7 @@ impl Ingest {
 mod tests {
     use super::*;
     use crate::localize::poses::PoseSample;
+    use crate::localize::series::Sample;
     use crate::reads::AntennaPose;
 
     fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
@@ -396,6 +398,36 @@ mod tests {
             all.push(&with(t, Some(-80.0)));
         }
         assert_eq!((all.taken(), all.set_aside().weak), (2, 0));
+    }
+
+    #[test]
+    fn extending_by_a_slice_files_as_pushing_each_read() {
+        // Two tags on two channels, interleaved, with a late read among them.
+        let mut reads: Vec<Read> = (0..40u64)
+            .map(|k| {
+                let (epc, f) = if k % 3 == 0 {
+                    ("A1", 915_250_000)
+                } else {
+                    ("B2", 902_750_000)
+                };
+                posed(epc, k * 10_000, 0.004 * k as f64, f)
+            })
+            .collect();
+        reads.swap(20, 22);
+        let mut one_by_one = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        for r in &reads {
+            one_by_one.push(r);
+        }
+        let mut extended = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        extended.extend(&reads);
+        assert_eq!(extended.taken(), 40);
+        let series = |i: &Ingest| -> Vec<(Key, Vec<Sample>)> {
+            i.series()
+                .map(|(k, s)| (k.clone(), s.samples().to_vec()))
+                .collect()
+        };
+        assert_eq!(series(&extended), series(&one_by_one));
+        assert_eq!(series(&extended).len(), 2);
     }
 
     /// A read of phase 0.5 rad carrying its own pose: the antenna at `x` on the x axis.
