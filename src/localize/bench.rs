@@ -267,10 +267,8 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
     let start = Instant::now();
     let estimates = match (source, run.pose_error) {
         (PoseSource::Refined, Some(m)) => {
-            let s = &run.settings;
-            let settings = (s.ambiguity, s.max_gap_us, s.min_rssi_dbm);
             let poses = &run.estimated_poses;
-            localize_refined(&run.reads, poses, settings, estimator, &g, &m).0
+            localize_refined(&run.reads, poses, &run.settings, estimator, &g, &m).0
         }
         _ => {
             let mut ingest = Ingest::new(poses, run.settings.ambiguity, run.settings.max_gap_us)

@@ -110,7 +110,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         let weak = run
             .reads
             .iter()
-            .filter(|r| r.rssi_dbm.is_some_and(|v| v < floor))
+            .filter(|r| super::ingest::under_floor(r, Some(floor)))
             .count();
         println!(
             "Reads weaker than {floor} dBm set aside: {weak} of {}\n",

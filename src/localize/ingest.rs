@@ -38,6 +38,12 @@ impl SetAside {
     }
 }
 
+/// Whether `read`'s RSSI is under `floor` (dBm): such a read is set aside. A read without
+/// RSSI, or no floor, is not.
+pub fn under_floor(read: &Read, floor: Option<f64>) -> bool {
+    matches!((floor, read.rssi_dbm), (Some(floor), Some(rssi)) if rssi < floor)
+}
+
 /// Asks the CPU to bring the cache line at `p` in (a hint: no load, no fault).
 #[inline(always)]
 fn prefetch(p: *const u8) {
@@ -97,11 +103,9 @@ impl Ingest {
 
     /// Takes one read (a read older than its series' newest is put in its place in time).
     pub fn push(&mut self, read: &Read) {
-        if let (Some(floor), Some(rssi)) = (self.min_rssi_dbm, read.rssi_dbm) {
-            if rssi < floor {
-                self.set_aside.weak += 1;
-                return;
-            }
+        if under_floor(read, self.min_rssi_dbm) {
+            self.set_aside.weak += 1;
+            return;
         }
         let Some(phase) = read.phase_rad else {
             self.set_aside.no_phase += 1;

@@ -12,8 +12,8 @@ use nalgebra::{Matrix2, Vector2};
 
 use super::estimate::{estimate_all, Estimate, Estimator, Geometry};
 use super::ingest::Ingest;
+use super::live::Settings;
 use super::poses::{PoseSample, Poses};
-use super::series::Ambiguity;
 use crate::reads::Read;
 
 /// The pose error the smoother assumes: x and y, each a Gauss–Markov process.
@@ -185,18 +185,20 @@ pub fn refined_poses(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> Poses
     refine(ingest, ingest.poses(), &tags, &|r| g.sign_of(r), m)
 }
 
-/// Every tag of `reads` located by `estimator` on `poses` refined once ([`refined_poses`]).
+/// Every tag of `reads` located by `estimator` on `poses` refined once ([`refined_poses`]),
+/// the reads filed as `settings` say.
 /// Returns the estimates and the corrected poses.
 pub fn localize_refined(
     reads: &[Read],
     poses: &Poses,
-    settings: (Ambiguity, u64, Option<f64>),
+    settings: &Settings,
     estimator: Estimator,
     g: &Geometry,
     m: &PoseErrorModel,
 ) -> (Vec<Estimate>, Poses) {
     let ingest_on = |poses: Poses| {
-        let mut ingest = Ingest::new(poses, settings.0, settings.1).with_min_rssi(settings.2);
+        let mut ingest = Ingest::new(poses, settings.ambiguity, settings.max_gap_us)
+            .with_min_rssi(settings.min_rssi_dbm);
         ingest.extend(reads);
         ingest
     };
@@ -208,6 +210,7 @@ pub fn localize_refined(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::localize::series::Ambiguity;
     use crate::localize::synthetic::{read, FREQUENCY_HZ};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};

@@ -112,6 +112,13 @@ struct Search {
     hint: Option<[f64; 3]>,
 }
 
+impl Search {
+    /// Whether the horizontal point `p` is on the side the antennas face (or on their path).
+    fn faces(&self, p: [f64; 2]) -> bool {
+        (p[0] - self.mid[0]) * self.facing[0] + (p[1] - self.mid[1]) * self.facing[1] >= 0.0
+    }
+}
+
 /// The points of the grid of `step` over (`lo`, `hi`) on the facing side, each with its
 /// `cost`.
 fn grid(
@@ -126,7 +133,7 @@ fn grid(
     for i in 0..=steps[0] {
         for j in 0..=steps[1] {
             let (x, y) = (lo[0] + i as f64 * step, lo[1] + j as f64 * step);
-            if (x - s.mid[0]) * s.facing[0] + (y - s.mid[1]) * s.facing[1] < 0.0 {
+            if !s.faces([x, y]) {
                 continue;
             }
             for k in 0..=steps[2] {
@@ -221,9 +228,8 @@ fn coarse_starts(
             half
         };
         let mut score = |p: [f64; 3]| {
-            let facing = (p[0] - s.mid[0]) * s.facing[0] + (p[1] - s.mid[1]) * s.facing[1];
             let inside = (0..s.dims).all(|a| p[a] >= s.lo[a] - 1e-9 && p[a] <= s.hi[a] + 1e-9);
-            (facing >= 0.0 && inside).then(|| -coarse(p))
+            (s.faces([p[0], p[1]]) && inside).then(|| -coarse(p))
         };
         return join::best_in_box(centre, half, COARSE.0, COARSE_TOP, &mut score)
             .map(|b| b.1)
@@ -252,8 +258,7 @@ fn refine(s: &Search, c: [f64; 3], fine: &mut dyn FnMut([f64; 3]) -> f64) -> [f6
     let n = FINE_HALF_STEPS;
     let half = [n, n, if s.dims == 3 { n } else { 0 }];
     let mut score = |p: [f64; 3]| {
-        let facing = (p[0] - s.mid[0]) * s.facing[0] + (p[1] - s.mid[1]) * s.facing[1];
-        (facing >= 0.0 && p[2] >= s.lo[2] && p[2] <= s.hi[2]).then(|| -fine(p))
+        (s.faces([p[0], p[1]]) && p[2] >= s.lo[2] && p[2] <= s.hi[2]).then(|| -fine(p))
     };
     join::best_in_box(c, half, FINE.0, FINE_TOP, &mut score).map_or(c, |b| b.1)
 }
