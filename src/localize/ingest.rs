@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use rustc_hash::FxHashMap;
 
-use super::poses::Poses;
+use super::poses::{Poses, Track};
 use super::series::{Ambiguity, Series};
 use super::SPEED_OF_LIGHT;
 use crate::reads::Read;
@@ -55,6 +55,38 @@ fn prefetch(p: *const u8) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
+}
+
+/// The pose tracks one batch of reads has looked up (reader, antenna, its track if there is
+/// one, and where its last lookup landed): a handful of antennas, scanned.
+#[allow(clippy::type_complexity)]
+struct Tracks<'r, 'p>(Vec<(&'r str, u16, Option<Track<'p>>, usize)>);
+
+impl<'r, 'p> Tracks<'r, 'p> {
+    /// Most antennas remembered; beyond it a track is looked up each time.
+    const MAX: usize = 64;
+
+    /// [`Poses::position_at`] through the remembered track of `reader`'s `antenna`.
+    fn position_at(
+        &mut self,
+        poses: &'p Poses,
+        reader: &'r str,
+        antenna: u16,
+        t_us: u64,
+    ) -> Option<([f64; 3], f64)> {
+        let known = self.0.iter().position(|e| e.1 == antenna && e.0 == reader);
+        let i = match known {
+            Some(i) => i,
+            None if self.0.len() < Self::MAX => {
+                self.0
+                    .push((reader, antenna, poses.track_at(reader, antenna), 0));
+                self.0.len() - 1
+            }
+            None => return poses.position_at(reader, antenna, t_us),
+        };
+        let (_, _, track, cursor) = &mut self.0[i];
+        track.as_ref()?.position_at(t_us, cursor)
+    }
 }
 
 /// Every series of the reads taken in so far.
@@ -103,6 +135,34 @@ impl Ingest {
 
     /// Takes one read (a read older than its series' newest is put in its place in time).
     pub fn push(&mut self, read: &Read) {
+        self.extend(std::slice::from_ref(read));
+    }
+
+    /// Takes `reads` in order, as [`Ingest::push`] does each: each antenna's pose track is
+    /// found once and its reads looked up from where the last one landed, and the EPC and
+    /// reader name of reads a few ahead are fetched into the cache while the one before them
+    /// is filed (reads in memory hold them on the heap, one allocation each, which would
+    /// otherwise be waited for read by read).
+    pub fn extend(&mut self, reads: &[Read]) {
+        const AHEAD: usize = 8;
+        // Taken out for the batch, so that the series can be filed while its tracks are
+        // borrowed; put back below.
+        let poses = std::mem::take(&mut self.poses);
+        let mut tracks = Tracks(Vec::new());
+        for (i, read) in reads.iter().enumerate() {
+            if let Some(next) = reads.get(i + AHEAD) {
+                prefetch(next.epc.as_ptr());
+                if let Some(reader) = &next.reader {
+                    prefetch(reader.as_ptr());
+                }
+            }
+            self.take(read, &poses, &mut tracks);
+        }
+        self.poses = poses;
+    }
+
+    /// Files one read, its pose from `poses` through `tracks`.
+    fn take<'r, 'p>(&mut self, read: &'r Read, poses: &'p Poses, tracks: &mut Tracks<'r, 'p>) {
         if under_floor(read, self.min_rssi_dbm) {
             self.set_aside.weak += 1;
             return;
@@ -118,7 +178,7 @@ impl Ingest {
         let reader = read.reader.as_deref().unwrap_or_default();
         let pose = match &read.antenna_pose {
             Some(p) => Some(([p.x, p.y, p.z], p.yaw_deg)),
-            None => self.poses.position_at(reader, read.antenna, read.t_us),
+            None => tracks.position_at(poses, reader, read.antenna, read.t_us),
         };
         let Some((position, yaw_deg)) = pose else {
             self.set_aside.no_pose += 1;
@@ -136,23 +196,6 @@ impl Ingest {
             .1
             .push(read.t_us, phase, position, yaw_deg.to_radians());
         self.taken += 1;
-    }
-
-    /// Takes `reads` in order, as [`Ingest::push`] does each: the EPC and reader name of
-    /// reads a few ahead are fetched into the cache while the one before them is filed
-    /// (reads in memory hold them on the heap, one allocation each, which would otherwise be
-    /// waited for read by read).
-    pub fn extend(&mut self, reads: &[Read]) {
-        const AHEAD: usize = 8;
-        for (i, read) in reads.iter().enumerate() {
-            if let Some(next) = reads.get(i + AHEAD) {
-                prefetch(next.epc.as_ptr());
-                if let Some(reader) = &next.reader {
-                    prefetch(reader.as_ptr());
-                }
-            }
-            self.push(read);
-        }
     }
 
     /// A new series under `key`: where it is.

@@ -333,6 +333,32 @@ pub fn best_in_box(
     top: usize,
     score: &mut dyn FnMut([f64; 3]) -> Option<f64>,
 ) -> Option<(f64, [f64; 3])> {
+    levels(centre, half, step, top, None, score)
+}
+
+/// [`best_in_box`] with the first level scored by `rough` (a cheaper score that ranks points
+/// as `score` does, roughly); its `top` best points are then scored by `score` with their
+/// neighbours.
+pub fn best_in_box_rough(
+    centre: [f64; 3],
+    half: [i32; 3],
+    step: f64,
+    top: usize,
+    rough: &mut dyn FnMut([f64; 3]) -> Option<f64>,
+    score: &mut dyn FnMut([f64; 3]) -> Option<f64>,
+) -> Option<(f64, [f64; 3])> {
+    levels(centre, half, step, top, Some(rough), score)
+}
+
+/// [`best_in_box`]'s two levels, the first scored by `rough` where it is given.
+fn levels(
+    centre: [f64; 3],
+    half: [i32; 3],
+    step: f64,
+    top: usize,
+    mut rough: Option<&mut dyn FnMut([f64; 3]) -> Option<f64>>,
+    score: &mut dyn FnMut([f64; 3]) -> Option<f64>,
+) -> Option<(f64, [f64; 3])> {
     let at =
         |c: [f64; 3], d: [i32; 3], h: [f64; 3]| [0, 1, 2].map(|a| c[a] + f64::from(d[a]) * h[a]);
     // Axes of 2 half steps or more are searched at twice the step first.
@@ -343,7 +369,11 @@ pub fn best_in_box(
         for j in -coarse_half[1]..=coarse_half[1] {
             for k in -coarse_half[2]..=coarse_half[2] {
                 let p = at(centre, [i, j, k], coarse_step);
-                if let Some(v) = score(p) {
+                let v = match rough.as_mut() {
+                    Some(rough) => rough(p),
+                    None => score(p),
+                };
+                if let Some(v) = v {
                     points.push((v, p));
                 }
             }
@@ -351,13 +381,17 @@ pub fn best_in_box(
     }
     points.sort_by(|a, b| b.0.total_cmp(&a.0));
     points.truncate(top);
-    let mut best = points.first().copied();
+    let mut best = match rough {
+        Some(_) => None,
+        None => points.first().copied(),
+    };
     let near = half.map(|n| i32::from(n >= 2));
     for &(_, p) in &points {
         for i in -near[0]..=near[0] {
             for j in -near[1]..=near[1] {
                 for k in -near[2]..=near[2] {
-                    if (i, j, k) == (0, 0, 0) {
+                    // The point itself has its score already, unless it was scored roughly.
+                    if (i, j, k) == (0, 0, 0) && rough.is_none() {
                         continue;
                     }
                     let q = at(p, [i, j, k], [step; 3]);
@@ -495,6 +529,24 @@ mod tests {
         assert_eq!(flat[2], 0.5);
         // Nothing to consider: no point.
         assert!(best_in_box([0.0; 3], [4, 4, 4], 0.01, 4, &mut |_| None).is_none());
+    }
+
+    #[test]
+    fn a_rough_first_level_picks_the_points_the_exact_score_then_decides_among() {
+        // The exact score peaks at an odd step; the rough one agrees near the peak but ranks
+        // a far point (the box's corner) above everything: the corner's rough score must not
+        // stand for the point, and the exact peak is still found from the other top points.
+        let peak = [0.03, -0.05, 0.07];
+        let exact = |p: [f64; 3]| -((0..3).map(|a| (p[a] - peak[a]).powi(2)).sum::<f64>());
+        let corner = |p: [f64; 3]| p.iter().all(|&x| x < -0.07);
+        let mut rough = |p: [f64; 3]| Some(if corner(p) { 1.0 } else { exact(p) });
+        let mut score = |p: [f64; 3]| Some(exact(p));
+        let (v, best) =
+            best_in_box_rough([0.0; 3], [8, 8, 8], 0.01, 4, &mut rough, &mut score).unwrap();
+        for a in 0..3 {
+            assert!((best[a] - peak[a]).abs() < 1e-9, "{best:?}");
+        }
+        assert_eq!(v, exact(best), "the value is the exact score");
     }
 
     #[test]

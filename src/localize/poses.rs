@@ -256,16 +256,10 @@ impl Poses {
 
     /// The position (m) and yaw (°) of [`Poses::at`], without making a sample.
     pub fn position_at(&self, reader: &str, antenna: u16, t_us: u64) -> Option<([f64; 3], f64)> {
-        let (_, before, after) = self.around(reader, antenna, t_us)?;
-        let Some((after, f)) = after else {
-            return Some(([before.x, before.y, before.z], before.yaw_deg));
-        };
-        let (position, yaw_deg, _) = blend(before, after, f);
-        Some((position, yaw_deg))
+        self.track_at(reader, antenna)?.position_at(t_us, &mut 0)
     }
 
-    /// Robot time of reader time `t_us`, and the sample at it, or the samples around it with
-    /// the fraction of the way from the first to the second (at most the reach apart).
+    /// [`Track::around`] on `reader`'s `antenna`.
     #[allow(clippy::type_complexity)]
     fn around(
         &self,
@@ -273,21 +267,16 @@ impl Poses {
         antenna: u16,
         t_us: u64,
     ) -> Option<(u64, &PoseSample, Option<(&PoseSample, f64)>)> {
-        let track = self.track_of(reader, antenna)?;
-        let offset = self.offset(reader);
-        let t = i128::from(t_us) - i128::from(offset);
-        let t = u64::try_from(t).ok()?;
-        let i = at_or_before(track, t);
-        let before = track.get(i.checked_sub(1)?)?;
-        if before.t_us == t {
-            return Some((t, before, None));
-        }
-        let after = track.get(i)?;
-        if after.t_us - before.t_us > self.reach_us {
-            return None;
-        }
-        let f = (t - before.t_us) as f64 / (after.t_us - before.t_us) as f64;
-        Some((t, before, Some((after, f))))
+        self.track_at(reader, antenna)?.around(t_us, &mut 0)
+    }
+
+    /// The track of `reader`'s `antenna` with its clock offset, to look many reads up in.
+    pub fn track_at(&self, reader: &str, antenna: u16) -> Option<Track<'_>> {
+        Some(Track {
+            samples: self.track_of(reader, antenna)?,
+            offset_us: self.offset(reader),
+            reach_us: self.reach_us,
+        })
     }
 
     /// `reader`'s clock offset (reader time − robot time, µs; 0 when not set).
@@ -309,10 +298,70 @@ impl Poses {
     }
 }
 
-/// How many of `track`'s samples (in time order) are at or before `t`: first where the
-/// track's mean interval puts `t` (right, or next to it, on a track sampled at a steady
-/// rate), else by binary search.
-fn at_or_before(track: &[PoseSample], t: u64) -> usize {
+/// One antenna's pose track with its reader's clock offset and the reach: the reads of one
+/// antenna looked up in turn, each starting where the one before landed.
+#[derive(Clone, Copy, Debug)]
+pub struct Track<'a> {
+    samples: &'a [PoseSample],
+    offset_us: i64,
+    reach_us: u64,
+}
+
+impl<'a> Track<'a> {
+    /// [`Poses::position_at`] on this track; `cursor` is where the last lookup landed (0 at
+    /// first), and is moved to where this one does.
+    pub fn position_at(&self, t_us: u64, cursor: &mut usize) -> Option<([f64; 3], f64)> {
+        let (_, before, after) = self.around(t_us, cursor)?;
+        let Some((after, f)) = after else {
+            return Some(([before.x, before.y, before.z], before.yaw_deg));
+        };
+        let (position, yaw_deg, _) = blend(before, after, f);
+        Some((position, yaw_deg))
+    }
+
+    /// Robot time of reader time `t_us`, and the sample at it, or the samples around it with
+    /// the fraction of the way from the first to the second (at most the reach apart);
+    /// `cursor` as for [`Track::position_at`].
+    #[allow(clippy::type_complexity)]
+    fn around(
+        &self,
+        t_us: u64,
+        cursor: &mut usize,
+    ) -> Option<(u64, &'a PoseSample, Option<(&'a PoseSample, f64)>)> {
+        let track = self.samples;
+        let t = i128::from(t_us) - i128::from(self.offset_us);
+        let t = u64::try_from(t).ok()?;
+        let i = at_or_before(track, t, *cursor);
+        *cursor = i;
+        let before = track.get(i.checked_sub(1)?)?;
+        if before.t_us == t {
+            return Some((t, before, None));
+        }
+        let after = track.get(i)?;
+        if after.t_us - before.t_us > self.reach_us {
+            return None;
+        }
+        let f = (t - before.t_us) as f64 / (after.t_us - before.t_us) as f64;
+        Some((t, before, Some((after, f))))
+    }
+}
+
+/// How many of `track`'s samples (in time order) are at or before `t`: first `hint` (the
+/// count for a time a little before: the same, or one more), then where the track's mean
+/// interval puts `t` (right, or next to it, on a track sampled at a steady rate), else by
+/// binary search.
+fn at_or_before(track: &[PoseSample], t: u64, hint: usize) -> usize {
+    // Exactly i + 1 samples are at or before t (times strictly increase).
+    let fits = |i: usize| {
+        i < track.len() && track[i].t_us <= t && track.get(i + 1).map_or(true, |s| s.t_us > t)
+    };
+    if let Some(i) = [hint.checked_sub(1), Some(hint)]
+        .into_iter()
+        .flatten()
+        .find(|&i| fits(i))
+    {
+        return i + 1;
+    }
     let (Some(first), Some(last)) = (track.first(), track.last()) else {
         return 0;
     };
@@ -342,10 +391,22 @@ fn at_or_before(track: &[PoseSample], t: u64) -> usize {
 /// [−180, 180), turned the short way round.
 fn blend(a: &PoseSample, b: &PoseSample, f: f64) -> ([f64; 3], f64, f64) {
     let lerp = |u: f64, v: f64| u + (v - u) * f;
-    let turn = (b.yaw_deg - a.yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
-    let yaw = (a.yaw_deg + turn * f + 180.0).rem_euclid(360.0) - 180.0;
+    let turn = wrap360(b.yaw_deg - a.yaw_deg + 180.0) - 180.0;
+    let yaw = wrap360(a.yaw_deg + turn * f + 180.0) - 180.0;
     let position = [lerp(a.x, b.x), lerp(a.y, b.y), lerp(a.z, b.z)];
     (position, yaw, lerp(a.pitch_deg, b.pitch_deg))
+}
+
+/// `x` modulo 360, in [0, 360): as `rem_euclid`, without its division for `x` within a turn
+/// of that range (a yaw's usual case).
+fn wrap360(x: f64) -> f64 {
+    if (0.0..360.0).contains(&x) {
+        x
+    } else if (360.0..720.0).contains(&x) {
+        x - 360.0
+    } else {
+        x.rem_euclid(360.0)
+    }
 }
 
 /// A CSV row under `columns` as a sample.
@@ -452,7 +513,7 @@ mod tests {
     }
 
     #[test]
-    fn the_guessed_sample_is_the_one_a_binary_search_finds() {
+    fn the_guessed_sample_is_the_one_a_binary_search_finds_whatever_the_hint() {
         // Steady (100 ms), jittered, with a long gap, and with repeated times.
         let steady: Vec<u64> = (0..50).map(|k| 1_000 + k * 100_000).collect();
         let jittered: Vec<u64> = (0..50).map(|k| k * 100_000 + (k * 7919) % 40_000).collect();
@@ -464,8 +525,20 @@ mod tests {
             let end = times.last().copied().unwrap_or(0) + 200_000;
             for t in (0..end).step_by(997).chain(times.iter().copied()) {
                 let want = track.partition_point(|s| s.t_us <= t);
-                assert_eq!(at_or_before(&track, t), want, "t {t} in {times:?}");
+                for hint in [0, want.saturating_sub(1), want, want + 1, track.len() + 1] {
+                    let got = at_or_before(&track, t, hint);
+                    assert_eq!(got, want, "t {t} hint {hint} in {times:?}");
+                }
             }
+        }
+    }
+
+    #[test]
+    fn the_yaw_wrap_is_rem_euclid() {
+        for x in [
+            -725.5, -360.0, -0.0, 0.0, 1e-12, 359.999, 360.0, 500.0, 720.0, 1e6,
+        ] {
+            assert_eq!(wrap360(x).to_bits(), x.rem_euclid(360.0).to_bits(), "{x}");
         }
     }
 

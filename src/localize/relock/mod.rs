@@ -166,10 +166,11 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
         Some(h) => [h[0], h[1], if s.dims == 3 { h[2] } else { s.z }],
         None => {
             let (coarse, fine) = (spread(obs, COARSE.1), spread(obs, FINE.1));
-            let best = coarse_starts(s, &mut segment_cost(&coarse, s.sign), 1);
+            let mut coarse_cost = segment_cost(&coarse, s.sign);
+            let best = coarse_starts(s, &mut coarse_cost, 1);
             let best = best.first().copied().ok_or(NoFix::InsufficientGeometry)?;
             let mut fine_cost = segment_cost(&fine, s.sign);
-            refine(s, best, &mut fine_cost)
+            refine(s, best, Some(&mut coarse_cost), &mut fine_cost)
         }
     };
     // A fit outside the box in height is no fix.
@@ -253,14 +254,28 @@ fn coarse_starts(
 /// Points of the coarse grid's first level (twice its step) whose neighbours are searched.
 const COARSE_TOP: usize = 16;
 
-/// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`.
-fn refine(s: &Search, c: [f64; 3], fine: &mut dyn FnMut([f64; 3]) -> f64) -> [f64; 3] {
+/// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`, its
+/// first level (twice the step) ranked by the `coarse` cost where it is given (the
+/// separate-offsets cost on the coarse grid's phases ranks the fine grid's first level as
+/// the fine cost does on S1–S3; the split fit's phase-pair cost does not).
+fn refine(
+    s: &Search,
+    c: [f64; 3],
+    coarse: Option<&mut dyn FnMut([f64; 3]) -> f64>,
+    fine: &mut dyn FnMut([f64; 3]) -> f64,
+) -> [f64; 3] {
     let n = FINE_HALF_STEPS;
     let half = [n, n, if s.dims == 3 { n } else { 0 }];
-    let mut score = |p: [f64; 3]| {
-        (s.faces([p[0], p[1]]) && p[2] >= s.lo[2] && p[2] <= s.hi[2]).then(|| -fine(p))
+    let allowed = |p: [f64; 3]| s.faces([p[0], p[1]]) && p[2] >= s.lo[2] && p[2] <= s.hi[2];
+    let mut score = |p: [f64; 3]| allowed(p).then(|| -fine(p));
+    let best = match coarse {
+        Some(coarse) => {
+            let mut rough = |p: [f64; 3]| allowed(p).then(|| -coarse(p));
+            join::best_in_box_rough(c, half, FINE.0, FINE_TOP, &mut rough, &mut score)
+        }
+        None => join::best_in_box(c, half, FINE.0, FINE_TOP, &mut score),
     };
-    join::best_in_box(c, half, FINE.0, FINE_TOP, &mut score).map_or(c, |b| b.1)
+    best.map_or(c, |b| b.1)
 }
 
 /// Points of the fine grid's first level (twice its step) whose neighbours are searched.

@@ -155,7 +155,7 @@ pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Sol
         let starts = coarse_starts(s, &mut |p| coarse.at(p), STARTS);
         starts
             .into_iter()
-            .map(move |c| refine(s, c, &mut |p| fine.at(p)))
+            .map(move |c| refine(s, c, None, &mut |p| fine.at(p)))
     });
     let mut best: Option<(f64, Solution)> = None;
     for c in near.into_iter().chain(grid) {
