@@ -15,7 +15,7 @@ mod cost;
 mod problem;
 mod split;
 
-use bins::{bin, BIN_ABOVE};
+use bins::{bin, BIN_ABOVE, BIN_M, SEPARATE_BIN_M};
 use cost::segment_cost;
 use problem::{solve, Problem, Solution};
 
@@ -146,7 +146,7 @@ fn grid(
 }
 
 /// The fit of `obs` in `s` (its phases binned ([`bin`]) where there are more than
-/// [`BIN_ABOVE`]): a coarse grid (COARSE) of the per-segment cost over the box, a
+/// [`BIN_ABOVE`], at [`SEPARATE_BIN_M`], and at [`BIN_M`] for the joining): a coarse grid (COARSE) of the per-segment cost over the box, a
 /// finer one (FINE) around its best point, and Levenberg–Marquardt from there, each segment
 /// with its own offset; when a series is split or calibrated antennas hold several series
 /// ([`join::joinable`]) and that fit leaves σ above [`JOIN_ABOVE_SIGMA_M`], also
@@ -154,9 +154,10 @@ fn grid(
 /// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
 /// phases could not tell from it: no fix.
 fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
+    let all = obs;
     let binned;
     let obs = if obs.len() > BIN_ABOVE {
-        binned = bin(obs);
+        binned = bin(obs, SEPARATE_BIN_M);
         binned.as_slice()
     } else {
         obs
@@ -198,6 +199,13 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     let near = separate.as_ref().map(|f| position(&f.0, s));
     // Joined segments must explain the phases about as well as separate offsets do: over a
     // pose track that drifts (odometry), one offset does not hold for long.
+    let fine_binned;
+    let obs = if all.len() > BIN_ABOVE {
+        fine_binned = bin(all, BIN_M);
+        fine_binned.as_slice()
+    } else {
+        obs
+    };
     match (in_box(split::fit(obs, s, near)), separate) {
         (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
         (Some(joined), _) => Ok(joined),

@@ -148,12 +148,12 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
     let (dims, segments) = (problem.dims, problem.inverse_weights.len());
     let (reads, scatter) = (problem.reads, problem.scatter_rad2);
-    let (solved, _report) = solver().minimize(problem);
-    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
+    let (solved, report) = solver().minimize(problem);
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let squares = r.norm_squared() + scatter;
+    // The objective is ½‖r‖² at the parameters returned.
+    let squares = 2.0 * report.objective_function + scatter;
     let variance = squares / (reads - (dims + segments) as f64).max(1.0);
-    let info = j.transpose() * &j;
+    let info = DMatrix::from_fn(dims, dims, |a, b| j.column(a).dot(&j.column(b)));
     let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)? * variance;
     let p = solved.p;
     let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= s.lo[a] && p[a] <= s.hi[a]);
