@@ -73,10 +73,18 @@ fn merge(run: &[Obs]) -> Obs {
     if run.len() == 1 {
         return first;
     }
-    let total: f64 = run.iter().map(|o| o.weight).sum();
-    let mean = |f: &dyn Fn(&Obs) -> f64| run.iter().map(|o| o.weight * f(o)).sum::<f64>() / total;
-    let phase = mean(&|o| o.phase_rad);
-    let antenna = [0, 1, 2].map(|a| mean(&|o| o.antenna[a]));
+    // The weighted sums of weight, phase and antenna position in one pass (each summed in
+    // the reads' order, as separate sums would be).
+    let (mut total, mut phase, mut antenna) = (0.0, 0.0, [0.0; 3]);
+    for o in run {
+        total += o.weight;
+        phase += o.weight * o.phase_rad;
+        for (sum, x) in antenna.iter_mut().zip(o.antenna) {
+            *sum += o.weight * x;
+        }
+    }
+    let phase = phase / total;
+    let antenna = antenna.map(|x| x / total);
     // Position along the run: from its mean, along first → last.
     let last = run[run.len() - 1].antenna;
     let dir = [0, 1, 2].map(|a| last[a] - first.antenna[a]);
