@@ -6,6 +6,8 @@
 //! then 10 cm on up to 100 within 60 cm of its best.
 //! Where a series is split, its segments are joined (`split`, ours, with [`super::join`]).
 
+use std::borrow::Cow;
+
 use nalgebra::DVector;
 
 use super::{join, lanes};
@@ -145,23 +147,25 @@ fn grid(
     out
 }
 
-/// The fit of `obs` in `s` (its phases binned ([`bin`]) where there are more than
-/// [`BIN_ABOVE`], at [`SEPARATE_BIN_M`], and at [`BIN_M`] for the joining): a coarse grid (COARSE) of the per-segment cost over the box, a
-/// finer one (FINE) around its best point, and Levenberg–Marquardt from there, each segment
-/// with its own offset; when a series is split or calibrated antennas hold several series
-/// ([`join::joinable`]) and that fit leaves σ above [`JOIN_ABOVE_SIGMA_M`], also
-/// [`split::fit`], which joins them and is taken unless it explains the phases clearly worse. A fit outside the box in height
-/// (under the floor, say) is the mirror image of the tag about the antennas' path, which the
-/// phases could not tell from it: no fix.
-fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
-    let all = obs;
-    let binned;
-    let obs = if obs.len() > BIN_ABOVE {
-        binned = bin(obs, SEPARATE_BIN_M);
-        binned.as_slice()
-    } else {
-        obs
+/// The fit of the phases `all` in `s` (binned ([`bin`]) where there are more than
+/// [`BIN_ABOVE`]: at [`SEPARATE_BIN_M`], and at [`BIN_M`] for the joining): a coarse grid
+/// (COARSE) of the per-segment cost over the box, a finer one (FINE) around its best point,
+/// and Levenberg–Marquardt from there, each segment with its own offset; when a series is
+/// split or calibrated antennas hold several series ([`join::joinable`]) and that fit leaves
+/// σ above [`JOIN_ABOVE_SIGMA_M`], also [`split::fit`], which joins them and is taken unless
+/// it explains the phases clearly worse. A fit outside the box in height (under the floor,
+/// say) is the mirror image of the tag about the antennas' path, which the phases could not
+/// tell from it: no fix.
+fn fit(all: &[Obs], s: &Search) -> Result<Solution, NoFix> {
+    let binned = |width: f64| {
+        if all.len() > BIN_ABOVE {
+            Cow::Owned(bin(all, width))
+        } else {
+            Cow::Borrowed(all)
+        }
     };
+    let separate_obs = binned(SEPARATE_BIN_M);
+    let obs: &[Obs] = &separate_obs;
     let inside = |h: &[f64; 3]| (0..s.dims).all(|a| h[a] >= s.lo[a] && h[a] <= s.hi[a]);
     let start = match s.hint.filter(inside) {
         Some(h) => [h[0], h[1], if s.dims == 3 { h[2] } else { s.z }],
@@ -199,14 +203,7 @@ fn fit(obs: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     let near = separate.as_ref().map(|f| position(&f.0, s));
     // Joined segments must explain the phases about as well as separate offsets do: over a
     // pose track that drifts (odometry), one offset does not hold for long.
-    let fine_binned;
-    let obs = if all.len() > BIN_ABOVE {
-        fine_binned = bin(all, BIN_M);
-        fine_binned.as_slice()
-    } else {
-        obs
-    };
-    match (in_box(split::fit(obs, s, near)), separate) {
+    match (in_box(split::fit(&binned(BIN_M), s, near)), separate) {
         (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
         (Some(joined), _) => Ok(joined),
         // Separate offsets leave the tag loose (above), and no joined fit stands (its phases
@@ -266,7 +263,7 @@ const COARSE_TOP: usize = 8;
 /// The best point (`fine` cost) of the fine grid around the coarse grid's point `c`, its
 /// first level (twice the step) ranked by the `coarse` cost where it is given (the
 /// separate-offsets cost on the coarse grid's phases ranks the fine grid's first level as
-/// the fine cost does on S1–S3; the split fit's phase-pair cost does not).
+/// the fine cost does on S1 and S2; the split fit's phase-pair cost does not).
 fn refine(
     s: &Search,
     c: [f64; 3],
