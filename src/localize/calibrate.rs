@@ -19,6 +19,7 @@ use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
 use super::ingest::Ingest;
+use super::lanes::sin_cos_f32;
 
 /// Fewest reference tags read by both antennas for an offset between them.
 pub const MIN_REFERENCES: usize = 2;
@@ -37,7 +38,13 @@ pub struct Calibration {
 fn circular_mean(angles: impl Iterator<Item = f64>, period: f64) -> (f64, f64) {
     let (mut re, mut im, mut n) = (0.0, 0.0, 0usize);
     for a in angles {
-        let (s, c) = (a * TAU / period).sin_cos();
+        // Whole turns off in f64 (1.5·2⁵² rounds to the nearest integer), then sin and cos
+        // in f32 to 2e-6: a libm sin/cos a reference read was most of the calibration.
+        const ROUND: f64 = 6_755_399_441_055_744.0;
+        let x = a * TAU / period;
+        let turns = (x / TAU + ROUND) - ROUND;
+        let (s, c) = sin_cos_f32((x - turns * TAU) as f32);
+        let (s, c) = (f64::from(s), f64::from(c));
         re += c;
         im += s;
         n += 1;
