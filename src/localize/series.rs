@@ -73,8 +73,8 @@ fn step(folded: f64, prev: f64, period: f64) -> f64 {
 }
 
 /// `phase` onto [0, `period`): a reported phase already is, or is one period above it
-/// (π ambiguity), both exact without a libm fmod.
-fn fold(phase: f64, period: f64) -> f64 {
+/// (π ambiguity), both exact without a libm fmod (so is a yaw in degrees, period 360).
+pub(crate) fn fold(phase: f64, period: f64) -> f64 {
     if (0.0..period).contains(&phase) {
         phase
     } else if (period..2.0 * period).contains(&phase) {

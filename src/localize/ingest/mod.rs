@@ -77,11 +77,14 @@ struct Met<'r, 'p> {
     cursor: usize,
 }
 
-/// The antennas one batch of reads has met: a handful, scanned.
-struct Tracks<'r, 'p>(Vec<Met<'r, 'p>>);
+/// The antennas one batch of reads has met (a handful, scanned), up to `limit` of them.
+struct Tracks<'r, 'p> {
+    met: Vec<Met<'r, 'p>>,
+    limit: usize,
+}
 
 impl<'r, 'p> Tracks<'r, 'p> {
-    /// Most antennas remembered; beyond it each read's are looked up afresh.
+    /// Most antennas a batch remembers; beyond it each read's are looked up afresh.
     const MAX: usize = 64;
 
     /// The antenna `port` of `reader`, remembered now (its reader's id from `id`) if it was
@@ -94,24 +97,24 @@ impl<'r, 'p> Tracks<'r, 'p> {
         id: impl FnOnce() -> u32,
     ) -> Option<&mut Met<'r, 'p>> {
         let known = self
-            .0
+            .met
             .iter()
             .position(|m| m.port == port && m.reader == reader);
         let i = match known {
             Some(i) => i,
-            None if self.0.len() < Self::MAX => {
-                self.0.push(Met {
+            None if self.met.len() < self.limit => {
+                self.met.push(Met {
                     reader,
                     port,
                     id: id(),
                     track: poses.track_at(reader, port),
                     cursor: 0,
                 });
-                self.0.len() - 1
+                self.met.len() - 1
             }
             None => return None,
         };
-        Some(&mut self.0[i])
+        Some(&mut self.met[i])
     }
 }
 
@@ -175,7 +178,9 @@ impl Ingest {
 
     /// Takes one read (a read older than its series' newest is put in its place in time).
     pub fn push(&mut self, read: &Read) {
-        self.extend(std::slice::from_ref(read));
+        // One read remembers no antenna: nothing to allocate for the live path's read at a
+        // time.
+        self.file(std::slice::from_ref(read), 0);
     }
 
     /// Takes `reads` in order, as [`Ingest::push`] does each: each antenna's pose track is
@@ -184,11 +189,19 @@ impl Ingest {
     /// is filed (reads in memory hold them on the heap, one allocation each, which would
     /// otherwise be waited for read by read).
     pub fn extend(&mut self, reads: &[Read]) {
+        self.file(reads, Tracks::MAX);
+    }
+
+    /// [`Ingest::extend`], remembering up to `antennas` antennas' tracks.
+    fn file(&mut self, reads: &[Read], antennas: usize) {
         const AHEAD: usize = 8;
         // Taken out for the batch, so that the series can be filed while its tracks are
         // borrowed; put back below.
         let poses = std::mem::take(&mut self.poses);
-        let mut tracks = Tracks(Vec::new());
+        let mut tracks = Tracks {
+            met: Vec::new(),
+            limit: antennas,
+        };
         for (i, read) in reads.iter().enumerate() {
             if let Some(next) = reads.get(i + AHEAD) {
                 prefetch(next.epc.as_ptr());

@@ -14,6 +14,8 @@ use std::io::BufRead;
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
+use super::series::fold;
+
 /// One pose sample: a line of the pose file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -351,7 +353,7 @@ impl<'a> Track<'a> {
 /// interval puts `t` (right, or next to it, on a track sampled at a steady rate), else by
 /// binary search.
 fn at_or_before(track: &[PoseSample], t: u64, hint: usize) -> usize {
-    // Exactly i + 1 samples are at or before t (times strictly increase).
+    // Exactly i + 1 samples are at or before t (the times in order).
     let fits = |i: usize| {
         i < track.len() && track[i].t_us <= t && track.get(i + 1).map_or(true, |s| s.t_us > t)
     };
@@ -391,22 +393,11 @@ fn at_or_before(track: &[PoseSample], t: u64, hint: usize) -> usize {
 /// [−180, 180), turned the short way round.
 fn blend(a: &PoseSample, b: &PoseSample, f: f64) -> ([f64; 3], f64, f64) {
     let lerp = |u: f64, v: f64| u + (v - u) * f;
-    let turn = wrap360(b.yaw_deg - a.yaw_deg + 180.0) - 180.0;
-    let yaw = wrap360(a.yaw_deg + turn * f + 180.0) - 180.0;
+    // Onto [0, 360) without a libm fmod where it is within a turn of it (`series::fold`).
+    let turn = fold(b.yaw_deg - a.yaw_deg + 180.0, 360.0) - 180.0;
+    let yaw = fold(a.yaw_deg + turn * f + 180.0, 360.0) - 180.0;
     let position = [lerp(a.x, b.x), lerp(a.y, b.y), lerp(a.z, b.z)];
     (position, yaw, lerp(a.pitch_deg, b.pitch_deg))
-}
-
-/// `x` modulo 360, in [0, 360): as `rem_euclid`, without its division for `x` within a turn
-/// of that range (a yaw's usual case).
-fn wrap360(x: f64) -> f64 {
-    if (0.0..360.0).contains(&x) {
-        x
-    } else if (360.0..720.0).contains(&x) {
-        x - 360.0
-    } else {
-        x.rem_euclid(360.0)
-    }
 }
 
 /// A CSV row under `columns` as a sample.

@@ -61,7 +61,11 @@ fn the_yaw_wrap_is_rem_euclid() {
     for x in [
         -725.5, -360.0, -0.0, 0.0, 1e-12, 359.999, 360.0, 500.0, 720.0, 1e6,
     ] {
-        assert_eq!(wrap360(x).to_bits(), x.rem_euclid(360.0).to_bits(), "{x}");
+        assert_eq!(
+            fold(x, 360.0).to_bits(),
+            x.rem_euclid(360.0).to_bits(),
+            "{x}"
+        );
     }
 }
 
