@@ -143,6 +143,14 @@ pub enum ErrorKind {
         /// Length field value.
         len: u32,
     },
+    /// Parameters of a self-containing type nested deeper than
+    /// [`MAX_NESTING`](crate::codec::MAX_NESTING).
+    TooDeep {
+        /// Type of the parameter one level too deep.
+        ty: u16,
+        /// The limit.
+        limit: u32,
+    },
 }
 
 /// A message that could not be decoded: where, what and the LLRPStatus it deserves.
@@ -193,10 +201,28 @@ impl DecodeError {
         self
     }
 
-    /// The path as `ADD_ROSPEC/ROSpec/AISpec/AntennaIDs`.
+    /// The path as `ADD_ROSPEC/ROSpec/AISpec/AntennaIDs`; a step repeated more than twice in
+    /// a row is written once with its count (`ParameterError×65`).
     pub fn path_string(&self) -> String {
-        let names: Vec<&str> = self.path.iter().map(PathSeg::name).collect();
-        names.join("/")
+        let mut out = String::new();
+        let mut steps = self.path.iter().map(PathSeg::name).peekable();
+        while let Some(name) = steps.next() {
+            let mut run = 1;
+            while steps.peek() == Some(&name) {
+                steps.next();
+                run += 1;
+            }
+            for k in 0..if run > 2 { 1 } else { run } {
+                if !out.is_empty() || k > 0 {
+                    out.push('/');
+                }
+                out.push_str(name);
+            }
+            if run > 2 {
+                out.push_str(&format!("×{run}"));
+            }
+        }
+        out
     }
 
     /// The status code a reader answers this error with (top level of [`Self::to_status`]).
@@ -210,7 +236,7 @@ impl DecodeError {
         if let ErrorKind::UnsupportedVersion { .. } = self.kind {
             return LlrpStatus::new(StatusCode::M_UnsupportedVersion, description);
         }
-        let params: Vec<u16> = self
+        let mut params: Vec<u16> = self
             .path
             .iter()
             .filter_map(|s| match s {
@@ -218,6 +244,14 @@ impl DecodeError {
                 _ => None,
             })
             .collect();
+        if let ErrorKind::TooDeep { ty, .. } = self.kind {
+            // The detail stops at the first parameter of the self-nested run, holding the
+            // run as one ParameterError of its type: echoing the whole path would answer
+            // with a chain deeper than any decoder takes.
+            if let Some(first) = params.iter().position(|&p| p == ty) {
+                params.truncate(first + 1);
+            }
+        }
         let field = self.path.iter().rev().find_map(|s| match s {
             PathSeg::Field { index, .. } => Some(*index),
             _ => None,
@@ -249,7 +283,7 @@ impl DecodeError {
                 StatusCode::M_UnknownParameter,
                 StatusCode::P_UnknownParameter,
             ),
-            ErrorKind::BadParameterLength { ty, .. } => (
+            ErrorKind::BadParameterLength { ty, .. } | ErrorKind::TooDeep { ty, .. } => (
                 Some(ty),
                 StatusCode::M_ParameterError,
                 StatusCode::P_ParameterError,
@@ -314,6 +348,9 @@ impl fmt::Display for DecodeError {
                 format!("unsupported protocol version {version}")
             }
             ErrorKind::BadMessageLength { len } => format!("bad message length {len}"),
+            ErrorKind::TooDeep { ty, limit } => {
+                format!("parameter type {ty} nested more than {limit} deep")
+            }
         };
         write!(
             f,

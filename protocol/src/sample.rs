@@ -219,3 +219,32 @@ pub fn benchmark_report(n_tags: usize, seed: u64) -> crate::Message {
         },
     )
 }
+
+/// Most ParameterErrors that fit nested in one LLRPStatus (a TLV's length is 16 bits).
+pub const MAX_FITTING_NESTING: usize = (u16::MAX as usize - 4 - 4 - 4) / 8;
+
+/// A frame of message type `msg_type` whose body is one LLRPStatus (M_ParameterError) holding
+/// a chain of `depth` ParameterErrors, each inside the one before: what a hostile peer sends
+/// to exhaust a recursive decoder. Built iteratively; `depth` is capped at
+/// [`MAX_FITTING_NESTING`].
+pub fn nested_status_frame(msg_type: u16, id: u32, depth: usize) -> Vec<u8> {
+    let depth = depth.min(MAX_FITTING_NESTING);
+    // LLRPStatus: header, StatusCode, ErrorDescription (empty), then the chain; each
+    // ParameterError: header, ParameterType (289), ErrorCode (P_ParameterError), the next.
+    let status_len = 4 + 2 + 2 + 8 * depth;
+    let mut f = Vec::with_capacity(10 + status_len);
+    f.extend_from_slice(&((1u16 << 10) | (msg_type & 0x3FF)).to_be_bytes());
+    f.extend_from_slice(&((10 + status_len) as u32).to_be_bytes());
+    f.extend_from_slice(&id.to_be_bytes());
+    f.extend_from_slice(&287u16.to_be_bytes());
+    f.extend_from_slice(&(status_len as u16).to_be_bytes());
+    f.extend_from_slice(&100u16.to_be_bytes());
+    f.extend_from_slice(&0u16.to_be_bytes());
+    for level in 0..depth {
+        f.extend_from_slice(&289u16.to_be_bytes());
+        f.extend_from_slice(&((8 * (depth - level)) as u16).to_be_bytes());
+        f.extend_from_slice(&289u16.to_be_bytes());
+        f.extend_from_slice(&200u16.to_be_bytes());
+    }
+    f
+}

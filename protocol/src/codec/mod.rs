@@ -176,10 +176,56 @@ impl<T: Param> Param for Box<T> {
         T::matches(h)
     }
     fn decode_param(i: &[u8], h: &ParamHeader) -> Result<Self, DecodeError> {
+        // A boxed slot is the only way a parameter can contain itself (ParameterError), so
+        // it is the only place where nesting is not bounded by the spec's grammar.
+        let _level = Nesting::enter(i, h)?;
         T::decode_param(i, h).map(Box::new)
     }
     fn encode_param(&self, buf: &mut BytesMut) {
         (**self).encode_param(buf)
+    }
+}
+
+/// How many parameters of a self-containing type (a ParameterError in a ParameterError, …)
+/// the decoder accepts nested in one another.
+///
+/// The spec's grammar bounds every other nesting; a ParameterError chain mirrors the path to
+/// an error, which no real message makes deeper than about ten. Anything deeper is refused
+/// with [`ErrorKind::TooDeep`], so that decoding (and every recursive walk over a decoded
+/// value: encoding, JSON, drop) stays within a few kilobytes of stack.
+pub const MAX_NESTING: u32 = 64;
+
+std::thread_local! {
+    /// Boxed (self-containing) parameters being decoded on this thread, outermost first.
+    static NESTING: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// One level of self-containing nesting, released when dropped (also on error).
+struct Nesting;
+
+impl Nesting {
+    /// Enters one more level, or refuses past [`MAX_NESTING`].
+    fn enter(i: &[u8], h: &ParamHeader) -> Result<Nesting, DecodeError> {
+        NESTING.with(|n| {
+            let depth = n.get();
+            if depth >= MAX_NESTING {
+                return Err(DecodeError::at(
+                    i.as_ptr(),
+                    ErrorKind::TooDeep {
+                        ty: h.ty(),
+                        limit: MAX_NESTING,
+                    },
+                ));
+            }
+            n.set(depth + 1);
+            Ok(Nesting)
+        })
+    }
+}
+
+impl Drop for Nesting {
+    fn drop(&mut self) {
+        NESTING.with(|n| n.set(n.get().saturating_sub(1)));
     }
 }
 
