@@ -180,6 +180,7 @@ pub(super) async fn truth(State(state): State<AppState>) -> Result<Response, Api
         (status = 400, description = "A pose is bad: the message names its index, field and \
             reason; none of the body is taken", body = super::schema::Error),
         (status = 401, description = "A token is set and the request lacks it", body = super::schema::Error),
+        (status = 408, description = "The body stalled, or the request took too long", body = super::schema::Error),
         (status = 413, description = "The body is over the limit", body = super::schema::Error),
         (status = 503, description = "The localizer is behind: try again", body = super::schema::Error)),
     security((), ("bearer" = [])))]
@@ -187,7 +188,16 @@ pub(super) async fn post_poses(
     State(state): State<AppState>,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
-    let body = body.map_err(|r| ApiError::new(r.status(), r.body_text()))?;
+    let body = body.map_err(|r| {
+        if stalled(&r) {
+            ApiError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                "the body stalled: no part of it came within the body-read timeout",
+            )
+        } else {
+            ApiError::new(r.status(), r.body_text())
+        }
+    })?;
     let poses = super::parse_poses(&body).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
     let n = poses.len();
     if !state.tap.offer(Input::Poses(poses)) {
@@ -197,6 +207,18 @@ pub(super) async fn post_poses(
         ));
     }
     Ok((StatusCode::ACCEPTED, Json(json!({ "accepted": n }))).into_response())
+}
+
+/// Whether reading a body failed because it stalled (tower-http's body timeout).
+fn stalled(rejection: &BytesRejection) -> bool {
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(rejection);
+    while let Some(e) = cause {
+        if e.is::<tower_http::timeout::TimeoutError>() {
+            return true;
+        }
+        cause = e.source();
+    }
+    false
 }
 
 #[cfg(test)]

@@ -8,7 +8,10 @@ use std::sync::Arc;
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
-use super::{check_bind, require_token_everywhere, router, serve, HttpOptions, DEFAULT_BODY_LIMIT};
+use super::{
+    check_bind, require_token_everywhere, router, serve, HttpOptions, ServerLimits,
+    DEFAULT_BODY_LIMIT,
+};
 use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 
@@ -124,10 +127,12 @@ pub async fn launch(
         token_everywhere: require_token_everywhere(&bound),
         simulation,
         body_limit: DEFAULT_BODY_LIMIT,
+        limits: ServerLimits::default(),
     };
+    let limits = options.limits;
     let app = router(shared, tap, options);
     let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(serve(listener, app, async move {
+    let task = tokio::spawn(serve(listener, app, limits, async move {
         let _ = stopped.await;
     }));
     Ok(Some(Launched {

@@ -6,8 +6,6 @@
 //! Every route is declared once, in [`api`]; the router and the OpenAPI document both come
 //! from it. Errors are JSON `{"error": "..."}`, unknown routes included.
 
-use std::future::Future;
-use std::io;
 use std::net::SocketAddr;
 use std::sync::Arc;
 
@@ -15,8 +13,10 @@ use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::{header, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::{Extension, Json};
+use axum::Json;
+use subtle::ConstantTimeEq;
 use tokio::sync::watch;
+use tower_http::timeout::RequestBodyTimeoutLayer;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
@@ -28,8 +28,10 @@ mod handlers;
 pub mod launch;
 pub mod poses;
 pub mod schema;
+mod serve;
 
 pub use poses::parse_poses;
+pub use serve::{serve, ServerLimits};
 
 /// Default largest request body (`POST /api/poses`): 1 MiB.
 pub const DEFAULT_BODY_LIMIT: usize = 1 << 20;
@@ -44,8 +46,10 @@ pub struct HttpOptions {
     pub token_everywhere: bool,
     /// A simulation: `GET /api/truth` is served (404 otherwise).
     pub simulation: bool,
-    /// Largest request body (bytes); larger ones get 413.
+    /// Largest request body (bytes); larger ones get 413 (at once when declared).
     pub body_limit: usize,
+    /// Timeouts and the connection limit.
+    pub limits: ServerLimits,
 }
 
 impl Default for HttpOptions {
@@ -55,6 +59,7 @@ impl Default for HttpOptions {
             token_everywhere: false,
             simulation: false,
             body_limit: DEFAULT_BODY_LIMIT,
+            limits: ServerLimits::default(),
         }
     }
 }
@@ -116,6 +121,7 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
     // A document of plain strings and maps always serialises.
     let openapi = document.to_pretty_json().unwrap_or_else(|_| "{}".into());
     let body_limit = options.body_limit;
+    let body_read = options.limits.body_read;
     let state = AppState {
         shared,
         tap,
@@ -126,25 +132,60 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
         .fallback(no_route)
         .method_not_allowed_fallback(no_method)
         .layer(DefaultBodyLimit::max(body_limit))
+        .layer(RequestBodyTimeoutLayer::new(body_read))
+        .layer(middleware::from_fn_with_state(state.clone(), deadline))
+        .layer(middleware::from_fn_with_state(
+            state.clone(),
+            declared_length,
+        ))
         .layer(middleware::from_fn_with_state(state.clone(), authorize))
         .with_state(state)
 }
 
-/// Serves `router` on `listener` until `shutdown` resolves; then open event streams end and
-/// requests under way finish.
-pub async fn serve(
-    listener: tokio::net::TcpListener,
-    router: axum::Router,
-    shutdown: impl Future<Output = ()> + Send + 'static,
-) -> io::Result<()> {
-    let (closing_tx, closing_rx) = watch::channel(false);
-    let router = router.layer(Extension(Closing(closing_rx)));
-    axum::serve(listener, router)
-        .with_graceful_shutdown(async move {
-            shutdown.await;
-            let _ = closing_tx.send(true);
-        })
-        .await
+/// The route that streams for as long as the client listens, so has no deadline.
+const STREAM_ROUTE: &str = "/api/events";
+
+/// A request that takes longer than [`ServerLimits::request`] from its header to its answer
+/// gets 408 and the connection is closed (the event stream excepted).
+async fn deadline(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    if request.uri().path() == STREAM_ROUTE {
+        return next.run(request).await;
+    }
+    let limit = state.options.limits.request;
+    match tokio::time::timeout(limit, next.run(request)).await {
+        Ok(response) => response,
+        Err(_) => closing(ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            format!("the request took over {} s", limit.as_secs_f64()),
+        )),
+    }
+}
+
+/// A body declared (Content-Length) over the limit gets 413 before any of it is read, and the
+/// connection is closed.
+async fn declared_length(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let limit = state.options.body_limit;
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    match declared {
+        Some(n) if n > limit as u64 => closing(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("the body declares {n} bytes: the limit is {limit}"),
+        )),
+        _ => next.run(request).await,
+    }
+}
+
+/// `error` as a response that also closes the connection (its request was not read whole).
+fn closing(error: ApiError) -> Response {
+    let mut response = error.into_response();
+    response
+        .headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
+    response
 }
 
 /// Tells long-lived responses (the event stream) that the server is shutting down.
@@ -207,10 +248,10 @@ async fn authorize(State(state): State<AppState>, request: Request, next: Next) 
         .headers()
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
+        .and_then(bearer);
     let reason = match given {
         None => "this route needs the header Authorization: Bearer <token>",
-        Some(g) if !same(g.trim().as_bytes(), token.as_bytes()) => "wrong bearer token",
+        Some(g) if !bool::from(g.as_bytes().ct_eq(token.as_bytes())) => "wrong bearer token",
         Some(_) => return next.run(request).await,
     };
     let mut response = ApiError::new(StatusCode::UNAUTHORIZED, reason).into_response();
@@ -220,9 +261,13 @@ async fn authorize(State(state): State<AppState>, request: Request, next: Next) 
     response
 }
 
-/// Compares in time independent of where the first difference is.
-fn same(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+/// The credentials of an `Authorization` value in the Bearer scheme, whose name is
+/// case-insensitive (RFC 9110 §11.1).
+fn bearer(value: &str) -> Option<&str> {
+    let (scheme, credentials) = value.trim().split_once(' ')?;
+    scheme
+        .eq_ignore_ascii_case("bearer")
+        .then(|| credentials.trim())
 }
 
 #[cfg(test)]
@@ -247,8 +292,11 @@ mod tests {
     }
 
     #[test]
-    fn tokens_compare_whole() {
-        assert!(same(b"abc", b"abc"));
-        assert!(!same(b"abc", b"abd") && !same(b"abc", b"ab") && !same(b"", b"a"));
+    fn the_bearer_scheme_is_case_insensitive_and_other_schemes_are_not_taken() {
+        assert_eq!(bearer("Bearer s3cret"), Some("s3cret"));
+        assert_eq!(bearer("bearer s3cret"), Some("s3cret"));
+        assert_eq!(bearer("BEARER  s3cret "), Some("s3cret"));
+        assert_eq!(bearer("Basic s3cret"), None);
+        assert_eq!(bearer("Bearers3cret"), None);
     }
 }

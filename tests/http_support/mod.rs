@@ -91,6 +91,7 @@ impl Server {
     /// Starts a localizer with `settings` and serves the API over it with `options`.
     pub fn start_with(options: HttpOptions, settings: Settings) -> Server {
         let live = Live::start(settings).expect("localizer starts");
+        let limits = options.limits;
         let router = http::router(live.shared.clone(), live.tap.clone(), options);
         let std_listener = std::net::TcpListener::bind("127.0.0.1:0").expect("binds loopback");
         let addr = std_listener.local_addr().expect("an address");
@@ -102,7 +103,7 @@ impl Server {
                 .build()?;
             rt.block_on(async move {
                 let listener = tokio::net::TcpListener::from_std(std_listener)?;
-                http::serve(listener, router, async move {
+                http::serve(listener, router, limits, async move {
                     let _ = stopped.await;
                 })
                 .await
