@@ -3,6 +3,7 @@
 
 pub mod alloc;
 pub mod decode;
+pub mod files;
 pub mod fleet;
 pub mod gateway;
 pub mod http;

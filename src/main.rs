@@ -39,6 +39,9 @@ enum Command {
         /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
         #[arg(long)]
         truth: Option<PathBuf>,
+        /// Replace an existing truth file (without it, an existing file is refused).
+        #[arg(long, requires = "truth")]
+        force: bool,
         /// Record every session to this file (one file per reader, `FILE-NAME`, when the
         /// scenario has several), as the proxy does (docs/recordings.md).
         #[arg(long)]
@@ -125,6 +128,7 @@ fn main() -> ExitCode {
             listen,
             speed,
             truth,
+            force,
             record,
             record_max_bytes,
             tls_cert,
@@ -149,6 +153,7 @@ fn main() -> ExitCode {
                 listen,
                 speed,
                 truth,
+                force,
                 record,
                 record_options: llrp_gateway::record::RecordOptions {
                     max_bytes: record_max_bytes,

@@ -307,6 +307,25 @@ pub fn hex_upper(bytes: &[u8]) -> String {
     s
 }
 
+/// Why `epc` is no EPC in hex, if it is not.
+pub fn check_epc(epc: &str) -> Result<(), String> {
+    if epc.is_empty() {
+        return Err("the EPC is empty".into());
+    }
+    if let Some((i, c)) = epc.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
+        return Err(format!(
+            "EPC {epc:?} is not hex: {c:?} at offset {i} is no hex digit"
+        ));
+    }
+    if epc.len() % 2 != 0 {
+        return Err(format!(
+            "EPC {epc:?} is not hex bytes: an odd number of digits ({})",
+            epc.len()
+        ));
+    }
+    Ok(())
+}
+
 /// Writes one read as a reads-file line.
 pub fn write_jsonl(out: &mut impl Write, read: &Read) -> io::Result<()> {
     serde_json::to_writer(&mut *out, read)?;
@@ -339,6 +358,11 @@ pub fn read_jsonl(input: impl BufRead) -> Result<Vec<Read>, ReadsFileError> {
             line: i + 1,
             message: format!("{}: {}", e.path(), e.inner()),
         })?;
+        // A read with no EPC, or one that is not hex, would make a tag of nothing.
+        check_epc(&read.epc).map_err(|reason| ReadsFileError {
+            line: i + 1,
+            message: format!("epc: {reason}"),
+        })?;
         reads.push(read);
     }
     Ok(reads)
@@ -363,6 +387,40 @@ mod tests {
         assert_eq!(cut.len(), 3);
         assert_eq!(cut[2], Err(()));
         assert_eq!(frames(&bytes[..4]).count(), 0);
+    }
+
+    #[test]
+    fn an_epc_is_even_hex_and_the_reason_is_named() {
+        assert!(check_epc("E200ab").is_ok());
+        assert!(check_epc("").is_err());
+        let e = check_epc("E20").expect_err("odd");
+        assert!(e.contains("odd"), "{e}");
+        let e = check_epc("E2G0").expect_err("G");
+        assert!(e.contains("'G'") && e.contains("offset 2"), "{e}");
+        // Not ASCII: a char, not a byte, is named.
+        let e = check_epc("é0").expect_err("é");
+        assert!(e.contains("'é'"), "{e}");
+    }
+
+    #[test]
+    fn a_reads_file_line_with_an_empty_or_non_hex_epc_is_refused_by_number() {
+        let good = r#"{"epc":"3034F8","antenna":1,"t_us":1,"phase_rad":null,"rssi_dbm":null}"#;
+        for (epc, why) in [("", "empty"), ("30G4", "'G'"), ("303", "odd")] {
+            let bad = good.replace("3034F8", epc);
+            let text = format!("{good}\n{good}\n{bad}\n");
+            let e = read_jsonl(text.as_bytes()).expect_err("refused");
+            assert_eq!(e.line, 3, "{e}");
+            assert!(
+                e.message.starts_with("epc: ") && e.message.contains(why),
+                "{e}"
+            );
+        }
+        assert_eq!(
+            read_jsonl(format!("{good}\n").as_bytes())
+                .expect("parses")
+                .len(),
+            1
+        );
     }
 
     #[test]

@@ -22,6 +22,7 @@ fn localize(args: &[&str], output: &Path) -> (bool, Option<serde_json::Value>, S
     let out = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
         .arg("localize")
         .args(args)
+        .arg("--force")
         .arg("--output")
         .arg(output)
         .output()

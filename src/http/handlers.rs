@@ -95,25 +95,6 @@ struct TagDetail {
     recent_reads: Vec<Read>,
 }
 
-/// Why `epc` is no EPC in hex, if it is not.
-pub fn check_epc(epc: &str) -> Result<(), String> {
-    if epc.is_empty() {
-        return Err("the EPC is empty".into());
-    }
-    if let Some((i, c)) = epc.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
-        return Err(format!(
-            "EPC {epc:?} is not hex: {c:?} at offset {i} is no hex digit"
-        ));
-    }
-    if epc.len() % 2 != 0 {
-        return Err(format!(
-            "EPC {epc:?} is not hex bytes: an odd number of digits ({})",
-            epc.len()
-        ));
-    }
-    Ok(())
-}
-
 #[utoipa::path(get, path = "/api/tags/{epc}", tag = "localizer",
     params(("epc" = String, Path, description = "EPC in hex, any case")),
     responses(
@@ -126,7 +107,7 @@ pub(super) async fn tag(
     epc: Result<Path<String>, PathRejection>,
 ) -> Result<Response, ApiError> {
     let Path(epc) = epc.map_err(|r| ApiError::new(r.status(), r.body_text()))?;
-    check_epc(&epc).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
+    crate::reads::check_epc(&epc).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
     let view = state.shared.tag(&epc).ok_or_else(|| {
         ApiError::new(
             StatusCode::NOT_FOUND,
@@ -219,22 +200,4 @@ fn stalled(rejection: &BytesRejection) -> bool {
         cause = e.source();
     }
     false
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_epc_is_even_hex_and_the_reason_is_named() {
-        assert!(check_epc("E200ab").is_ok());
-        assert!(check_epc("").is_err());
-        let e = check_epc("E20").expect_err("odd");
-        assert!(e.contains("odd"), "{e}");
-        let e = check_epc("E2G0").expect_err("G");
-        assert!(e.contains("'G'") && e.contains("offset 2"), "{e}");
-        // Not ASCII: a char, not a byte, is named.
-        let e = check_epc("é0").expect_err("é");
-        assert!(e.contains("'é'"), "{e}");
-    }
 }

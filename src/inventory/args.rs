@@ -37,6 +37,9 @@ pub struct InventoryArgs {
     /// JSON Lines on standard output.
     #[arg(long, value_parser = parse_output)]
     pub output: Option<Output>,
+    /// Replace an existing output file (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
     /// Reader name written in each read (default: the reader address as given).
     #[arg(long)]
     pub name: Option<String>,

@@ -197,7 +197,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         path: output_name.clone(),
         source,
     };
-    let mut sink = Sink::open(&args.output).map_err(output_error)?;
+    let mut sink = Sink::open(&args.output, args.force).map_err(output_error)?;
     let sinks = crate::gateway::live::start_sinks(&args.live, "inventory")
         .await
         .map_err(InventoryError::Localizer)?;

@@ -1,7 +1,6 @@
 //! [`Sink`]: the reads' destination (a reads file, CSV or standard output), written in whole
 //! lines.
 
-use std::fs::File;
 use std::io::{self, Write};
 
 use super::Output;
@@ -20,12 +19,14 @@ pub(super) struct Sink {
 }
 
 impl Sink {
-    pub(super) fn open(output: &Option<Output>) -> io::Result<Sink> {
+    /// Opens the destination; an existing file is refused unless `force`.
+    pub(super) fn open(output: &Option<Output>, force: bool) -> io::Result<Sink> {
+        let create = |p| crate::files::create_stream(p, &[], force).map_err(|e| e.into_io());
         let (out, csv): (Option<Box<dyn Write>>, bool) = match output {
             None => (None, false),
             Some(Output::Stdout) => (Some(Box::new(io::stdout())), false),
-            Some(Output::Jsonl(p)) => (Some(Box::new(File::create(p)?)), false),
-            Some(Output::Csv(p)) => (Some(Box::new(File::create(p)?)), true),
+            Some(Output::Jsonl(p)) => (Some(Box::new(create(p)?)), false),
+            Some(Output::Csv(p)) => (Some(Box::new(create(p)?)), true),
         };
         let mut sink = Sink {
             out,

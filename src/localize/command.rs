@@ -36,6 +36,9 @@ pub struct LocalizeArgs {
         conflicts_with = "subscribe"
     )]
     pub output: Option<PathBuf>,
+    /// Replace an existing output file (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
     /// Run as a localizer worker on this MQTT broker's reads instead
     /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).
     #[command(flatten)]
@@ -73,6 +76,15 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
     let (Some(input), Some(output)) = (&args.input, &args.output) else {
         return Err("INPUT and --output are needed (or --subscribe)".into());
     };
+    // The output is checked before the work: not an input, not an existing file.
+    let mut out = if output.as_os_str() == "-" {
+        None
+    } else {
+        let mut inputs: Vec<&std::path::Path> = vec![input];
+        inputs.extend(args.poses.as_deref());
+        inputs.extend(args.settings.as_deref());
+        Some(crate::files::Output::create(output, &inputs, args.force).map_err(|e| e.to_string())?)
+    };
     let reads = offline::load_reads(input).map_err(|e| e.to_string())?;
     let bar = if reads.len() >= PROGRESS_FROM {
         indicatif::ProgressBar::new(reads.len() as u64)
@@ -100,10 +112,15 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
     });
     bar.finish_and_clear();
     let json = serde_json::to_string_pretty(&outcome.tags).map_err(|e| e.to_string())?;
-    if output.as_os_str() == "-" {
-        println!("{json}");
-    } else {
-        std::fs::write(output, json + "\n").map_err(|e| format!("{}: {e}", output.display()))?;
+    match out.take() {
+        None => println!("{json}"),
+        Some(mut file) => {
+            use std::io::Write;
+            file.write_all((json + "\n").as_bytes())
+                .and_then(|()| file.flush())
+                .map_err(|e| format!("{}: {e}", output.display()))?;
+            file.commit().map_err(|e| e.to_string())?;
+        }
     }
     let a = outcome.set_aside;
     eprintln!(

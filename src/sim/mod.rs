@@ -42,6 +42,8 @@ pub struct SimOptions {
     pub speed: Speed,
     /// Where to write ground truth (JSONL), if anywhere.
     pub truth: Option<PathBuf>,
+    /// Replace an existing truth file (`--force`); without it an existing one is refused.
+    pub force: bool,
     /// Record every reader's sessions (one file per reader when there are several:
     /// [`record_path`]).
     pub record: Option<PathBuf>,
@@ -75,6 +77,7 @@ impl Default for SimOptions {
             listen: Vec::new(),
             speed: Speed::Factor(1.0),
             truth: None,
+            force: false,
             record: None,
             record_options: RecordOptions::default(),
             tls: None,
@@ -113,13 +116,8 @@ pub enum SimError {
         source: io::Error,
     },
     /// The truth file could not be created.
-    #[error("cannot create truth file {path}: {source}")]
-    Truth {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        source: io::Error,
-    },
+    #[error("cannot create the truth file {0}")]
+    Truth(crate::files::OutputError),
 }
 
 /// A running simulation: its listeners and how to stop it.
@@ -256,12 +254,9 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     }
     let truth = match &opts.truth {
         Some(path) => Some(Arc::new(Truth {
-            out: Mutex::new(BufWriter::new(File::create(path).map_err(|source| {
-                SimError::Truth {
-                    path: path.clone(),
-                    source,
-                }
-            })?)),
+            out: Mutex::new(BufWriter::new(
+                crate::files::create_stream(path, &[], opts.force).map_err(SimError::Truth)?,
+            )),
         })),
         None => None,
     };

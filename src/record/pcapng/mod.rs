@@ -9,7 +9,7 @@ pub mod packet;
 pub mod stream;
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use pcap_file::PcapError;
@@ -93,7 +93,14 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
     let mut warnings = read.warnings;
     let packets = read.packets;
     let Some(first) = packets.first() else {
-        return Err(ImportError::NoLlrp("the capture holds no packets".into()));
+        let why = if warnings.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", warnings.join("; "))
+        };
+        return Err(ImportError::NoLlrp(format!(
+            "the capture holds no whole packet{why}"
+        )));
     };
     let start_us = first.utc_us;
     let mut unsupported: Vec<u32> = Vec::new();
@@ -253,14 +260,17 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
     })
 }
 
-/// Writes `recording` (header and entries) to `path`, truncating it.
-pub fn write_recording(recording: &Recording, path: &Path) -> std::io::Result<()> {
-    let mut out = Vec::new();
-    encode_header(&recording.header, &mut out);
+/// Writes `recording` (header and entries) to `out`.
+pub fn write_recording(
+    recording: &Recording,
+    out: &mut impl std::io::Write,
+) -> std::io::Result<()> {
+    let mut buf = Vec::new();
+    encode_header(&recording.header, &mut buf);
     for e in &recording.entries {
-        encode_entry(e, &mut out);
+        encode_entry(e, &mut buf);
     }
-    std::fs::write(path, out)
+    out.write_all(&buf)
 }
 
 /// `llrp-gateway export`: a recording as a pcapng capture.
@@ -275,6 +285,9 @@ pub struct ExportArgs {
     #[arg(long, default_value_t = DEFAULT_MSS,
           value_parser = clap::value_parser!(u16).range(i64::from(export::MIN_MSS)..=i64::from(export::MAX_MSS)))]
     pub mss: u16,
+    /// Replace an existing capture (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `llrp-gateway import`: the LLRP streams of a capture as a recording.
@@ -285,11 +298,22 @@ pub struct ImportArgs {
     /// The recording to write.
     #[arg(long, value_name = "RECORDING")]
     pub output: PathBuf,
+    /// Replace an existing recording (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs `llrp-gateway export`; errors and a summary go to standard error.
 pub fn run_export(args: &ExportArgs) -> ExitCode {
     let name = args.file.display();
+    // The output is checked (not the input, not an existing file) before anything is read.
+    let output = match crate::files::Output::create(&args.pcapng, &[&args.file], args.force) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("llrp-gateway export: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
     let recording = match Recording::open(&args.file) {
         Ok(r) => r,
         Err(e) => {
@@ -301,14 +325,7 @@ pub fn run_export(args: &ExportArgs) -> ExitCode {
         eprintln!("llrp-gateway export: warning: {name}: {w}");
     }
     let out = args.pcapng.display();
-    let file = match std::fs::File::create(&args.pcapng) {
-        Ok(f) => f,
-        Err(e) => {
-            eprintln!("llrp-gateway export: cannot create {out}: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let mut writer = std::io::BufWriter::new(file);
+    let mut writer = output;
     let options = ExportOptions { mss: args.mss };
     let summary = match export(&recording, &options, &mut writer) {
         Ok(s) => s,
@@ -321,6 +338,10 @@ pub fn run_export(args: &ExportArgs) -> ExitCode {
         eprintln!("llrp-gateway export: writing {out}: {e}");
         return ExitCode::FAILURE;
     }
+    if let Err(e) = writer.commit() {
+        eprintln!("llrp-gateway export: {e}");
+        return ExitCode::FAILURE;
+    }
     eprintln!(
         "llrp-gateway export: {} TCP streams, {} frames, {} bytes entries: {} packets in {out}",
         summary.streams, summary.frames, summary.bytes_entries, summary.packets
@@ -331,6 +352,14 @@ pub fn run_export(args: &ExportArgs) -> ExitCode {
 /// Runs `llrp-gateway import`; warnings, errors and a summary go to standard error.
 pub fn run_import(args: &ImportArgs) -> ExitCode {
     let name = args.capture.display();
+    let mut output = match crate::files::Output::create(&args.output, &[&args.capture], args.force)
+    {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("llrp-gateway import: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
     let data = match std::fs::read(&args.capture) {
         Ok(d) => d,
         Err(e) => {
@@ -349,15 +378,25 @@ pub fn run_import(args: &ImportArgs) -> ExitCode {
         eprintln!("llrp-gateway import: warning: {name}: {w}");
     }
     let out = args.output.display();
-    if let Err(e) = write_recording(&recording, &args.output) {
-        eprintln!("llrp-gateway import: cannot write {out}: {e}");
-        return ExitCode::FAILURE;
-    }
     let frames = recording
         .entries
         .iter()
         .filter(|e| matches!(e, Entry::Frame { .. }))
         .count();
+    if frames == 0 {
+        eprintln!(
+            "llrp-gateway import: {name}: no LLRP frame could be read (see the warnings above); {out} not written"
+        );
+        return ExitCode::FAILURE;
+    }
+    if let Err(e) = write_recording(&recording, &mut output).and_then(|()| output.flush()) {
+        eprintln!("llrp-gateway import: cannot write {out}: {e}");
+        return ExitCode::FAILURE;
+    }
+    if let Err(e) = output.commit() {
+        eprintln!("llrp-gateway import: {e}");
+        return ExitCode::FAILURE;
+    }
     eprintln!(
         "llrp-gateway import: {} connections, {frames} frames, reader {}: {out}",
         recording.connections().len(),
