@@ -332,3 +332,31 @@ fn llrpkit_inventories_a_replay_of_its_own_session() {
     }
     drop(replay);
 }
+
+#[test]
+fn replay_list_shows_each_connection_and_which_one_is_replayed() {
+    let out = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .arg("replay")
+        .arg(fixture("s1-sllurp-impinj.jsonl"))
+        .arg("--list")
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].starts_with("conn  start_s"), "{text}");
+    let rec = Recording::open(&fixture("s1-sllurp-impinj.jsonl")).expect("opens");
+    assert_eq!(lines.len(), 1 + rec.connections().len(), "{text}");
+    assert_eq!(
+        lines
+            .iter()
+            .filter(|l| l.ends_with("(replayed by default)"))
+            .count(),
+        1,
+        "{text}"
+    );
+}

@@ -21,9 +21,14 @@ pub struct ReplayArgs {
     /// Start the reports stream over when it ends, timestamps shifted.
     #[arg(long = "loop")]
     pub looped: bool,
-    /// Replay this recorded connection (default: the first one the reader spoke on).
+    /// Replay this recorded connection (default: the first that carries an LLRP session,
+    /// see `--list`).
     #[arg(long)]
     pub conn: Option<u32>,
+    /// List the recording's connections (what each holds, which one is replayed by
+    /// default) and exit.
+    #[arg(long)]
+    pub list: bool,
     /// Serve LLRP over TLS with this certificate chain (PEM), as readers do on port 5085.
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -49,6 +54,10 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
     };
     for w in &recording.warnings {
         eprintln!("llrp-gateway replay: {}: warning: {w}", args.file.display());
+    }
+    if args.list {
+        print!("{}", list(&recording));
+        return ExitCode::SUCCESS;
     }
     let script = match Script::new(&recording, args.conn) {
         Ok(s) => std::sync::Arc::new(s),
@@ -124,4 +133,35 @@ pub fn run_replay(args: ReplayArgs) -> ExitCode {
         eprintln!("llrp-gateway replay: stopped");
         ExitCode::SUCCESS
     })
+}
+
+/// The table `replay --list` prints: a line per connection, the default one marked.
+fn list(recording: &crate::record::Recording) -> String {
+    use std::fmt::Write as _;
+    let default = crate::record::replay::Script::new(recording, None)
+        .ok()
+        .map(|s| s.conn());
+    let mut out =
+        String::from("conn  start_s  client_frames  reader_frames  reports  client / end\n");
+    for s in recording.summaries() {
+        let start = s.start.map_or(0.0, |t| t.t_us as f64 / 1e6);
+        let mark = if Some(s.conn) == default {
+            "  (replayed by default)"
+        } else if !s.has_session() {
+            "  (no LLRP session)"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            out,
+            "{:>4}  {start:>7.3}  {:>13}  {:>13}  {:>7}  {} / {}{mark}",
+            s.conn,
+            s.to_reader,
+            s.from_reader,
+            s.reports,
+            s.client.as_deref().unwrap_or("-"),
+            s.end.as_deref().unwrap_or("-"),
+        );
+    }
+    out
 }

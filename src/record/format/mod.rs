@@ -14,6 +14,7 @@ use std::io::{self, BufRead};
 use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine as _;
 use bytes::Bytes;
+use llrp::message::MessageDef as _;
 use serde::{Deserialize, Serialize};
 
 /// The format version this build writes and reads.
@@ -392,6 +393,42 @@ impl Recording {
         })
     }
 
+    /// What each connection holds, in order of first appearance.
+    pub fn summaries(&self) -> Vec<ConnSummary> {
+        let report = llrp::message::RoAccessReport::TYPE;
+        self.connections()
+            .into_iter()
+            .map(|conn| {
+                let mut s = ConnSummary {
+                    conn,
+                    ..ConnSummary::default()
+                };
+                for e in self.entries.iter().filter(|e| e.conn() == conn) {
+                    s.start.get_or_insert(e.at());
+                    match e {
+                        Entry::Frame { dir, frame, .. } => match dir {
+                            Direction::ToReader => s.to_reader += 1,
+                            Direction::FromReader => {
+                                s.from_reader += 1;
+                                if llrp::FrameHeader::peek(frame).map(|h| h.msg_type)
+                                    == Some(report)
+                                {
+                                    s.reports += 1;
+                                }
+                            }
+                        },
+                        Entry::Marker { event, reason, .. } => match event {
+                            Event::Connect => s.client = Some(reason.clone()),
+                            Event::Disconnect => s.end = Some(reason.clone()),
+                        },
+                        Entry::Bytes { .. } | Entry::Reader { .. } => {}
+                    }
+                }
+                s
+            })
+            .collect()
+    }
+
     /// The connection numbers in order of first appearance.
     pub fn connections(&self) -> Vec<u32> {
         let mut seen = Vec::new();
@@ -401,6 +438,33 @@ impl Recording {
             }
         }
         seen
+    }
+}
+
+/// One recorded connection at a glance (`replay --list`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ConnSummary {
+    /// Connection number.
+    pub conn: u32,
+    /// When its first line happened.
+    pub start: Option<Stamp>,
+    /// Its connect marker's words (the client's address).
+    pub client: Option<String>,
+    /// Frames the client sent.
+    pub to_reader: usize,
+    /// Frames the reader sent.
+    pub from_reader: usize,
+    /// RO_ACCESS_REPORTs among them.
+    pub reports: usize,
+    /// Its disconnect marker's words.
+    pub end: Option<String>,
+}
+
+impl ConnSummary {
+    /// Whether it carries an LLRP session: the client sent a frame and the reader answered
+    /// (a port probe or health check gets the reader's greeting and sends nothing).
+    pub fn has_session(&self) -> bool {
+        self.to_reader > 0 && self.from_reader > 0
     }
 }
 

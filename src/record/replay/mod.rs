@@ -76,21 +76,22 @@ fn unsolicited(kind: MessageKind) -> bool {
 }
 
 impl Script {
-    /// The script of connection `conn` of `recording`, or of its first connection whose
-    /// reader sent a frame.
+    /// The script of connection `conn` of `recording`; by default its first connection that
+    /// carries an LLRP session (the client sent a frame and the reader answered), else its
+    /// first connection whose reader sent a frame.
     pub fn new(recording: &Recording, conn: Option<u32>) -> Result<Script, ScriptError> {
         let conns = recording.connections();
         let conn = match conn {
             Some(c) if conns.contains(&c) => c,
             Some(c) => return Err(ScriptError::NoSuchConnection(c, conns)),
-            None => *conns
-                .iter()
-                .find(|&&c| {
-                    recording
-                        .frames(c)
-                        .any(|(_, d, _)| d == Direction::FromReader)
-                })
-                .ok_or(ScriptError::Empty)?,
+            None => {
+                let all = recording.summaries();
+                all.iter()
+                    .find(|s| s.has_session())
+                    .or_else(|| all.iter().find(|s| s.from_reader > 0))
+                    .ok_or(ScriptError::Empty)?
+                    .conn
+            }
         };
         let start = recording
             .entries

@@ -262,3 +262,45 @@ fn a_loop_repeats_the_reports_with_timestamps_shifted_by_the_streams_length() {
         vec![1_010_000 + 30_000, 1_020_000 + 30_000, 1_030_000 + 30_000]
     );
 }
+
+#[test]
+fn by_default_a_port_probe_before_the_session_is_passed_over_and_listed_as_such() {
+    use Direction::*;
+    // Connection 1: a health check that got the reader's greeting and left; 2: the session.
+    let mut rec = recording();
+    for e in &mut rec.entries {
+        if let Entry::Frame { conn, .. } | Entry::Marker { conn, .. } = e {
+            *conn = 2;
+        }
+    }
+    let probe = vec![
+        Entry::Marker {
+            at: Stamp::default(),
+            conn: 1,
+            event: crate::record::Event::Connect,
+            reason: "client 10.0.0.9:40000".into(),
+        },
+        Entry::Frame {
+            at: Stamp::default(),
+            conn: 1,
+            dir: FromReader,
+            frame: Message::new(0, Keepalive::default()).to_bytes().freeze(),
+        },
+        Entry::Marker {
+            at: Stamp::default(),
+            conn: 1,
+            event: crate::record::Event::Disconnect,
+            reason: "client closed".into(),
+        },
+    ];
+    rec.entries.splice(0..0, probe);
+    let script = Script::new(&rec, None).expect("script");
+    assert_eq!(script.conn(), 2, "the connection with a session");
+    assert_eq!(Script::new(&rec, Some(1)).expect("asked for").conn(), 1);
+    let s = rec.summaries();
+    assert_eq!(s.len(), 2);
+    assert!(!s[0].has_session() && s[1].has_session(), "{s:?}");
+    assert_eq!((s[1].to_reader, s[1].from_reader, s[1].reports), (2, 6, 3));
+    assert_eq!(s[0].client.as_deref(), Some("client 10.0.0.9:40000"));
+    assert_eq!(s[0].end.as_deref(), Some("client closed"));
+}
