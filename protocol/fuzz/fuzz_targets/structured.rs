@@ -1,24 +1,34 @@
 //! Builds frames with structure, not random bytes, and checks how they decode.
 //!
-//! The first input byte picks one of two ways to build a frame:
+//! The first input byte picks one of two ways to build a frame (bit 0), and its size limit
+//! (bit 7: 72 KiB, room for a full TLV; or 1.25 MiB, room for more than 65535 sub-parameters
+//! in a message body).
 //!
 //! * **Program** (even): the rest of the input is a small program run on an explicit stack
 //!   (no recursion): open a TLV parameter of any known TLV type, an unknown type or a Custom
-//!   (Impinj or another vendor), close it (its length is computed, now and then off by a
-//!   little), add a TV parameter of a valid TV type, add field bytes or a counted array of
-//!   up to 65535 elements, repeat the last parameter N times or as often as fits (maximal
-//!   counts, up to a TLV's 65535 bytes, or past 65535 sub-parameters in a message body), open
-//!   ParameterErrors k deep or wrap the last parameter in k of them (up to
-//!   [`MAX_FITTING_NESTING`]). The message type is any typed one (standard or Impinj custom)
-//!   or any other number.
+//!   (Impinj or another vendor); close it (its length computed, now and then off by a
+//!   little); add a TV parameter of a valid TV type; add field bytes, or a counted array of
+//!   up to 65535 elements; repeat the last parameter N times or as often as fits (maximal
+//!   counts, up to a TLV's 65535 bytes); open ParameterErrors k deep, or wrap the last
+//!   parameter in k of them (k up to [`MAX_FITTING_NESTING`]). The message type is any typed
+//!   one (standard or Impinj custom) or any other number.
 //! * **Seeded** (odd): the next 9 bytes seed [`Gen`] and pick a typed message, which is
 //!   encoded; the rest of the input then edits its parameter tree: wrap a parameter in k
-//!   levels of nesting, duplicate one many times, move or copy one to another place, drop
-//!   one. Every enclosing length is fixed up, so only the structure is wrong, never a length.
+//!   levels of ParameterError (or another type), duplicate one many times, move or copy one
+//!   to another place, drop one. Every enclosing length is fixed up. (The tree is found
+//!   without knowing the fields' layout, so now and then a field is taken for a parameter
+//!   and the edit mangles it.)
 //!
-//! Then the frame is decoded. What decodes must encode to the identical bytes and serialize
-//! to JSON; what does not must be refused at an offset inside the frame, with an LLRPStatus
-//! that, sent back in an ERROR_MESSAGE, decodes again (to the same message).
+//! Then the frame is decoded:
+//!
+//! * what decodes must encode to the identical bytes, and serialize to JSON. The one change
+//!   allowed is cleared bits: the codec writes reserved bits as 0 (the spec has receivers
+//!   ignore them), so a frame with one set comes back with it cleared, and that form must
+//!   decode to the same message and re-encode to itself;
+//! * what does not decode must be refused at an offset inside the frame, with an LLRPStatus
+//!   that, sent back in an ERROR_MESSAGE, decodes again to the same message.
+//!
+//! `STRUCTURED_DUMP=1` in the environment prints each frame in hex (to read a crash).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -28,8 +38,12 @@ use llrp::params::KNOWN_TLV_TYPES;
 use llrp::sample::{Gen, MAX_FITTING_NESTING};
 use llrp::{FrameHeader, Message};
 
-/// Largest frame built: room for more than 65535 small sub-parameters in one message body.
-const MAX_FRAME: usize = 1_310_720;
+/// Largest frame built: a full TLV and more (with the sanitizers, decoding, encoding and
+/// serializing a frame full of small parameters takes about 20 µs a parameter).
+const MAX_FRAME: usize = 73_728;
+/// Largest frame built when the first input byte has its top bit set: room for more than
+/// 65535 small sub-parameters in one message body (one such frame takes about two seconds).
+const LARGE_FRAME: usize = 1_310_720;
 /// Largest TLV parameter (its length field is 16 bits).
 const MAX_TLV: usize = u16::MAX as usize;
 const PARAMETER_ERROR: u16 = 289;
@@ -48,11 +62,23 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let mut input = Input(rest);
-    let frame = if mode % 2 == 0 {
-        program(&mut input)
+    let max_frame = if mode & 0x80 == 0 {
+        MAX_FRAME
     } else {
-        seeded(&mut input)
+        LARGE_FRAME
     };
+    let frame = if mode % 2 == 0 {
+        program(&mut input, max_frame)
+    } else {
+        seeded(&mut input, max_frame)
+    };
+    if std::env::var_os("STRUCTURED_DUMP").is_some() {
+        eprintln!(
+            "frame ({} bytes): {}",
+            frame.len(),
+            llrp::raw::to_hex(&frame)
+        );
+    }
     check(&frame);
 });
 
@@ -62,18 +88,32 @@ fn check(frame: &[u8]) {
         Ok(m) => {
             let again = m.to_bytes();
             if again[..] != frame[..] {
-                let at = again.iter().zip(frame).position(|(a, b)| a != b);
-                panic!(
-                    "{} re-encodes to other bytes: {} bytes vs {}, first difference at {at:?}",
-                    m.name(),
-                    again.len(),
-                    frame.len()
-                );
+                // Reserved bits are not kept: the codec writes them as 0 (the spec has the
+                // receiver ignore them). Clearing bits must be the only change, and the
+                // cleared form must be stable.
+                let cleared =
+                    again.len() == frame.len() && again.iter().zip(frame).all(|(a, f)| a & !f == 0);
+                if !cleared {
+                    let at = again.iter().zip(frame).position(|(a, f)| a != f);
+                    panic!(
+                        "{} re-encodes to other bytes: {} bytes instead of {}, first difference at {at:?}",
+                        m.name(),
+                        again.len(),
+                        frame.len()
+                    );
+                }
+                let back = Message::decode(&again).expect("the re-encoded message decodes");
+                assert_eq!(back, m, "clearing reserved bits changed the message");
+                assert!(back.to_bytes() == again, "re-encoding is not stable");
             }
             serde_json::to_string(&m).expect("a decoded message serializes to JSON");
         }
         Err(e) => {
-            assert!(e.offset <= frame.len(), "offset {} past the frame", e.offset);
+            assert!(
+                e.offset <= frame.len(),
+                "offset {} past the frame",
+                e.offset
+            );
             let answer = Message::new(
                 7,
                 ErrorMessage {
@@ -119,6 +159,17 @@ impl Input<'_> {
         self.0 = rest;
         head
     }
+    /// A count up to `max`: mostly below 8, often around the nesting limit (56 to 71),
+    /// sometimes any 16-bit number, sometimes `max` itself (as many as fit).
+    fn count(&mut self, max: usize) -> usize {
+        let n = match self.u8() {
+            0..=127 => usize::from(self.u8() % 8),
+            128..=191 => 56 + usize::from(self.u8() % 16),
+            192..=254 => usize::from(self.u16()),
+            255 => max,
+        };
+        n.min(max)
+    }
     /// One of `items`.
     fn pick<T: Copy>(&mut self, items: &[T]) -> T {
         items[usize::from(self.u16()) % items.len()]
@@ -149,7 +200,13 @@ fn message_header(input: &mut Input, out: &mut Vec<u8>) {
         (input.u16() & 0x3FF, IMPINJ, input.u8())
     };
     let id = input.u32();
-    FrameHeader { version, msg_type, length: 0, id }.encode(out);
+    FrameHeader {
+        version,
+        msg_type,
+        length: 0,
+        id,
+    }
+    .encode(out);
     if msg_type == CUSTOM {
         out.extend_from_slice(&vendor.to_be_bytes());
         out.push(subtype);
@@ -180,6 +237,8 @@ fn open_tlv(input: &mut Input, out: &mut Vec<u8>, ty: u16) {
 /// The frame being built by [`program`]: bytes, open TLVs and the last whole parameter.
 struct Builder {
     out: Vec<u8>,
+    /// Largest frame to build.
+    max_frame: usize,
     /// Start of each open TLV, outermost first.
     open: Vec<usize>,
     /// Where the last closed or added parameter starts (it ends at `out.len()` until more is
@@ -189,9 +248,9 @@ struct Builder {
 
 impl Builder {
     /// Bytes that can still be appended without any open TLV passing 65535 bytes (the
-    /// outermost is the largest) or the frame passing [`MAX_FRAME`].
+    /// outermost is the largest) or the frame passing its maximum.
     fn room(&self) -> usize {
-        let frame = MAX_FRAME - self.out.len();
+        let frame = self.max_frame.saturating_sub(self.out.len());
         match self.open.first() {
             Some(&start) => frame.min(MAX_TLV - (self.out.len() - start)),
             None => frame,
@@ -220,9 +279,10 @@ impl Builder {
 }
 
 /// Runs the input as a program that builds a frame (see the top of the file).
-fn program(input: &mut Input) -> Vec<u8> {
+fn program(input: &mut Input, max_frame: usize) -> Vec<u8> {
     let mut b = Builder {
         out: Vec::with_capacity(256),
+        max_frame,
         open: Vec::new(),
         last: None,
     };
@@ -269,19 +329,16 @@ fn program(input: &mut Input) -> Vec<u8> {
             8 => {
                 let size = [1usize, 2, 4][usize::from(input.u8() % 3)];
                 let fill = input.u8();
-                let want = usize::from(input.u16());
-                let count = want.min(b.room().saturating_sub(2) / size);
+                let count = input.count(MAX_TLV.min(b.room().saturating_sub(2) / size));
                 let mut array = (count as u16).to_be_bytes().to_vec();
                 array.resize(2 + count * size, fill);
                 b.put(&array);
             }
             // Repeat the last parameter N times, or as often as it fits.
             9 => {
-                let n = usize::from(input.u16());
                 if let Some((start, end)) = b.last {
                     let len = end - start;
-                    let fits = b.room() / len.max(1);
-                    let n = if n >= 0xFF00 { fits } else { n.min(fits) };
+                    let n = input.count(b.room() / len);
                     if n > 0 {
                         let copy = b.out[start..end].to_vec();
                         b.out.extend_from_slice(&copy.repeat(n));
@@ -292,10 +349,10 @@ fn program(input: &mut Input) -> Vec<u8> {
             // Open k ParameterErrors, each inside the one before (closed by later ops or at
             // the end): ParameterType and ErrorCode fields, then the next.
             10 => {
-                let k = usize::from(input.u16()) % (MAX_FITTING_NESTING + 1);
+                let k = input.count(MAX_FITTING_NESTING.min(b.room() / 8));
                 let ty = input.u16();
                 let code = input.u16();
-                for _ in 0..k.min(b.room() / 8) {
+                for _ in 0..k {
                     b.open.push(b.out.len());
                     b.out.extend_from_slice(&PARAMETER_ERROR.to_be_bytes());
                     b.out.extend_from_slice(&[0, 0]);
@@ -305,9 +362,9 @@ fn program(input: &mut Input) -> Vec<u8> {
             }
             // Wrap the last parameter in k ParameterErrors.
             _ => {
-                let k = usize::from(input.u16()) % (MAX_FITTING_NESTING + 1);
                 if let Some((start, end)) = b.last.filter(|&(_, end)| end == b.out.len()) {
-                    let k = k.min(b.room() / 8).min((MAX_TLV - (end - start)) / 8);
+                    let fits = b.room().min(MAX_TLV - (end - start)) / 8;
+                    let k = input.count(MAX_FITTING_NESTING.min(fits));
                     let ty = u16::from_be_bytes([b.out[start], b.out[start + 1]]) & 0x3FF;
                     let mut wrap = Vec::with_capacity(8 * k);
                     for level in 0..k {
@@ -400,9 +457,18 @@ fn parameter_tree(frame: &[u8], body: usize) -> Vec<Node> {
         while p < end && nodes.len() < 4096 {
             let n = param_size(&frame[p..end]).expect("the chain was checked");
             let tlv = frame[p] & 0x80 == 0;
-            nodes.push(Node { start: p, end: p + n, tlv, parent });
+            nodes.push(Node {
+                start: p,
+                end: p + n,
+                tlv,
+                parent,
+            });
             if tlv {
-                let header = if tlv_type_at(&frame[p..]) == CUSTOM { 12 } else { 4 };
+                let header = if tlv_type_at(&frame[p..]) == CUSTOM {
+                    12
+                } else {
+                    4
+                };
                 todo.push((p + header, p + n, Some(nodes.len() - 1)));
             }
             p += n;
@@ -413,11 +479,20 @@ fn parameter_tree(frame: &[u8], body: usize) -> Vec<Node> {
 
 /// Where a parameter can go: before any parameter, or last in the message body or any TLV.
 fn slots(nodes: &[Node], frame_len: usize) -> Vec<Slot> {
-    let mut slots = vec![Slot { pos: frame_len, parent: None }];
+    let mut slots = vec![Slot {
+        pos: frame_len,
+        parent: None,
+    }];
     for (k, n) in nodes.iter().enumerate() {
-        slots.push(Slot { pos: n.start, parent: n.parent });
+        slots.push(Slot {
+            pos: n.start,
+            parent: n.parent,
+        });
         if n.tlv {
-            slots.push(Slot { pos: n.end, parent: Some(k) });
+            slots.push(Slot {
+                pos: n.end,
+                parent: Some(k),
+            });
         }
     }
     slots
@@ -434,12 +509,12 @@ fn ancestors(nodes: &[Node], mut parent: Option<usize>) -> Vec<usize> {
 }
 
 /// How many bytes can be added inside `parent` before an enclosing TLV passes 65535 bytes
-/// or the frame passes [`MAX_FRAME`].
-fn room_in(frame: &[u8], nodes: &[Node], parent: Option<usize>) -> usize {
+/// or the frame passes `max_frame`.
+fn room_in(frame: &[u8], max_frame: usize, nodes: &[Node], parent: Option<usize>) -> usize {
     ancestors(nodes, parent)
         .iter()
         .map(|&k| MAX_TLV - (nodes[k].end - nodes[k].start))
-        .fold(MAX_FRAME.saturating_sub(frame.len()), usize::min)
+        .fold(max_frame.saturating_sub(frame.len()), usize::min)
 }
 
 /// Adds `delta` to the length of every TLV enclosing `parent` and sets the frame's.
@@ -454,7 +529,7 @@ fn grow(frame: &mut [u8], nodes: &[Node], parent: Option<usize>, delta: isize) {
 
 /// Encodes a random valid typed message and edits its parameter tree (see the top of the
 /// file).
-fn seeded(input: &mut Input) -> Vec<u8> {
+fn seeded(input: &mut Input, max_frame: usize) -> Vec<u8> {
     let seed = input.u64();
     let k = usize::from(input.u8()) % MessageBody::TYPED.len();
     let mut g = Gen::new(seed);
@@ -481,12 +556,19 @@ fn seeded(input: &mut Input) -> Vec<u8> {
         match op {
             // Wrap it in k levels of ParameterError (or of another TLV type).
             0 => {
-                let ty = if input.u8() < 192 { PARAMETER_ERROR } else { tlv_type(input) };
+                let ty = if input.u8() < 192 {
+                    PARAMETER_ERROR
+                } else {
+                    tlv_type(input)
+                };
                 let level = if ty == PARAMETER_ERROR { 8 } else { 4 };
-                let k = usize::from(input.u16()) % (MAX_FITTING_NESTING + 1);
-                let room = room_in(&frame, &nodes, node.parent).min(MAX_TLV - len);
-                let k = k.min(room / level);
-                let inner_ty = if node.tlv { tlv_type_at(&bytes) } else { u16::from(bytes[0] & 0x7F) };
+                let room = room_in(&frame, max_frame, &nodes, node.parent).min(MAX_TLV - len);
+                let k = input.count(MAX_FITTING_NESTING.min(room / level));
+                let inner_ty = if node.tlv {
+                    tlv_type_at(&bytes)
+                } else {
+                    u16::from(bytes[0] & 0x7F)
+                };
                 let mut wrap = Vec::with_capacity(level * k);
                 for depth in 0..k {
                     wrap.extend_from_slice(&ty.to_be_bytes());
@@ -502,9 +584,7 @@ fn seeded(input: &mut Input) -> Vec<u8> {
             }
             // Duplicate it N times, or as often as fits.
             1 => {
-                let n = usize::from(input.u16());
-                let fits = room_in(&frame, &nodes, node.parent) / len;
-                let n = if n >= 0xFF00 { fits } else { n.min(fits) };
+                let n = input.count(room_in(&frame, max_frame, &nodes, node.parent) / len);
                 frame.splice(node.end..node.end, bytes.repeat(n));
                 grow(&mut frame, &nodes, node.parent, (n * len) as isize);
             }
@@ -512,7 +592,9 @@ fn seeded(input: &mut Input) -> Vec<u8> {
             2 => {
                 let all = slots(&nodes, frame.len());
                 let to = all[usize::from(input.u16()) % all.len()];
-                if ancestors(&nodes, to.parent).contains(&at) || room_in(&frame, &nodes, to.parent) < len {
+                if ancestors(&nodes, to.parent).contains(&at)
+                    || room_in(&frame, max_frame, &nodes, to.parent) < len
+                {
                     continue;
                 }
                 frame.drain(node.start..node.end);
@@ -521,7 +603,11 @@ fn seeded(input: &mut Input) -> Vec<u8> {
                 let moved = |p: usize| if p >= node.end { p - len } else { p };
                 let after: Vec<Node> = nodes
                     .iter()
-                    .map(|n| Node { start: moved(n.start), end: moved(n.end), ..*n })
+                    .map(|n| Node {
+                        start: moved(n.start),
+                        end: moved(n.end),
+                        ..*n
+                    })
                     .collect();
                 let pos = moved(to.pos);
                 frame.splice(pos..pos, bytes);
@@ -531,7 +617,7 @@ fn seeded(input: &mut Input) -> Vec<u8> {
             3 => {
                 let all = slots(&nodes, frame.len());
                 let to = all[usize::from(input.u16()) % all.len()];
-                if room_in(&frame, &nodes, to.parent) < len {
+                if room_in(&frame, max_frame, &nodes, to.parent) < len {
                     continue;
                 }
                 frame.splice(to.pos..to.pos, bytes);
