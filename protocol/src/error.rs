@@ -290,6 +290,16 @@ impl DecodeError {
             ),
             _ => (None, StatusCode::M_FieldError, StatusCode::P_FieldError),
         };
+        // An LLRPStatus holds at most 1 + MAX_NESTING ParameterErrors (what the decoder takes):
+        // a deeper path is cut, its innermost kept parameter reported as P_ParameterError
+        // without the detail below it (the description still names the whole path).
+        let most = crate::codec::MAX_NESTING as usize + 1;
+        let cut = params.len() + usize::from(sub_ty.is_some()) > most;
+        if cut {
+            params.truncate(most);
+        }
+        let sub_ty = sub_ty.filter(|_| !cut);
+        let field = field.filter(|_| !cut);
         // Innermost detail first, then wrap it in each enclosing parameter.
         let mut inner: Option<ParameterError> = sub_ty.map(|ty| ParameterError::new(ty, p_code));
         let mut field_error = match (sub_ty, field) {
@@ -302,7 +312,7 @@ impl DecodeError {
         };
         for (depth, ty) in params.iter().enumerate().rev() {
             let innermost = depth == params.len() - 1;
-            let code = if innermost && sub_ty.is_none() {
+            let code = if innermost && sub_ty.is_none() && !cut {
                 StatusCode::P_FieldError
             } else {
                 StatusCode::P_ParameterError

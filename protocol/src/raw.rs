@@ -41,7 +41,7 @@ impl RawParam {
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Extra {
     /// Number of typed sub-parameters that precede it in its container.
-    pub at: u16,
+    pub at: u32,
     /// The parameter itself.
     #[cfg_attr(feature = "serde", serde(flatten))]
     pub param: RawParam,

@@ -97,7 +97,7 @@ impl Gen {
             bytes.extend_from_slice(&((4 + len) as u16).to_be_bytes());
             bytes.extend((0..len).map(|_| self.rng.gen::<u8>()));
             vec![Extra {
-                at: at as u16,
+                at: at as u32,
                 param: RawParam::new(bytes),
             }]
         } else {

@@ -150,3 +150,83 @@ proptest! {
         prop_assert_eq!(&back, &m);
     }
 }
+
+/// An ERROR_MESSAGE whose LLRPStatus holds `depth` nested ParameterErrors, the innermost
+/// holding `innermost` (bytes of a fault: an unexpected parameter, a cut field).
+fn chain_around(depth: usize, innermost: &[u8]) -> Vec<u8> {
+    let mut inner = innermost.to_vec();
+    for _ in 0..depth {
+        let mut pe = Vec::with_capacity(inner.len() + 8);
+        pe.extend_from_slice(&289u16.to_be_bytes());
+        pe.extend_from_slice(&((8 + inner.len()) as u16).to_be_bytes());
+        pe.extend_from_slice(&287u16.to_be_bytes());
+        pe.extend_from_slice(&200u16.to_be_bytes());
+        pe.extend_from_slice(&inner);
+        inner = pe;
+    }
+    let mut status = Vec::with_capacity(inner.len() + 8);
+    status.extend_from_slice(&287u16.to_be_bytes());
+    status.extend_from_slice(&((8 + inner.len()) as u16).to_be_bytes());
+    status.extend_from_slice(&100u16.to_be_bytes());
+    status.extend_from_slice(&0u16.to_be_bytes());
+    status.extend_from_slice(&inner);
+    let mut f = Vec::with_capacity(status.len() + 10);
+    f.extend_from_slice(&(0x400u16 | 100).to_be_bytes());
+    f.extend_from_slice(&((10 + status.len()) as u32).to_be_bytes());
+    f.extend_from_slice(&1u32.to_be_bytes());
+    f.extend_from_slice(&status);
+    f
+}
+
+#[test]
+fn the_answer_to_a_fault_at_any_depth_is_itself_decodable() {
+    // Faults found by the structured fuzz target's hand-made inputs: an unexpected TV
+    // parameter, and a ParameterError cut inside its ErrorCode field, at every depth.
+    let unexpected: &[u8] = &[0x81, 0, 0];
+    let cut_field: &[u8] = &[0x01, 0x21, 0x00, 0x06, 0x01, 0x1f];
+    on_small_stack(move || {
+        for depth in (0..=MAX_NESTING as usize + 4).chain([MAX_FITTING_NESTING - 1]) {
+            for fault in [unexpected, cut_field] {
+                let frame = chain_around(depth, fault);
+                let e = Message::decode(&frame).expect_err("a fault");
+                let answer = Message::new(
+                    1,
+                    llrp::message::ErrorMessage {
+                        llrp_status: e.to_status(),
+                        ..Default::default()
+                    },
+                );
+                Message::decode(&answer.to_bytes())
+                    .map_err(|a| format!("depth {depth}, {e}: the answer: {a}"))?;
+            }
+        }
+        Ok::<_, String>(())
+    })
+    .expect("every answer decodes");
+}
+
+#[test]
+fn an_unknown_parameter_after_more_than_65535_typed_ones_keeps_its_place() {
+    // RO_ACCESS_REPORT: n TagReportData (EPC-96 only), then an unknown TLV 900, then one more.
+    let tag: [u8; 17] = [
+        0x00, 0xf0, 0x00, 0x11, 0x8d, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11,
+    ];
+    for n in [65_535usize, 65_536, 65_537] {
+        let mut body = Vec::with_capacity((n + 1) * 17 + 4);
+        for _ in 0..n {
+            body.extend_from_slice(&tag);
+        }
+        body.extend_from_slice(&[0x03, 0x84, 0x00, 0x04]);
+        body.extend_from_slice(&tag);
+        let mut frame = Vec::with_capacity(body.len() + 10);
+        frame.extend_from_slice(&(0x400u16 | 61).to_be_bytes());
+        frame.extend_from_slice(&((10 + body.len()) as u32).to_be_bytes());
+        frame.extend_from_slice(&1u32.to_be_bytes());
+        frame.extend_from_slice(&body);
+        let m = Message::decode(&frame).expect("decodes");
+        assert!(
+            m.to_bytes()[..] == frame[..],
+            "{n} typed: re-encoded bytes differ"
+        );
+    }
+}

@@ -16,7 +16,7 @@ use crate::raw::{Extra, RawParam};
 pub struct Walk<'a> {
     rest: &'a [u8],
     extras: Vec<Extra>,
-    count: u16,
+    count: u32,
 }
 
 impl<'a> Walk<'a> {
@@ -122,7 +122,7 @@ pub struct SubEnc<'b> {
     buf: &'b mut BytesMut,
     extras: &'b [Extra],
     next: usize,
-    count: u16,
+    count: u32,
 }
 
 impl<'b> SubEnc<'b> {
