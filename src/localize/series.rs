@@ -48,6 +48,12 @@ pub struct Sample {
     pub raw_phase_rad: f64,
 }
 
+/// Antenna positions this close (m) to the first of a run of reads count as one place when a
+/// series is thinned ([`Series::thin_places`]).
+pub const SAME_PLACE_M: f64 = 0.005;
+/// Reads of one place a thinned series keeps (besides a segment's last).
+pub const KEPT_AT_ONE_PLACE: usize = 16;
+
 /// Why a series starts a new segment between two reads.
 #[derive(Clone, Copy)]
 enum Split {
@@ -288,6 +294,34 @@ impl Series {
     /// Whether no phase is held.
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
+    }
+
+    /// Drops reads that add no aperture: of each run of a segment's reads whose antenna
+    /// stayed within [`SAME_PLACE_M`] of the run's first, keeps the first
+    /// [`KEPT_AT_ONE_PLACE`] and the segment's last (which the next read is unwrapped
+    /// against). A parked antenna's thousands of reads then weigh as a few, and the reads
+    /// that made the aperture are all kept.
+    pub fn thin_places(&mut self) {
+        let mut kept = 0;
+        for k in 0..self.starts.len() {
+            let (a, b) = self.bounds(k);
+            self.starts[k] = kept;
+            let mut anchor = self.samples.get(a).map_or([0.0; 3], |s| s.antenna);
+            let mut run = 0usize;
+            for i in a..b {
+                let here = self.samples[i].antenna;
+                if distance(here, anchor) > SAME_PLACE_M {
+                    anchor = here;
+                    run = 0;
+                }
+                if run < KEPT_AT_ONE_PLACE || i + 1 == b {
+                    self.samples[kept] = self.samples[i];
+                    kept += 1;
+                }
+                run += 1;
+            }
+        }
+        self.samples.truncate(kept);
     }
 
     /// Keeps every other phase of each segment, and each segment's last (which the next read

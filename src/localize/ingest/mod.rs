@@ -323,12 +323,20 @@ impl Ingest {
         }
     }
 
-    /// Keeps tag `epc` within `bound` phases once it is over: its series thinned
-    /// ([`Ingest::thin_tag`]), and if that leaves more than three quarters of the bound
-    /// (segments of one or two phases, as of a series split at every channel visit, do not
-    /// thin), its oldest segments dropped down to half the bound ([`Ingest::trim_tag`]).
+    /// Keeps tag `epc` within `bound` phases once it is over: first the reads that add no
+    /// aperture go (a parked antenna's: [`Series::thin_places`]); if that leaves more than
+    /// three quarters of the bound, its series are thinned ([`Ingest::thin_tag`]), and if
+    /// that still leaves more (segments of one or two phases, as of a series split at every
+    /// channel visit, do not thin), its oldest segments are dropped down to half the bound
+    /// ([`Ingest::trim_tag`]).
     pub fn bound_tag(&mut self, epc: &str, bound: usize) {
         if self.tag_samples(epc) <= bound {
+            return;
+        }
+        for s in self.by_tag.get(epc).map_or(&[][..], Vec::as_slice) {
+            self.series[s.index].1.thin_places();
+        }
+        if self.tag_samples(epc) <= bound / 4 * 3 {
             return;
         }
         self.thin_tag(epc);

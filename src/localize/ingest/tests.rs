@@ -267,3 +267,34 @@ fn a_tag_of_long_segments_is_thinned_and_keeps_its_oldest_read() {
     assert!(s.len() <= 4096);
     assert_eq!(s.samples()[0].t_us, 0, "the aperture stays");
 }
+
+#[test]
+fn a_parked_antennas_reads_do_not_thin_away_the_pass_before_it() {
+    let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+    // The drive: 1,200 reads 1 cm apart (one segment); then the robot parks at its end and
+    // reads the tag 30,000 times more from there (S1's end of drive at 100 reads a second).
+    let end = 11.99;
+    for k in 0..1_200u64 {
+        ingest.push(&posed("C3", k * 10_000, k as f64 * 0.01, 915_250_000));
+        ingest.bound_tag("C3", 4096);
+    }
+    for k in 1_200..31_200u64 {
+        ingest.push(&posed("C3", k * 10_000, end, 915_250_000));
+        ingest.bound_tag("C3", 4096);
+    }
+    assert!(ingest.tag_samples("C3") <= 4096);
+    let samples: Vec<Sample> = ingest
+        .tag_series("C3")
+        .flat_map(|(_, s)| s.samples().to_vec())
+        .collect();
+    let moving = samples
+        .iter()
+        .filter(|s| s.antenna[0] < end - 0.005)
+        .count();
+    assert_eq!(moving, 1_199, "every read of the drive is kept");
+    assert_eq!(
+        samples.last().map(|s| s.t_us),
+        Some(31_199 * 10_000),
+        "the newest read stays (the next one is unwrapped against it)"
+    );
+}
