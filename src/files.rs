@@ -2,7 +2,7 @@
 //! user says `--force`, a command never writes over one of its own inputs, and a file written
 //! in one go appears whole or not at all.
 //!
-//! - [`Output::create`] for a file written in one go (`export`, `import`, `localize`, a plot):
+//! - [`Output::create`] for a file written in one go (`export`, `import`, `localize`):
 //!   the bytes go to a hidden temporary file beside the target, and [`Output::commit`] moves
 //!   it into place (without `--force`, by a hard link that fails if the target appeared in the
 //!   meantime). Dropped before the commit (an error, a panic), the temporary file is removed
