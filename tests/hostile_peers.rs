@@ -168,6 +168,26 @@ fn a_reader_nesting_parameter_errors_8000_deep_kills_neither_proxy_nor_replay_no
         })
         .count();
     assert_eq!(deep, 10, "every deep frame of both sessions is recorded");
+    // Each is marked undecodable with the codec's reason, and only they are.
+    let marked: Vec<(usize, &str)> = r
+        .entries
+        .iter()
+        .filter_map(|e| match e {
+            llrp_gateway::record::Entry::Frame {
+                frame,
+                undecodable: Some(why),
+                ..
+            } => Some((frame.len(), why.as_str())),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(marked.len(), 10, "{marked:?}");
+    assert!(
+        marked
+            .iter()
+            .all(|(len, why)| *len > 60_000 && why.contains("nested more than")),
+        "{marked:?}"
+    );
 
     // Replayed with the live localizer reading the frames.
     let mut replay = Proc::spawn(&[

@@ -97,6 +97,7 @@ impl<'a> Recorded<'a> {
             conn: self.conn,
             dir,
             frame,
+            undecodable: None,
         });
     }
 
@@ -645,6 +646,7 @@ fn add_synthetic(r: &mut Recording) {
             conn: 3,
             dir,
             frame: m.to_bytes().freeze(),
+            undecodable: None,
         });
     }
     let bytes = [

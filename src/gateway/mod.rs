@@ -489,12 +489,21 @@ async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
         tick.tick().await;
         let now = stats.frames_from_reader.load(Relaxed);
         if now != last {
+            let bad = (
+                stats.undecodable_to_reader.load(Relaxed),
+                stats.undecodable_from_reader.load(Relaxed),
+            );
             tracing::info!(
                 proxy = %name,
-                "{} sessions, {} frames to the reader, {now} from it ({}/s)",
+                "{} sessions, {} frames to the reader, {now} from it ({}/s){}",
                 stats.sessions.load(Relaxed),
                 stats.frames_to_reader.load(Relaxed),
-                (now - last) / 10
+                (now - last) / 10,
+                if bad == (0, 0) {
+                    String::new()
+                } else {
+                    format!("; undecodable: {} to the reader, {} from it", bad.0, bad.1)
+                }
             );
             last = now;
         }

@@ -198,6 +198,7 @@ async fn record_sent(recorder: &Option<Recorder>, conn: u32, bytes: &[u8]) {
             conn,
             dir: Direction::FromReader,
             frame: all.slice(start..start + len),
+            undecodable: None,
         });
         start += len;
     }

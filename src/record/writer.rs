@@ -166,6 +166,7 @@ impl Recorder {
             conn,
             dir,
             frame,
+            undecodable: None,
         })
         .await
     }

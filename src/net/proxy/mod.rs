@@ -154,6 +154,11 @@ pub struct Stats {
     pub frames_from_reader: AtomicU64,
     /// Whole LLRP frames forwarded from clients to the reader.
     pub frames_to_reader: AtomicU64,
+    /// Of the frames from the reader, those the codec could not decode (counted only while
+    /// something decodes them: a recording or the tap).
+    pub undecodable_from_reader: AtomicU64,
+    /// Of the frames from clients, those the codec could not decode (as above).
+    pub undecodable_to_reader: AtomicU64,
 }
 
 impl Stats {
@@ -161,6 +166,13 @@ impl Stats {
         match dir {
             Direction::ToReader => &self.frames_to_reader,
             Direction::FromReader => &self.frames_from_reader,
+        }
+    }
+
+    fn undecodable(&self, dir: Direction) -> &AtomicU64 {
+        match dir {
+            Direction::ToReader => &self.undecodable_to_reader,
+            Direction::FromReader => &self.undecodable_from_reader,
         }
     }
 }

@@ -6,9 +6,7 @@ use std::time::Duration;
 
 use bytes::{Bytes, BytesMut};
 use llrp::enums::KeepaliveTriggerType;
-use llrp::message::{
-    CloseConnection, Keepalive, MessageBody, MessageDef, ReaderEventNotification, SetReaderConfig,
-};
+use llrp::message::{CloseConnection, Keepalive, MessageBody, MessageDef, ReaderEventNotification};
 use llrp::{FrameError, FrameHeader, FrameSplitter, Inbound, Message, Split};
 use std::sync::atomic::Ordering;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -127,6 +125,8 @@ pub(super) struct Tee<'a> {
     pub(super) saw_close: bool,
     /// The reader sent CLOSE_CONNECTION_RESPONSE.
     pub(super) saw_close_response: bool,
+    /// A frame of this direction could not be decoded (and was logged).
+    saw_undecodable: bool,
     /// A write of this direction was abandoned part-way: where the stream stands is unknown.
     cut: bool,
     /// Recording entries of the chunk being looked at.
@@ -147,6 +147,7 @@ impl<'a> Tee<'a> {
             reader: ReaderInfo::default(),
             saw_close: false,
             saw_close_response: false,
+            saw_undecodable: false,
             cut: false,
             pending: Vec::new(),
         }
@@ -174,12 +175,13 @@ impl<'a> Tee<'a> {
         while let Some(inbound) = self.next_frame() {
             match inbound {
                 Inbound::Frame(frame) => {
-                    self.look(&frame);
+                    let undecodable = self.look(&frame);
                     self.record(Entry::Frame {
                         at,
                         conn: self.session.conn,
                         dir: self.dir,
                         frame,
+                        undecodable,
                     });
                 }
                 Inbound::Unsynced(e) => {
@@ -243,7 +245,9 @@ impl<'a> Tee<'a> {
         self.buf.extend_from_slice(chunk);
         while let Some(inbound) = self.next_frame() {
             match inbound {
-                Inbound::Frame(frame) => self.look(&frame),
+                Inbound::Frame(frame) => {
+                    self.look(&frame);
+                }
                 Inbound::Unsynced(_) => {
                     self.unsynced = true;
                     self.buf.clear();
@@ -273,25 +277,38 @@ impl<'a> Tee<'a> {
     }
 
     /// Notes what matters in a frame: the close handshake, tag reads and events for the tap,
-    /// the reader's identity for the recording.
-    fn look(&mut self, frame: &Bytes) {
-        let Some(h) = FrameHeader::peek(frame) else {
-            return;
+    /// the reader's identity for the recording. Where a recording or the tap takes a copy,
+    /// the frame is decoded once, and why it could not be is returned (and counted).
+    fn look(&mut self, frame: &Bytes) -> Option<String> {
+        let h = FrameHeader::peek(frame)?;
+        let copies = self.session.recorder.is_some() || self.session.tap.is_some();
+        let mut undecodable = None;
+        let message = if copies {
+            match Message::decode(frame) {
+                Ok(m) => Some(m),
+                Err(e) => {
+                    undecodable = Some(e.to_string());
+                    self.undecodable(frame, &h, &e);
+                    None
+                }
+            }
+        } else {
+            None
         };
         match self.dir {
             Direction::ToReader => {
                 if h.msg_type == CloseConnection::TYPE {
                     self.saw_close = true;
                 }
-                if h.msg_type == SetReaderConfig::TYPE && self.session.tap.is_some() {
-                    let spec = Message::decode(frame).ok().and_then(|m| match m.body {
-                        MessageBody::SetReaderConfig(c) => c.keepalive_spec,
-                        _ => None,
-                    });
-                    if let Some(k) = spec {
-                        let period = (k.keepalive_trigger_type == KeepaliveTriggerType::Periodic)
-                            .then(|| Duration::from_millis(u64::from(k.periodic_trigger_value)));
-                        self.session.link(LinkNote::Spec(period));
+                if let (Some(m), Some(_)) = (&message, &self.session.tap) {
+                    if let MessageBody::SetReaderConfig(c) = &m.body {
+                        if let Some(k) = &c.keepalive_spec {
+                            let period =
+                                (k.keepalive_trigger_type == KeepaliveTriggerType::Periodic).then(
+                                    || Duration::from_millis(u64::from(k.periodic_trigger_value)),
+                                );
+                            self.session.link(LinkNote::Spec(period));
+                        }
                     }
                 }
             }
@@ -305,23 +322,49 @@ impl<'a> Tee<'a> {
                 if let Some(tap) = &self.session.tap {
                     let now = utc_now_us();
                     self.scratch.clear();
-                    self.scratch.clear();
                     if self.reads.frame(frame, now, &mut self.scratch).is_ok()
                         && !self.scratch.is_empty()
                     {
                         tap.offer(Tapped::Reads(std::mem::take(&mut self.scratch)));
                     }
-                    if h.msg_type == ReaderEventNotification::TYPE {
-                        if let Ok(m) = Message::decode(frame) {
-                            tap.offer(Tapped::Event {
-                                reader: self.session.config.name.clone(),
-                                conn: self.session.conn,
-                                message: Box::new(m),
-                            });
-                        }
+                    if let Some(m) = message.filter(|_| h.msg_type == ReaderEventNotification::TYPE)
+                    {
+                        tap.offer(Tapped::Event {
+                            reader: self.session.config.name.clone(),
+                            conn: self.session.conn,
+                            message: Box::new(m),
+                        });
                     }
                 }
             }
+        }
+        undecodable
+    }
+
+    /// Counts a frame the codec refused; the first of each direction and session is logged.
+    fn undecodable(&mut self, frame: &[u8], h: &FrameHeader, e: &llrp::DecodeError) {
+        let n = self
+            .session
+            .stats
+            .undecodable(self.dir)
+            .fetch_add(1, Ordering::Relaxed);
+        let first = !self.saw_undecodable;
+        self.saw_undecodable = true;
+        let from = match self.dir {
+            Direction::ToReader => "the client",
+            Direction::FromReader => "the reader",
+        };
+        if first {
+            tracing::warn!(
+                proxy = %self.session.config.name,
+                client = %self.session.peer,
+                "a {} (id {}) from {from} cannot be decoded ({e}); forwarded unchanged, recorded as undecodable ({} such frames so far)",
+                llrp::message::message_name(h.msg_type, frame),
+                h.id,
+                n + 1
+            );
+        } else {
+            tracing::debug!(proxy = %self.session.config.name, "undecodable frame from {from}: {e}");
         }
     }
 

@@ -119,6 +119,9 @@ pub enum Entry {
         dir: Direction,
         /// The frame.
         frame: Bytes,
+        /// Why the codec could not decode it, where the writer tried (the proxy does for
+        /// its recording); the frame is kept byte for byte all the same.
+        undecodable: Option<String>,
     },
     /// Bytes that are not LLRP frames (after a length field that cannot be resynchronised),
     /// as they were read.
@@ -187,6 +190,8 @@ struct Line {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     frame: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    undecodable: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     bytes: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     event: Option<Event>,
@@ -212,6 +217,7 @@ pub fn encode_entry(entry: &Entry, out: &mut Vec<u8>) {
             conn,
             dir,
             frame,
+            undecodable: None,
         } => return encode_data(*at, *conn, *dir, "frame", frame, out),
         Entry::Bytes {
             at,
@@ -229,9 +235,15 @@ pub fn encode_entry(entry: &Entry, out: &mut Vec<u8>) {
         ..Line::default()
     };
     match entry {
-        Entry::Frame { dir, frame, .. } => {
+        Entry::Frame {
+            dir,
+            frame,
+            undecodable,
+            ..
+        } => {
             line.dir = Some(*dir);
             line.frame = Some(BASE64.encode(frame));
+            line.undecodable.clone_from(undecodable);
         }
         Entry::Bytes { dir, bytes, .. } => {
             line.dir = Some(*dir);
@@ -388,6 +400,7 @@ impl Recording {
                 conn: c,
                 dir,
                 frame,
+                ..
             } if *c == conn => Some((*at, *dir, frame)),
             _ => None,
         })
@@ -498,6 +511,7 @@ fn parse_entry(text: &str) -> Result<Entry, String> {
             conn,
             dir: dir()?,
             frame,
+            undecodable: line.undecodable.clone(),
         });
     }
     if let Some(b) = &line.bytes {

@@ -22,12 +22,20 @@ fn sample() -> (Header, Vec<Entry>) {
             conn: 1,
             dir: Direction::ToReader,
             frame,
+            undecodable: None,
         },
         Entry::Bytes {
             at: at(11),
             conn: 1,
             dir: Direction::FromReader,
             bytes: Bytes::from_static(b"GET / HTTP/1.1\r\n"),
+        },
+        Entry::Frame {
+            at: at(11),
+            conn: 1,
+            dir: Direction::FromReader,
+            frame: Bytes::from_static(&[0x04, 0x3e, 0, 0, 0, 12, 0, 0, 0, 9, 0xff, 0xff]),
+            undecodable: Some("KEEPALIVE_ACK: 2 bytes after the message body".into()),
         },
         Entry::Reader {
             at: at(12),
@@ -68,7 +76,7 @@ fn every_kind_of_line_round_trips() {
     assert_eq!(r.entries, entries);
     assert!(r.warnings.is_empty());
     assert_eq!(r.connections(), vec![1]);
-    assert_eq!(r.frames(1).count(), 1);
+    assert_eq!(r.frames(1).count(), 2);
 }
 
 #[test]

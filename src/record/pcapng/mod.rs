@@ -211,6 +211,7 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
                         conn,
                         dir: dir(*end),
                         frame: frame.clone(),
+                        undecodable: None,
                     },
                     Piece::Bytes(bytes) => Entry::Bytes {
                         at,

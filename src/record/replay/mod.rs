@@ -116,6 +116,7 @@ impl Script {
                 conn: c,
                 dir,
                 frame,
+                ..
             } = e
             else {
                 continue;

@@ -34,6 +34,7 @@ fn frame(t_us: u64, dir: Direction, m: Message) -> Entry {
         conn: 1,
         dir,
         frame: m.to_bytes().freeze(),
+        undecodable: None,
     }
 }
 
@@ -75,6 +76,7 @@ fn recording() -> Recording {
             conn: 1,
             dir: FromReader,
             frame: report(901 + i as u32, 1_000_000 + dt),
+            undecodable: None,
         });
     }
     Recording {
@@ -285,6 +287,7 @@ fn by_default_a_port_probe_before_the_session_is_passed_over_and_listed_as_such(
             conn: 1,
             dir: FromReader,
             frame: Message::new(0, Keepalive::default()).to_bytes().freeze(),
+            undecodable: None,
         },
         Entry::Marker {
             at: Stamp::default(),
