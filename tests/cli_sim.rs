@@ -293,6 +293,63 @@ fn sigterm_tells_the_client_flushes_the_truth_and_exits() {
     }
 }
 
+/// The truth covers all simulated time, whoever drives the inventory: the reader's own
+/// inventory before a client, the client's session, and the own inventory again after the
+/// client left with CLOSE_CONNECTION; one line every 100 ms of simulated time, none missing
+/// or twice, up to the stop.
+#[test]
+fn the_truth_covers_simulated_time_before_during_and_after_a_client() {
+    use llrp::message::CloseConnection;
+    use std::io::Write;
+    use std::time::Duration;
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truth = dir.path().join("truth.jsonl");
+    let truth_arg = truth.to_str().expect("utf-8 path");
+    let sim = spawn_sim_as(&[
+        "--http",
+        "127.0.0.1:0",
+        "--speed",
+        "10",
+        "--truth",
+        truth_arg,
+    ]);
+    // At ten times real time, a second is 10 s of simulated time.
+    std::thread::sleep(Duration::from_secs(1));
+    let mut s = std::net::TcpStream::connect(&sim.addr).expect("connects");
+    s.set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    read_message(&mut s).expect("greeting");
+    s.write_all(&llrp::Message::new(3, CloseConnection::default()).to_bytes())
+        .expect("send");
+    loop {
+        let m = read_message(&mut s).expect("the close response");
+        if m.name() == "CLOSE_CONNECTION_RESPONSE" {
+            break;
+        }
+    }
+    drop(s);
+    std::thread::sleep(Duration::from_secs(1));
+    let (ok, log) = sim.terminate();
+    assert!(ok, "{log}");
+    let text = std::fs::read_to_string(&truth).expect("truth file exists");
+    let times: Vec<u64> = text
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).expect("each line is JSON");
+            v["t_us"].as_u64().expect("t_us")
+        })
+        .collect();
+    let expected: Vec<u64> = (0..times.len() as u64).map(|k| k * 100_000).collect();
+    assert_eq!(times, expected, "one line every 100 ms of simulated time");
+    // Two wall seconds passed at ten times real time.
+    assert!(
+        times.last().is_some_and(|&t| t >= 15_000_000),
+        "the truth stops at {:?} µs",
+        times.last()
+    );
+}
+
 /// A client's malformed requests get LLRP answers, the connection carries on, and nothing is
 /// logged at error level for them (the log is the binary's stderr at its default level).
 #[test]

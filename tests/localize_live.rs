@@ -189,3 +189,158 @@ async fn a_client_stops_the_own_inventory_and_sees_the_reader_as_before() {
     sim.shutdown().await;
     live.stop();
 }
+
+/// How a client of [`clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory`]
+/// leaves.
+#[derive(Clone, Copy, Debug)]
+enum Leave {
+    /// CLOSE_CONNECTION, its response, then the reader's close.
+    CloseConnection,
+    /// It stops answering keepalives; the reader closes after three misses.
+    KeepaliveTimeout,
+    /// A TCP close (FIN) with no LLRP goodbye.
+    TcpClose,
+    /// A TCP reset (SO_LINGER 0), as of a process killed with its socket.
+    Reset,
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
+    let scenario = s1();
+    let live = live_for(&scenario);
+    let opts = SimOptions {
+        speed: Speed::Factor(4.0),
+        localize: Some(LocalizeFeed {
+            tap: live.tap.clone(),
+            poses: PoseSource::Estimated,
+            pose_interval_us: feed::POSE_INTERVAL_US,
+            read_poses: true,
+        }),
+        ..Default::default()
+    };
+    let sim = sim::start(&scenario, &opts).await.expect("starts");
+    let shared = live.shared.clone();
+    let own_reads = |shared: &Shared, more_than: u64| {
+        let r = &shared.readers()[0];
+        !r.connected && r.peer.is_none() && r.inventory == "self" && r.reads > more_than
+    };
+    assert!(
+        until(&shared, Duration::from_secs(30), |s| own_reads(s, 0)
+            && s.readers()[0].reads_per_s > 0.0
+            && s.tags().iter().any(|t| t.reads_per_s > 0.0))
+        .await,
+        "the own inventory read nothing: {:?}",
+        shared.readers()
+    );
+    for (k, leave) in [
+        Leave::CloseConnection,
+        Leave::KeepaliveTimeout,
+        Leave::TcpClose,
+        Leave::Reset,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        if let Leave::Reset = leave {
+            let s = tokio::net::TcpStream::connect(sim.addrs[0])
+                .await
+                .expect("connects");
+            assert!(
+                until(&shared, Duration::from_secs(10), |s| s.readers()[0]
+                    .connected)
+                .await,
+                "{leave:?}: the client is not shown: {:?}",
+                shared.readers()
+            );
+            // Closing with a zero linger sends RST, not FIN (deprecated in tokio because the
+            // drop of a socket with a nonzero linger may block; a zero one never does).
+            #[allow(deprecated)]
+            s.set_linger(Some(Duration::ZERO)).expect("SO_LINGER");
+            drop(s);
+            let before = shared.readers()[0].reads;
+            assert!(
+                until(&shared, Duration::from_secs(30), |s| own_reads(s, before)).await,
+                "{leave:?}: the reader did not go back to its own inventory: {:?}",
+                shared.readers()
+            );
+            continue;
+        }
+        let mut c = connect(&sim).await;
+        assert!(
+            until(&shared, Duration::from_secs(10), |s| s.readers()[0]
+                .connected
+                && s.readers()[0].peer.is_some())
+            .await,
+            "{leave:?}: the client is not shown: {:?}",
+            shared.readers()
+        );
+        if k == 0 {
+            // The client has not asked for an inventory yet: no reads come, and the rates
+            // say so instead of keeping their last value.
+            assert!(
+                until(&shared, Duration::from_secs(30), |s| s.readers()[0]
+                    .reads_per_s
+                    == 0.0
+                    && s.tags().iter().all(|t| t.reads_per_s == 0.0))
+                .await,
+                "rates stay up with no reads: {:?} {:?}",
+                shared.readers(),
+                shared
+                    .tags()
+                    .iter()
+                    .map(|t| t.reads_per_s)
+                    .collect::<Vec<_>>()
+            );
+        }
+        // The client inventories: its reads reach the localizer.
+        let id = 10 + k as u32;
+        let spec = rospec(
+            id,
+            vec![0],
+            ro_null(),
+            ai_null(),
+            full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+        );
+        c.add_rospec(spec, T).await.expect("ADD_ROSPEC");
+        c.enable_rospec(id, T).await.expect("ENABLE_ROSPEC");
+        let (tags, _) = collect_reports(&mut c, T, |t| !t.is_empty()).await;
+        assert!(!tags.is_empty(), "{leave:?}: the client read nothing");
+        assert!(
+            until(&shared, Duration::from_secs(10), |s| s.readers()[0]
+                .inventory
+                == "client")
+            .await,
+            "{leave:?}: {:?}",
+            shared.readers()
+        );
+        c.delete_rospec(0, T).await.expect("DELETE_ROSPEC 0");
+        match leave {
+            Leave::CloseConnection => c.close_connection(T).await.expect("a clean close"),
+            Leave::KeepaliveTimeout => {
+                let set = llrp::message::SetReaderConfig {
+                    keepalive_spec: Some(llrp::params::KeepaliveSpec {
+                        keepalive_trigger_type: KeepaliveTriggerType::Periodic,
+                        periodic_trigger_value: 100,
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                };
+                assert_eq!(request_status(&mut c, set).await, StatusCode::M_Success);
+                // Keepalives are not acknowledged: the reader gives up and closes.
+                c.until_closed(Duration::from_secs(20))
+                    .await
+                    .expect("the reader closes a silent client");
+            }
+            Leave::TcpClose => c.close(T).await.expect("closed"),
+            Leave::Reset => unreachable!("handled above"),
+        }
+        let before = shared.readers()[0].reads;
+        assert!(
+            until(&shared, Duration::from_secs(30), |s| own_reads(s, before)).await,
+            "{leave:?}: the reader did not go back to its own inventory: {:?}",
+            shared.readers()
+        );
+    }
+    sim.shutdown().await;
+    live.stop();
+}

@@ -252,9 +252,6 @@ pub async fn serve_tls(
     let live = here.as_mut().and_then(|s| s.live.take());
     let mut told: Option<(bool, bool)> = None;
     loop {
-        if let Some(l) = &live {
-            tell_live(l, &client, here.as_deref(), &mut told);
-        }
         if let Some(mut sim) = here.take() {
             // Requests that came during a turn, in order.
             while let (Some(inbound), Some(c)) = (arrived.pop_front(), client.as_ref()) {
@@ -295,6 +292,11 @@ pub async fn serve_tls(
                 }
             }
             here = Some(sim);
+        }
+        // After the session's output, which may have closed the client (CLOSE_CONNECTION,
+        // a keepalive timeout): told before waiting, not when something next wakes the loop.
+        if let Some(l) = &live {
+            tell_live(l, &client, here.as_deref(), &mut told);
         }
         let (deadline, wake) = match here.as_deref() {
             Some(sim) => {

@@ -6,6 +6,7 @@ use std::io::{self, BufWriter, Write};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use tokio::net::TcpListener;
 use tokio::sync::watch;
@@ -206,13 +207,18 @@ fn pose_record(t_us: u64, reader: &str, antenna: u16, pose: &AntennaPose) -> ser
     })
 }
 
-/// The observer that writes reader `name`'s antenna poses (true, estimated and odometry) and
-/// the tags' positions every [`TRUTH_INTERVAL_US`] of simulated time.
-fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64) -> Observer {
+/// Writes reader `name`'s antenna poses (true, estimated and odometry) and the tags'
+/// positions every [`TRUTH_INTERVAL_US`] of simulated time, up to the time it is called with.
+fn truth_writer(
+    truth: Arc<Truth>,
+    name: String,
+    moving: Vec<usize>,
+    utc0: u64,
+    m: Arc<Model>,
+) -> impl FnMut(u64) + Send {
     let mut next = 0u64;
-    Box::new(move |r: &Reader| {
-        let m = r.model();
-        while next <= r.now_us() {
+    move |now_us: u64| {
+        while next <= now_us {
             let t = next;
             let antennas: Vec<_> = (1..=m.antenna_count())
                 .map(|a| {
@@ -244,7 +250,34 @@ fn truth_observer(truth: Arc<Truth>, name: String, moving: Vec<usize>, utc0: u64
             }));
             next += TRUTH_INTERVAL_US;
         }
-    })
+    }
+}
+
+/// Writes the truth by the clock (real-time speeds), whoever drives the inventory: a client,
+/// the own inventory or nobody. Ends at `shutdown`, after writing up to that moment.
+async fn truth_by_clock(
+    mut write: impl FnMut(u64) + Send,
+    clock: Arc<Clock>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let Speed::Factor(f) = clock.speed() else {
+        return;
+    };
+    // One line's worth of simulated time, but not more often than every 10 ms.
+    let every =
+        Duration::from_secs_f64(TRUTH_INTERVAL_US as f64 / 1e6 / f).max(Duration::from_millis(10));
+    let mut tick = tokio::time::interval(every);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        write(clock.now_us());
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => {
+                write(clock.now_us());
+                return;
+            }
+        }
+    }
 }
 
 /// Starts every reader of `scenario`; returns once all listen.
@@ -302,9 +335,26 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         let model = Arc::new(Model::in_world(&world, scenario, i));
         let profile = ReaderProfile::from_scenario(scenario, i, &model);
         let reader = Reader::new(profile.clone(), model.clone(), utc0);
-        let mut observer = truth
-            .as_ref()
-            .map(|t| truth_observer(t.clone(), spec.name.clone(), moving.clone(), utc0));
+        let mut observer: Option<Observer> = None;
+        if let Some(t) = &truth {
+            let mut write = truth_writer(
+                t.clone(),
+                spec.name.clone(),
+                moving.clone(),
+                utc0,
+                model.clone(),
+            );
+            if opts.speed == Speed::Max {
+                // Simulated time moves only as the served reader steps it.
+                observer = Some(Box::new(move |r: &Reader| write(r.now_us())));
+            } else {
+                own_tasks.push(tokio::spawn(truth_by_clock(
+                    write,
+                    clock.clone(),
+                    rx.clone(),
+                )));
+            }
+        }
         let mut hook = None;
         if let Some(l) = &opts.localize {
             l.tap.offer(Input::Reader {

@@ -61,6 +61,9 @@ const RELEASE_EVERY: Duration = Duration::from_secs(10);
 /// Reader time over which read rates are counted (µs).
 const RATE_WINDOW_US: u64 = 2_000_000;
 
+/// A reader or tag that sent no read for this long (wall clock) shows a rate of 0.
+const RATE_SILENCE: Duration = Duration::from_secs(3);
+
 /// How the live localizer works.
 #[derive(Clone, Debug)]
 pub struct Settings {
@@ -176,6 +179,8 @@ struct TagState {
     settle_due: bool,
     rate_start_us: u64,
     rate_count: u64,
+    /// When its last read arrived (for [`RATE_SILENCE`]); `None` once its rate shows 0.
+    read_at: Option<Instant>,
 }
 
 struct Worker {
@@ -186,6 +191,10 @@ struct Worker {
     /// Reads waiting for a pose, with their arrival.
     waiting: VecDeque<(Read, Instant)>,
     reader_rates: HashMap<String, (u64, u64)>,
+    /// When each reader's last read arrived; removed once its rate shows 0.
+    reader_read_at: HashMap<String, Instant>,
+    /// When the rates were last checked for silence.
+    silence_checked: Instant,
     tags: BTreeMap<String, TagState>,
     set_aside_seen: u64,
     /// Input came since the waiting reads were last looked at.
@@ -212,6 +221,8 @@ impl Worker {
             decoders: crate::reads::Decoders::default(),
             waiting: VecDeque::new(),
             reader_rates: HashMap::new(),
+            reader_read_at: HashMap::new(),
+            silence_checked: Instant::now(),
             tags: BTreeMap::new(),
             set_aside_seen: 0,
             taken_since_flush: false,
@@ -272,6 +283,41 @@ impl Worker {
                 self.flush_waiting(false);
             }
             self.estimate(self.settings.compute_budget, false);
+            self.silence_rates();
+        }
+    }
+
+    /// Shows a rate of 0 for the readers and tags that sent nothing for [`RATE_SILENCE`]
+    /// (a rate is otherwise updated only as reads come); checked twice a second at most.
+    fn silence_rates(&mut self) {
+        if self.silence_checked.elapsed() < RATE_SILENCE / 6 {
+            return;
+        }
+        self.silence_checked = Instant::now();
+        let silent = |at: &Instant| at.elapsed() >= RATE_SILENCE;
+        let readers: Vec<String> = self
+            .reader_read_at
+            .iter()
+            .filter(|(_, at)| silent(at))
+            .map(|(name, _)| name.clone())
+            .collect();
+        for name in readers {
+            self.reader_read_at.remove(&name);
+            self.reader_rates.remove(&name);
+            self.shared.update_reader(&name, |v| v.reads_per_s = 0.0);
+        }
+        let estimator = self.settings.estimator.name();
+        for (epc, t) in &mut self.tags {
+            if t.read_at.as_ref().is_some_and(silent) {
+                t.read_at = None;
+                t.rate_count = 0;
+                t.rate_start_us = u64::MAX;
+                self.shared.update_tag(
+                    epc,
+                    || TagView::unseen(epc, estimator),
+                    |v| v.reads_per_s = 0.0,
+                );
+            }
         }
     }
 
@@ -458,6 +504,7 @@ impl Worker {
             .or_insert((r.t_us, 0));
         rate.1 += 1;
         let reader_rate = rolled(rate, r.t_us);
+        self.reader_read_at.insert(reader.clone(), now);
         self.shared.update_reader(&reader, |v| {
             v.reads += 1;
             if let Some(x) = reader_rate {
@@ -470,6 +517,11 @@ impl Worker {
         });
         if self.ingest.taken() > before && state.dirty_since.is_none() {
             state.dirty_since = Some(now);
+        }
+        state.read_at = Some(now);
+        if state.rate_start_us == u64::MAX {
+            // The first read after a silence starts a new window.
+            state.rate_start_us = r.t_us;
         }
         let mut window = (state.rate_start_us, state.rate_count + 1);
         let tag_rate = rolled(&mut window, r.t_us);
