@@ -274,7 +274,7 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
             match llrp_gateway::http::launch::launch(
                 &addr,
                 chosen,
-                localize.http.http_token.clone(),
+                &localize.http,
                 true,
                 l.shared.clone(),
                 l.tap.clone(),

@@ -6,7 +6,9 @@ mod http_support;
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
-use http_support::{pose, read, request, truth, Events, Server, EPC, PATIENCE, READER, TAG};
+use http_support::{
+    pose, post_poses, read, request, truth, Events, Server, EPC, PATIENCE, READER, TAG,
+};
 use llrp_gateway::http::HttpOptions;
 use llrp_gateway::localize::live::{Input, Settings};
 
@@ -190,20 +192,18 @@ fn events_deliver_an_estimate_after_a_new_read() {
 fn posted_poses_are_accepted_and_show_in_readers() {
     let server = open();
     let body = format!("[{}, {}]", pose_json(1_000, 0.25), pose_json(2_000, 0.5));
-    let r = request(server.addr, "POST", "/api/poses", &[], body.as_bytes());
+    let r = post_poses(server.addr, &[], body.as_bytes());
     assert_eq!(r.status, 202, "{}", r.text());
     assert_eq!(r.json(), serde_json::json!({"accepted": 2}));
     // One object alone and JSON Lines are taken too.
-    let r = request(
+    let r = post_poses(
         server.addr,
-        "POST",
-        "/api/poses",
         &[("Content-Type", "application/json")],
         pose_json(3_000, 0.75).as_bytes(),
     );
     assert_eq!(r.json(), serde_json::json!({"accepted": 1}));
     let lines = format!("{}\n{}\n", pose_json(4_000, 1.0), pose_json(5_000, 1.25));
-    let r = request(server.addr, "POST", "/api/poses", &[], lines.as_bytes());
+    let r = post_poses(server.addr, &[], lines.as_bytes());
     assert_eq!(r.json(), serde_json::json!({"accepted": 2}));
     let deadline = Instant::now() + PATIENCE;
     loop {
@@ -233,24 +233,18 @@ fn a_bad_pose_is_400_naming_index_and_field_and_nothing_is_taken() {
     let server = open();
     let bad = pose_json(2_000, 0.5).replace("\"antenna\":2", "\"antenna\":0");
     let body = format!("[{}, {bad}]", pose_json(1_000, 0.25));
-    let r = request(server.addr, "POST", "/api/poses", &[], body.as_bytes());
+    let r = post_poses(server.addr, &[], body.as_bytes());
     assert_eq!(r.status, 400);
     assert_eq!(r.error(), "pose 1: antenna: must be a port number from 1");
     let wrong_type = pose_json(1_000, 0.25).replace("\"y\":0.0", "\"y\":\"zero\"");
-    let r = request(
-        server.addr,
-        "POST",
-        "/api/poses",
-        &[],
-        wrong_type.as_bytes(),
-    );
+    let r = post_poses(server.addr, &[], wrong_type.as_bytes());
     assert_eq!(r.status, 400);
     assert!(
         r.error().starts_with("pose 0: y: invalid type"),
         "{}",
         r.text()
     );
-    let r = request(server.addr, "POST", "/api/poses", &[], b"{not json");
+    let r = post_poses(server.addr, &[], b"{not json");
     assert_eq!(r.status, 400);
     assert!(r.error().starts_with("pose 0: not JSON"), "{}", r.text());
     // Nothing of the bad bodies reached the localizer.
@@ -287,7 +281,7 @@ fn posted_poses_are_503_while_the_localizer_is_behind() {
     let refused = loop {
         // Fill the tap until it refuses, then post at once.
         while server.live.tap.offer(filler()) {}
-        let r = request(server.addr, "POST", "/api/poses", &[], body.as_bytes());
+        let r = post_poses(server.addr, &[], body.as_bytes());
         if r.status == 503 {
             break r;
         }
@@ -306,10 +300,10 @@ fn a_body_over_the_limit_is_413() {
     let one = pose_json(1_000, 0.25);
     let many = format!("[{}]", vec![one.as_str(); 20].join(","));
     assert!(many.len() > 1000);
-    let r = request(server.addr, "POST", "/api/poses", &[], many.as_bytes());
+    let r = post_poses(server.addr, &[], many.as_bytes());
     assert_eq!(r.status, 413);
     assert!(!r.error().is_empty());
-    let r = request(server.addr, "POST", "/api/poses", &[], one.as_bytes());
+    let r = post_poses(server.addr, &[], one.as_bytes());
     assert_eq!(r.status, 202, "under the limit: {}", r.text());
 }
 
@@ -317,16 +311,16 @@ fn a_body_over_the_limit_is_413() {
 fn with_a_token_posts_need_the_bearer_and_reads_on_loopback_do_not() {
     let server = with_token(false);
     let body = pose_json(1_000, 0.25);
-    let r = request(server.addr, "POST", "/api/poses", &[], body.as_bytes());
+    let r = post_poses(server.addr, &[], body.as_bytes());
     assert_eq!(r.status, 401);
     assert_eq!(r.header("www-authenticate"), Some("Bearer"));
     assert!(r.error().contains("Authorization: Bearer"), "{}", r.text());
     let wrong = [("Authorization", "Bearer nope")];
-    let r = request(server.addr, "POST", "/api/poses", &wrong, body.as_bytes());
+    let r = post_poses(server.addr, &wrong, body.as_bytes());
     assert_eq!(r.status, 401);
     assert_eq!(r.error(), "wrong bearer token");
     let right = [("Authorization", "Bearer s3cret")];
-    let r = request(server.addr, "POST", "/api/poses", &right, body.as_bytes());
+    let r = post_poses(server.addr, &right, body.as_bytes());
     assert_eq!(r.status, 202, "{}", r.text());
     assert_eq!(server.get("/api/tags").status, 200);
     assert_eq!(server.get("/healthz").status, 200);

@@ -10,7 +10,7 @@ use std::io::{BufRead, BufReader, ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
-use http_support::{request, Proc, Server, PATIENCE};
+use http_support::{post_poses, request, Proc, Server, PATIENCE};
 use llrp_gateway::http::{HttpOptions, ServerLimits};
 
 fn limits() -> ServerLimits {
@@ -213,21 +213,9 @@ fn with_a_token_an_unknown_method_gets_401_before_405_and_the_scheme_is_case_ins
         b"",
     );
     assert_eq!(r.status, 405, "{}", r.text());
-    let r = request(
-        s.addr,
-        "POST",
-        "/api/poses",
-        &[("Authorization", "bearer s3cret")],
-        b"[]",
-    );
+    let r = post_poses(s.addr, &[("Authorization", "bearer s3cret")], b"[]");
     // Past the token check: the body itself is judged (an empty array is no pose).
     assert_eq!(r.status, 400, "{}", r.text());
-    let r = request(
-        s.addr,
-        "POST",
-        "/api/poses",
-        &[("Authorization", "Basic s3cret")],
-        b"[]",
-    );
+    let r = post_poses(s.addr, &[("Authorization", "Basic s3cret")], b"[]");
     assert_eq!(r.status, 401, "{}", r.text());
 }

@@ -116,7 +116,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
                 let h = crate::http::launch::launch(
                     &addr,
                     chosen,
-                    w.http.http_token.clone(),
+                    &w.http,
                     false,
                     worker.live.shared.clone(),
                     worker.live.tap.clone(),

@@ -189,7 +189,7 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
     let http = launch(
         &addr,
         chosen,
-        args.http.http_token.clone(),
+        &args.http,
         false,
         live.shared.clone(),
         live.tap.clone(),

@@ -3,7 +3,7 @@
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, PathRejection};
 use axum::extract::{Path, State};
-use axum::http::{header, StatusCode};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
 use axum::Json;
 use serde::Serialize;
@@ -48,8 +48,18 @@ pub(super) fn base_document() -> OpenApi {
 
 #[utoipa::path(get, path = "/", tag = "map",
     responses((status = 200, description = "The live map page", content_type = "text/html")))]
-pub(super) async fn map_page() -> Html<&'static str> {
-    Html(MAP_HTML)
+pub(super) async fn map_page() -> Response {
+    static POLICY: std::sync::OnceLock<HeaderValue> = std::sync::OnceLock::new();
+    let policy = POLICY.get_or_init(|| {
+        // The policy is ASCII (keywords and base64), so always a valid header value.
+        HeaderValue::from_str(&super::guard::page_policy(MAP_HTML))
+            .unwrap_or_else(|_| HeaderValue::from_static("default-src 'none'"))
+    });
+    (
+        [(header::CONTENT_SECURITY_POLICY, policy.clone())],
+        Html(MAP_HTML),
+    )
+        .into_response()
 }
 
 #[utoipa::path(get, path = "/healthz", tag = "ops",
@@ -155,20 +165,26 @@ pub(super) async fn truth(State(state): State<AppState>) -> Result<Response, Api
 
 #[utoipa::path(post, path = "/api/poses", tag = "localizer",
     request_body(content = Vec<super::schema::Pose>, description = "One pose object, a JSON \
-        array of them, or JSON Lines (one object a line); any content type"),
+        array of them, or JSON Lines (one object a line), sent as application/json (or \
+        application/x-ndjson, application/jsonl)"),
     responses(
         (status = 202, description = "Handed to the localizer", body = super::schema::Accepted),
         (status = 400, description = "A pose is bad: the message names its index, field and \
             reason; none of the body is taken", body = super::schema::Error),
         (status = 401, description = "A token is set and the request lacks it", body = super::schema::Error),
+        (status = 403, description = "From another origin's page, or for a host name that is \
+            not this server's", body = super::schema::Error),
         (status = 408, description = "The body stalled, or the request took too long", body = super::schema::Error),
         (status = 413, description = "The body is over the limit", body = super::schema::Error),
+        (status = 415, description = "The body is not sent as JSON", body = super::schema::Error),
         (status = 503, description = "The localizer is behind: try again", body = super::schema::Error)),
     security((), ("bearer" = [])))]
 pub(super) async fn post_poses(
     State(state): State<AppState>,
+    headers: HeaderMap,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
+    super::guard::require_json(&headers)?;
     let body = body.map_err(|r| {
         if stalled(&r) {
             ApiError::new(

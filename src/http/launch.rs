@@ -9,7 +9,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
 use super::{
-    check_bind, require_token_everywhere, router, serve, HttpOptions, ServerLimits,
+    check_bind, require_token_everywhere, router, serve, BrowserRules, HttpOptions, ServerLimits,
     DEFAULT_BODY_LIMIT,
 };
 use crate::localize::live::Tap;
@@ -28,9 +28,26 @@ pub struct HttpArgs {
     /// Bearer token the write routes need (every route when bound beyond loopback).
     #[arg(long, value_name = "TOKEN")]
     pub http_token: Option<String>,
+    /// A host name the loopback HTTP API also answers to (beside localhost, 127.0.0.1 and
+    /// `[::1]`); `.example.lan` takes a domain and its subdomains. Repeatable.
+    #[arg(long, value_name = "HOST")]
+    pub http_allowed_host: Vec<String>,
+    /// An origin whose pages may call the HTTP API, writes included (CORS), e.g.
+    /// `http://dashboard.lan:3000`. Repeatable.
+    #[arg(long, value_name = "ORIGIN")]
+    pub http_allowed_origin: Vec<String>,
 }
 
 impl HttpArgs {
+    /// The browser rules these flags give a listener on `bound`.
+    pub fn browser(&self, bound: &SocketAddr) -> BrowserRules {
+        BrowserRules {
+            check_host: !require_token_everywhere(bound),
+            allowed_hosts: self.http_allowed_host.clone(),
+            allowed_origins: self.http_allowed_origin.clone(),
+        }
+    }
+
     /// Where to serve, and whether the user chose it: `default` when no `--http` was given
     /// (`None`: off unless asked for), nothing with `--no-http`.
     pub fn address(&self, default: Option<&str>) -> Option<(String, bool)> {
@@ -94,12 +111,13 @@ impl Launched {
     }
 }
 
-/// Starts the API on `addr` over `shared` and `tap`. When `chosen` is false (the command's
-/// default address) and the address is taken, `Ok(None)`: the caller says so and runs on.
+/// Starts the API on `addr` over `shared` and `tap`, with the token and browser rules of
+/// `args`. When `chosen` is false (the command's default address) and the address is taken,
+/// `Ok(None)`: the caller says so and runs on.
 pub async fn launch(
     addr: &str,
     chosen: bool,
-    token: Option<String>,
+    args: &HttpArgs,
     simulation: bool,
     shared: Arc<Shared>,
     tap: Tap,
@@ -118,6 +136,7 @@ pub async fn launch(
         addr: addr.to_string(),
         source,
     })?;
+    let token = args.http_token.clone();
     check_bind(&bound, &token).map_err(|reason| LaunchError::Exposed {
         addr: addr.to_string(),
         reason,
@@ -128,6 +147,7 @@ pub async fn launch(
         simulation,
         body_limit: DEFAULT_BODY_LIMIT,
         limits: ServerLimits::default(),
+        browser: args.browser(&bound),
     };
     let limits = options.limits;
     let app = router(shared, tap, options);
@@ -152,6 +172,7 @@ mod tests {
             http: http.map(String::from),
             no_http,
             http_token: None,
+            ..HttpArgs::default()
         };
         let d = Some("127.0.0.1:8080");
         assert_eq!(
@@ -174,7 +195,7 @@ mod tests {
         let skipped = launch(
             &addr,
             false,
-            None,
+            &HttpArgs::default(),
             false,
             live.shared.clone(),
             live.tap.clone(),
@@ -185,7 +206,7 @@ mod tests {
         let err = launch(
             &addr,
             true,
-            None,
+            &HttpArgs::default(),
             false,
             live.shared.clone(),
             live.tap.clone(),

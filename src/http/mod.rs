@@ -24,12 +24,14 @@ use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 
 mod events;
+pub mod guard;
 mod handlers;
 pub mod launch;
 pub mod poses;
 pub mod schema;
 mod serve;
 
+pub use guard::BrowserRules;
 pub use poses::parse_poses;
 pub use serve::{serve, ServerLimits};
 
@@ -50,6 +52,8 @@ pub struct HttpOptions {
     pub body_limit: usize,
     /// Timeouts and the connection limit.
     pub limits: ServerLimits,
+    /// What browser pages of other origins and other host names may do.
+    pub browser: BrowserRules,
 }
 
 impl Default for HttpOptions {
@@ -60,6 +64,10 @@ impl Default for HttpOptions {
             simulation: false,
             body_limit: DEFAULT_BODY_LIMIT,
             limits: ServerLimits::default(),
+            browser: BrowserRules {
+                check_host: true,
+                ..BrowserRules::default()
+            },
         }
     }
 }
@@ -122,13 +130,14 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
     let openapi = document.to_pretty_json().unwrap_or_else(|_| "{}".into());
     let body_limit = options.body_limit;
     let body_read = options.limits.body_read;
+    let cors = cors(&options.browser);
     let state = AppState {
         shared,
         tap,
         options: Arc::new(options),
         openapi: Arc::new(openapi),
     };
-    routes
+    let app = routes
         .fallback(no_route)
         .method_not_allowed_fallback(no_method)
         .layer(DefaultBodyLimit::max(body_limit))
@@ -139,7 +148,37 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
             declared_length,
         ))
         .layer(middleware::from_fn_with_state(state.clone(), authorize))
-        .with_state(state)
+        .layer(middleware::from_fn_with_state(
+            state.clone(),
+            guard::browser_guard,
+        ))
+        .layer(middleware::from_fn(guard::security_headers));
+    let app = match cors {
+        Some(cors) => app.layer(cors),
+        None => app,
+    };
+    app.with_state(state)
+}
+
+/// CORS answers (preflights included) for the origins `--http-allowed-origin` names, and for
+/// no other: a page of another origin can then neither read the API nor send it JSON.
+fn cors(rules: &BrowserRules) -> Option<tower_http::cors::CorsLayer> {
+    use tower_http::cors::{AllowOrigin, CorsLayer};
+    let origins: Vec<HeaderValue> = rules
+        .allowed_origins
+        .iter()
+        .filter_map(|o| HeaderValue::from_str(o.trim_end_matches('/')).ok())
+        .collect();
+    if origins.is_empty() {
+        return None;
+    }
+    Some(
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(origins))
+            .allow_methods([Method::GET, Method::POST])
+            .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION])
+            .max_age(std::time::Duration::from_secs(600)),
+    )
 }
 
 /// The route that streams for as long as the client listens, so has no deadline.

@@ -217,7 +217,11 @@ fn write_request(
     headers: &[(&str, &str)],
     body: &[u8],
 ) {
-    let mut head = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n");
+    // The address as Host unless the caller gives one.
+    let mut head = format!("{method} {path} HTTP/1.1\r\nConnection: close\r\n");
+    if !headers.iter().any(|(k, _)| k.eq_ignore_ascii_case("host")) {
+        head.push_str(&format!("Host: {addr}\r\n"));
+    }
     for (k, v) in headers {
         head.push_str(&format!("{k}: {v}\r\n"));
     }
@@ -251,6 +255,19 @@ fn read_head(reader: &mut impl BufRead) -> (u16, Vec<(String, String)>) {
         }
     }
     (status, headers)
+}
+
+/// `POST /api/poses` with `body` sent as JSON: `Content-Type: application/json` unless
+/// `headers` names a content type.
+pub fn post_poses(addr: SocketAddr, headers: &[(&str, &str)], body: &[u8]) -> Response {
+    let mut all = headers.to_vec();
+    if !all
+        .iter()
+        .any(|(k, _)| k.eq_ignore_ascii_case("content-type"))
+    {
+        all.push(("Content-Type", "application/json"));
+    }
+    request(addr, "POST", "/api/poses", &all, body)
 }
 
 /// One request; the whole response.
@@ -413,6 +430,29 @@ impl Proc {
     pub fn kill_hard(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+
+    /// The first `n` lines of the log that hold `marker`, waiting for them at most 30 s;
+    /// fewer if they do not come.
+    pub fn lines_with(&mut self, marker: &str, n: usize) -> Vec<String> {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            let found: Vec<String> = self
+                .log
+                .iter()
+                .filter(|l| l.contains(marker))
+                .take(n)
+                .cloned()
+                .collect();
+            if found.len() >= n {
+                return found;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => self.log.push(line),
+                Err(_) => return found,
+            }
+        }
     }
 
     /// The address after `marker` in the first line of the log that has it.
