@@ -15,16 +15,23 @@ use llrp_gateway::stop::StopSignal;
 #[command(
     name = "llrp-gateway",
     version,
-    about = "Simulated LLRP RFID reader and LLRP frame decoder"
+    about = "Point your LLRP reader software here: a simulated Impinj-class reader (sim), a \
+             gateway to real readers (proxy, replay, inventory, export, import) and a tag \
+             localizer (localize), with a live map over HTTP",
+    long_about = None
 )]
 struct Cli {
+    /// Log lines as text (coloured on a terminal unless NO_COLOR is set) or as JSON objects.
+    #[arg(long, global = true, value_enum, default_value_t = llrp_gateway::stop::LogFormat::Text)]
+    log_format: llrp_gateway::stop::LogFormat,
     #[command(subcommand)]
     command: Command,
 }
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run simulated LLRP readers for a scenario (default: the embedded warehouse S1).
+    /// Simulated reader: serve LLRP for a scenario's readers (default: the embedded
+    /// warehouse S1), with a live map of the tags it localizes.
     Sim {
         /// Scenario file (JSON); without it the embedded default scenario S1 runs.
         #[arg(long)]
@@ -78,11 +85,19 @@ enum Command {
         #[command(flatten)]
         publish: llrp_gateway::fleet::args::PublishArgs,
     },
-    /// Forward clients to a real reader byte for byte, recording the sessions.
+    /// Gateway: forward clients to a real reader byte for byte, recording the sessions.
     Proxy(llrp_gateway::gateway::ProxyArgs),
-    /// Serve a recording to a client as the reader did.
+    /// Gateway: serve a recording to a client as the reader did.
     Replay(llrp_gateway::gateway::ReplayArgs),
-    /// Decode LLRP frames and print one JSON object per message.
+    /// Gateway: inventory an LLRP reader and write its tag reads (docs/client.md).
+    Inventory(llrp_gateway::inventory::InventoryArgs),
+    /// Gateway: write a recording as a pcapng capture that Wireshark dissects as LLRP.
+    Export(llrp_gateway::record::pcapng::ExportArgs),
+    /// Gateway: turn the LLRP streams of a pcap or pcapng capture into a recording.
+    Import(llrp_gateway::record::pcapng::ImportArgs),
+    /// Localizer: locate every tag of a recording or a reads file (docs/localize.md).
+    Localize(llrp_gateway::localize::command::LocalizeArgs),
+    /// Tool: decode LLRP frames and print one JSON object per message (docs/codec.md).
     Decode {
         /// Input file with LLRP frames; `-` or nothing reads standard input.
         file: Option<PathBuf>,
@@ -93,14 +108,6 @@ enum Command {
         #[arg(long)]
         roundtrip: bool,
     },
-    /// Inventory an LLRP reader and write its tag reads (see docs/client.md).
-    Inventory(llrp_gateway::inventory::InventoryArgs),
-    /// Write a recording as a pcapng capture that Wireshark dissects as LLRP.
-    Export(llrp_gateway::record::pcapng::ExportArgs),
-    /// Turn the LLRP streams of a pcap or pcapng capture into a recording.
-    Import(llrp_gateway::record::pcapng::ImportArgs),
-    /// Localize every tag of a recording or a reads file (docs/localize.md).
-    Localize(llrp_gateway::localize::command::LocalizeArgs),
     /// Benchmarks (docs/benchmarks.md).
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -115,6 +122,7 @@ enum BenchCommand {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    llrp_gateway::stop::set_log_format(cli.log_format);
     match cli.command {
         Command::Inventory(args) => llrp_gateway::inventory::run(args),
         Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),

@@ -293,6 +293,50 @@ fn sigterm_tells_the_client_flushes_the_truth_and_exits() {
     }
 }
 
+/// Logs written to a file or a pipe carry no ANSI colour codes; `--log-format json` writes
+/// one JSON object an event.
+#[test]
+fn logs_to_a_pipe_are_plain_text_and_json_on_request() {
+    let sim = spawn_sim(&[]);
+    let (ok, log) = sim.terminate();
+    assert!(ok, "{log}");
+    assert!(log.contains("simulated reader listening"), "{log}");
+    assert!(
+        !log.contains('\u{1b}'),
+        "colour codes in a piped log:\n{log:?}"
+    );
+
+    let mut child = bin()
+        .args([
+            "--log-format",
+            "json",
+            "sim",
+            "--listen",
+            "127.0.0.1:0",
+            "--no-http",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("runs");
+    let stderr = child.stderr.take().expect("piped");
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(stderr));
+    let event = lines
+        .find_map(|l| {
+            let l = l.ok()?;
+            l.starts_with('{').then_some(l)
+        })
+        .expect("a JSON log line");
+    let _ = child.kill();
+    let _ = child.wait();
+    let v: serde_json::Value = serde_json::from_str(&event).expect("the line is JSON");
+    assert_eq!(v["level"], "INFO", "{event}");
+    assert_eq!(
+        v["fields"]["message"], "simulated reader listening",
+        "{event}"
+    );
+}
+
 /// The truth covers all simulated time, whoever drives the inventory: the reader's own
 /// inventory before a client, the client's session, and the own inventory again after the
 /// client left with CLOSE_CONNECTION; one line every 100 ms of simulated time, none missing
