@@ -238,6 +238,55 @@ fn reports_are_held_after_a_reconnect_and_released_as_they_were() {
     assert_eq!(released, sent_unheld);
 }
 
+/// Reads a ROSpec gathered for a client that left before they were reported (report trigger
+/// None: only GET_REPORT reports) are not reported to the next client, unless
+/// HoldEventsAndReportsUponReconnect keeps them for it.
+#[test]
+fn unreported_reads_of_a_departed_client_reach_the_next_only_when_held() {
+    for hold in [false, true] {
+        let mut v = VirtualReader::new(&s1());
+        let set = SetReaderConfig {
+            events_and_reports: Some(EventsAndReports {
+                hold_events_and_reports_upon_reconnect: hold,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(v.status(set), StatusCode::M_Success);
+        add_and_enable(
+            &mut v,
+            rospec(
+                1,
+                vec![0],
+                ro_null(),
+                ai_null(),
+                full_report(RoReportTriggerType::None, 0),
+            ),
+        );
+        v.run_for(1_000_000);
+        assert!(
+            v.take_reports().is_empty(),
+            "trigger None reports nothing by itself"
+        );
+        v.disconnect();
+        v.connect();
+        v.send(GetReport::default());
+        v.send(EnableEventsAndReports::default());
+        let reads: usize = v.take_reports().iter().map(Vec::len).sum();
+        if hold {
+            assert!(reads > 0, "held for the next connection, then reported");
+        } else {
+            assert_eq!(reads, 0, "the departed client's reads reached the next one");
+        }
+        // The ROSpec itself stays, as on an Impinj reader.
+        let m = v.request(GetRospecs::default());
+        let MessageBody::GetRospecsResponse(r) = &m.body else {
+            panic!("{m:?}")
+        };
+        assert_eq!(r.ro_specs.len(), 1, "hold {hold}");
+    }
+}
+
 #[test]
 fn an_aispec_without_end_reports_at_the_reader_interval() {
     // sllurp's default ROSpec: Null stop triggers, ROReportTrigger 1 with N = 0. Impinj

@@ -217,3 +217,59 @@ async fn every_reader_of_a_scenario_listens() {
     }
     sim.shutdown().await;
 }
+
+/// A client leaves its ROSpec running (as sllurp does when it is killed); the next client's
+/// inventory (`ReadStream`, what `llrp-gateway inventory` runs) takes only its own reads:
+/// every one with the antenna, phase and RSSI it asked for, none of the earlier ROSpec's
+/// (whose reports carried no antenna and no Impinj phase).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_inventory_takes_no_read_of_a_rospec_an_earlier_client_left_running() {
+    use llrp_gateway::net::client::{InventorySpec, ReadStream};
+    let sim = start(&line_scenario(&[1.0, 1.5, 2.0]), Speed::Factor(1.0)).await;
+    let mut first = connect(&sim).await;
+    let bare = RoSpec::immediate(7, vec![0]).with_report(
+        RoReportSpec::new(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1).with_content(
+            TagReportContentSelector {
+                enable_ro_spec_id: true,
+                ..Default::default()
+            },
+        ),
+    );
+    add(&mut first, bare).await;
+    enable(&mut first, 7).await;
+    let (tags, _) = collect_reports(&mut first, T, |t| !t.is_empty()).await;
+    assert!(!tags.is_empty(), "the first client's ROSpec reads");
+    // Gone without a word: its ROSpec stays and keeps running on the next connection.
+    drop(first);
+    tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+    let second = Client::connect_reader(sim.addrs[0], T)
+        .await
+        .expect("connects");
+    // The old ROSpec's reports pile up while the client is not yet set up.
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    let spec = InventorySpec {
+        impinj: true,
+        ..InventorySpec::default()
+    };
+    let mut stream = ReadStream::start(second, &spec, None, T)
+        .await
+        .expect("the inventory starts");
+    let mut reads = Vec::new();
+    while reads.len() < 50 {
+        stream
+            .next(T, &mut reads)
+            .await
+            .expect("reports keep coming");
+    }
+    for r in &reads {
+        assert!(
+            r.antenna >= 1 && r.phase_rad.is_some() && r.rssi_dbm.is_some(),
+            "a read this inventory did not ask for: {r:?}"
+        );
+    }
+    assert!(
+        stream.foreign_reads() > 0,
+        "the earlier ROSpec's reports came (and were set aside)"
+    );
+    sim.shutdown().await;
+}

@@ -30,6 +30,8 @@ pub(super) struct Stats {
     pub(super) connections: u32,
     pub(super) keepalives: u64,
     pub(super) bad_reports: u64,
+    /// Tag reads that were not this inventory's (an earlier client's ROSpec), dropped.
+    pub(super) foreign_reads: u64,
 }
 
 impl Stats {
@@ -42,6 +44,7 @@ impl Stats {
             connections: 0,
             keepalives: 0,
             bad_reports: 0,
+            foreign_reads: 0,
         }
     }
 
@@ -83,6 +86,12 @@ impl Stats {
             s.push_str(&format!(
                 ", undecodable reports skipped: {}",
                 self.bad_reports
+            ));
+        }
+        if self.foreign_reads > 0 {
+            s.push_str(&format!(
+                ", reads of another client's ROSpec ignored: {}",
+                self.foreign_reads
             ));
         }
         s.push('\n');

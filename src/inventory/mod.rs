@@ -292,6 +292,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
             if over(&stop) {
                 stats.keepalives += stream.keepalives_answered();
                 stats.bad_reports += stream.bad_reports();
+                stats.foreign_reads += stream.foreign_reads();
                 let closed = stream.finish(CLOSE_TIMEOUT, &mut batch).await;
                 share(&batch);
                 for r in batch.drain(..) {
@@ -310,6 +311,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
                 Err(e) => {
                     stats.keepalives += stream.keepalives_answered();
                     stats.bad_reports += stream.bad_reports();
+                    stats.foreign_reads += stream.foreign_reads();
                     let why = match e {
                         ClientError::Closed => "the reader closed the connection".to_string(),
                         e => format!("connection lost: {e}"),
@@ -332,6 +334,7 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
                 if now.duration_since(last_heard) > d {
                     stats.keepalives += stream.keepalives_answered();
                     stats.bad_reports += stream.bad_reports();
+                    stats.foreign_reads += stream.foreign_reads();
                     let why = format!(
                         "nothing from the reader for {:.1} s (keepalives every {} ms)",
                         d.as_secs_f64(),

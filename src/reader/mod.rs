@@ -265,10 +265,27 @@ impl Reader {
     }
 
     /// The client went away (closed, or dropped by the reader).
+    ///
+    /// ROSpecs and the configuration stay, as on an Impinj reader. Reads gathered for the
+    /// client and not yet reported, and messages held for it, are dropped unless
+    /// HoldEventsAndReportsUponReconnect is set: then the next client gets them when it sends
+    /// ENABLE_EVENTS_AND_REPORTS (LLRP 1.1 §20: a reader MAY keep data state across
+    /// connections; docs/simulator.md, "Across connections").
     pub fn disconnect(&mut self) {
         self.connected = false;
         self.impinj = false;
         self.keepalive_due_ms = None;
+        if !self
+            .config
+            .events_and_reports
+            .hold_events_and_reports_upon_reconnect
+        {
+            let dropped = self.specs.take_reports().len();
+            self.held.clear();
+            if dropped > 0 {
+                tracing::debug!("{dropped} unreported reads of the departed client dropped");
+            }
+        }
     }
 
     /// The message a reader answers a frame it could not decode with: the request's

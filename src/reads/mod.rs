@@ -128,6 +128,10 @@ pub struct ReadDecoder {
     from_reader: bool,
     /// Stamps each read with its antenna's pose.
     poses: Option<PoseAt>,
+    /// Takes only the reads of this ROSpec (those that carry another ROSpecID are counted
+    /// in `foreign` and dropped).
+    only_rospec: Option<u32>,
+    foreign: u64,
 }
 
 /// Why a frame gave no reads.
@@ -159,6 +163,18 @@ impl ReadDecoder {
     pub fn with_poses(mut self, poses: Option<PoseAt>) -> Self {
         self.poses = poses;
         self
+    }
+
+    /// Takes only the reads of ROSpec `id`: a read whose ROSpecID is another's (a ROSpec an
+    /// earlier client left running) is dropped and counted ([`Self::foreign_reads`]).
+    pub fn with_only_rospec(mut self, id: u32) -> Self {
+        self.only_rospec = Some(id);
+        self
+    }
+
+    /// Reads dropped because they carried another ROSpec's ID.
+    pub fn foreign_reads(&self) -> u64 {
+        self.foreign
     }
 
     /// The hop table in use, if any.
@@ -211,6 +227,12 @@ impl ReadDecoder {
         }
         for r in llrp::reads::tag_reads(frame)? {
             let r = r?;
+            if let (Some(want), Some(got)) = (self.only_rospec, r.ro_spec_id) {
+                if got != want {
+                    self.foreign += 1;
+                    continue;
+                }
+            }
             out.push(self.read(&r, now_utc_us));
         }
         Ok(())

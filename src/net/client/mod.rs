@@ -364,6 +364,20 @@ impl Client {
         self.pending.drain(..).collect()
     }
 
+    /// Drops the queued RO_ACCESS_REPORTs (keeping the other messages in order); the number
+    /// of tag reads they held.
+    pub fn discard_pending_reports(&mut self) -> usize {
+        let mut reads = 0;
+        self.pending.retain(|m| match &m.body {
+            MessageBody::RoAccessReport(r) => {
+                reads += r.tag_report_data.len();
+                false
+            }
+            _ => true,
+        });
+        reads
+    }
+
     /// Sends a request and waits for its response; `Err(Status)` unless the reader answers
     /// with the request's response type carrying M_Success (an ERROR_MESSAGE gives its
     /// status too).

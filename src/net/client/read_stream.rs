@@ -19,6 +19,8 @@ pub struct ReadStream {
     rospec_id: u32,
     /// RO_ACCESS_REPORTs that did not decode (skipped).
     bad_reports: u64,
+    /// Tag reads that came before this inventory's ROSpec started (dropped).
+    early_reads: u64,
 }
 
 impl ReadStream {
@@ -26,7 +28,10 @@ impl ReadStream {
     /// capabilities (the hop table, and [`InventorySpec::check`]), SET_READER_CONFIG (the
     /// keepalive), IMPINJ_ENABLE_EXTENSIONS when asked, DELETE_ROSPEC 0 (whatever an earlier
     /// client left; a reader without any may say so), ADD_ROSPEC, ENABLE_ROSPEC and
-    /// START_ROSPEC. Reads are labelled with `reader`.
+    /// START_ROSPEC. Reads are labelled with `reader`. Only this inventory's reads are
+    /// taken: reports that came during the setup, and reads of another ROSpec (one an earlier
+    /// client left running: ROSpecs persist across connections on Impinj readers) are dropped
+    /// and counted ([`Self::foreign_reads`]).
     pub async fn start(
         mut client: Client,
         spec: &InventorySpec,
@@ -40,7 +45,7 @@ impl ReadStream {
             .general_device_capabilities
             .as_ref()
             .map_or(1, |g| g.max_number_of_antenna_supported);
-        let mut decoder = ReadDecoder::new(reader);
+        let mut decoder = ReadDecoder::new(reader).with_only_rospec(spec.rospec_id);
         decoder.observe(&Message::new(0, caps));
         client.check(spec.reader_config(), timeout).await?;
         if spec.impinj {
@@ -56,11 +61,20 @@ impl ReadStream {
             .await?;
         client.enable_rospec(spec.rospec_id, timeout).await?;
         client.start_rospec(spec.rospec_id, timeout).await?;
+        // Whatever was reported before our ROSpec started is not ours.
+        let early_reads = client.discard_pending_reports() as u64;
+        if early_reads > 0 {
+            tracing::info!(
+                "{early_reads} tag reads reported before this inventory's ROSpec started \
+                 (an earlier client's ROSpec) were dropped"
+            );
+        }
         Ok(ReadStream {
             client,
             decoder,
             rospec_id: spec.rospec_id,
             bad_reports: 0,
+            early_reads,
         })
     }
 
@@ -103,6 +117,12 @@ impl ReadStream {
     /// RO_ACCESS_REPORTs skipped because they did not decode.
     pub fn bad_reports(&self) -> u64 {
         self.bad_reports
+    }
+
+    /// Tag reads dropped as not this inventory's: reported before its ROSpec started, or
+    /// carrying another ROSpec's ID.
+    pub fn foreign_reads(&self) -> u64 {
+        self.early_reads + self.decoder.foreign_reads()
     }
 
     /// Ends the inventory cleanly: STOP_ROSPEC and DELETE_ROSPEC (their failures ignored:
