@@ -304,6 +304,31 @@ fn bad_settings_and_reads_files_are_refused_naming_what_is_wrong() {
     assert!(!out.exists(), "nothing is written for a bad input");
 }
 
+/// Reads set aside for want of a pose or a phase: the summary says what to give.
+#[test]
+fn reads_set_aside_come_with_the_remedy() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("out.json");
+    let reads = dir.path().join("reads.jsonl");
+    std::fs::write(
+        &reads,
+        "{\"epc\":\"AA\",\"antenna\":1,\"t_us\":1,\"phase_rad\":1.0,\"channel_frequency_hz\":866000000}\n\
+         {\"epc\":\"AB\",\"antenna\":1,\"t_us\":2,\"channel_frequency_hz\":866000000}\n",
+    )
+    .expect("writes");
+    let (ok, _, stderr) = localize(&[reads.to_str().expect("utf-8")], &out);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("1 reads have no antenna pose: give one with --poses FILE"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("antenna_pose"), "{stderr}");
+    assert!(
+        stderr.contains("1 reads have no phase") && stderr.contains("--impinj"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn reads_under_the_settings_rssi_floor_are_set_aside_and_counted() {
     let dir = tempfile::tempdir().expect("temp dir");

@@ -133,5 +133,46 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         a.no_pose,
         a.weak
     );
+    for hint in set_aside_hints(&a, args.poses.is_some()) {
+        eprintln!("llrp-gateway localize: {hint}");
+    }
     Ok(())
+}
+
+/// What to do about the reads set aside, one sentence per cause that set some aside.
+fn set_aside_hints(a: &crate::localize::ingest::SetAside, have_poses: bool) -> Vec<String> {
+    let mut hints = Vec::new();
+    if a.no_pose > 0 {
+        hints.push(if have_poses {
+            format!(
+                "{} reads fall outside the pose file's time span (or name a reader or antenna it \
+                 lacks): its t_us must be on the reads' clock (settings' clock_offsets_us)",
+                a.no_pose
+            )
+        } else {
+            format!(
+                "{} reads have no antenna pose: give one with --poses FILE (JSON Lines or CSV of \
+                 t_us, reader, antenna, x, y, z, yaw_deg; `jq -c '.antennas[].estimated' \
+                 truth.jsonl` makes one from `sim --truth`), or localize reads that carry their \
+                 own antenna_pose (the simulator's do)",
+                a.no_pose
+            )
+        });
+    }
+    if a.no_phase > 0 {
+        hints.push(format!(
+            "{} reads have no phase: the localizer needs the Impinj RF phase \
+             (`llrp-gateway inventory --impinj`, sllurp --impinj-reports)",
+            a.no_phase
+        ));
+    }
+    if a.no_frequency > 0 {
+        hints.push(format!(
+            "{} reads have no channel frequency: a read needs channel_frequency_hz, written \
+             when the reader's hop table is known (`inventory` reads it from the reader's \
+             capabilities, `proxy` from the session or --region)",
+            a.no_frequency
+        ));
+    }
+    hints
 }
