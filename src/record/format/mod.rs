@@ -302,8 +302,8 @@ pub enum RecordError {
         VERSION
     )]
     Version {
-        /// The version in the header.
-        found: u32,
+        /// The version in the header, as written there.
+        found: String,
     },
     /// A line (not the last) does not parse.
     #[error("line {line}: {message}")]
@@ -343,18 +343,25 @@ impl Recording {
         }
         let value: serde_json::Value =
             serde_json::from_str(&text).map_err(|e| RecordError::Header(e.to_string()))?;
-        match value.get("llrp_recording").and_then(|v| v.as_u64()) {
+        match value.get("llrp_recording") {
             None => {
                 return Err(RecordError::Header(
                     "llrp_recording: missing (not an llrp-gateway recording)".into(),
                 ))
             }
-            Some(v) if v != u64::from(VERSION) => {
+            // Any other number (beyond u64, negative, fractional) is another version.
+            Some(serde_json::Value::Number(n)) if n.as_u64() != Some(u64::from(VERSION)) => {
                 return Err(RecordError::Version {
-                    found: u32::try_from(v).unwrap_or(u32::MAX),
+                    found: number_as_written(&text, "llrp_recording").unwrap_or(n.to_string()),
                 })
             }
-            Some(_) => {}
+            Some(serde_json::Value::Number(_)) => {}
+            Some(other) => {
+                return Err(RecordError::Header(format!(
+                    "llrp_recording: {other} is not a format version (a number; this \
+                     llrp-gateway reads version {VERSION})"
+                )))
+            }
         }
         let header: Header = serde_path_to_error::deserialize(value)
             .map_err(|e| RecordError::Header(format!("{}: {}", e.path(), e.inner())))?;
@@ -479,6 +486,17 @@ impl ConnSummary {
     pub fn has_session(&self) -> bool {
         self.to_reader > 0 && self.from_reader > 0
     }
+}
+
+/// The number after `"key":` in a JSON line, as written (serde_json reads integers past u64
+/// as floats, which would misname them).
+fn number_as_written(line: &str, key: &str) -> Option<String> {
+    let at = line.find(&format!("\"{key}\""))? + key.len() + 2;
+    let rest = line[at..].trim_start().strip_prefix(':')?.trim_start();
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || "+-.eE".contains(c)))
+        .unwrap_or(rest.len());
+    (end > 0).then(|| rest[..end].to_string())
 }
 
 fn parse_entry(text: &str) -> Result<Entry, String> {

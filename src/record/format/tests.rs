@@ -138,8 +138,26 @@ fn another_format_version_is_refused_by_number() {
     let (mut header, entries) = sample();
     header.llrp_recording = 2;
     let e = Recording::read(&encode(&header, &entries)[..]).expect_err("version 2");
-    assert!(matches!(e, RecordError::Version { found: 2 }), "{e:?}");
+    assert!(
+        matches!(&e, RecordError::Version { found } if found == "2"),
+        "{e:?}"
+    );
     assert!(e.to_string().contains("reads version 1"), "{e}");
+    // A version beyond u64 is named as written, not taken for a missing one.
+    let big = String::from_utf8(encode(&header, &entries))
+        .expect("utf-8")
+        .replacen(
+            "\"llrp_recording\":2",
+            "\"llrp_recording\":18446744073709551616",
+            1,
+        );
+    let e = Recording::read(big.as_bytes()).expect_err("beyond u64");
+    assert_eq!(
+        e.to_string(),
+        "recording format version 18446744073709551616 is not supported: this llrp-gateway reads version 1"
+    );
+    let e = Recording::read(&b"{\"llrp_recording\":\"1\"}\n"[..]).expect_err("a string");
+    assert!(e.to_string().contains("is not a format version"), "{e}");
     let e = Recording::read(&b"{\"hello\":1}\n"[..]).expect_err("not a recording");
     assert!(e.to_string().contains("llrp_recording"), "{e}");
 }
