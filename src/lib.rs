@@ -10,6 +10,7 @@ pub mod http;
 pub mod inventory;
 pub mod localize;
 pub mod net;
+pub mod options;
 pub mod physics;
 pub mod reader;
 pub mod reads;

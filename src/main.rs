@@ -54,7 +54,7 @@ enum Command {
         #[arg(long)]
         record: Option<PathBuf>,
         /// Start a numbered next recording file once a file would pass this many bytes.
-        #[arg(long)]
+        #[arg(long, value_name = "BYTES", value_parser = llrp_gateway::options::parser::<u64>("record-max-bytes"))]
         record_max_bytes: Option<u64>,
         /// Serve LLRP over TLS with this certificate chain (PEM) on every reader's address
         /// (port 5085 by convention: choose it with --listen); see docs/tls.md.
@@ -72,7 +72,7 @@ enum Command {
         poses: llrp_gateway::sim::PoseSource,
         /// Time between two pose samples of each antenna, as a robot publishes its pose
         /// (ms; 100 is 10 Hz).
-        #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        #[arg(long, value_name = "MS", default_value_t = 100, value_parser = llrp_gateway::options::parser::<u64>("pose-interval-ms"))]
         pose_interval_ms: u64,
         /// Do not stamp each read with its antenna's pose at the read (the localizer and
         /// MQTT workers then wait for a pose sample at or after each read).
@@ -370,4 +370,126 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
         eprintln!("llrp-gateway sim: stopped");
         ExitCode::SUCCESS
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::any::TypeId;
+    use std::ffi::OsStr;
+
+    use clap::CommandFactory;
+    use llrp_gateway::options::{range, RANGES};
+
+    use super::Cli;
+
+    /// The numeric types an option may give, with their bounds.
+    fn numeric(id: &clap::builder::ValueParser) -> Option<(&'static str, f64, f64)> {
+        let t = id.type_id();
+        [
+            (TypeId::of::<u8>(), "u8", 0.0, u8::MAX as f64),
+            (TypeId::of::<u16>(), "u16", 0.0, u16::MAX as f64),
+            (TypeId::of::<u32>(), "u32", 0.0, u32::MAX as f64),
+            (TypeId::of::<u64>(), "u64", 0.0, u64::MAX as f64),
+            (TypeId::of::<usize>(), "usize", 0.0, usize::MAX as f64),
+            (TypeId::of::<i64>(), "i64", i64::MIN as f64, i64::MAX as f64),
+            (TypeId::of::<f64>(), "f64", f64::MIN, f64::MAX),
+        ]
+        .into_iter()
+        .find(|(id, ..)| t == *id)
+        .map(|(_, name, lo, hi)| (name, lo, hi))
+    }
+
+    /// Every (command path, command, option) of the CLI, subcommands included.
+    fn all_args(
+        cmd: &clap::Command,
+        path: String,
+        out: &mut Vec<(String, clap::Command, clap::Arg)>,
+    ) {
+        for a in cmd.get_arguments() {
+            out.push((path.clone(), cmd.clone(), a.clone()));
+        }
+        for sub in cmd.get_subcommands() {
+            all_args(sub, format!("{path} {}", sub.get_name()), out);
+        }
+    }
+
+    #[test]
+    fn every_numeric_option_of_every_command_is_checked_against_its_range() {
+        let cli = Cli::command();
+        let mut args = Vec::new();
+        all_args(&cli, "llrp-gateway".into(), &mut args);
+        let mut seen = std::collections::BTreeSet::new();
+        for (path, cmd, arg) in &args {
+            let parser = arg.get_value_parser();
+            let Some((ty, lo, hi)) = numeric(parser) else {
+                continue;
+            };
+            let name = arg
+                .get_long()
+                .unwrap_or_else(|| panic!("{path}: a numeric option without a long name"));
+            let r = range(name);
+            seen.insert(name);
+            assert!(
+                r.min >= lo && r.max <= hi,
+                "{path} --{name}: range {}..={} does not fit {ty}",
+                r.min,
+                r.max
+            );
+            // The command parsed with just this option: a value out of range is a
+            // ValueValidation error (found as the value is parsed, before any check of the
+            // command's other required arguments, which may fail next).
+            let parse = |v: String| -> Result<(), ()> {
+                // `--name=value`, so that a negative value is not taken for a flag.
+                let flag = format!("--{name}={v}");
+                let line = [OsStr::new("x"), OsStr::new(&flag)];
+                match cmd.clone().try_get_matches_from(line) {
+                    Err(e) if e.kind() == clap::error::ErrorKind::ValueValidation => Err(()),
+                    _ => Ok(()),
+                }
+            };
+            let text = |v: f64| {
+                if r.integer {
+                    format!("{}", v as i128)
+                } else {
+                    format!("{v}")
+                }
+            };
+            // The bounds pass; just outside them, nonsense and NaN do not.
+            assert!(parse(text(r.min)).is_ok(), "{path} --{name} {}", r.min);
+            if r.max < 1e15 {
+                assert!(parse(text(r.max)).is_ok(), "{path} --{name} {}", r.max);
+                let over = if r.integer {
+                    r.max + 1.0
+                } else {
+                    r.max * 2.0 + 1.0
+                };
+                assert!(parse(text(over)).is_err(), "{path} --{name} {over} taken");
+            }
+            let under = if r.integer {
+                r.min - 1.0
+            } else if r.min > 0.0 {
+                r.min / 2.0
+            } else {
+                r.min - 1.0
+            };
+            assert!(parse(text(under)).is_err(), "{path} --{name} {under} taken");
+            for bad in ["many", "NaN", ""] {
+                assert!(parse(bad.into()).is_err(), "{path} --{name} {bad:?} taken");
+            }
+            if r.integer {
+                assert!(
+                    parse(format!("{}.5", r.min as i128)).is_err(),
+                    "{path} --{name} x.5"
+                );
+            }
+        }
+        // Every range is some option's (no stale entries).
+        for r in RANGES {
+            assert!(seen.contains(r.name), "--{} in RANGES is no option", r.name);
+        }
+        // The ones the issue named are among them.
+        for name in ["record-max-bytes", "connect-timeout-ms", "seconds", "mss"] {
+            assert!(seen.contains(name), "{name}");
+        }
+    }
 }

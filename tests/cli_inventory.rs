@@ -629,3 +629,24 @@ fn llrpkit_emulate_reads_arrive_with_its_own_hop_table() {
     assert!(summary_number(&out, "keepalives answered: ") >= 1, "{out}");
     assert_eq!(summary_number(&out, "connections: "), 1, "{out}");
 }
+
+/// `--output /dev/null` (a name that says no format) needs `--format`, and then works.
+#[test]
+fn an_output_named_without_a_format_takes_it_from_format() {
+    let (sim, addr) = sim_anywhere(None);
+    let (status, _, err) = inventory(&[&addr, "--seconds", "0.5", "--output", "/dev/null"]);
+    assert!(!status.success());
+    assert!(err.contains("--format jsonl"), "{err}");
+    let (status, out, err) = inventory(&[
+        &addr,
+        "--seconds",
+        "1",
+        "--output",
+        "/dev/null",
+        "--format",
+        "csv",
+    ]);
+    drop(sim);
+    assert!(status.success(), "{err}");
+    assert!(summary_number(&out, " reads,") > 0, "{out}");
+}

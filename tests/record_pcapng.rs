@@ -766,7 +766,7 @@ fn export_refuses_a_bad_mss_and_import_names_a_file_that_is_no_capture() {
         .output()
         .expect("runs");
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("536..=65495"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("from 536 to 65495"));
     let out = bin()
         .arg("import")
         .arg(&rec)

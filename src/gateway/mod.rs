@@ -39,14 +39,14 @@ pub struct ProxyArgs {
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Start a numbered next recording file once a file would pass this many bytes.
-    #[arg(long)]
+    #[arg(long, value_name = "BYTES", value_parser = crate::options::parser::<u64>("record-max-bytes"))]
     pub record_max_bytes: Option<u64>,
     /// Regulatory region of the reader (`fcc` or `etsi`), for channel frequencies of tapped
     /// reads until the reader's capabilities are seen.
     #[arg(long)]
     pub region: Option<Region>,
     /// Longest wait for the reader to accept the connection, in milliseconds.
-    #[arg(long, default_value = "5000")]
+    #[arg(long, default_value = "5000", value_parser = crate::options::parser::<u64>("connect-timeout-ms"))]
     pub connect_timeout_ms: u64,
     /// Clients connect with TLS: this certificate chain (PEM); see docs/tls.md.
     #[arg(

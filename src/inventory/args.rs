@@ -11,32 +11,35 @@ pub struct InventoryArgs {
     /// The reader: HOST or HOST:PORT (port 5084 when none is given); IPv6 as `[ADDR]:PORT`.
     pub reader: String,
     /// Stop after this many seconds (default: run until Ctrl-C or SIGTERM).
-    #[arg(long, value_parser = parse_seconds)]
+    #[arg(long, value_parser = crate::options::parser::<f64>("seconds"))]
     pub seconds: Option<f64>,
     /// Antenna ports to inventory, comma-separated (default: all the reader has).
-    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_delimiter = ',', value_parser = crate::options::parser::<u16>("antennas"))]
     pub antennas: Vec<u16>,
     /// Enable the Impinj extensions and ask for Impinj RF phase, peak RSSI and Doppler.
     #[arg(long)]
     pub impinj: bool,
     /// The reader sends a report every N tag entries (a reader may fold a tag's repeated
     /// reads into one entry; reads not yet reported come when the inventory stops).
-    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::options::parser::<u16>("report-every"))]
     pub report_every: u16,
     /// Gen2 session, 0-3 (default: the reader's).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=3))]
+    #[arg(long, value_parser = crate::options::parser::<u8>("session"))]
     pub session: Option<u8>,
     /// Impinj inventory search mode (0 reader selected, 1 single target, 2 dual target,
     /// 3 single target with suppression, ...; default: the reader's).
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", value_parser = crate::options::parser::<u16>("search-mode"))]
     pub search_mode: Option<u16>,
     /// RF mode: a ModeIdentifier of the reader's RF mode table (default: the reader's).
-    #[arg(long, value_name = "ID")]
+    #[arg(long, value_name = "ID", value_parser = crate::options::parser::<u16>("mode"))]
     pub mode: Option<u16>,
     /// Write the reads here: a `.jsonl` file (the reads file), a `.csv` file, or `-` for
-    /// JSON Lines on standard output.
+    /// JSON Lines on standard output; any other name (`/dev/null`, a FIFO) with `--format`.
     #[arg(long, value_parser = parse_output)]
     pub output: Option<Output>,
+    /// The output's format, when its name does not say it (or to override what it says).
+    #[arg(long, value_enum, requires = "output")]
+    pub format: Option<Format>,
     /// Replace an existing output file (without it, an existing file is refused).
     #[arg(long)]
     pub force: bool,
@@ -45,16 +48,16 @@ pub struct InventoryArgs {
     pub name: Option<String>,
     /// Keepalive interval asked of the reader, ms (0: none). A reader silent for three
     /// intervals and 5 s more is taken for lost and reconnected.
-    #[arg(long, value_name = "MS", default_value_t = 5000)]
+    #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = crate::options::parser::<u32>("keepalive-ms"))]
     pub keepalive_ms: u32,
     /// Retries after failed connection attempts in a row: a number, or `forever`.
     #[arg(long, default_value = "5", value_parser = parse_retries)]
     pub retries: Retries,
     /// First wait before a retry, ms; it doubles with each failure in a row.
-    #[arg(long, value_name = "MS", default_value_t = 500)]
+    #[arg(long, value_name = "MS", default_value_t = 500, value_parser = crate::options::parser::<u64>("backoff-ms"))]
     pub backoff_ms: u64,
     /// Longest wait before a retry, ms.
-    #[arg(long, value_name = "MS", default_value_t = 30_000)]
+    #[arg(long, value_name = "MS", default_value_t = 30_000, value_parser = crate::options::parser::<u64>("backoff-max-ms"))]
     pub backoff_max_ms: u64,
     /// LLRP over TLS (port 5085 when HOST has none), with --tls-ca or --tls-insecure.
     #[arg(long)]
@@ -97,12 +100,46 @@ pub enum Output {
     Csv(PathBuf),
     /// JSON Lines to standard output.
     Stdout,
+    /// A file whose name says no format: `--format` must.
+    Unnamed(PathBuf),
 }
 
-fn parse_seconds(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v > 0.0 && v.is_finite() && v < 1e9 => Ok(v),
-        _ => Err(format!("`{s}` is not a positive number of seconds")),
+/// The format of the reads written (`--format`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// JSON Lines, the reads file.
+    Jsonl,
+    /// CSV with a header row.
+    Csv,
+}
+
+impl InventoryArgs {
+    /// The output with its format settled by `--format`; why not, when neither the name nor
+    /// the flag says it.
+    pub fn resolved_output(&self) -> Result<Option<Output>, String> {
+        let Some(out) = &self.output else {
+            return Ok(None);
+        };
+        Ok(Some(match (out, self.format) {
+            (Output::Unnamed(p), None) => {
+                return Err(format!(
+                    "--output {}: the name does not say the format: add --format jsonl or \
+                     --format csv (or name the file .jsonl or .csv)",
+                    p.display()
+                ))
+            }
+            (Output::Stdout, Some(Format::Csv)) => {
+                return Err("--output -: standard output takes JSON Lines only".into())
+            }
+            (Output::Stdout, _) => Output::Stdout,
+            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Jsonl)) => {
+                Output::Jsonl(p.clone())
+            }
+            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Csv)) => {
+                Output::Csv(p.clone())
+            }
+            (named, None) => named.clone(),
+        }))
     }
 }
 
@@ -123,9 +160,7 @@ fn parse_output(s: &str) -> Result<Output, String> {
     match path.extension().and_then(|e| e.to_str()) {
         Some("jsonl") | Some("ndjson") => Ok(Output::Jsonl(path)),
         Some("csv") => Ok(Output::Csv(path)),
-        _ => Err(format!(
-            "`{s}`: the file name must end in .jsonl (reads file) or .csv, or be `-`"
-        )),
+        _ => Ok(Output::Unnamed(path)),
     }
 }
 
@@ -174,7 +209,7 @@ mod tests {
             assert_eq!(a.session, Some(s));
         }
         let e = parse(&["r", "--session", "4"]).expect_err("session 4");
-        assert!(e.to_string().contains("0..=3"), "{e}");
+        assert!(e.to_string().contains("from 0 to 3"), "{e}");
     }
 
     #[test]
@@ -221,12 +256,35 @@ mod tests {
             &["r", "--seconds", "0"][..],
             &["r", "--seconds", "-1"],
             &["r", "--seconds", "soon"],
-            &["r", "--output", "reads.txt"],
             &["r", "--report-every", "0"],
             &["r", "--retries", "many"],
         ] {
             assert!(parse(bad).is_err(), "{bad:?} is refused");
         }
+    }
+
+    #[test]
+    fn an_output_whose_name_says_no_format_takes_it_from_the_flag() {
+        let out = |args: &[&str]| parse(args).expect("parses").resolved_output();
+        assert_eq!(
+            out(&["r", "--output", "/dev/null", "--format", "csv"]),
+            Ok(Some(Output::Csv("/dev/null".into())))
+        );
+        assert_eq!(
+            out(&["r", "--output", "reads.txt", "--format", "jsonl"]),
+            Ok(Some(Output::Jsonl("reads.txt".into())))
+        );
+        let e = out(&["r", "--output", "/dev/null"]).expect_err("no format");
+        assert!(e.contains("--format jsonl"), "{e}");
+        assert!(out(&["r", "--output", "-", "--format", "csv"]).is_err());
+        assert_eq!(
+            out(&["r", "--output", "x.csv"]),
+            Ok(Some(Output::Csv("x.csv".into())))
+        );
+        assert!(
+            parse(&["r", "--format", "csv"]).is_err(),
+            "--format needs --output"
+        );
     }
 
     #[test]

@@ -26,7 +26,9 @@ mod args;
 mod display;
 mod sink;
 
-pub use args::{reader_address, reader_address_on, InventoryArgs, Output, Retries, LLRP_PORT};
+pub use args::{
+    reader_address, reader_address_on, Format, InventoryArgs, Output, Retries, LLRP_PORT,
+};
 use display::{Screen, Stats};
 use sink::Sink;
 
@@ -148,7 +150,14 @@ async fn pause(d: Duration, deadline: Option<Instant>, stop: &AtomicBool) -> boo
 }
 
 /// Runs `llrp-gateway inventory` and reports the outcome as the process's exit code.
-pub fn run(args: InventoryArgs) -> ExitCode {
+pub fn run(mut args: InventoryArgs) -> ExitCode {
+    match args.resolved_output() {
+        Ok(out) => args.output = out,
+        Err(e) => {
+            eprintln!("llrp-gateway inventory: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
     let runtime = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -191,7 +200,9 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
     let output_name = match &args.output {
         None => String::new(),
         Some(Output::Stdout) => "standard output".into(),
-        Some(Output::Jsonl(p)) | Some(Output::Csv(p)) => p.display().to_string(),
+        Some(Output::Jsonl(p)) | Some(Output::Csv(p)) | Some(Output::Unnamed(p)) => {
+            p.display().to_string()
+        }
     };
     let output_error = |source| InventoryError::Output {
         path: output_name.clone(),

@@ -27,6 +27,12 @@ impl Sink {
             Some(Output::Stdout) => (Some(Box::new(io::stdout())), false),
             Some(Output::Jsonl(p)) => (Some(Box::new(create(p)?)), false),
             Some(Output::Csv(p)) => (Some(Box::new(create(p)?)), true),
+            Some(Output::Unnamed(p)) => {
+                return Err(io::Error::other(format!(
+                    "{}: the format is not settled (InventoryArgs::resolved_output)",
+                    p.display()
+                )))
+            }
         };
         let mut sink = Sink {
             out,
