@@ -220,13 +220,16 @@ async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
     };
     let sim = sim::start(&scenario, &opts).await.expect("starts");
     let shared = live.shared.clone();
+    // The reader's view (none until the localizer has taken in the reader).
+    let reader = |s: &Shared| s.readers().into_iter().next();
     let own_reads = |shared: &Shared, more_than: u64| {
-        let r = &shared.readers()[0];
-        !r.connected && r.peer.is_none() && r.inventory == "self" && r.reads > more_than
+        reader(shared).is_some_and(|r| {
+            !r.connected && r.peer.is_none() && r.inventory == "self" && r.reads > more_than
+        })
     };
     assert!(
         until(&shared, Duration::from_secs(30), |s| own_reads(s, 0)
-            && s.readers()[0].reads_per_s > 0.0
+            && reader(s).is_some_and(|r| r.reads_per_s > 0.0)
             && s.tags().iter().any(|t| t.reads_per_s > 0.0))
         .await,
         "the own inventory read nothing: {:?}",
@@ -267,9 +270,8 @@ async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
         }
         let mut c = connect(&sim).await;
         assert!(
-            until(&shared, Duration::from_secs(10), |s| s.readers()[0]
-                .connected
-                && s.readers()[0].peer.is_some())
+            until(&shared, Duration::from_secs(10), |s| reader(s)
+                .is_some_and(|r| r.connected && r.peer.is_some()))
             .await,
             "{leave:?}: the client is not shown: {:?}",
             shared.readers()

@@ -7,6 +7,7 @@ pub mod clock;
 pub mod connection;
 pub mod proxy;
 pub mod replay;
+pub mod report_buffer;
 pub mod server;
 pub mod stream;
 pub mod tls;

@@ -21,6 +21,7 @@ use tokio::task::JoinSet;
 
 use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
+use super::report_buffer::{ReportBuffer, REPORT_BUFFER_BYTES};
 use super::stream::Stream;
 use super::tls;
 use crate::localize::live::{Input, Tap};
@@ -180,6 +181,8 @@ struct Client {
     peer: String,
     /// Its connection number in the recording.
     rec: u32,
+    /// The reports waiting for it, bounded.
+    buffer: ReportBuffer,
 }
 
 /// Records the frames of `bytes` (whole frames, as the session sends them) as sent by the
@@ -265,17 +268,32 @@ pub async fn serve_tls(
             }
             if let Some(c) = &mut client {
                 let now_utc_us = sim.session.reader().utc_us(sim.session.reader().now_us());
-                if let Some(t) = sim.session.transmit() {
-                    record_sent(&recorder, c.rec, &t.bytes[..]).await;
+                let out = sim.session.transmit().map(|t| (t.bytes.split(), t.close));
+                if let Some((raw, close)) = out {
+                    // Reports past the report buffer are dropped, and the client told.
+                    let admitted = c.buffer.admit(c.conn.queued(), raw);
+                    let mut bytes = admitted.bytes;
+                    if let Some(percent) = admitted.warn {
+                        if let Some(m) = sim.session.reader_mut().buffer_warning_event(percent) {
+                            m.encode(&mut bytes);
+                        }
+                    }
+                    if admitted.overflow {
+                        sim.session
+                            .reader_mut()
+                            .buffer_overflow_event()
+                            .encode(&mut bytes);
+                    }
+                    record_sent(&recorder, c.rec, &bytes[..]).await;
                     if let Some(l) = &live {
                         l.tap.offer(Input::Frames {
                             reader: l.name.clone(),
-                            bytes: bytes::Bytes::copy_from_slice(&t.bytes[..]),
+                            bytes: bytes::Bytes::copy_from_slice(&bytes[..]),
                             now_utc_us,
                         });
                     }
-                    c.conn.queue_buf(t.bytes);
-                    if t.close {
+                    c.conn.queue_buf(&mut bytes);
+                    if close {
                         // What the session said last goes out, then the connection closes.
                         let _ = tokio::time::timeout(SHUTDOWN_FLUSH, c.conn.shutdown()).await;
                         sim.session.disconnect(c.id);
@@ -520,6 +538,7 @@ async fn admit(
                 conn: Connection::from_stream(stream),
                 peer: peer.to_string(),
                 rec,
+                buffer: ReportBuffer::new(REPORT_BUFFER_BYTES),
             });
         }
         Accepted::Refused(bytes) => {

@@ -243,6 +243,43 @@ impl Reader {
         })
     }
 
+    /// A READER_EVENT_NOTIFICATION with a ReportBufferLevelWarningEvent at `percent` full, if
+    /// the client enabled that event (EventNotificationState, type 3).
+    pub fn buffer_warning_event(&mut self, percent: u8) -> Option<Message> {
+        if !self
+            .config
+            .event_enabled(NotificationEventType::ReportBufferFillWarning)
+        {
+            return None;
+        }
+        let data = ReaderEventNotificationData {
+            timestamp: self.timestamp(),
+            report_buffer_level_warning_event: Some(ReportBufferLevelWarningEvent {
+                report_buffer_percentage_full: percent,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        Some(self.message(ReaderEventNotification {
+            reader_event_notification_data: data,
+            ..Default::default()
+        }))
+    }
+
+    /// A READER_EVENT_NOTIFICATION with a ReportBufferOverflowErrorEvent: reports were lost
+    /// (always sent: LLRP makes this event mandatory).
+    pub fn buffer_overflow_event(&mut self) -> Message {
+        let data = ReaderEventNotificationData {
+            timestamp: self.timestamp(),
+            report_buffer_overflow_error_event: Some(ReportBufferOverflowErrorEvent::default()),
+            ..Default::default()
+        };
+        self.message(ReaderEventNotification {
+            reader_event_notification_data: data,
+            ..Default::default()
+        })
+    }
+
     /// A client connected at simulated time `now_us` (wall clock `wall_ms`): the greeting.
     ///
     /// While no client is connected the reader does not inventory; ROSpecs and configuration
