@@ -61,9 +61,14 @@ fn tags_list_the_converged_tag_in_the_issue_shape_within_a_centimetre() {
         "samples",
         "last_seen",
         "reads_per_s",
+        "reason",
     ]
     .into();
     assert_eq!(keys, want);
+    assert!(
+        t["reason"].is_null(),
+        "a converged tag needs no reason: {t}"
+    );
     assert_eq!(t["epc"], EPC);
     assert_eq!(t["estimator"], "relock");
     assert_eq!(t["state"], "converged");
@@ -74,6 +79,42 @@ fn tags_list_the_converged_tag_in_the_issue_shape_within_a_centimetre() {
     let [x, y, z] = ["x", "y", "z"].map(|k| e[k].as_f64().expect("a number"));
     let off = ((x - TAG[0]).powi(2) + (y - TAG[1]).powi(2) + (z - TAG[2]).powi(2)).sqrt();
     assert!(off < 0.01, "estimate {e} is {off} m from the truth");
+}
+
+/// A tag read from one place only is `insufficient_geometry` with a sentence saying why.
+#[test]
+fn a_tag_read_from_one_place_says_why_it_has_no_position() {
+    let server = open();
+    let mut reads = Vec::new();
+    for k in 0..50u64 {
+        let mut r = read(1_000 + k * 1_000);
+        r.epc = "BEEF".into();
+        // Every read from the same place.
+        r.antenna_pose = Some(llrp_gateway::reads::AntennaPose {
+            x: 0.5,
+            y: 0.0,
+            z: 0.5,
+            yaw_deg: 90.0,
+            pitch_deg: 0.0,
+        });
+        reads.push(r);
+    }
+    server
+        .live
+        .tap
+        .offer(llrp_gateway::localize::live::Input::Reads(reads));
+    let deadline = Instant::now() + PATIENCE;
+    let t = loop {
+        let v = server.get("/api/tags/BEEF").json();
+        if v["samples"].as_u64().is_some_and(|n| n > 0) {
+            break v;
+        }
+        assert!(Instant::now() < deadline, "the reads never showed: {v}");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(t["state"], "insufficient_geometry", "{t}");
+    let why = t["reason"].as_str().expect("a reason");
+    assert!(why.contains("has not passed the tag"), "{why}");
 }
 
 #[test]

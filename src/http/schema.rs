@@ -48,8 +48,11 @@ pub struct Tag {
     pub samples: u64,
     /// Time of the newest read (µs, the reads' clock: UTC for LLRP readers).
     pub last_seen: u64,
-    /// Reads per second over the last rate window (reader time).
+    /// Reads per second over the last rate window (reader time); 0 after 3 s without reads.
     pub reads_per_s: f64,
+    /// Why the state is not `converged`, in a sentence; null when converged.
+    #[schema(required = true)]
+    pub reason: Option<String>,
 }
 
 /// `GET /api/tags`.

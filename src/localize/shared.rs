@@ -464,6 +464,8 @@ pub struct TagJson {
     pub last_seen: u64,
     /// Reads per second over the last rate window (reader time).
     pub reads_per_s: f64,
+    /// Why the state is not `converged`, in a sentence (`null` when converged).
+    pub reason: Option<String>,
 }
 
 impl TagJson {
@@ -478,6 +480,36 @@ impl TagJson {
             samples: e.samples,
             last_seen,
             reads_per_s,
+            reason: reason(e),
+        }
+    }
+}
+
+/// Why an estimate is not converged, for a user: what it lacks and what would give it.
+pub fn reason(e: &Estimate) -> Option<String> {
+    use super::estimate::{State, CONVERGED_SIGMA_M};
+    match e.state {
+        State::Converged => None,
+        State::InsufficientGeometry if e.samples == 0 => Some(
+            "no phase taken in yet: a position needs reads with phase, channel frequency and \
+             an antenna pose"
+                .into(),
+        ),
+        State::InsufficientGeometry => Some(format!(
+            "no position from {} phases: the antenna has not passed the tag (read from one \
+             place, or along too short a stretch); a position needs reads from poses spread \
+             along a pass by it",
+            e.samples
+        )),
+        State::Converging => {
+            let sigma_mm = e
+                .covariance
+                .map_or(f64::NAN, |c| c[0].max(c[4]).max(c[8]).max(0.0).sqrt() * 1e3);
+            Some(format!(
+                "not yet trustworthy: σ {sigma_mm:.0} mm along its worse axis; converged at \
+                 {:.0} mm or less",
+                CONVERGED_SIGMA_M * 1e3
+            ))
         }
     }
 }
