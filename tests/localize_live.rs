@@ -346,3 +346,59 @@ async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
     sim.shutdown().await;
     live.stop();
 }
+
+/// Every time the API shows is on the reads' clock (UTC µs for an LLRP reader): a pose's
+/// `t_us` in `/api/readers` and `/api/truth` and a tag's `last_seen` agree to seconds (a pose
+/// used to show simulated time since the start, 1.8·10¹⁵ µs off).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn poses_reads_and_truth_share_the_reads_clock() {
+    let scenario = s1();
+    let live = live_for(&scenario);
+    let opts = SimOptions {
+        speed: Speed::Factor(4.0),
+        localize: Some(LocalizeFeed {
+            tap: live.tap.clone(),
+            poses: PoseSource::Estimated,
+            pose_interval_us: feed::POSE_INTERVAL_US,
+            read_poses: true,
+        }),
+        ..Default::default()
+    };
+    let sim = sim::start(&scenario, &opts).await.expect("starts");
+    let shared = live.shared.clone();
+    let ready = |s: &Shared| {
+        s.readers()
+            .first()
+            .is_some_and(|r| r.antennas.first().is_some_and(|a| a.pose.is_some()))
+            && s.tags().iter().any(|t| t.last_seen_us > 0)
+            && s.truth().is_some()
+    };
+    assert!(
+        until(&shared, Duration::from_secs(30), ready).await,
+        "no pose, read or truth"
+    );
+    let pose_t = shared.readers()[0].antennas[0]
+        .pose
+        .as_ref()
+        .map(|p| p.t_us)
+        .expect("a pose");
+    let seen = shared
+        .tags()
+        .iter()
+        .map(|t| t.last_seen_us)
+        .max()
+        .expect("a tag");
+    let truth_t = shared.truth().expect("truth").antennas[0].t_us;
+    sim.shutdown().await;
+    live.stop();
+    let apart = |a: u64, b: u64| a.abs_diff(b);
+    // Seconds apart at most (the pose feed, the reads and the truth update at their own pace).
+    assert!(
+        apart(pose_t, seen) < 30_000_000,
+        "pose {pose_t}, read {seen}"
+    );
+    assert!(
+        apart(truth_t, seen) < 30_000_000,
+        "truth {truth_t}, read {seen}"
+    );
+}

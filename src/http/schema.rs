@@ -135,7 +135,9 @@ pub struct TagDetail {
 /// One antenna pose sample (a line of the pose file).
 #[derive(ToSchema)]
 pub struct Pose {
-    /// Robot (or site) time, µs.
+    /// µs. Posted: the robot's clock (the reader's clock offset, if one is set, maps it onto
+    /// the reads' clock). Shown by `/api/readers` and `/api/truth`: the reads' clock (UTC µs
+    /// for LLRP readers), as every other time of the API.
     pub t_us: u64,
     /// Reader name (not empty).
     pub reader: String,

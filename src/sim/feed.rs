@@ -58,6 +58,9 @@ pub struct Feed {
     epcs: Vec<String>,
     /// When the truth was last set.
     truth_at: Option<Instant>,
+    /// The reads' clock at simulated time 0 (UTC µs): the truth's antenna poses are shown on
+    /// it, as every time of the API is.
+    utc0_us: u64,
 }
 
 impl Feed {
@@ -81,7 +84,14 @@ impl Feed {
             interval_us,
             epcs: Vec::new(),
             truth_at: None,
+            utc0_us: 0,
         }
+    }
+
+    /// Shows the truth's antenna poses on the reads' clock, simulated time 0 being `utc0_us`.
+    pub fn with_utc0(mut self, utc0_us: u64) -> Feed {
+        self.utc0_us = utc0_us;
+        self
     }
 
     /// Sends the samples due up to simulated time `now_us`, and the truth at the newest (at
@@ -127,6 +137,10 @@ impl Feed {
                     .collect(),
                 antennas: (1..=m.antenna_count())
                     .map(|a| sample(&self.name, a, t, &m.antenna_pose(a, t)))
+                    .map(|mut p| {
+                        p.t_us += self.utc0_us;
+                        p
+                    })
                     .collect(),
             };
             self.tap.shared().set_truth(truth);

@@ -370,14 +370,17 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
                     .then(|| feed::pose_at(model.clone(), l.poses, utc0)),
             });
             let feed = |now_us| {
-                own::feed_fn(feed::Feed::new(
-                    l.tap.clone(),
-                    spec.name.clone(),
-                    l.poses,
-                    references.clone(),
-                    l.pose_interval_us,
-                    now_us,
-                ))
+                own::feed_fn(
+                    feed::Feed::new(
+                        l.tap.clone(),
+                        spec.name.clone(),
+                        l.poses,
+                        references.clone(),
+                        l.pose_interval_us,
+                        now_us,
+                    )
+                    .with_utc0(utc0),
+                )
             };
             observer = Some(both(observer, feed(0)));
             let (client, client_rx) = watch::channel(false);

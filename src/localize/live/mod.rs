@@ -381,7 +381,11 @@ impl Worker {
                     newest.insert((p.reader.clone(), p.antenna), p.clone());
                     self.ingest.poses_mut().add(p);
                 }
-                for ((reader, antenna), p) in newest {
+                for ((reader, antenna), mut p) in newest {
+                    // Shown on the reads' clock (UTC µs for LLRP readers), as every other time
+                    // of the API is: a pose comes on the robot's.
+                    let offset = self.ingest.poses_mut().offset(&reader);
+                    p.t_us = p.t_us.saturating_add_signed(offset);
                     self.shared.update_reader(&reader, |v| {
                         match v.antennas.iter_mut().find(|a| a.antenna == antenna) {
                             Some(a) => a.pose = Some(p),

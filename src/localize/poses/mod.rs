@@ -282,7 +282,7 @@ impl Poses {
     }
 
     /// `reader`'s clock offset (reader time − robot time, µs; 0 when not set).
-    fn offset(&self, reader: &str) -> i64 {
+    pub fn offset(&self, reader: &str) -> i64 {
         if self.offsets.is_empty() {
             return 0;
         }
