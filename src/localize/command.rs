@@ -154,7 +154,7 @@ fn set_aside_hints(a: &crate::localize::ingest::SetAside, have_poses: bool) -> V
                 "{} reads have no antenna pose: give one with --poses FILE (JSON Lines or CSV of \
                  t_us, reader, antenna, x, y, z, yaw_deg; `jq -c '.antennas[].estimated' \
                  truth.jsonl` makes one from `sim --truth`), or localize reads that carry their \
-                 own antenna_pose (the simulator's do)",
+                 own antenna_pose",
                 a.no_pose
             )
         });
