@@ -736,3 +736,80 @@ async fn a_recording_replays_over_tls() {
     drop(plain);
     let _ = stop.send(true);
 }
+
+/// A TLS client that drops in the middle of a TLS record (a record header promising bytes
+/// that never come, then the end of the stream, no close_notify) hands the reader back as any
+/// other leaving does: shown not connected, and the reader's own inventory resumes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tls_client_dropping_mid_record_hands_the_reader_back_to_its_own_inventory() {
+    use llrp_gateway::localize::live::{Live, Settings};
+    use llrp_gateway::localize::shared::Shared;
+    use llrp_gateway::sim::{feed, LocalizeFeed, PoseSource};
+
+    let pki = Pki::new();
+    let scenario = s1();
+    let live = Live::start(feed::settings(&scenario, Settings::default())).expect("starts");
+    let sim = sim::start(
+        &scenario,
+        &SimOptions {
+            tls: Some(pki.server_files()),
+            speed: llrp_gateway::net::clock::Speed::Factor(4.0),
+            localize: Some(LocalizeFeed {
+                tap: live.tap.clone(),
+                poses: PoseSource::Estimated,
+                pose_interval_us: feed::POSE_INTERVAL_US,
+                read_poses: true,
+            }),
+            ..Default::default()
+        },
+    )
+    .await
+    .expect("starts");
+    let shared = live.shared.clone();
+    let until = |pred: &dyn Fn(&Shared) -> bool| {
+        let deadline = std::time::Instant::now() + GUARD;
+        loop {
+            if pred(&shared) {
+                return true;
+            }
+            if std::time::Instant::now() > deadline {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    let own = |s: &Shared, more_than: u64| {
+        s.readers()
+            .first()
+            .is_some_and(|r| !r.connected && r.inventory == "self" && r.reads > more_than)
+    };
+    assert!(until(&|s| own(s, 0)), "{:?}", shared.readers());
+    let addr = sim.addrs[0].to_string();
+    let tcp = TcpStream::connect(&addr).await.expect("connects");
+    let mut tls = pki
+        .connector()
+        .connect(&addr, tcp)
+        .await
+        .expect("handshake");
+    let mut greeting = [0u8; 10];
+    tls.read_exact(&mut greeting).await.expect("the greeting");
+    assert!(
+        until(&|s| s.readers().first().is_some_and(|r| r.connected)),
+        "{:?}",
+        shared.readers()
+    );
+    // Application data promising 64 bytes, three of them sent, then the end of the stream.
+    let (mut raw, _) = tls.into_inner();
+    raw.write_all(&[0x17, 0x03, 0x03, 0x00, 0x40, 1, 2, 3])
+        .await
+        .expect("writes");
+    drop(raw);
+    let before = shared.readers()[0].reads;
+    assert!(
+        until(&|s| own(s, before)),
+        "the reader was not handed back: {:?}",
+        shared.readers()
+    );
+    sim.shutdown().await;
+    live.stop();
+}

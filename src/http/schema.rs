@@ -126,8 +126,11 @@ pub struct TagDetail {
     pub samples: u64,
     /// Time of the newest read (µs).
     pub last_seen: u64,
-    /// Reads per second over the last rate window.
+    /// Reads per second over the last rate window; 0 after 3 s without reads.
     pub reads_per_s: f64,
+    /// Why the state is not `converged`, in a sentence; null when converged.
+    #[schema(required = true)]
+    pub reason: Option<String>,
     /// The newest reads (at most 32), oldest first.
     pub recent_reads: Vec<Read>,
 }
