@@ -28,6 +28,21 @@ async fn until(shared: &Shared, limit: Duration, pred: impl Fn(&Shared) -> bool)
     pred(shared)
 }
 
+/// The simulator at 4× real time feeding `live`, with the robot's own poses and reads that
+/// carry them.
+fn own_poses_at_4x(live: &Live) -> SimOptions {
+    SimOptions {
+        speed: Speed::Factor(4.0),
+        localize: Some(LocalizeFeed {
+            tap: live.tap.clone(),
+            poses: PoseSource::Estimated,
+            pose_interval_us: feed::POSE_INTERVAL_US,
+            read_poses: true,
+        }),
+        ..Default::default()
+    }
+}
+
 fn live_for(scenario: &llrp_gateway::scenario::Scenario) -> Live {
     Live::start(feed::settings(scenario, Settings::default())).expect("starts")
 }
@@ -108,16 +123,7 @@ async fn own_inventory_converges(read_poses: bool) {
 async fn a_client_stops_the_own_inventory_and_sees_the_reader_as_before() {
     let scenario = s1();
     let live = live_for(&scenario);
-    let opts = SimOptions {
-        speed: Speed::Factor(4.0),
-        localize: Some(LocalizeFeed {
-            tap: live.tap.clone(),
-            poses: PoseSource::Estimated,
-            pose_interval_us: feed::POSE_INTERVAL_US,
-            read_poses: true,
-        }),
-        ..Default::default()
-    };
+    let opts = own_poses_at_4x(&live);
     let sim = sim::start(&scenario, &opts).await.expect("starts");
     let shared = live.shared.clone();
     assert!(
@@ -208,16 +214,7 @@ enum Leave {
 async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
     let scenario = s1();
     let live = live_for(&scenario);
-    let opts = SimOptions {
-        speed: Speed::Factor(4.0),
-        localize: Some(LocalizeFeed {
-            tap: live.tap.clone(),
-            poses: PoseSource::Estimated,
-            pose_interval_us: feed::POSE_INTERVAL_US,
-            read_poses: true,
-        }),
-        ..Default::default()
-    };
+    let opts = own_poses_at_4x(&live);
     let sim = sim::start(&scenario, &opts).await.expect("starts");
     let shared = live.shared.clone();
     // The reader's view (none until the localizer has taken in the reader).
@@ -354,16 +351,7 @@ async fn clients_leaving_every_way_hand_the_reader_back_to_its_own_inventory() {
 async fn poses_reads_and_truth_share_the_reads_clock() {
     let scenario = s1();
     let live = live_for(&scenario);
-    let opts = SimOptions {
-        speed: Speed::Factor(4.0),
-        localize: Some(LocalizeFeed {
-            tap: live.tap.clone(),
-            poses: PoseSource::Estimated,
-            pose_interval_us: feed::POSE_INTERVAL_US,
-            read_poses: true,
-        }),
-        ..Default::default()
-    };
+    let opts = own_poses_at_4x(&live);
     let sim = sim::start(&scenario, &opts).await.expect("starts");
     let shared = live.shared.clone();
     let ready = |s: &Shared| {
