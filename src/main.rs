@@ -270,9 +270,13 @@ fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOption
                 estimator: localize.estimator,
                 ..Default::default()
             };
-            let l = match llrp_gateway::localize::live::Live::start(sim::feed::settings(
-                &scenario, settings,
-            )) {
+            let mut settings = sim::feed::settings(&scenario, settings);
+            // The robot's own poses come with the error its scenario states: the estimates'
+            // covariance takes it in.
+            if localize.poses == sim::PoseSource::Estimated {
+                settings.geometry.pose_error = sim::feed::pose_error(&scenario);
+            }
+            let l = match llrp_gateway::localize::live::Live::start(settings) {
                 Ok(l) => l,
                 Err(e) => {
                     eprintln!("llrp-gateway sim: cannot start the localizer: {e}");

@@ -1,7 +1,7 @@
 //! The live localizer beside `sim` long after S1's drive has ended (the robot parked at its
 //! end, reading the last tags thousands of times from one pose), with busy threads
 //! competing for the cores: the estimates are what the drive's reads make them, whatever the
-//! load (issue 40 §2).
+//! load; and on the robot's own poses, ellipses that hold the truth (issue 40 §2).
 
 mod http_support;
 
@@ -15,10 +15,16 @@ use http_support::{request, Proc};
 /// Simulated time the test waits for: the drive ends near 44 s, so over 350 s parked.
 const PARKED_UNTIL_US: u64 = 400_000_000;
 
-#[test]
-fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
+/// Runs `sim --speed SPEED --poses POSES` until `until_us` of simulated time, `hogs` busy
+/// threads beside it; the truth and the tags then.
+fn run_sim(
+    poses: &str,
+    speed: &str,
+    until_us: u64,
+    hogs: usize,
+) -> (serde_json::Value, Vec<serde_json::Value>) {
     let busy = Arc::new(AtomicBool::new(true));
-    let hogs: Vec<_> = (0..3)
+    let hogs: Vec<_> = (0..hogs)
         .map(|_| {
             let busy = Arc::clone(&busy);
             std::thread::spawn(move || {
@@ -33,9 +39,9 @@ fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
     let mut sim = Proc::spawn(&[
         "sim",
         "--speed",
-        "10",
+        speed,
         "--poses",
-        "truth",
+        poses,
         "--listen",
         "127.0.0.1:0",
         "--http",
@@ -57,7 +63,7 @@ fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
             }
             _ => 0,
         };
-        if now >= PARKED_UNTIL_US {
+        if now >= until_us {
             break t;
         }
         assert!(
@@ -71,7 +77,23 @@ fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
     for h in hogs {
         h.join().expect("hog");
     }
-    let tags = tags["tags"].as_array().expect("tags").clone();
+    (truth, tags["tags"].as_array().expect("tags").clone())
+}
+
+/// `tag`'s true position in `truth` (x, y).
+fn true_xy(truth: &serde_json::Value, tag: &serde_json::Value) -> (f64, f64) {
+    let p = &truth["tags"]
+        .as_array()
+        .expect("truth tags")
+        .iter()
+        .find(|x| x["epc"] == tag["epc"])
+        .expect("a true position")["position"];
+    (p["x"].as_f64().expect("x"), p["y"].as_f64().expect("y"))
+}
+
+#[test]
+fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
+    let (truth, tags) = run_sim("truth", "10", PARKED_UNTIL_US, 3);
     let mut converged = 0;
     for t in &tags {
         if t["state"] != "converged" {
@@ -79,17 +101,9 @@ fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
         }
         converged += 1;
         let epc = t["epc"].as_str().expect("epc");
-        let truth = truth["tags"]
-            .as_array()
-            .expect("truth tags")
-            .iter()
-            .find(|x| x["epc"] == epc)
-            .expect("a true position");
-        let d = |k: &str| {
-            t["estimate"][k].as_f64().expect("estimate")
-                - truth["position"][k].as_f64().expect("truth")
-        };
-        let error_m = d("x").hypot(d("y"));
+        let (x, y) = true_xy(&truth, t);
+        let error_m = (t["estimate"]["x"].as_f64().expect("x") - x)
+            .hypot(t["estimate"]["y"].as_f64().expect("y") - y);
         assert!(
             error_m < 0.01,
             "{epc} converged {error_m} m from the truth: {t}"
@@ -101,5 +115,40 @@ fn after_a_long_park_under_busy_threads_every_tag_converges_where_it_is() {
         10,
         "{converged} of {} converged: {tags:?}",
         tags.len()
+    );
+}
+
+#[test]
+fn on_the_robots_own_poses_every_ellipse_holds_its_tag_and_none_converges_away() {
+    // The default poses: S1's localization stack, σ 15 mm, 0.5°, correlated over 2 s. The
+    // drive and some parking after it.
+    let (truth, tags) = run_sim("estimated", "20", 200_000_000, 0);
+    let (mut estimated, mut inside95) = (0, 0);
+    for t in &tags {
+        let Some(c) = t["covariance"].as_array() else {
+            continue;
+        };
+        estimated += 1;
+        let c: Vec<f64> = c.iter().map(|v| v.as_f64().expect("a number")).collect();
+        let (x, y) = true_xy(&truth, t);
+        let (dx, dy) = (
+            x - t["estimate"]["x"].as_f64().expect("x"),
+            y - t["estimate"]["y"].as_f64().expect("y"),
+        );
+        let det = c[0] * c[4] - c[1] * c[3];
+        let m2 = (c[4] * dx * dx - (c[1] + c[3]) * dx * dy + c[0] * dy * dy) / det;
+        // χ²(2): 5.99 at 95 %, 13.8 at 99.9 %.
+        assert!(m2 <= 13.8, "truth {m2:.1} (Mahalanobis²) outside: {t}");
+        inside95 += usize::from(m2 <= 5.99);
+        let error_m = dx.hypot(dy);
+        assert!(
+            t["state"] != "converged" || error_m < 0.03,
+            "converged {error_m} m away: {t}"
+        );
+    }
+    assert_eq!(estimated, 10, "{tags:?}");
+    assert!(
+        inside95 >= 9,
+        "{inside95} of 10 inside their 95 % ellipse: {tags:?}"
     );
 }

@@ -113,6 +113,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
         reach_m: 4.0,
         references: Vec::new(),
         readers: Default::default(),
+        pose_error: None,
     };
     let estimates = estimate::estimate_all(&ingest, estimate::Estimator::Relock, &geometry);
     assert_eq!(estimates.len(), 10);

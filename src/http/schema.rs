@@ -304,6 +304,7 @@ mod tests {
                 samples: 1,
                 state: EstimateState::Converged,
                 last_update_us: 1,
+                pose_sigma_m: None,
             },
             last_seen_us: 1,
             reads: 1,

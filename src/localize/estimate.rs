@@ -11,7 +11,7 @@ pub use super::observe::{
     calibrated_observations, observations, pose_observations, Observed, PoseTrack,
 };
 use super::relock;
-use super::{fingerprint, hyperbolic, linear, loci3d, wls};
+use super::{fingerprint, hyperbolic, linear, loci3d, uncertainty, wls};
 use std::collections::BTreeMap;
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
@@ -47,6 +47,9 @@ pub struct Estimate {
     pub state: State,
     /// Time of the newest phase (µs, the reads' clock).
     pub last_update_us: u64,
+    /// σ along the worse axis (m) of the covariance's share from the antenna poses' own
+    /// error, when that error is known.
+    pub pose_sigma_m: Option<f64>,
 }
 
 /// The estimators the localizer offers, by the names the API and the command line use.
@@ -251,6 +254,7 @@ pub fn estimate_from(
         obs,
         last_us: last,
         facing,
+        reader_of_group,
     } = calibrated_observations(ingest, epc, g, calibration);
     let base = Estimate {
         epc: epc.to_string(),
@@ -260,6 +264,7 @@ pub fn estimate_from(
         samples: obs.len(),
         state: State::InsufficientGeometry,
         last_update_us: last,
+        pose_sigma_m: None,
     };
     // The phases are times their readers' signs: the estimators see s = +1.
     let sign = 1.0;
@@ -268,12 +273,13 @@ pub fn estimate_from(
         let [a, b, c, d] = fix.covariance;
         (fix.position, [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0])
     };
+    let (lo, hi) = obs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), o| {
+        (lo.min(o.antenna[2]), hi.max(o.antenna[2]))
+    });
+    let relock3d = hi - lo >= relock::MIN_HEIGHT_SPAN_M;
     let fix = match estimator {
         Estimator::Relock => {
-            let (lo, hi) = obs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), o| {
-                (lo.min(o.antenna[2]), hi.max(o.antenna[2]))
-            });
-            if hi - lo >= relock::MIN_HEIGHT_SPAN_M {
+            if relock3d {
                 // Antennas at several heights: the height is estimated too.
                 relock::locate3d_from(&obs, sign, facing, g.reach_m, hint)
                     .map(|f| (f.position, f.covariance))
@@ -297,11 +303,32 @@ pub fn estimate_from(
             Err(relock::NoFix::InsufficientGeometry)
         }
     });
+    // The poses' own error, where it is known, widens the covariance by its share.
+    let dims = match estimator {
+        Estimator::Relock if relock3d => 3,
+        Estimator::Loci3d => 3,
+        _ => 2,
+    };
+    let fix = fix.map(|(p, mut c)| {
+        let share = g.pose_error.as_ref().and_then(|m| {
+            uncertainty::pose_share(&obs, p, dims, m, &|group| {
+                reader_of_group.get(group).copied().unwrap_or(0)
+            })
+        });
+        if let Some(share) = share {
+            for (c, s) in c.iter_mut().zip(share) {
+                *c += s;
+            }
+        }
+        let pose_sigma = share.map(|s| s[0].max(s[4]).max(s[8]).max(0.0).sqrt());
+        (p, c, pose_sigma)
+    });
     match fix {
-        Ok((position, covariance)) => Estimate {
+        Ok((position, covariance, pose_sigma_m)) => Estimate {
             estimate: Some(position),
             covariance: Some(covariance),
             state: state_of(&covariance),
+            pose_sigma_m,
             ..base
         },
         Err(relock::NoFix::InsufficientGeometry) => base,
@@ -408,6 +435,7 @@ mod tests {
             reach_m: 3.0,
             references: Vec::new(),
             readers: BTreeMap::new(),
+            pose_error: None,
         };
         let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);
@@ -500,6 +528,7 @@ mod tests {
             reach_m: 2.0,
             references: Vec::new(),
             readers: BTreeMap::new(),
+            pose_error: None,
         };
         // One track per (reader, antenna), both channels merged in time order, as reported
         // (times the phase sign: +1 here).

@@ -21,6 +21,10 @@ pub struct Geometry {
     pub references: Vec<(String, [f64; 3])>,
     /// Per reader name, its own phase sign and facing (the defaults above for the others).
     pub readers: BTreeMap<String, ReaderGeometry>,
+    /// The antenna poses' own error, when it is known (a localization stack's, as the
+    /// scenario or the settings file states it): added to every estimate's covariance
+    /// ([`super::uncertainty`]) and, where asked, taken out of the poses ([`super::refine`]).
+    pub pose_error: Option<super::refine::PoseErrorModel>,
 }
 
 /// One reader's own settings.

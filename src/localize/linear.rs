@@ -315,6 +315,7 @@ mod tests {
                     period_rad: std::f64::consts::TAU,
                     weight: 1.0,
                     scatter_rad2: 0.0,
+                    t_us: 0,
                 }
             })
             .collect();

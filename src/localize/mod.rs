@@ -6,7 +6,7 @@
 //! [`calibrate`]), the min-distance linear model ([`linear`]), hyperbolic intersection
 //! ([`hyperbolic`]), 3D by loci intersection ([`loci3d`]), fingerprinting ([`fingerprint`]),
 //! the multi-hypothesis EKF ([`mhekf`]) and distributed WLS by consensus ([`wls`]); estimates
-//! with covariance and state ([`estimate`]); the live worker ([`live`], [`shared`]), the
+//! with covariance and state ([`estimate`]), the pose error's share of it ([`uncertainty`]); the live worker ([`live`], [`shared`]), the
 //! `localize` command ([`command`], [`offline`]) and `bench localize` ([`mod@bench`]). It sees
 //! only reads and poses, never simulator internals, so it works the same on a real reader's
 //! data.
@@ -39,6 +39,7 @@ pub mod shared;
 #[cfg(test)]
 mod synthetic;
 pub mod tap;
+pub mod uncertainty;
 pub mod wls;
 
 /// Speed of light (m/s), for a channel's wavelength.

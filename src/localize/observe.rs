@@ -21,6 +21,8 @@ pub struct Observed {
     pub last_us: u64,
     /// The side the antennas face of the reader with the most of the tag's phases.
     pub facing: [f64; 2],
+    /// Per group (series), its reader's number among the tag's readers.
+    pub reader_of_group: Vec<usize>,
 }
 
 /// Tag `epc`'s phases, each reader's by its own settings in `g`.
@@ -41,7 +43,11 @@ pub fn calibrated_observations(
     // (reader, antenna or none when calibrated, channel) → joint group.
     let mut joints: BTreeMap<(&str, Option<u16>, u64), usize> = BTreeMap::new();
     let mut per_reader: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut reader_of_group = Vec::new();
+    let mut numbers: BTreeMap<&str, usize> = BTreeMap::new();
     for (group, (key, series)) in ingest.tag_series(epc).enumerate() {
+        let next = numbers.len();
+        reader_of_group.push(*numbers.entry(key.1.as_str()).or_insert(next));
         let (lambda, period_rad) = (series.wavelength_m(), series.ambiguity().period());
         let offset = calibration.offset(&key.1, key.2, key.3);
         let sign = g.sign_of(&key.1);
@@ -64,6 +70,7 @@ pub fn calibrated_observations(
                     period_rad,
                     weight: 1.0,
                     scatter_rad2: 0.0,
+                    t_us: s.t_us,
                 });
             }
         }
@@ -77,6 +84,7 @@ pub fn calibrated_observations(
         obs,
         last_us,
         facing,
+        reader_of_group,
     }
 }
 

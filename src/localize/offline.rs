@@ -306,6 +306,10 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
             .map(|r| (r.epc.to_ascii_uppercase(), [r.x, r.y, r.z]))
             .collect(),
         readers,
+        pose_error: file
+            .pose_error
+            .as_ref()
+            .map(|e| PoseErrorModel::new(e.sigma_m, e.correlation_s)),
     }
 }
 
@@ -373,6 +377,7 @@ pub fn localize(
                 samples: 0,
                 state: estimate::State::InsufficientGeometry,
                 last_update_us: 0,
+                pose_sigma_m: None,
             });
             TagJson::new(&e, last, rate)
         })

@@ -53,6 +53,7 @@ impl TagView {
                 samples: 0,
                 state: super::estimate::State::InsufficientGeometry,
                 last_update_us: 0,
+                pose_sigma_m: None,
             },
             last_seen_us: 0,
             reads: 0,
@@ -505,11 +506,21 @@ pub fn reason(e: &Estimate) -> Option<String> {
             let sigma_mm = e
                 .covariance
                 .map_or(f64::NAN, |c| c[0].max(c[4]).max(c[8]).max(0.0).sqrt() * 1e3);
-            Some(format!(
-                "not yet trustworthy: σ {sigma_mm:.0} mm along its worse axis; converged at \
-                 {:.0} mm or less",
-                CONVERGED_SIGMA_M * 1e3
-            ))
+            match e.pose_sigma_m {
+                // More reads do not help when the poses' own error is most of it.
+                Some(pose) if pose * pose * 2.0 >= (sigma_mm * 1e-3).powi(2) => Some(format!(
+                    "σ {sigma_mm:.0} mm along its worse axis, {:.0} mm of it from the antenna \
+                     poses' own error (the robot's localization), which more reads do not \
+                     remove; converged at {:.0} mm or less",
+                    pose * 1e3,
+                    CONVERGED_SIGMA_M * 1e3
+                )),
+                _ => Some(format!(
+                    "not yet trustworthy: σ {sigma_mm:.0} mm along its worse axis; converged \
+                     at {:.0} mm or less",
+                    CONVERGED_SIGMA_M * 1e3
+                )),
+            }
         }
     }
 }

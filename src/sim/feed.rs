@@ -10,11 +10,12 @@ use std::time::{Duration, Instant};
 use crate::localize::estimate::ReaderGeometry;
 use crate::localize::live::{Input, Settings, Tap};
 use crate::localize::poses::PoseSample;
+use crate::localize::refine::PoseErrorModel;
 use crate::localize::series::Ambiguity;
 use crate::localize::shared::{Truth, TruthTag};
 use crate::physics::{AntennaPose, Model, World};
 use crate::reads::PoseAt;
-use crate::scenario::Scenario;
+use crate::scenario::{Mount, PoseEstimateKind, Scenario};
 
 /// Simulated time between two pose samples of an antenna by default, µs (10 Hz).
 pub const POSE_INTERVAL_US: u64 = 100_000;
@@ -180,6 +181,32 @@ fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSamp
         yaw_deg: pose.yaw_rad.to_degrees(),
         pitch_deg: pose.pitch_rad.to_degrees(),
     }
+}
+
+/// The error of the poses a robot of `scenario` reports, as the localizer is told it: the
+/// largest over its antennas on robots whose `pose_estimate` is `localized`, the heading's
+/// error taken in at the antenna's lever arm from the robot's centre; `None` when no antenna
+/// has such poses (fixed antennas, or odometry, whose error grows without bound).
+pub fn pose_error(scenario: &Scenario) -> Option<PoseErrorModel> {
+    scenario
+        .readers
+        .iter()
+        .flat_map(|r| &r.antennas)
+        .filter_map(|a| match &a.mount {
+            Mount::Robot { robot, offset }
+                if robot.pose_estimate.kind == PoseEstimateKind::Localized =>
+            {
+                let e = &robot.pose_estimate;
+                let lever = offset.position[0].hypot(offset.position[1]);
+                let heading = lever * e.heading_sigma_deg.to_radians();
+                Some(PoseErrorModel::new(
+                    e.position_sigma_m.hypot(heading),
+                    e.correlation_s,
+                ))
+            }
+            _ => None,
+        })
+        .max_by(|a, b| a.sigma_m.total_cmp(&b.sigma_m))
 }
 
 /// The live localizer's settings for a scenario: its first reader's first antenna gives the

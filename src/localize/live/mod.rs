@@ -104,6 +104,7 @@ impl Default for Settings {
                 reach_m: 4.0,
                 references: Vec::new(),
                 readers: BTreeMap::new(),
+                pose_error: None,
             },
             ambiguity: Ambiguity::None,
             max_gap_us: super::series::DEFAULT_MAX_GAP_US,

@@ -75,10 +75,11 @@ fn merge(run: &[Obs]) -> Obs {
     }
     // The weighted sums of weight, phase and antenna position in one pass (each summed in
     // the reads' order, as separate sums would be).
-    let (mut total, mut phase, mut antenna) = (0.0, 0.0, [0.0; 3]);
+    let (mut total, mut phase, mut antenna, mut time) = (0.0, 0.0, [0.0; 3], 0.0);
     for o in run {
         total += o.weight;
         phase += o.weight * o.phase_rad;
+        time += o.weight * o.t_us as f64;
         for (sum, x) in antenna.iter_mut().zip(o.antenna) {
             *sum += o.weight * x;
         }
@@ -119,6 +120,7 @@ fn merge(run: &[Obs]) -> Obs {
         antenna,
         weight: total,
         scatter_rad2: scatter,
+        t_us: (time / total).round() as u64,
         ..first
     }
 }
@@ -154,6 +156,7 @@ mod tests {
                     period_rad: std::f64::consts::TAU,
                     weight: 1.0,
                     scatter_rad2: 0.0,
+                    t_us: 0,
                 });
             }
         }

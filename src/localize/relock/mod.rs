@@ -46,6 +46,8 @@ pub struct Obs {
     /// A bin's reads' squared deviations from the line through their phases along the path
     /// (rad²): the phase noise its mean hides; 0 for a read.
     pub scatter_rad2: f64,
+    /// When it was read (µs; a bin's: its reads' mean).
+    pub t_us: u64,
 }
 
 /// A 2D estimate.
