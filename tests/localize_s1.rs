@@ -114,6 +114,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
         references: Vec::new(),
         readers: Default::default(),
         pose_error: None,
+        pose_corrections: None,
     };
     let estimates = estimate::estimate_all(&ingest, estimate::Estimator::Relock, &geometry);
     assert_eq!(estimates.len(), 10);

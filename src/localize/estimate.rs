@@ -436,6 +436,7 @@ mod tests {
             references: Vec::new(),
             readers: BTreeMap::new(),
             pose_error: None,
+            pose_corrections: None,
         };
         let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);
@@ -529,6 +530,7 @@ mod tests {
             references: Vec::new(),
             readers: BTreeMap::new(),
             pose_error: None,
+            pose_corrections: None,
         };
         // One track per (reader, antenna), both channels merged in time order, as reported
         // (times the phase sign: +1 here).

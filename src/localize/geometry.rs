@@ -25,6 +25,9 @@ pub struct Geometry {
     /// scenario or the settings file states it): added to every estimate's covariance
     /// ([`super::uncertainty`]) and, where asked, taken out of the poses ([`super::refine`]).
     pub pose_error: Option<super::refine::PoseErrorModel>,
+    /// Corrections of the antenna positions the phases were filed with, per reader and time
+    /// (the live localizer's pose refinement); `None`: the positions as filed.
+    pub pose_corrections: Option<std::sync::Arc<super::refine::PoseCorrections>>,
 }
 
 /// One reader's own settings.

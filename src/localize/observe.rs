@@ -31,7 +31,8 @@ pub fn observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Observed {
 }
 
 /// [`observations`] with the offsets of `calibration` taken off the phases of the antennas it
-/// calibrates, whose series on one (reader, channel) then form one joint group.
+/// calibrates, whose series on one (reader, channel) then form one joint group; the antenna
+/// positions moved by `g`'s pose corrections where it has them.
 pub fn calibrated_observations(
     ingest: &Ingest,
     epc: &str,
@@ -60,9 +61,16 @@ pub fn calibrated_observations(
             let segment = obs.last().map_or(0, |o| o.segment + 1);
             for s in seg {
                 last_us = last_us.max(s.t_us);
+                let antenna = match &g.pose_corrections {
+                    Some(c) => {
+                        let d = c.at(&key.1, s.t_us);
+                        [s.antenna[0] + d[0], s.antenna[1] + d[1], s.antenna[2]]
+                    }
+                    None => s.antenna,
+                };
                 obs.push(Obs {
                     phase_rad: sign * (s.phase_rad - offset.unwrap_or(0.0)),
-                    antenna: s.antenna,
+                    antenna,
                     wavelength_m: lambda,
                     segment,
                     group,

@@ -310,6 +310,7 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
             .pose_error
             .as_ref()
             .map(|e| PoseErrorModel::new(e.sigma_m, e.correlation_s)),
+        pose_corrections: None,
     }
 }
 

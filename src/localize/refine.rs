@@ -135,6 +135,62 @@ fn smooth(res: &[Residual], m: &PoseErrorModel) -> Vec<(u64, Vector2<f64>)> {
     out
 }
 
+/// Corrections whose RMS is over this many times the stated pose error's are not used
+/// ([`PoseCorrections::from_tags`]).
+pub const IMPLAUSIBLE: f64 = 2.0;
+
+/// The corrections of each reader's antenna positions: δ(t) in x and y (m) at the times of
+/// its reads (the reads' clock), as the smoother gave them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PoseCorrections {
+    per_reader: BTreeMap<String, Vec<(u64, Vector2<f64>)>>,
+}
+
+impl PoseCorrections {
+    /// What tags at `tags` say of the poses' error (`sign_of` gives a reader's phase sign).
+    /// A reader whose corrections come out larger than the error stated could make them (RMS
+    /// over [`IMPLAUSIBLE`] times the model's, which a smoother's mean never is on average
+    /// when the model holds) gets none: its residuals are not a pose error's but tags' that are
+    /// not where they were put.
+    pub fn from_tags(
+        ingest: &Ingest,
+        tags: &BTreeMap<String, [f64; 3]>,
+        sign_of: &dyn Fn(&str) -> f64,
+        m: &PoseErrorModel,
+    ) -> PoseCorrections {
+        // The model's RMS of δ in x and y together.
+        let bound = IMPLAUSIBLE * m.sigma_m * std::f64::consts::SQRT_2;
+        let per_reader = residuals(ingest, tags, sign_of)
+            .into_iter()
+            .map(|(reader, res)| (reader, smooth(&res, m)))
+            .filter(|(_, s)| {
+                let sum: f64 = s.iter().map(|c| c.1.norm_squared()).sum();
+                (sum / s.len().max(1) as f64).sqrt() <= bound
+            })
+            .collect();
+        PoseCorrections { per_reader }
+    }
+
+    /// The correction to add to reader `reader`'s antenna position (x, y) at `t_us`,
+    /// interpolated between the nearest corrections; 0 for a reader without any.
+    pub fn at(&self, reader: &str, t_us: u64) -> [f64; 2] {
+        let Some(list) = self.per_reader.get(reader) else {
+            return [0.0; 2];
+        };
+        let i = list.partition_point(|c| c.0 < t_us);
+        let d = match (i.checked_sub(1).and_then(|j| list.get(j)), list.get(i)) {
+            (Some(a), Some(b)) if b.0 > a.0 => {
+                let f = (t_us - a.0) as f64 / (b.0 - a.0) as f64;
+                a.1 + (b.1 - a.1) * f
+            }
+            (Some(a), _) => a.1,
+            (None, Some(b)) => b.1,
+            (None, None) => Vector2::zeros(),
+        };
+        [d[0], d[1]]
+    }
+}
+
 /// `poses` corrected by what the tags at `tags` say of them; readers without reads as they
 /// were.
 pub fn refine(
@@ -144,29 +200,9 @@ pub fn refine(
     sign_of: &dyn Fn(&str) -> f64,
     m: &PoseErrorModel,
 ) -> Poses {
-    let corrections: BTreeMap<String, Vec<(u64, Vector2<f64>)>> = residuals(ingest, tags, sign_of)
-        .into_iter()
-        .map(|(reader, res)| {
-            let s = smooth(&res, m);
-            (reader, s)
-        })
-        .collect();
-    let at = |list: &[(u64, Vector2<f64>)], t: u64| -> Vector2<f64> {
-        let i = list.partition_point(|c| c.0 < t);
-        match (i.checked_sub(1).and_then(|j| list.get(j)), list.get(i)) {
-            (Some(a), Some(b)) if b.0 > a.0 => {
-                let f = (t - a.0) as f64 / (b.0 - a.0) as f64;
-                a.1 + (b.1 - a.1) * f
-            }
-            (Some(a), _) => a.1,
-            (None, Some(b)) => b.1,
-            (None, None) => Vector2::zeros(),
-        }
-    };
+    let corrections = PoseCorrections::from_tags(ingest, tags, sign_of, m);
     poses.mapped(|p, offset| {
-        let d = corrections.get(&p.reader).map_or(Vector2::zeros(), |c| {
-            at(c, p.t_us.saturating_add_signed(offset))
-        });
+        let d = corrections.at(&p.reader, p.t_us.saturating_add_signed(offset));
         PoseSample {
             x: p.x + d[0],
             y: p.y + d[1],
@@ -175,14 +211,36 @@ pub fn refine(
     })
 }
 
-/// `ingest`'s poses refined once from the tags `linear` locates on them (the estimator a
-/// pose error throws least, docs/localize.md).
-pub fn refined_poses(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> Poses {
-    let tags: BTreeMap<String, [f64; 3]> = estimate_all(ingest, Estimator::Linear, g)
+/// The tags `linear` locates in `ingest` on its poses as reported (the estimator a pose
+/// error throws least, docs/localize.md): what the corrections are measured against.
+fn linear_tags(ingest: &Ingest, g: &Geometry) -> BTreeMap<String, [f64; 3]> {
+    let plain = Geometry {
+        pose_error: None,
+        pose_corrections: None,
+        ..g.clone()
+    };
+    estimate_all(ingest, Estimator::Linear, &plain)
         .into_iter()
         .filter_map(|e| Some((e.epc, e.estimate?)))
-        .collect();
-    refine(ingest, ingest.poses(), &tags, &|r| g.sign_of(r), m)
+        .collect()
+}
+
+/// `ingest`'s poses refined once from the tags `linear` locates on them.
+pub fn refined_poses(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> Poses {
+    refine(
+        ingest,
+        ingest.poses(),
+        &linear_tags(ingest, g),
+        &|r| g.sign_of(r),
+        m,
+    )
+}
+
+/// The corrections [`refined_poses`] applies, for the observations' antenna positions
+/// ([`Geometry::pose_corrections`]): the live localizer's refinement, which does not file
+/// its reads again.
+pub fn corrections(ingest: &Ingest, g: &Geometry, m: &PoseErrorModel) -> PoseCorrections {
+    PoseCorrections::from_tags(ingest, &linear_tags(ingest, g), &|r| g.sign_of(r), m)
 }
 
 /// Every tag of `reads` located by `estimator` on `poses` refined once ([`refined_poses`]),
@@ -305,6 +363,76 @@ mod tests {
             let kept = refine(&ingest_on(&truth), &truth, &tags, &|_| 1.0, &m);
             assert!(rms(&kept, &truth) < 1e-3, "seed {seed}");
         }
+    }
+
+    #[test]
+    fn corrections_of_the_filed_positions_locate_as_the_refined_poses_filed_again() {
+        let m = PoseErrorModel::new(0.015, 2.0);
+        let (reads, _, reported, tags) = drive(3);
+        let ingest_on = |poses: Poses| {
+            let mut ingest = Ingest::new(poses, Ambiguity::None, 1_000_000);
+            for r in &reads {
+                ingest.push(r);
+            }
+            ingest
+        };
+        let ingest = ingest_on(reported);
+        let g = Geometry {
+            tag_height_m: 0.5,
+            reach_m: 3.0,
+            ..crate::localize::live::Settings::default().geometry
+        };
+        let mean_error = |estimates: &[Estimate]| {
+            estimates
+                .iter()
+                .map(|e| {
+                    let (p, t) = (e.estimate.expect("a position"), tags[&e.epc]);
+                    (p[0] - t[0]).hypot(p[1] - t[1])
+                })
+                .sum::<f64>()
+                / estimates.len() as f64
+        };
+        // Offline: the poses refined, the reads filed again on them.
+        let again = ingest_on(refined_poses(&ingest, &g, &m));
+        let offline = estimate_all(&again, Estimator::Relock, &g);
+        // Live: the positions as filed, moved by the corrections.
+        let corrected = Geometry {
+            pose_corrections: Some(std::sync::Arc::new(corrections(&ingest, &g, &m))),
+            ..g.clone()
+        };
+        let live = estimate_all(&ingest, Estimator::Relock, &corrected);
+        let plain = estimate_all(&ingest, Estimator::Relock, &g);
+        assert_eq!(offline.len(), tags.len());
+        for (a, b) in offline.iter().zip(&live) {
+            let (p, q) = (a.estimate.expect("offline"), b.estimate.expect("live"));
+            assert!((p[0] - q[0]).hypot(p[1] - q[1]) < 1e-3, "{a:?} {b:?}");
+        }
+        assert!(
+            mean_error(&live) < mean_error(&plain),
+            "refined {} m, plain {} m",
+            mean_error(&live),
+            mean_error(&plain)
+        );
+    }
+
+    #[test]
+    fn tags_put_where_they_are_not_give_no_corrections() {
+        let m = PoseErrorModel::new(0.015, 2.0);
+        let (reads, _, reported, tags) = drive(2);
+        let mut ingest = Ingest::new(reported, Ambiguity::None, 1_000_000);
+        for r in &reads {
+            ingest.push(r);
+        }
+        let times = || (0..200u64).map(|k| k * 100_000);
+        let right = PoseCorrections::from_tags(&ingest, &tags, &|_| 1.0, &m);
+        assert!(times().any(|t| right.at("r", t) != [0.0; 2]));
+        // Every tag 30 cm off in y and 40 cm in height (a 2D fit's height assumed wrong).
+        let wrong: BTreeMap<String, [f64; 3]> = tags
+            .iter()
+            .map(|(epc, t)| (epc.clone(), [t[0], t[1] + 0.3, t[2] + 0.4]))
+            .collect();
+        let refused = PoseCorrections::from_tags(&ingest, &wrong, &|_| 1.0, &m);
+        assert!(times().all(|t| refused.at("r", t) == [0.0; 2]));
     }
 
     #[test]

@@ -23,6 +23,11 @@
 //! [`SETTLE`] it is estimated once more from the grid, and published when that differs from
 //! the warm one by more than [`SETTLED_SAME_M`]: what a tag settles at is a function of its
 //! reads alone (two workers on different shards publish what one does).
+//!
+//! With a stated pose error (a robot's localization stack's), the antenna positions are
+//! corrected from every tag's phases as `localize` does offline ([`super::refine`]), again
+//! each time the reads' clock has moved on by [`REFINE_EVERY_US`] or a tenth of the time read
+//! so far, and every tag is estimated again on them.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -54,6 +59,14 @@ pub const POSE_KEEP_US: u64 = 60_000_000;
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
+
+/// Reads' time between two refinements of the poses, at the least (µs); later in a long
+/// run, a tenth of the time read so far.
+pub const REFINE_EVERY_US: u64 = 2_000_000;
+
+/// A tag is estimated again after a refinement of the poses when the corrections at its reads
+/// moved by more than this (m).
+pub const REFINED_SAME_M: f64 = 5e-4;
 
 /// How often the live localizer gives the allocator's free memory back ([`crate::alloc`]).
 const RELEASE_EVERY: Duration = Duration::from_secs(10);
@@ -105,6 +118,7 @@ impl Default for Settings {
                 references: Vec::new(),
                 readers: BTreeMap::new(),
                 pose_error: None,
+                pose_corrections: None,
             },
             ambiguity: Ambiguity::None,
             max_gap_us: super::series::DEFAULT_MAX_GAP_US,
@@ -202,6 +216,10 @@ struct Worker {
     taken_since_flush: bool,
     /// The readers whose first pose the geometry was derived with.
     derived: std::collections::BTreeSet<String>,
+    /// The first and the newest time of a filed read (µs, the reads' clock).
+    read_span_us: Option<(u64, u64)>,
+    /// The newest read's time when the poses were last refined.
+    refined_at_us: Option<u64>,
 }
 
 impl Worker {
@@ -228,6 +246,8 @@ impl Worker {
             set_aside_seen: 0,
             taken_since_flush: false,
             derived: std::collections::BTreeSet::new(),
+            read_span_us: None,
+            refined_at_us: None,
         }
     }
 
@@ -247,6 +267,7 @@ impl Worker {
                     }
                 }
                 self.flush_waiting(true);
+                self.refine_poses(true);
                 self.estimate(Duration::MAX, true);
                 return;
             }
@@ -270,6 +291,7 @@ impl Worker {
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
                     self.flush_waiting(true);
+                    self.refine_poses(true);
                     self.estimate(Duration::MAX, true);
                     return;
                 }
@@ -283,6 +305,7 @@ impl Worker {
             if std::mem::take(&mut self.taken_since_flush) || expired {
                 self.flush_waiting(false);
             }
+            self.refine_poses(false);
             self.estimate(self.settings.compute_budget, false);
             self.silence_rates();
         }
@@ -320,6 +343,55 @@ impl Worker {
                 );
             }
         }
+    }
+
+    /// With a stated pose error and a phase estimator, the antenna positions corrected again
+    /// from every tag ([`super::refine::corrections`]) once the reads' clock has moved on by
+    /// [`REFINE_EVERY_US`] or a tenth of the time read so far, whichever is longer (`last`:
+    /// whenever a read came since), and every estimated tag whose reads' corrections moved by
+    /// more than [`REFINED_SAME_M`] marked for a new estimate on them.
+    /// Paced by the reads' clock alone, so the estimates do not depend on the machine's load.
+    fn refine_poses(&mut self, last: bool) {
+        let Some(m) = self.settings.geometry.pose_error else {
+            return;
+        };
+        let phase = matches!(
+            self.settings.estimator,
+            Estimator::Relock | Estimator::Linear | Estimator::Hyperbolic | Estimator::Loci3d
+        );
+        let Some((first, newest)) = self.read_span_us.filter(|_| phase) else {
+            return;
+        };
+        let due = match self.refined_at_us {
+            None => true,
+            Some(at) if last => newest > at,
+            Some(at) => {
+                newest.saturating_sub(at) >= REFINE_EVERY_US.max(newest.saturating_sub(first) / 10)
+            }
+        };
+        if !due {
+            return;
+        }
+        self.refined_at_us = Some(newest);
+        let new = super::refine::corrections(&self.ingest, &self.settings.geometry, &m);
+        let old = self.settings.geometry.pose_corrections.take();
+        let now = Instant::now();
+        for (epc, t) in &mut self.tags {
+            // Estimated again where the corrections at its reads moved.
+            let moved = || {
+                self.ingest.tag_series(epc).any(|(key, series)| {
+                    series.samples().iter().any(|s| {
+                        let a = new.at(&key.1, s.t_us);
+                        let b = old.as_ref().map_or([0.0; 2], |c| c.at(&key.1, s.t_us));
+                        (a[0] - b[0]).hypot(a[1] - b[1]) > REFINED_SAME_M
+                    })
+                })
+            };
+            if t.last_estimate.is_some() && t.dirty_since.is_none() && moved() {
+                t.dirty_since = Some(now);
+            }
+        }
+        self.settings.geometry.pose_corrections = Some(Arc::new(new));
     }
 
     fn any_dirty(&self) -> bool {
@@ -418,7 +490,9 @@ impl Worker {
         let before = self.derived.len();
         self.derived.extend(new);
         if self.derived.len() > before {
+            let corrections = self.settings.geometry.pose_corrections.take();
             self.settings.geometry = super::offline::geometry(file, reads, self.ingest.poses());
+            self.settings.geometry.pose_corrections = corrections;
         }
     }
 
@@ -487,6 +561,12 @@ impl Worker {
         let now = Instant::now();
         let before = self.ingest.taken();
         self.ingest.push(&r);
+        if self.ingest.taken() > before {
+            self.read_span_us = Some(match self.read_span_us {
+                Some((first, newest)) => (first.min(r.t_us), newest.max(r.t_us)),
+                None => (r.t_us, r.t_us),
+            });
+        }
         // Thinned as the reads come, not as estimates are made: what a tag holds is then a
         // function of its reads alone (two workers on different shards hold what one does).
         if self.ingest.taken() > before {
