@@ -45,8 +45,10 @@ use crate::reads::Read;
 
 pub use super::tap::{Input, Mirror, Tap};
 
+mod refinement;
 mod rounds;
 
+pub use refinement::{REFINED_SAME_M, REFINE_EVERY_US};
 pub use rounds::{REFRESH, SETTLE, SETTLED_SAME_M};
 
 /// Longest a read waits for a pose at or after its time (wall-clock time at the localizer).
@@ -59,14 +61,6 @@ pub const POSE_KEEP_US: u64 = 60_000_000;
 
 /// Most reads waiting for a pose; beyond it the oldest is filed (or set aside) at once.
 pub const MAX_WAITING: usize = 100_000;
-
-/// Reads' time between two refinements of the poses, at the least (µs); later in a long
-/// run, a tenth of the time read so far.
-pub const REFINE_EVERY_US: u64 = 2_000_000;
-
-/// A tag is estimated again after a refinement of the poses when the corrections at its reads
-/// moved by more than this (m).
-pub const REFINED_SAME_M: f64 = 5e-4;
 
 /// How often the live localizer gives the allocator's free memory back ([`crate::alloc`]).
 const RELEASE_EVERY: Duration = Duration::from_secs(10);
@@ -343,55 +337,6 @@ impl Worker {
                 );
             }
         }
-    }
-
-    /// With a stated pose error and a phase estimator, the antenna positions corrected again
-    /// from every tag ([`super::refine::corrections`]) once the reads' clock has moved on by
-    /// [`REFINE_EVERY_US`] or a tenth of the time read so far, whichever is longer (`last`:
-    /// whenever a read came since), and every estimated tag whose reads' corrections moved by
-    /// more than [`REFINED_SAME_M`] marked for a new estimate on them.
-    /// Paced by the reads' clock alone, so the estimates do not depend on the machine's load.
-    fn refine_poses(&mut self, last: bool) {
-        let Some(m) = self.settings.geometry.pose_error else {
-            return;
-        };
-        let phase = matches!(
-            self.settings.estimator,
-            Estimator::Relock | Estimator::Linear | Estimator::Hyperbolic | Estimator::Loci3d
-        );
-        let Some((first, newest)) = self.read_span_us.filter(|_| phase) else {
-            return;
-        };
-        let due = match self.refined_at_us {
-            None => true,
-            Some(at) if last => newest > at,
-            Some(at) => {
-                newest.saturating_sub(at) >= REFINE_EVERY_US.max(newest.saturating_sub(first) / 10)
-            }
-        };
-        if !due {
-            return;
-        }
-        self.refined_at_us = Some(newest);
-        let new = super::refine::corrections(&self.ingest, &self.settings.geometry, &m);
-        let old = self.settings.geometry.pose_corrections.take();
-        let now = Instant::now();
-        for (epc, t) in &mut self.tags {
-            // Estimated again where the corrections at its reads moved.
-            let moved = || {
-                self.ingest.tag_series(epc).any(|(key, series)| {
-                    series.samples().iter().any(|s| {
-                        let a = new.at(&key.1, s.t_us);
-                        let b = old.as_ref().map_or([0.0; 2], |c| c.at(&key.1, s.t_us));
-                        (a[0] - b[0]).hypot(a[1] - b[1]) > REFINED_SAME_M
-                    })
-                })
-            };
-            if t.last_estimate.is_some() && t.dirty_since.is_none() && moved() {
-                t.dirty_since = Some(now);
-            }
-        }
-        self.settings.geometry.pose_corrections = Some(Arc::new(new));
     }
 
     fn any_dirty(&self) -> bool {
