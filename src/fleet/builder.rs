@@ -174,11 +174,11 @@ impl Builder {
             Input::Reader {
                 name,
                 hop_table,
+                antennas,
                 clock_offset_us,
                 poses,
-                ..
             } => {
-                self.decoders.register(&name, hop_table, poses);
+                self.decoders.register(&name, hop_table, &antennas, poses);
                 self.offsets.insert(name.clone(), clock_offset_us);
                 self.came(&name);
             }

@@ -48,7 +48,7 @@ pub struct Estimate {
     /// Time of the newest phase (µs, the reads' clock).
     pub last_update_us: u64,
     /// σ along the worse axis (m) of the covariance's share from the antenna poses' own
-    /// error, when that error is known.
+    /// error, when that error is known and the geometry passes it on no more than threefold.
     pub pose_sigma_m: Option<f64>,
 }
 
@@ -320,7 +320,13 @@ pub fn estimate_from(
                 *c += s;
             }
         }
-        let pose_sigma = share.map(|s| s[0].max(s[4]).max(s[8]).max(0.0).sqrt());
+        // Told as the poses' only where the geometry passes their error on no more than
+        // threefold: beyond, a weak geometry amplifies it, and more aperture is the remedy.
+        let pose_sigma = share
+            .map(|s| s[0].max(s[4]).max(s[8]).max(0.0).sqrt())
+            .zip(g.pose_error.as_ref())
+            .filter(|(s, m)| *s <= 3.0 * m.sigma_m * std::f64::consts::SQRT_2)
+            .map(|(s, _)| s);
         (p, c, pose_sigma)
     });
     match fix {

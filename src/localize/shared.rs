@@ -498,23 +498,32 @@ pub fn reason(e: &Estimate) -> Option<String> {
         ),
         State::InsufficientGeometry => Some(format!(
             "no position from {} phases: the antenna has not passed the tag (read from one \
-             place, or along too short a stretch); a position needs reads from poses spread \
-             along a pass by it",
+             place, or along too short a stretch), or its reads came too far apart to follow \
+             the phase (over a quarter wavelength, about 8 cm, of travel between two reads, as \
+             from a client that reports each tag once a second); a position needs reads from \
+             poses spread along a pass by it, close together",
             e.samples
         )),
         State::Converging => {
             let sigma_mm = e
                 .covariance
                 .map_or(f64::NAN, |c| c[0].max(c[4]).max(c[8]).max(0.0).sqrt() * 1e3);
+            let sigma_m = sigma_mm * 1e-3;
             match e.pose_sigma_m {
-                // More reads do not help when the poses' own error is most of it.
-                Some(pose) if pose * pose * 2.0 >= (sigma_mm * 1e-3).powi(2) => Some(format!(
-                    "σ {sigma_mm:.0} mm along its worse axis, {:.0} mm of it from the antenna \
-                     poses' own error (the robot's localization), which more reads do not \
-                     remove; converged at {:.0} mm or less",
-                    pose * 1e3,
-                    CONVERGED_SIGMA_M * 1e3
-                )),
+                // More reads do not help when the phases alone have converged and the poses'
+                // own error is what keeps the estimate from it (in a weak geometry both are
+                // large, and more aperture helps).
+                Some(pose)
+                    if sigma_m * sigma_m - pose * pose <= CONVERGED_SIGMA_M * CONVERGED_SIGMA_M =>
+                {
+                    Some(format!(
+                        "σ {sigma_mm:.0} mm along its worse axis, {:.0} mm of it from the \
+                         antenna poses' own error (the robot's localization), which more \
+                         reads do not remove; converged at {:.0} mm or less",
+                        pose * 1e3,
+                        CONVERGED_SIGMA_M * 1e3
+                    ))
+                }
                 _ => Some(format!(
                     "not yet trustworthy: σ {sigma_mm:.0} mm along its worse axis; converged \
                      at {:.0} mm or less",

@@ -132,6 +132,8 @@ pub struct ReadDecoder {
     /// in `foreign` and dropped).
     only_rospec: Option<u32>,
     foreign: u64,
+    /// The reader's only antenna, when it has one: a read that names none is its.
+    sole_antenna: Option<u16>,
 }
 
 /// Why a frame gave no reads.
@@ -162,6 +164,16 @@ impl ReadDecoder {
     /// Stamps each read with its antenna's pose from `poses` (where the source knows it).
     pub fn with_poses(mut self, poses: Option<PoseAt>) -> Self {
         self.poses = poses;
+        self
+    }
+
+    /// The reader's antenna ports: when there is one, a read that names no antenna (its
+    /// client turned AntennaID off, as sllurp's `inventory` does) is taken as that antenna's.
+    pub fn with_antennas(mut self, antennas: &[u16]) -> Self {
+        self.sole_antenna = match antennas {
+            [one] => Some(*one),
+            _ => None,
+        };
         self
     }
 
@@ -253,7 +265,7 @@ impl ReadDecoder {
             .zip(self.hop_table.as_ref())
             .and_then(|(c, t)| t.frequency_khz(c))
             .map(|khz| u64::from(khz) * 1000);
-        let antenna = r.antenna_id.unwrap_or(0);
+        let antenna = r.antenna_id.or(self.sole_antenna).unwrap_or(0);
         Read {
             epc: hex_upper(r.epc),
             reader: self.reader.clone(),
@@ -275,12 +287,13 @@ impl ReadDecoder {
 pub struct Decoders(std::collections::HashMap<String, ReadDecoder>);
 
 impl Decoders {
-    /// Reader `name` advertises `hop_table`, and its source knows its antennas' poses where
-    /// `poses` is given (its decoder keeps what it has learnt).
+    /// Reader `name` advertises `hop_table` and has antenna ports `antennas`, and its source
+    /// knows its antennas' poses where `poses` is given (its decoder keeps what it has learnt).
     pub fn register(
         &mut self,
         name: &str,
         hop_table: Option<llrp::units::HopTable>,
+        antennas: &[u16],
         poses: Option<PoseAt>,
     ) {
         let d = self
@@ -288,6 +301,7 @@ impl Decoders {
             .remove(name)
             .unwrap_or_else(|| ReadDecoder::new(Some(name.to_owned())))
             .with_fallback_table(hop_table)
+            .with_antennas(antennas)
             .with_poses(poses);
         self.0.insert(name.to_owned(), d);
     }

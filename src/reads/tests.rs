@@ -187,6 +187,42 @@ fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
 }
 
 #[test]
+fn a_read_naming_no_antenna_is_the_sole_antennas_and_gets_its_pose() {
+    use llrp::params::FirstSeenTimestampUtc;
+    // As sllurp's `inventory` asks: AntennaID off.
+    let frame = report(llrp::params::TagReportData {
+        antenna_id: None,
+        first_seen_timestamp_utc: Some(FirstSeenTimestampUtc(2_000_000)),
+        ..tag_ab()
+    });
+    let poses = || {
+        Some(PoseAt::new(|antenna, _| {
+            (antenna == 3).then_some(AntennaPose {
+                x: 1.0,
+                y: 2.0,
+                z: 0.5,
+                yaw_deg: 90.0,
+                pitch_deg: 0.0,
+            })
+        }))
+    };
+    let mut out = Vec::new();
+    let mut sole = ReadDecoder::new(Some("r".into()))
+        .with_antennas(&[3])
+        .with_poses(poses());
+    sole.frame(&frame, 0, &mut out).expect("decodes");
+    assert_eq!(out[0].antenna, 3);
+    assert!(out[0].antenna_pose.is_some(), "{:?}", out[0]);
+    // A reader of several antennas: which one is unknown.
+    let mut several = ReadDecoder::new(Some("r".into()))
+        .with_antennas(&[1, 3])
+        .with_poses(poses());
+    out.clear();
+    several.frame(&frame, 0, &mut out).expect("decodes");
+    assert_eq!((out[0].antenna, out[0].antenna_pose), (0, None));
+}
+
+#[test]
 fn an_epc_of_other_than_96_bits_is_read_from_epc_data() {
     use llrp::codec::BitVec;
     use llrp::message::RoAccessReport;

@@ -353,7 +353,7 @@ impl Worker {
                 clock_offset_us,
                 poses,
             } => {
-                self.decoders.register(&name, hop_table, poses);
+                self.decoders.register(&name, hop_table, &antennas, poses);
                 self.ingest.poses_mut().set_offset(&name, clock_offset_us);
                 self.shared.update_reader(&name, |v| {
                     for a in antennas {
