@@ -182,10 +182,13 @@ pub async fn run(
                     if c.is_err() {
                         return;
                     }
+                    // A client that came and went while a step ran (a session shorter than
+                    // one step, on a busy machine) changed the reader and its status too:
+                    // the own inventory starts again, as after any client.
                     if *client.borrow() {
                         tracing::info!(reader = %task.name, "a client connected: the reader's own inventory stops");
-                        break;
                     }
+                    break;
                 }
                 _ = sleep_until(wake) => {
                     let (back, done) = oneshot::channel();
