@@ -323,7 +323,7 @@ pub fn estimate_from(
         // Told as the poses' only where the geometry passes their error on no more than
         // threefold: beyond, a weak geometry amplifies it, and more aperture is the remedy.
         let pose_sigma = share
-            .map(|s| s[0].max(s[4]).max(s[8]).max(0.0).sqrt())
+            .map(|s| worse_sigma(&s))
             .zip(g.pose_error.as_ref())
             .filter(|(s, m)| *s <= 3.0 * m.sigma_m * std::f64::consts::SQRT_2)
             .map(|(s, _)| s);
@@ -341,15 +341,19 @@ pub fn estimate_from(
     }
 }
 
-/// `converged` when the σ along the worst axis (bounded by the largest diagonal term of the
-/// covariance) is at most [`CONVERGED_SIGMA_M`], else `converging`.
-pub fn state_of(covariance: &[f64; 9]) -> State {
-    let worse = covariance[0]
+/// The σ along the worse axis of a 3×3 covariance (m), bounded by its largest diagonal term.
+pub fn worse_sigma(covariance: &[f64; 9]) -> f64 {
+    covariance[0]
         .max(covariance[4])
         .max(covariance[8])
         .max(0.0)
-        .sqrt();
-    if worse <= CONVERGED_SIGMA_M {
+        .sqrt()
+}
+
+/// `converged` when the σ along the worse axis ([`worse_sigma`]) is at most
+/// [`CONVERGED_SIGMA_M`], else `converging`.
+pub fn state_of(covariance: &[f64; 9]) -> State {
+    if worse_sigma(covariance) <= CONVERGED_SIGMA_M {
         State::Converged
     } else {
         State::Converging

@@ -507,7 +507,7 @@ pub fn reason(e: &Estimate) -> Option<String> {
         State::Converging => {
             let sigma_mm = e
                 .covariance
-                .map_or(f64::NAN, |c| c[0].max(c[4]).max(c[8]).max(0.0).sqrt() * 1e3);
+                .map_or(f64::NAN, |c| super::estimate::worse_sigma(&c) * 1e3);
             let sigma_m = sigma_mm * 1e-3;
             match e.pose_sigma_m {
                 // More reads do not help when the phases alone have converged and the poses'
