@@ -18,3 +18,4 @@ pub mod record;
 pub mod scenario;
 pub mod sim;
 pub mod stop;
+pub mod utc;

@@ -4,8 +4,6 @@
 //! `antennaPort`, `peakRssiCdbm` in centi-dBm, `frequency` in kHz, `phaseAngle` in degrees,
 //! `lastSeenTime` as RFC 3339); the rest are ours, in the same camelCase (docs/fleet.md).
 
-use std::time::{Duration, UNIX_EPOCH};
-
 use serde::{Deserialize, Serialize};
 
 use crate::reads::{AntennaPose, Read};
@@ -198,9 +196,10 @@ fn round_to(v: f64, per: f64) -> f64 {
     (v * per).round() / per
 }
 
-/// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds.
+/// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds
+/// ([`crate::utc::rfc3339_micros`]: every `u64`, a year past 9999 expanded).
 pub fn rfc3339(us: u64) -> String {
-    humantime::format_rfc3339_micros(UNIX_EPOCH + Duration::from_micros(us)).to_string()
+    crate::utc::rfc3339_micros(us)
 }
 
 /// [`rfc3339`] for times that come in order: the date and time of day made once a second.
@@ -256,6 +255,8 @@ mod tests {
             1_764_633_601_000_000,
             1_764_633_600_000_002,   // back a second
             253_402_300_799_999_999, // 9999-12-31T23:59:59.999999Z
+            253_402_300_800_000_001, // +10000-01-01: humantime failed here and panicked
+            u64::MAX,
         ] {
             assert_eq!(clock.format(us), rfc3339(us), "{us}");
         }

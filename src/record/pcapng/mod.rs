@@ -26,33 +26,9 @@ use stream::{Ending, Happening, Piece, Streams};
 pub const READER_PORT: u16 = 5084;
 
 /// UTC µs since the Unix epoch as ISO-8601 with microseconds, e.g.
-/// `2023-11-14T22:13:20.000010Z`.
+/// `2023-11-14T22:13:20.000010Z` ([`crate::utc::rfc3339_micros`]).
 pub fn iso8601(utc_us: u64) -> String {
-    let secs = utc_us / 1_000_000;
-    let (days, s) = ((secs / 86_400) as i64, secs % 86_400);
-    let (y, m, d) = civil_from_days(days);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:06}Z",
-        s / 3600,
-        s / 60 % 60,
-        s % 60,
-        utc_us % 1_000_000
-    )
-}
-
-/// Year, month, day of a day count since 1970-01-01 (proleptic Gregorian calendar), by the
-/// era arithmetic of H. Hinnant's "chrono-Compatible Low-Level Date Algorithms".
-fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    (y, m, d)
+    crate::utc::rfc3339_micros(utc_us)
 }
 
 /// Why a capture cannot be imported.
