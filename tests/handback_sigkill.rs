@@ -4,29 +4,19 @@
 
 mod http_support;
 
-use std::net::SocketAddr;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use http_support::{request, Proc};
+use http_support::{first_reader, Proc};
 
 /// Longest the test waits for each state (a hang guard, not a measurement).
 const GUARD: Duration = Duration::from_secs(60);
 
 #[test]
 fn a_client_killed_with_sigkill_hands_the_reader_back_to_its_own_inventory() {
-    let mut sim = Proc::spawn(&[
-        "sim",
-        "--speed",
-        "4",
-        "--listen",
-        "127.0.0.1:0",
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let http: SocketAddr = sim.address("live map on http://").parse().expect("addr");
+    let (mut sim, http) = Proc::sim(&["--speed", "4"]);
     let llrp = sim.address("listening on ");
-    let reader = || request(http, "GET", "/api/readers", &[], b"").json()["readers"][0].clone();
+    let reader = || first_reader(http);
     let until = |what: &str, pred: &dyn Fn(&serde_json::Value) -> bool| {
         let deadline = Instant::now() + GUARD;
         loop {

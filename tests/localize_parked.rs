@@ -5,7 +5,6 @@
 
 mod http_support;
 
-use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -36,18 +35,7 @@ fn run_sim(
             })
         })
         .collect();
-    let mut sim = Proc::spawn(&[
-        "sim",
-        "--speed",
-        speed,
-        "--poses",
-        poses,
-        "--listen",
-        "127.0.0.1:0",
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let http: SocketAddr = sim.address("live map on http://").parse().expect("addr");
+    let (_sim, http) = Proc::sim(&["--speed", speed, "--poses", poses]);
     let deadline = Instant::now() + Duration::from_secs(180);
     // The truth's times are on the reads' clock (UTC µs): simulated time is counted from the
     // first truth seen (a little after simulated time 0).

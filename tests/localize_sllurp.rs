@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use http_support::{counter, request, Proc};
+use http_support::{counter, first_reader, Proc};
 
 #[test]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
@@ -18,18 +18,9 @@ fn sllurps_reads_without_antenna_ids_are_filed_on_the_readers_one_antenna() {
     let venv = PathBuf::from(
         std::env::var("LLRP_VENV").expect("LLRP_VENV must name the sllurp venv (./scripts/test)"),
     );
-    let mut sim = Proc::spawn(&[
-        "sim",
-        "--speed",
-        "4",
-        "--listen",
-        "127.0.0.1:0",
-        "--http",
-        "127.0.0.1:0",
-    ]);
-    let http: SocketAddr = sim.address("live map on http://").parse().expect("addr");
+    let (mut sim, http) = Proc::sim(&["--speed", "4"]);
     let llrp: SocketAddr = sim.address("listening on ").parse().expect("addr");
-    let reader = || request(http, "GET", "/api/readers", &[], b"").json()["readers"][0].clone();
+    let reader = || first_reader(http);
     // The README's command, until the reader serves it and the localizer has taken in reads
     // of its session (a hang guard, not a measurement).
     let mut sllurp = Command::new(venv.join("bin").join("sllurp"))

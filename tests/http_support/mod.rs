@@ -369,6 +369,11 @@ pub fn counter(http: SocketAddr, name: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {name} in {text}"))
 }
 
+/// The first reader of `GET /api/readers`.
+pub fn first_reader(http: SocketAddr) -> serde_json::Value {
+    request(http, "GET", "/api/readers", &[], b"").json()["readers"][0].clone()
+}
+
 /// A running child with the addresses it printed; SIGTERM and a wait when dropped.
 pub struct Proc {
     child: std::process::Child,
@@ -398,6 +403,19 @@ impl Proc {
             lines,
             log: Vec::new(),
         }
+    }
+
+    /// Starts `sim` with `extra` options, its LLRP listener and HTTP API on free loopback
+    /// ports; the child and the API's address.
+    pub fn sim(extra: &[&str]) -> (Proc, SocketAddr) {
+        let mut args = vec!["sim", "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0"];
+        args.extend_from_slice(extra);
+        let mut sim = Proc::spawn(&args);
+        let http = sim
+            .address("live map on http://")
+            .parse()
+            .expect("an HTTP address");
+        (sim, http)
     }
 
     /// The child's process id.
