@@ -14,6 +14,7 @@ pub mod options;
 pub mod physics;
 pub mod reader;
 pub mod reads;
+pub mod realism;
 pub mod record;
 pub mod scenario;
 pub mod sim;

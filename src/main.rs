@@ -118,6 +118,9 @@ enum BenchCommand {
     /// Simulate a scenario faster than real time and localize it with every applicable
     /// estimator: errors against the truth and compute times.
     Localize(llrp_gateway::localize::bench_cli::BenchLocalizeArgs),
+    /// Run the parked-rail replica of a real Impinj measurement and print its reads'
+    /// statistics beside the real ones (docs/measurement.md "Validation").
+    Realism(llrp_gateway::realism::BenchRealismArgs),
 }
 
 fn main() -> ExitCode {
@@ -131,6 +134,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Localize(args)) => {
             llrp_gateway::localize::bench_cli::run(args)
         }
+        Command::Bench(BenchCommand::Realism(args)) => llrp_gateway::realism::run(args),
         Command::Sim {
             scenario,
             listen,

@@ -22,7 +22,7 @@ use super::geometry::{distance, Vec3};
 use super::multipath::{self, Aim, Channel};
 use super::schedule;
 use super::seed::Stream;
-use super::{noise, phase, rssi, Model, Read, Want};
+use super::{hardware, noise, phase, rssi, Model, Read, Want};
 use crate::scenario::RssiModel;
 
 /// Half-interval (µs) of the central difference giving the radial velocity.
@@ -245,7 +245,16 @@ impl Model {
         if rng.gen::<f64>() >= schedule::read_probability(margin_db) {
             return None;
         }
-        let backscatter_db = self.tags[tag].radio.backscatter_db;
+        let hw = &self.antennas[usize::from(antenna) - 1].hardware;
+        // What hardware adds to the level: compression at strong signal and the fixed
+        // per-channel response (0 at the defaults).
+        let backscatter_db = self.tags[tag].radio.backscatter_db
+            - hardware::compression_db(
+                margin_db,
+                spec.compression_knee_db,
+                spec.backscatter_compression,
+            )
+            + hw.rssi_db(tag, channel_index);
         let rx = |noise| {
             rssi::full_model(
                 tx_power_dbm,
@@ -263,7 +272,17 @@ impl Model {
         let (clean_dbm, rssi_dbm) = match spec.rssi_model {
             RssiModel::Reader => {
                 let clean = rx(0.0)?;
-                let n_db = noise::gaussian(rng, spec.rssi_sigma_db);
+                let scale = if spec.rssi_sigma_grows {
+                    noise::weak_signal_scale_with(
+                        clean,
+                        spec.phase_noise_ref_dbm,
+                        spec.noise_exponent,
+                    )
+                } else {
+                    1.0
+                };
+                let n_db = noise::gaussian(rng, spec.rssi_sigma_db * scale)
+                    + hardware::rssi_outlier(rng, spec.rssi_outlier_rate);
                 (
                     clean,
                     rssi::reader_dbm(clean, n_db, spec.rssi_resolution_db),
@@ -283,18 +302,28 @@ impl Model {
         // asking for one gives it the same value as asking for both.
         let (mut phase_rad, mut doppler_hz) = (0.0, 0.0);
         if want.phase || want.doppler {
-            let scale = noise::weak_signal_scale(clean_dbm, spec.phase_noise_ref_dbm);
-            let mut n_phi = noise::gaussian(rng, spec.phase_noise_rad * scale);
+            let scale = noise::weak_signal_scale_with(
+                clean_dbm,
+                spec.phase_noise_ref_dbm,
+                spec.noise_exponent,
+            );
+            let sigma = spec.phase_noise_rad * scale;
+            let mut n_phi = hardware::heavy(rng, sigma, spec.phase_noise_dof);
             if let Some(dist) = &spec.extra_phase_noise {
                 n_phi += noise::extra(rng, dist);
             }
             if spec.phase_pi_ambiguity && rng.gen::<bool>() {
                 n_phi += std::f64::consts::PI;
             }
+            n_phi += hardware::phase_outlier(rng, spec.phase_outlier_rate, sigma);
             let n_doppler = noise::gaussian(rng, spec.doppler_sigma_hz * scale);
             if want.phase {
-                let phi0 = self.phase_offset(antenna, tag, channel_index);
+                let phi0 = self.phase_offset(antenna, tag, channel_index)
+                    + self.pattern_phase(antenna, tag, time_us);
                 phase_rad = phase::reported_phase(ch.delay_rad, phi0, spec.phase_sign, n_phi);
+                if spec.phase_resolution_bits < 12 {
+                    phase_rad = hardware::quantise_phase(phase_rad, spec.phase_resolution_bits);
+                }
             }
             if want.doppler {
                 doppler_hz = self.doppler_hz(antenna, tag, time_us, lambda) + n_doppler;
@@ -310,6 +339,31 @@ impl Model {
             phase_rad,
             doppler_hz,
         })
+    }
+
+    /// The smooth angle-dependent phase error (rad) of `tag` read by `antenna` at `t_us`:
+    /// the antenna's pattern in its own frame plus the tag's against the direction it is read
+    /// from (0 when neither has one).
+    fn pattern_phase(&self, antenna: u16, tag: usize, t_us: u64) -> f64 {
+        let a = &self.antennas[usize::from(antenna) - 1];
+        let radio = &self.tags[tag].radio;
+        if a.hardware.phase_field.is_none() && radio.phase_field.is_none() {
+            return 0.0;
+        }
+        let pose = self.antenna_pose(antenna, t_us);
+        let at = self.tag_position(tag, t_us);
+        let mut sum = 0.0;
+        if let Some(f) = &a.hardware.phase_field {
+            let b = super::geometry::boresight(pose.yaw_rad, pose.pitch_rad);
+            sum += f.at(hardware::in_antenna_frame(
+                hardware::direction(pose.position, at),
+                b,
+            ));
+        }
+        if let Some(f) = &radio.phase_field {
+            sum += f.at(hardware::direction(at, pose.position));
+        }
+        sum
     }
 
     /// Doppler shift (Hz) of `tag` seen by `antenna` at `t_us`, from the radial velocity

@@ -14,6 +14,7 @@ mod field;
 pub mod flags;
 pub mod gen2;
 pub mod geometry;
+pub mod hardware;
 pub mod hopping;
 mod inventory;
 pub mod lookahead;
@@ -146,6 +147,8 @@ struct AntennaModel {
     /// The structured φ0 without the tag's part, per channel (index 0 = channel 1): the
     /// scenario's listed offsets, else the reader/antenna part plus the cable's 4π·f·τ.
     phase_base: Vec<f64>,
+    /// What the antenna's hardware adds to its reads.
+    hardware: hardware::AntennaHardware,
 }
 
 /// The constant part of a robot-mounted antenna's boresight.
@@ -308,7 +311,26 @@ impl Model {
                     ),
                 })
                 .collect();
+            let port = antennas.len() as u64 + 1;
+            let hardware = hardware::AntennaHardware {
+                phase_field: hardware::SmoothField::new(
+                    &[scenario.seed, seed::domain::HARDWARE, reader as u64, port],
+                    a.phase_pattern_rad,
+                    a.phase_pattern_deg.to_radians(),
+                ),
+                band_db: hardware::band_offsets(&table, a.rssi_tilt_db_per_mhz),
+                prefix: seed::mix(&[
+                    scenario.seed,
+                    seed::domain::HARDWARE,
+                    reader as u64,
+                    port,
+                    0,
+                ]),
+                channel_phase_sigma: scenario.tag_variation.channel_phase_sigma_rad,
+                channel_rssi_sigma: scenario.tag_variation.channel_rssi_sigma_db,
+            };
             antennas.push(AntennaModel {
+                hardware,
                 phase_base,
                 spec: a.clone(),
                 rates,
@@ -435,8 +457,16 @@ impl Model {
         }
         match a.spec.phase_offsets {
             PhaseOffsets::Structured => {
-                let tag_part = self.tags.get(tag).map_or(0.0, |t| t.radio.phase_rad);
-                geometry::wrap_2pi(a.phase_base.get(k).copied().unwrap_or(0.0) + tag_part)
+                let f_hz = self.table.get(k).map_or(0.0, |&f| f64::from(f) * 1e3);
+                let tag_part = self.tags.get(tag).map_or(0.0, |t| {
+                    t.radio.phase_rad
+                        + a.spec.phase_sign * phase::cable_phase(f_hz, t.radio.delay_ns * 1e-9)
+                });
+                geometry::wrap_2pi(
+                    a.phase_base.get(k).copied().unwrap_or(0.0)
+                        + tag_part
+                        + a.hardware.phase_rad(tag, channel),
+                )
             }
             PhaseOffsets::RandomPerChannel => {
                 // seed::mix(&[seed, PHASE_OFFSET, reader, antenna, tag, channel]), its

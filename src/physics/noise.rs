@@ -26,13 +26,18 @@ pub const WEAK_SIGNAL_EXPONENT: f64 = 0.6;
 /// Factor on a measurement noise σ for a read at `rssi_dbm`: 1 at or above `ref_dbm`, below it
 /// 10^(0.6·(ref − RSSI)/20) ([`WEAK_SIGNAL_EXPONENT`]); at most [`MAX_WEAK_SIGNAL_SCALE`].
 pub fn weak_signal_scale(rssi_dbm: f64, ref_dbm: f64) -> f64 {
+    weak_signal_scale_with(rssi_dbm, ref_dbm, WEAK_SIGNAL_EXPONENT)
+}
+
+/// [`weak_signal_scale`] with the exponent `k`: 10^(k·(ref − RSSI)/20) below `ref_dbm`.
+pub fn weak_signal_scale_with(rssi_dbm: f64, ref_dbm: f64, k: f64) -> f64 {
     if rssi_dbm >= ref_dbm {
         1.0
     } else if rssi_dbm.is_nan() {
         MAX_WEAK_SIGNAL_SCALE
     } else {
         // 10^(k·Δ/20) as one exp (cheaper than powf on every weak read).
-        (WEAK_SIGNAL_EXPONENT * std::f64::consts::LN_10 / 20.0 * (ref_dbm - rssi_dbm))
+        (k * std::f64::consts::LN_10 / 20.0 * (ref_dbm - rssi_dbm))
             .exp()
             .min(MAX_WEAK_SIGNAL_SCALE)
     }

@@ -99,6 +99,8 @@ pub mod domain {
     pub const GEN2: u64 = 7;
     /// Inventoried-flag persistence times.
     pub const FLAGS: u64 = 8;
+    /// What hardware adds: the antennas' phase patterns and fixed per-channel draws.
+    pub const HARDWARE: u64 = 9;
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)

@@ -32,6 +32,10 @@ pub struct TagRadio {
     pub phase_rad: f64,
     /// 10^(sensitivity_db/20): the factor on the forward-link amplitude the tag needs.
     pub amplitude_scale: f64,
+    /// The tag's own group delay against the nominal (ns): a phase linear in frequency.
+    pub delay_ns: f64,
+    /// The tag's angle-dependent phase error, if the scenario gives one.
+    pub phase_field: Option<super::hardware::SmoothField>,
 }
 
 impl TagRadio {
@@ -48,6 +52,15 @@ impl TagRadio {
         let sensitivity = spread(v.sensitivity_sigma_db);
         let backscatter = spread(v.backscatter_sigma_db);
         let phase_rad = std::f64::consts::TAU * rand::Rng::gen::<f64>(&mut rng);
+        let delay_ns = noise::gaussian(&mut rng, v.delay_sigma_ns).clamp(
+            -CLIP_SIGMAS * v.delay_sigma_ns,
+            CLIP_SIGMAS * v.delay_sigma_ns,
+        );
+        let phase_field = super::hardware::SmoothField::new(
+            &[scenario.seed, seed::domain::TAG, index as u64, 1],
+            v.phase_pattern_rad,
+            v.phase_pattern_deg.to_radians(),
+        );
         let sensitivity_db = spec.sensitivity_offset_db.unwrap_or(sensitivity);
         TagRadio {
             sensitivity_db,
@@ -58,6 +71,8 @@ impl TagRadio {
                 (n > 0.0 && n.is_finite()).then(|| [a[0] / n, a[1] / n, a[2] / n])
             }),
             phase_rad,
+            delay_ns,
+            phase_field,
         }
     }
 

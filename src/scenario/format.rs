@@ -92,6 +92,23 @@ pub struct TagVariation {
     /// Standard deviation of the backscatter strength across tags (dB).
     #[serde(default = "default_tag_spread")]
     pub backscatter_sigma_db: f64,
+    /// RMS (rad) of each tag's smooth phase error against the direction it is read from
+    /// (inlay, orientation, mounting), the same on every channel; 0: none.
+    #[serde(default)]
+    pub phase_pattern_rad: f64,
+    /// Angle (degrees) over which that phase error decorrelates.
+    #[serde(default = "default_pattern_deg")]
+    pub phase_pattern_deg: f64,
+    /// Standard deviation across tags of the tag's own group delay (ns): a phase linear in
+    /// frequency that differs from tag to tag.
+    #[serde(default)]
+    pub delay_sigma_ns: f64,
+    /// Standard deviation of a fixed phase per (tag, antenna, channel) (rad).
+    #[serde(default)]
+    pub channel_phase_sigma_rad: f64,
+    /// Standard deviation of a fixed RSSI offset per (tag, antenna, channel) (dB).
+    #[serde(default)]
+    pub channel_rssi_sigma_db: f64,
 }
 
 impl Default for TagVariation {
@@ -99,6 +116,11 @@ impl Default for TagVariation {
         TagVariation {
             sensitivity_sigma_db: default_tag_spread(),
             backscatter_sigma_db: default_tag_spread(),
+            phase_pattern_rad: 0.0,
+            phase_pattern_deg: default_pattern_deg(),
+            delay_sigma_ns: 0.0,
+            channel_phase_sigma_rad: 0.0,
+            channel_rssi_sigma_db: 0.0,
         }
     }
 }
@@ -169,6 +191,9 @@ pub struct ReaderSpec {
     pub report_interval_ms: u32,
     /// Antennas; antenna port `i + 1` is `antennas[i]`.
     pub antennas: Vec<AntennaSpec>,
+    /// The reader model whose defaults this reader's antennas took (else the scenario's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reader_model: Option<String>,
 }
 
 /// Orientation and position of an antenna or an antenna offset.
@@ -449,6 +474,44 @@ pub struct AntennaSpec {
     /// Relative standard deviation σ_r of the read range.
     #[serde(default = "default_range_sigma")]
     pub range_sigma: f64,
+    /// Steps per turn of the reported phase, as a power of two (12: every code of Impinj's
+    /// 12-bit field; 10: every fourth, as an R420 reports).
+    #[serde(default = "default_phase_bits")]
+    pub phase_resolution_bits: u8,
+    /// How fast the phase, Doppler (and, with `rssi_sigma_grows`, RSSI) noise grows below
+    /// `phase_noise_ref_dbm`: σ ∝ 10^(k·(ref − RSSI)/20).
+    #[serde(default = "default_noise_exponent")]
+    pub noise_exponent: f64,
+    /// The RSSI noise grows below `phase_noise_ref_dbm` as the phase noise does.
+    #[serde(default)]
+    pub rssi_sigma_grows: bool,
+    /// Degrees of freedom of a Student's t phase noise (same σ, heavier tails); 0: Gaussian.
+    #[serde(default)]
+    pub phase_noise_dof: f64,
+    /// Share of reads whose phase is an outlier (N(0, (12σ)²) added).
+    #[serde(default)]
+    pub phase_outlier_rate: f64,
+    /// Share of reads whose RSSI is an outlier (2–6 dB either way).
+    #[serde(default)]
+    pub rssi_outlier_rate: f64,
+    /// Backscatter compression: above `compression_knee_db` of forward-link margin over the
+    /// tag's wake-up power, its RSSI grows only by (1 − this) dB per dB (0: linear).
+    #[serde(default)]
+    pub backscatter_compression: f64,
+    /// Forward-link margin (dB over the tag's wake-up power) where compression starts.
+    #[serde(default)]
+    pub compression_knee_db: f64,
+    /// RSSI change across the band (dB per MHz from the hop table's centre), common to all
+    /// tags: the reader's and antenna's frequency response.
+    #[serde(default)]
+    pub rssi_tilt_db_per_mhz: f64,
+    /// RMS (rad) of the antenna's smooth angle-dependent phase error (its phase centre moving
+    /// off boresight), the same on every channel and for every tag; 0: none.
+    #[serde(default)]
+    pub phase_pattern_rad: f64,
+    /// Angle (degrees) over which that phase error decorrelates.
+    #[serde(default = "default_pattern_deg")]
+    pub phase_pattern_deg: f64,
 }
 
 fn default_listen() -> String {
@@ -533,4 +596,13 @@ fn default_range() -> f64 {
 }
 fn default_range_sigma() -> f64 {
     0.05
+}
+fn default_phase_bits() -> u8 {
+    12
+}
+fn default_noise_exponent() -> f64 {
+    crate::physics::noise::WEAK_SIGNAL_EXPONENT
+}
+fn default_pattern_deg() -> f64 {
+    30.0
 }

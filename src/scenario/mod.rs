@@ -3,6 +3,7 @@
 
 mod format;
 mod mount;
+pub mod profile;
 pub mod recorded;
 pub mod region;
 pub mod tagmem;
@@ -38,6 +39,10 @@ pub struct Scenario {
     /// Spread of the tags' sensitivity and backscatter strength.
     #[serde(default)]
     pub tag_variation: TagVariation,
+    /// The reader model (docs/measurement.md "Reader models") whose defaults the tags'
+    /// variation and every reader without its own model took.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reader_model: Option<String>,
     /// The readers.
     pub readers: Vec<ReaderSpec>,
     /// One line for each field the file gives that the models no longer use, saying what
@@ -104,9 +109,14 @@ impl Scenario {
     }
 
     /// Parses and validates, resolving relative files against `dir`.
-    fn from_json_in(text: &str, dir: &std::path::Path) -> Result<Scenario, ScenarioError> {
-        let mut de = serde_json::Deserializer::from_str(text);
-        let mut scenario: Scenario = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+    pub fn from_json_in(text: &str, dir: &std::path::Path) -> Result<Scenario, ScenarioError> {
+        let mut value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| ScenarioError::Json {
+                path: "(root)".to_string(),
+                reason: e.to_string(),
+            })?;
+        profile::apply(&mut value)?;
+        let mut scenario: Scenario = serde_path_to_error::deserialize(value).map_err(|e| {
             let path = json_path(&e.path().to_string());
             let reason = e.into_inner().to_string();
             // A mount reports the path inside it at the start of its message.
@@ -120,10 +130,6 @@ impl Scenario {
                 },
                 None => ScenarioError::Json { path, reason },
             }
-        })?;
-        de.end().map_err(|e| ScenarioError::Json {
-            path: "(root)".to_string(),
-            reason: e.to_string(),
         })?;
         scenario.fill_defaults();
         validate::validate(&scenario)?;

@@ -398,3 +398,61 @@ fn pose_estimate_defaults_and_errors_name_the_field() {
         );
     }
 }
+
+#[test]
+fn a_reader_model_sets_defaults_the_file_can_override() {
+    let mut v = base();
+    v["reader_model"] = "impinj-r420".into();
+    v["readers"][0]["antennas"][0]["cable_delay_ns"] = 20.0.into();
+    let s = Scenario::from_json(&v.to_string()).expect("valid");
+    let [given, filled] = [&s.readers[0].antennas[0], &s.readers[0].antennas[1]];
+    assert_eq!(given.cable_delay_ns, 20.0);
+    assert_eq!(filled.cable_delay_ns, 35.0);
+    assert_eq!(filled.phase_resolution_bits, 10);
+    assert_eq!(s.tag_variation.backscatter_sigma_db, 2.8);
+    // Without a model every field keeps its built-in default, and the model's name survives
+    // a round trip through JSON.
+    let plain = Scenario::from_json(&base().to_string()).expect("valid");
+    assert_eq!(plain.readers[0].antennas[1].phase_resolution_bits, 12);
+    assert_eq!(plain.readers[0].antennas[1].backscatter_compression, 0.0);
+    let again = Scenario::from_json(&serde_json::to_string(&s).expect("json")).expect("valid");
+    assert_eq!(again.reader_model.as_deref(), Some("impinj-r420"));
+}
+
+#[test]
+fn hardware_fields_out_of_range_name_the_field() {
+    let cases: [(&str, serde_json::Value, &str); 5] = [
+        (
+            "phase_noise_dof",
+            1.5.into(),
+            "must be 0 (Gaussian) or above 2",
+        ),
+        ("phase_resolution_bits", 0.into(), "must be 1 to 16, got 0"),
+        (
+            "backscatter_compression",
+            1.5.into(),
+            "must be in [0, 1], got 1.5",
+        ),
+        (
+            "phase_outlier_rate",
+            (-0.1).into(),
+            "must be in [0, 0.5], got -0.1",
+        ),
+        ("phase_pattern_deg", 0.into(), "must be in (0, 360], got 0"),
+    ];
+    for (field, value, reason) in cases {
+        let mut v = base();
+        v["readers"][0]["antennas"][1][field] = value;
+        let e = error_of(&v);
+        assert!(
+            e.starts_with(&format!("readers[0].antennas[1].{field}: {reason}")),
+            "{e}"
+        );
+    }
+    let mut v = base();
+    v["tag_variation"] = serde_json::json!({"delay_sigma_ns": -1});
+    assert!(error_of(&v).starts_with("tag_variation.delay_sigma_ns: must be in [0, 100]"));
+    let mut v = base();
+    v["reader_model"] = "acme".into();
+    assert!(error_of(&v).starts_with("reader_model: unknown reader model `acme`; known: ideal"));
+}

@@ -1,0 +1,718 @@
+//! The statistics of `../shared/research/real-reads.md`, computed from reads of a parked
+//! aperture (one antenna parked at points along a line, tags at known nominal places).
+//!
+//! A *group* is one (park, tag, channel) with at least [`MIN_GROUP`] reads; its phase is the
+//! circular mean of its main mode (the reads within π/2 of the circular mean of all).
+
+use std::collections::HashMap;
+use std::f64::consts::{PI, TAU};
+
+use crate::physics::phase::SPEED_OF_LIGHT;
+use crate::reads::Read;
+
+/// Fewest reads a group needs to count.
+pub const MIN_GROUP: usize = 5;
+
+/// One stop of the antenna: parked at `at` from `from_us` to `to_us` (simulated µs).
+#[derive(Clone, Debug)]
+pub struct Park {
+    /// Start of the stop (µs).
+    pub from_us: u64,
+    /// End of the stop (µs).
+    pub to_us: u64,
+    /// Antenna position (m).
+    pub at: [f64; 3],
+}
+
+/// What the statistics need to know of the measurement besides its reads.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    /// The antenna's stops, in time order.
+    pub parks: Vec<Park>,
+    /// Each tag's EPC (upper-case hex) and nominal position (m).
+    pub tags: Vec<(String, [f64; 3])>,
+    /// The antenna's boresight (unit vector).
+    pub boresight: [f64; 3],
+}
+
+/// The statistics of one measurement; `None` where the reads do not allow one.
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    /// Median over groups of the phase's circular std (rad).
+    pub phase_sigma_median: Option<f64>,
+    /// 90th percentile of the same (rad).
+    pub phase_sigma_p90: Option<f64>,
+    /// Exponent k of σ ∝ 10^(k·(ref − RSSI)/20), fitted over groups.
+    pub phase_noise_exponent: Option<f64>,
+    /// The fitted σ at −42 dBm (rad).
+    pub phase_sigma_at_42: Option<f64>,
+    /// The fitted σ at −57 dBm (rad).
+    pub phase_sigma_at_57: Option<f64>,
+    /// Share of reads about π from their group's mode.
+    pub pi_flips: Option<f64>,
+    /// Median over groups of the RSSI std (dB).
+    pub rssi_sigma_median: Option<f64>,
+    /// 90th percentile of the same (dB).
+    pub rssi_sigma_p90: Option<f64>,
+    /// Smallest step between two reported RSSI values (dB).
+    pub rssi_step: Option<f64>,
+    /// Slope of group-mean RSSI against log2(distance), whole aperture (dB per doubling).
+    pub rssi_slope: Option<f64>,
+    /// Mean RSSI with the tag 30–40° off boresight minus 0–10° (dB).
+    pub off_axis_drop: Option<f64>,
+    /// Median over (park, tag) of the std over channels of the group-mean RSSI (dB).
+    pub channel_rssi_sigma: Option<f64>,
+    /// Linear change across the band of the per-channel RSSI profile common to all tags (dB).
+    pub band_tilt: Option<f64>,
+    /// Max − min over tags of the mean RSSI with the antenna in front of each (dB).
+    pub tag_spread: Option<f64>,
+    /// Mean over tags of that RSSI (dBm).
+    pub level: Option<f64>,
+    /// Median over (park, tag) of the RMS residual of a free linear fit of phase against
+    /// frequency (rad).
+    pub channel_fit_residual: Option<f64>,
+    /// Median over (park, tag) of the std over channels of φ − 4πfd/c, its mean removed (rad).
+    pub phi0_profile: Option<f64>,
+    /// Median over (park, channel) of the std across tags of that profile (rad).
+    pub phi0_tag_spread: Option<f64>,
+    /// Mean over (tag, channel) of the RMS of phase along the aperture against
+    /// 4πd(x)/λ + const with the nominal geometry (rad).
+    pub aperture_nominal: Option<f64>,
+    /// The same with each tag's position fitted within ±10 cm (rad).
+    pub aperture_fitted: Option<f64>,
+    /// Excess kurtosis of the phase about each group's mode (pooled, each group standardised).
+    pub phase_kurtosis: Option<f64>,
+    /// Share of reads more than 5 robust σ from their group's mode.
+    pub phase_outliers: Option<f64>,
+    /// Share of reads more than 2 dB from their group's median RSSI.
+    pub rssi_outliers: Option<f64>,
+    /// Reads of the most read tag over reads of the least read one.
+    pub reads_ratio: Option<f64>,
+    /// Largest k such that every reported phase is a multiple of k·2π/4096.
+    pub phase_quantum: Option<f64>,
+    /// Share of gaps between two reads of a tag (counted in other tags' reads at the same
+    /// park) of 5 or more.
+    pub long_gaps: Option<f64>,
+    /// Groups counted.
+    pub groups: usize,
+    /// Reads counted (those during a park, of a listed tag, with phase, RSSI and frequency).
+    pub reads: usize,
+}
+
+struct Group {
+    phases: Vec<f64>,
+    rssi: Vec<f64>,
+}
+
+/// One group's summary.
+#[derive(Clone, Copy)]
+struct Summary {
+    park: usize,
+    tag: usize,
+    channel: usize,
+    mode: f64,
+    sigma: f64,
+    rssi_mean: f64,
+}
+
+/// Wraps an angle into (−π, π].
+fn wrap_pi(x: f64) -> f64 {
+    let y = (x + PI).rem_euclid(TAU) - PI;
+    if y <= -PI {
+        y + TAU
+    } else {
+        y
+    }
+}
+
+fn circular_mean(xs: &[f64]) -> (f64, f64) {
+    let (s, c) = xs
+        .iter()
+        .fold((0.0, 0.0), |(s, c), x| (s + x.sin(), c + x.cos()));
+    let n = xs.len().max(1) as f64;
+    (s.atan2(c), (s * s + c * c).sqrt() / n)
+}
+
+fn mean(xs: &[f64]) -> Option<f64> {
+    (!xs.is_empty()).then(|| xs.iter().sum::<f64>() / xs.len() as f64)
+}
+
+fn std(xs: &[f64]) -> Option<f64> {
+    let m = mean(xs)?;
+    (xs.len() > 1)
+        .then(|| (xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64).sqrt())
+}
+
+fn population_std(xs: &[f64]) -> Option<f64> {
+    let m = mean(xs)?;
+    Some((xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / xs.len() as f64).sqrt())
+}
+
+/// The `q` quantile (0..1) by nearest rank; `None` for no values.
+pub fn quantile(xs: &[f64], q: f64) -> Option<f64> {
+    let mut v: Vec<f64> = xs.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let i = ((v.len() - 1) as f64 * q).round() as usize;
+    Some(v[i.min(v.len() - 1)])
+}
+
+/// Least-squares line y = a + b·x: (a, b); `None` with fewer than two distinct x.
+pub fn line_fit(xs: &[f64], ys: &[f64]) -> Option<(f64, f64)> {
+    let (mx, my) = (mean(xs)?, mean(ys)?);
+    let sxx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let sxy: f64 = xs.iter().zip(ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let b = sxy / sxx;
+    Some((my - b * mx, b))
+}
+
+/// Unwraps a sequence of angles in place: each step taken as its wrapped difference.
+fn unwrap(xs: &mut [f64]) {
+    for i in 1..xs.len() {
+        xs[i] = xs[i - 1] + wrap_pi(xs[i] - xs[i - 1]);
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+/// Round-trip phase 4πfd/c (rad).
+fn propagation(f_hz: f64, d: f64) -> f64 {
+    4.0 * PI * f_hz * d / SPEED_OF_LIGHT
+}
+
+/// RMS of a residual sequence after its mean is removed.
+fn rms_about_mean(xs: &[f64]) -> Option<f64> {
+    population_std(xs)
+}
+
+/// Computes every statistic of the reads of `layout`.
+pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
+    let epcs: HashMap<&str, usize> = layout
+        .tags
+        .iter()
+        .enumerate()
+        .map(|(i, (e, _))| (e.as_str(), i))
+        .collect();
+    let mut freqs: Vec<u64> = reads
+        .iter()
+        .filter_map(|r| r.channel_frequency_hz)
+        .collect();
+    freqs.sort_unstable();
+    freqs.dedup();
+    let channel_of: HashMap<u64, usize> = freqs.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+    let park_of = |t: u64| {
+        let i = layout.parks.partition_point(|p| p.from_us <= t);
+        i.checked_sub(1).filter(|&i| t <= layout.parks[i].to_us)
+    };
+
+    let mut groups: HashMap<(usize, usize, usize), Group> = HashMap::new();
+    let mut per_tag = vec![0usize; layout.tags.len()];
+    let mut sequence: Vec<(usize, u64, usize)> = Vec::new();
+    let mut codes_gcd = 0u64;
+    let mut rssi_values: Vec<f64> = Vec::new();
+    let mut counted = 0;
+    for r in reads {
+        let (Some(&tag), Some(park)) = (epcs.get(r.epc.as_str()), park_of(r.t_us)) else {
+            continue;
+        };
+        let (Some(phase), Some(rssi), Some(f)) = (r.phase_rad, r.rssi_dbm, r.channel_frequency_hz)
+        else {
+            continue;
+        };
+        let channel = channel_of[&f];
+        counted += 1;
+        per_tag[tag] += 1;
+        sequence.push((park, r.t_us, tag));
+        let code = (phase / TAU * 4096.0).round() as u64 % 4096;
+        codes_gcd = gcd(codes_gcd, code);
+        rssi_values.push(rssi);
+        let g = groups.entry((park, tag, channel)).or_insert(Group {
+            phases: Vec::new(),
+            rssi: Vec::new(),
+        });
+        g.phases.push(phase);
+        g.rssi.push(rssi);
+    }
+
+    let mut s = Stats {
+        reads: counted,
+        ..Stats::default()
+    };
+    let mut summaries = Vec::new();
+    let (mut flips, mut outliers, mut rssi_out, mut total) = (0usize, 0usize, 0usize, 0usize);
+    let mut pooled: Vec<f64> = Vec::new();
+    let mut rssi_sigmas = Vec::new();
+    let mut keys: Vec<_> = groups.keys().copied().collect();
+    keys.sort_unstable();
+    for key in keys {
+        let g = &groups[&key];
+        if g.phases.len() < MIN_GROUP {
+            continue;
+        }
+        let (all_mean, _) = circular_mean(&g.phases);
+        let main: Vec<f64> = g
+            .phases
+            .iter()
+            .copied()
+            .filter(|p| wrap_pi(p - all_mean).abs() < PI / 2.0)
+            .collect();
+        if main.len() < MIN_GROUP {
+            continue;
+        }
+        let (mode, r) = circular_mean(&main);
+        let sigma = (-2.0 * r.min(1.0).ln()).max(0.0).sqrt();
+        let devs: Vec<f64> = g.phases.iter().map(|p| wrap_pi(p - mode)).collect();
+        flips += devs.iter().filter(|d| d.abs() > 0.75 * PI).count();
+        let abs: Vec<f64> = devs.iter().map(|d| d.abs()).collect();
+        let robust = 1.4826 * quantile(&abs, 0.5).unwrap_or(0.0);
+        // A quantised group can have a zero MAD: count against one phase step then.
+        let robust = robust.max(TAU / 4096.0);
+        outliers += abs.iter().filter(|&&d| d > 5.0 * robust).count();
+        let main_devs: Vec<f64> = devs
+            .iter()
+            .copied()
+            .filter(|d| d.abs() < PI / 2.0)
+            .collect();
+        if let Some(sd) = population_std(&main_devs).filter(|&sd| sd > 0.0) {
+            pooled.extend(main_devs.iter().map(|d| d / sd));
+        }
+        let median_rssi = quantile(&g.rssi, 0.5).unwrap_or(0.0);
+        rssi_out += g
+            .rssi
+            .iter()
+            .filter(|&&x| (x - median_rssi).abs() > 2.0)
+            .count();
+        total += g.phases.len();
+        if let Some(sd) = std(&g.rssi) {
+            rssi_sigmas.push(sd);
+        }
+        summaries.push(Summary {
+            park: key.0,
+            tag: key.1,
+            channel: key.2,
+            mode,
+            sigma,
+            rssi_mean: mean(&g.rssi).unwrap_or(f64::NAN),
+        });
+    }
+    s.groups = summaries.len();
+    if summaries.is_empty() {
+        return s;
+    }
+    let sigmas: Vec<f64> = summaries.iter().map(|g| g.sigma).collect();
+    s.phase_sigma_median = quantile(&sigmas, 0.5);
+    s.phase_sigma_p90 = quantile(&sigmas, 0.9);
+    let (levels, log_sigmas): (Vec<f64>, Vec<f64>) = summaries
+        .iter()
+        .filter(|g| g.sigma > 0.0)
+        .map(|g| (g.rssi_mean, g.sigma.log10()))
+        .unzip();
+    if let Some((a, b)) = line_fit(&levels, &log_sigmas) {
+        s.phase_noise_exponent = Some(-20.0 * b);
+        s.phase_sigma_at_42 = Some(10f64.powf(a + b * -42.0));
+        s.phase_sigma_at_57 = Some(10f64.powf(a + b * -57.0));
+    }
+    s.pi_flips = Some(flips as f64 / total as f64);
+    s.phase_outliers = Some(outliers as f64 / total as f64);
+    s.rssi_outliers = Some(rssi_out as f64 / total as f64);
+    s.rssi_sigma_median = quantile(&rssi_sigmas, 0.5);
+    s.rssi_sigma_p90 = quantile(&rssi_sigmas, 0.9);
+    s.phase_kurtosis = kurtosis(&pooled);
+    rssi_values.sort_by(f64::total_cmp);
+    s.rssi_step = rssi_values
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&d| d > 1e-9)
+        .min_by(f64::total_cmp);
+    s.phase_quantum = (codes_gcd > 0).then_some(codes_gcd as f64);
+    let (most, least) = (per_tag.iter().max(), per_tag.iter().min());
+    if let (Some(&m), Some(&l)) = (most, least) {
+        s.reads_ratio = (l > 0).then(|| m as f64 / l as f64);
+    }
+    s.long_gaps = long_gaps(&mut sequence, layout.tags.len());
+
+    geometry_stats(&mut s, &summaries, layout, &freqs);
+    s
+}
+
+fn gcd(a: u64, b: u64) -> u64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+/// Pooled excess kurtosis m4/m2² − 3.
+fn kurtosis(xs: &[f64]) -> Option<f64> {
+    let m = mean(xs)?;
+    let m2 = xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / xs.len() as f64;
+    let m4 = xs.iter().map(|x| (x - m).powi(4)).sum::<f64>() / xs.len() as f64;
+    (m2 > 0.0).then(|| m4 / (m2 * m2) - 3.0)
+}
+
+/// Share of gaps of 5 or more other-tag reads between two reads of one tag at one park.
+fn long_gaps(sequence: &mut [(usize, u64, usize)], tags: usize) -> Option<f64> {
+    sequence.sort_unstable();
+    let (mut long, mut gaps) = (0usize, 0usize);
+    let mut since = vec![None::<usize>; tags];
+    let mut park = usize::MAX;
+    for &(p, _, tag) in sequence.iter() {
+        if p != park {
+            park = p;
+            since.iter_mut().for_each(|s| *s = None);
+        }
+        if let Some(n) = since[tag] {
+            gaps += 1;
+            if n >= 5 {
+                long += 1;
+            }
+        }
+        for (k, s) in since.iter_mut().enumerate() {
+            if k == tag {
+                *s = Some(0);
+            } else if let Some(n) = s {
+                *n += 1;
+            }
+        }
+    }
+    (gaps > 0).then(|| long as f64 / gaps as f64)
+}
+
+/// The statistics that need the geometry: slope, off-axis drop, per-channel profiles, level,
+/// phase against frequency and along the aperture.
+fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: &[u64]) {
+    let distance = |park: usize, tag: usize| norm(sub(layout.tags[tag].1, layout.parks[park].at));
+    let off_axis = |park: usize, tag: usize| {
+        let v = sub(layout.tags[tag].1, layout.parks[park].at);
+        let b = layout.boresight;
+        let c = (v[0] * b[0] + v[1] * b[1] + v[2] * b[2]) / norm(v);
+        c.clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let (log_d, levels): (Vec<f64>, Vec<f64>) = summaries
+        .iter()
+        .map(|g| (distance(g.park, g.tag).log2(), g.rssi_mean))
+        .unzip();
+    s.rssi_slope = line_fit(&log_d, &levels).map(|(_, b)| b);
+    let band = |lo: f64, hi: f64| -> Vec<f64> {
+        summaries
+            .iter()
+            .filter(|g| (lo..hi).contains(&off_axis(g.park, g.tag)))
+            .map(|g| g.rssi_mean)
+            .collect()
+    };
+    if let (Some(off), Some(on)) = (mean(&band(30.0, 40.0)), mean(&band(0.0, 10.0))) {
+        s.off_axis_drop = Some(off - on);
+    }
+
+    // Per (park, tag): the group means by channel, where every channel has a group.
+    let n_ch = freqs.len();
+    let mut by_point: HashMap<(usize, usize), Vec<Option<Summary>>> = HashMap::new();
+    for g in summaries {
+        by_point
+            .entry((g.park, g.tag))
+            .or_insert_with(|| vec![None; n_ch])[g.channel] = Some(*g);
+    }
+    let f_mhz: Vec<f64> = freqs.iter().map(|&f| f as f64 / 1e6).collect();
+    let mut channel_sigmas = Vec::new();
+    let mut profile_sum = vec![0.0; n_ch];
+    let mut profile_n = 0usize;
+    let mut fit_residuals = Vec::new();
+    let mut phi0_profiles = Vec::new();
+    // (park, channel) -> per-tag mean-removed φ0 profile value.
+    let mut phi0_by_channel: HashMap<(usize, usize), Vec<f64>> = HashMap::new();
+    let mut points: Vec<_> = by_point.keys().copied().collect();
+    points.sort_unstable();
+    for key in points {
+        let row = &by_point[&key];
+        let Some(full) = row.iter().copied().collect::<Option<Vec<Summary>>>() else {
+            continue;
+        };
+        if n_ch < 2 {
+            continue;
+        }
+        let rssi: Vec<f64> = full.iter().map(|g| g.rssi_mean).collect();
+        channel_sigmas.extend(std(&rssi));
+        let m = mean(&rssi).unwrap_or(0.0);
+        for (k, x) in rssi.iter().enumerate() {
+            profile_sum[k] += x - m;
+        }
+        profile_n += 1;
+        let mut phases: Vec<f64> = full.iter().map(|g| g.mode).collect();
+        unwrap(&mut phases);
+        if let Some((a, b)) = line_fit(&f_mhz, &phases) {
+            let res: Vec<f64> = f_mhz
+                .iter()
+                .zip(&phases)
+                .map(|(f, p)| p - a - b * f)
+                .collect();
+            let rms = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
+            fit_residuals.push(rms);
+        }
+        let d = distance(key.0, key.1);
+        let mut psi: Vec<f64> = full
+            .iter()
+            .zip(freqs)
+            .map(|(g, &f)| g.mode - propagation(f as f64, d))
+            .collect();
+        unwrap(&mut psi);
+        let pm = mean(&psi).unwrap_or(0.0);
+        phi0_profiles.extend(population_std(&psi));
+        for (k, p) in psi.iter().enumerate() {
+            phi0_by_channel.entry((key.0, k)).or_default().push(p - pm);
+        }
+    }
+    s.channel_rssi_sigma = quantile(&channel_sigmas, 0.5);
+    if profile_n > 0 && n_ch > 1 {
+        let profile: Vec<f64> = profile_sum.iter().map(|x| x / profile_n as f64).collect();
+        let span = f_mhz[n_ch - 1] - f_mhz[0];
+        s.band_tilt = line_fit(&f_mhz, &profile).map(|(_, b)| b * span);
+    }
+    s.channel_fit_residual = quantile(&fit_residuals, 0.5);
+    s.phi0_profile = quantile(&phi0_profiles, 0.5);
+    let spreads: Vec<f64> = phi0_by_channel
+        .values()
+        .filter(|v| v.len() == layout.tags.len() && v.len() > 1)
+        .filter_map(|v| std(v))
+        .collect();
+    s.phi0_tag_spread = quantile(&spreads, 0.5);
+
+    // In front of each tag: the park nearest to it along the rail.
+    let mut fronts = Vec::new();
+    for tag in 0..layout.tags.len() {
+        let Some(park) =
+            (0..layout.parks.len()).min_by(|&a, &b| off_axis(a, tag).total_cmp(&off_axis(b, tag)))
+        else {
+            continue;
+        };
+        let here: Vec<f64> = summaries
+            .iter()
+            .filter(|g| g.park == park && g.tag == tag)
+            .map(|g| g.rssi_mean)
+            .collect();
+        fronts.extend(mean(&here));
+    }
+    if fronts.len() == layout.tags.len() && !fronts.is_empty() {
+        let max = fronts.iter().copied().fold(f64::MIN, f64::max);
+        let min = fronts.iter().copied().fold(f64::MAX, f64::min);
+        s.tag_spread = Some(max - min);
+        s.level = mean(&fronts);
+    }
+
+    aperture_stats(s, summaries, layout, freqs);
+}
+
+/// Phase along the aperture against the nominal (and the fitted) geometry.
+fn aperture_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: &[u64]) {
+    // (tag, channel) -> (park, mode), parks in order.
+    let mut series: HashMap<(usize, usize), Vec<(usize, f64)>> = HashMap::new();
+    for g in summaries {
+        series
+            .entry((g.tag, g.channel))
+            .or_default()
+            .push((g.park, g.mode));
+    }
+    for v in series.values_mut() {
+        v.sort_by_key(|&(p, _)| p);
+    }
+    let residual = |tag_at: [f64; 3], channel: usize, v: &[(usize, f64)]| -> Option<f64> {
+        let f = freqs[channel] as f64;
+        let mut r: Vec<f64> = v
+            .iter()
+            .map(|&(p, mode)| {
+                let d = norm(sub(tag_at, layout.parks[p].at));
+                wrap_pi(mode - propagation(f, d))
+            })
+            .collect();
+        unwrap(&mut r);
+        rms_about_mean(&r)
+    };
+    let mut nominal = Vec::new();
+    let mut fitted = Vec::new();
+    for (tag, (_, at)) in layout.tags.iter().enumerate() {
+        let channels: Vec<(usize, &Vec<(usize, f64)>)> = (0..freqs.len())
+            .filter_map(|c| series.get(&(tag, c)).map(|v| (c, v)))
+            .filter(|(_, v)| v.len() >= 3)
+            .collect();
+        if channels.is_empty() {
+            continue;
+        }
+        for &(c, v) in &channels {
+            nominal.extend(residual(*at, c, v));
+        }
+        // The position within ±10 cm (x, y) that minimises the residual over every channel.
+        let cost = |dx: f64, dy: f64| -> f64 {
+            let p = [at[0] + dx, at[1] + dy, at[2]];
+            channels
+                .iter()
+                .filter_map(|&(c, v)| residual(p, c, v))
+                .map(|r| r * r)
+                .sum::<f64>()
+        };
+        let mut best = (0.0, 0.0, cost(0.0, 0.0));
+        // A 1 cm grid over the ±10 cm square, then 1 mm and 0.1 mm grids about the best.
+        for step in [0.01, 0.001, 0.0001] {
+            let (cx, cy) = (best.0, best.1);
+            for i in -10..=10 {
+                for j in -10..=10 {
+                    let (dx, dy) = (cx + f64::from(i) * step, cy + f64::from(j) * step);
+                    if dx.abs() > 0.1 + 1e-9 || dy.abs() > 0.1 + 1e-9 {
+                        continue;
+                    }
+                    let c = cost(dx, dy);
+                    if c < best.2 {
+                        best = (dx, dy, c);
+                    }
+                }
+            }
+        }
+        let p = [at[0] + best.0, at[1] + best.1, at[2]];
+        for &(c, v) in &channels {
+            fitted.extend(residual(p, c, v));
+        }
+    }
+    s.aperture_nominal = mean(&nominal);
+    s.aperture_fitted = mean(&fitted);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(epc: &str, t_us: u64, phase: f64, rssi: f64, f_hz: u64) -> Read {
+        Read {
+            epc: epc.to_string(),
+            reader: None,
+            antenna: 1,
+            t_us,
+            phase_rad: Some(phase.rem_euclid(TAU)),
+            rssi_dbm: Some(rssi),
+            channel_index: None,
+            channel_frequency_hz: Some(f_hz),
+            doppler_hz: None,
+            antenna_pose: None,
+            last_seen_us: None,
+        }
+    }
+
+    /// An ideal aperture (phase exactly 4πfd/c plus per-channel constants, RSSI constant)
+    /// gives zero residuals and the delay it was built with.
+    #[test]
+    fn an_ideal_aperture_has_no_residual_and_its_own_delay() {
+        let tags = vec![
+            ("A".to_string(), [0.3, 0.8, 0.0]),
+            ("B".to_string(), [0.6, 0.8, 0.0]),
+        ];
+        let parks: Vec<Park> = (0..20)
+            .map(|i| Park {
+                from_us: i * 1_000_000,
+                to_us: i * 1_000_000 + 900_000,
+                at: [i as f64 * 0.05, 0.0, 0.0],
+            })
+            .collect();
+        let freqs: Vec<u64> = (0..8).map(|k| 920_625_000 + k * 500_000).collect();
+        let tau = 35e-9;
+        let mut reads = Vec::new();
+        for park in &parks {
+            for (k, (epc, at)) in tags.iter().enumerate() {
+                let d = norm(sub(*at, park.at));
+                for (c, &f) in freqs.iter().enumerate() {
+                    let phase = propagation(f as f64, d) + 4.0 * PI * f as f64 * tau + k as f64;
+                    for n in 0..6u64 {
+                        let t = park.from_us + (c as u64 * 6 + n) * 1000 + k as u64 * 100;
+                        reads.push(read(epc, t, phase, -50.0 - k as f64, f));
+                    }
+                }
+            }
+        }
+        let layout = Layout {
+            parks,
+            tags,
+            boresight: [0.0, 1.0, 0.0],
+        };
+        let s = compute(&reads, &layout);
+        assert!(s.aperture_nominal.expect("aperture") < 1e-3, "{s:?}");
+        assert!(s.aperture_fitted.expect("fitted") < 1e-3);
+        assert!(s.channel_fit_residual.expect("fit") < 1e-3);
+        let profile = s.phi0_profile.expect("profile");
+        let want = 4.0
+            * PI
+            * tau
+            * population_std(&freqs.iter().map(|&f| f as f64).collect::<Vec<_>>()).expect("std");
+        assert!((profile - want).abs() < 1e-3, "{profile} {want}");
+        assert!(s.phi0_tag_spread.expect("spread") < 1e-3);
+        assert_eq!(s.tag_spread, Some(1.0));
+        assert_eq!(s.rssi_sigma_median, Some(0.0));
+        assert_eq!(s.pi_flips, Some(0.0));
+    }
+
+    /// A tag placed 3 cm off its nominal place shows in the nominal residual, not once its
+    /// position is fitted.
+    #[test]
+    fn a_misplaced_tag_is_found_by_the_fit() {
+        let nominal = [0.5, 0.7, 0.0];
+        let truth = [0.53, 0.69, 0.0];
+        let parks: Vec<Park> = (0..50)
+            .map(|i| Park {
+                from_us: i * 1_000_000,
+                to_us: i * 1_000_000 + 900_000,
+                at: [i as f64 * 0.02, 0.0, 0.0],
+            })
+            .collect();
+        let f = 922_000_000u64;
+        let mut reads = Vec::new();
+        for park in &parks {
+            let d = norm(sub(truth, park.at));
+            for n in 0..5 {
+                reads.push(read(
+                    "A",
+                    park.from_us + n,
+                    propagation(f as f64, d),
+                    -50.0,
+                    f,
+                ));
+            }
+        }
+        let layout = Layout {
+            parks,
+            tags: vec![("A".to_string(), nominal)],
+            boresight: [0.0, 1.0, 0.0],
+        };
+        let s = compute(&reads, &layout);
+        assert!(s.aperture_nominal.expect("nominal") > 0.3, "{s:?}");
+        assert!(s.aperture_fitted.expect("fitted") < 0.01, "{s:?}");
+    }
+
+    #[test]
+    fn gaps_and_kurtosis() {
+        let mut seq: Vec<(usize, u64, usize)> = vec![(0, 0, 0), (0, 1, 1), (0, 2, 0)];
+        seq.extend((3..9).map(|t| (0, t, 1)));
+        seq.push((0, 9, 0));
+        // Tag 0: gaps 1 and 6; tag 1: gaps 1 (over tag 0's read) and 0 ×5, then none.
+        let g = long_gaps(&mut seq, 2).expect("gaps");
+        assert!((g - 1.0 / 8.0).abs() < 1e-12, "{g}");
+        let normal: Vec<f64> = (1..2000)
+            .map(|i| {
+                // Inverse-CDF samples of a standard normal by a logistic approximation are
+                // close enough that the kurtosis is near 0 and far from a uniform's −1.2.
+                let u = i as f64 / 2000.0;
+                (u / (1.0 - u)).ln() / 1.702
+            })
+            .collect();
+        let k = kurtosis(&normal).expect("kurtosis");
+        assert!(k > -0.6 && k < 1.5, "{k}");
+        let uniform: Vec<f64> = (0..1000).map(|i| i as f64).collect();
+        assert!((kurtosis(&uniform).expect("k") + 1.2).abs() < 0.01);
+    }
+}
