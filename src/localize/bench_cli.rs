@@ -46,26 +46,42 @@ pub struct BenchLocalizeArgs {
     /// Set aside reads weaker than this (dBm), as the settings file's `min_rssi_dbm` does.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::options::parser::<f64>("min-rssi"))]
     pub min_rssi: Option<f64>,
+    /// Run the scenario with this reader model (`ideal`, `impinj-r420`; docs/measurement.md
+    /// "Reader models"); default: the scenario's own.
+    #[arg(long)]
+    pub reader_model: Option<String>,
 }
 
 /// The scenario `name` (a fixture's name or a file).
 pub fn scenario(name: &str) -> Result<Scenario, String> {
+    scenario_with(name, None)
+}
+
+/// The scenario `name` (a fixture's name or a file), run with the reader model `model` when
+/// given (docs/measurement.md "Reader models").
+pub fn scenario_with(name: &str, model: Option<&str>) -> Result<Scenario, String> {
+    let here = std::path::Path::new(".");
     let embedded = match name.to_ascii_uppercase().as_str() {
-        "S1" => return Ok(Scenario::default_s1()),
+        "S1" => include_str!("../../fixtures/scenarios/s1.json"),
         "S2" => include_str!("../../fixtures/scenarios/s2-side-by-side.json"),
         "S2-BACK-TO-BACK" => include_str!("../../fixtures/scenarios/s2-back-to-back.json"),
         "S3" => include_str!("../../fixtures/scenarios/s3.json"),
         _ => {
             let path = std::path::Path::new(name);
-            return Scenario::load(path).map_err(|e| format!("{name}: {e}"));
+            let text = std::fs::read_to_string(path).map_err(|e| format!("{name}: {e}"))?;
+            let dir = path
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(here);
+            return Scenario::from_json_with(&text, dir, model).map_err(|e| format!("{name}: {e}"));
         }
     };
-    Scenario::from_json(embedded).map_err(|e| format!("{name}: {e}"))
+    Scenario::from_json_with(embedded, here, model).map_err(|e| format!("{name}: {e}"))
 }
 
 /// Runs `bench localize`.
 pub fn run(args: BenchLocalizeArgs) -> ExitCode {
-    let s = match scenario(&args.scenario) {
+    let s = match scenario_with(&args.scenario, args.reader_model.as_deref()) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("llrp-gateway bench localize: {e}");

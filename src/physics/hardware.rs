@@ -12,7 +12,7 @@ use super::seed;
 /// Terms of a [`SmoothField`].
 const TERMS: usize = 8;
 
-/// A seeded random smooth function of a direction: a sum of [`TERMS`] cosines of random
+/// A seeded random smooth function of a direction: a sum of eight cosines of random
 /// directions' projections, so nearby directions get nearly the same value and directions
 /// about `correlation_rad` apart are no longer alike. Its RMS over directions is `rms`.
 #[derive(Clone, Debug, PartialEq)]

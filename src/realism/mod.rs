@@ -44,12 +44,7 @@ pub struct Outcome {
 pub fn run_setup(dir: &Path, distance: f64, reader_model: Option<&str>) -> Result<Outcome, String> {
     let path = dir.join(format!("rail-{distance:.2}.json"));
     let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-    if let (Some(model), Some(obj)) = (reader_model, value.as_object_mut()) {
-        obj.insert("reader_model".to_string(), serde_json::Value::from(model));
-    }
-    let scenario = Scenario::from_json_in(&value.to_string(), dir)
+    let scenario = Scenario::from_json_with(&text, dir, reader_model)
         .map_err(|e| format!("{}: {e}", path.display()))?;
     let layout = layout(&scenario, distance)?;
     let seconds = layout.parks.last().map_or(0.0, |p| p.to_us as f64 * 1e-6);

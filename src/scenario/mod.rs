@@ -110,11 +110,24 @@ impl Scenario {
 
     /// Parses and validates, resolving relative files against `dir`.
     pub fn from_json_in(text: &str, dir: &std::path::Path) -> Result<Scenario, ScenarioError> {
+        Self::from_json_with(text, dir, None)
+    }
+
+    /// [`Scenario::from_json_in`] with the scenario-wide `reader_model` set to `model` when
+    /// given (in place of the file's own; readers that name their own keep it).
+    pub fn from_json_with(
+        text: &str,
+        dir: &std::path::Path,
+        model: Option<&str>,
+    ) -> Result<Scenario, ScenarioError> {
         let mut value: serde_json::Value =
             serde_json::from_str(text).map_err(|e| ScenarioError::Json {
                 path: "(root)".to_string(),
                 reason: e.to_string(),
             })?;
+        if let (Some(m), Some(root)) = (model, value.as_object_mut()) {
+            root.insert("reader_model".to_string(), serde_json::Value::from(m));
+        }
         profile::apply(&mut value)?;
         let mut scenario: Scenario = serde_path_to_error::deserialize(value).map_err(|e| {
             let path = json_path(&e.path().to_string());
