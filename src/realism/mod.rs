@@ -27,6 +27,18 @@ pub struct BenchRealismArgs {
     /// the scenario's own.
     #[arg(long)]
     pub reader_model: Option<String>,
+    /// Run this parked-aperture scenario instead of the three rail setups (its tags' own
+    /// positions taken as nominal).
+    #[arg(long, conflicts_with = "reads")]
+    pub scenario: Option<PathBuf>,
+    /// Score this reads file (JSON Lines, as `inventory` writes) instead of simulating: the
+    /// statistics of real reads of a parked aperture, with `--layout`.
+    #[arg(long, requires = "layout")]
+    pub reads: Option<PathBuf>,
+    /// The reads file's geometry: `{"parks": [{"from_us", "to_us", "at"}], "tags": [["EPC",
+    /// [x, y, z]]], "boresight": [x, y, z]}`.
+    #[arg(long, requires = "reads")]
+    pub layout: Option<PathBuf>,
 }
 
 /// The outcome of one setup: its statistics and how many figures fall outside their band.
@@ -46,29 +58,80 @@ pub fn run_setup(dir: &Path, distance: f64, reader_model: Option<&str>) -> Resul
     let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
     let scenario = Scenario::from_json_with(&text, dir, reader_model)
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    let layout = layout(&scenario, distance)?;
-    let seconds = layout.parks.last().map_or(0.0, |p| p.to_us as f64 * 1e-6);
-    let run = simulate_with(&scenario, seconds, Inventory::default());
-    let stats = stats::compute(&run.reads, &layout);
-    let setup = DISTANCES
+    if scenario.tags.len() != NOMINAL_X.len() {
+        return Err(format!(
+            "{}: the rail scenario has {} tags, not 3",
+            path.display(),
+            scenario.tags.len()
+        ));
+    }
+    let first_y = first_pose(&scenario)?.y;
+    let nominal: Vec<[f64; 3]> = scenario
+        .tags
         .iter()
-        .position(|&d| (d - distance).abs() < 1e-9)
-        .unwrap_or(0);
-    let outside = FIGURES
-        .iter()
-        .filter(|f| !(f.get)(&stats).is_some_and(|v| f.band.holds(v, setup)))
-        .map(|f| f.name)
+        .zip(NOMINAL_X)
+        .map(|(t, x)| [x, first_y + distance, t.position[2]])
         .collect();
-    Ok(Outcome {
-        distance,
-        stats,
-        outside,
-    })
+    let layout = layout(&scenario, &nominal)?;
+    Ok(judge(distance, simulate_layout(&scenario, &layout)))
 }
 
-/// The parks of the scenario's recorded antenna (runs of equal positions) and the tags'
-/// nominal places at `distance`.
-fn layout(s: &Scenario, distance: f64) -> Result<Layout, String> {
+/// Runs any parked-aperture scenario (a recorded antenna that stops at points), its tags'
+/// own positions taken as nominal, judged against the real setup nearest its distance.
+pub fn run_scenario(path: &Path, reader_model: Option<&str>) -> Result<Outcome, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let scenario = Scenario::from_json_with(&text, dir, reader_model)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let nominal: Vec<[f64; 3]> = scenario.tags.iter().map(|t| t.position).collect();
+    let layout = layout(&scenario, &nominal)?;
+    let distance = nearest_setup(&layout);
+    Ok(judge(distance, simulate_layout(&scenario, &layout)))
+}
+
+/// The statistics of `scenario` simulated until its last park ends.
+fn simulate_layout(scenario: &Scenario, layout: &Layout) -> Stats {
+    let seconds = layout.parks.last().map_or(0.0, |p| p.to_us as f64 * 1e-6);
+    let run = simulate_with(scenario, seconds, Inventory::default());
+    stats::compute(&run.reads, layout)
+}
+
+/// The first recorded pose of the scenario's first antenna.
+fn first_pose(s: &Scenario) -> Result<crate::scenario::PoseSample, String> {
+    let antenna = s
+        .readers
+        .first()
+        .and_then(|r| r.antennas.first())
+        .ok_or("the rail scenario has no antenna")?;
+    let Mount::Recorded { poses, .. } = &antenna.mount else {
+        return Err("the rail scenario's antenna is not a recorded mount".to_string());
+    };
+    poses.first().copied().ok_or_else(|| "no poses".to_string())
+}
+
+/// Of the real setups, the one nearest the tags' mean distance along the boresight.
+fn nearest_setup(layout: &Layout) -> f64 {
+    let p = layout.parks.first().map_or([0.0; 3], |p| p.at);
+    let b = layout.boresight;
+    let mean = layout
+        .tags
+        .iter()
+        .map(|(_, at)| (at[0] - p[0]) * b[0] + (at[1] - p[1]) * b[1] + (at[2] - p[2]) * b[2])
+        .sum::<f64>()
+        / layout.tags.len().max(1) as f64;
+    DISTANCES
+        .iter()
+        .copied()
+        .min_by(|a, b| (a - mean).abs().total_cmp(&(b - mean).abs()))
+        .unwrap_or(DISTANCES[0])
+}
+
+/// The parks of the scenario's recorded antenna (runs of equal positions) and its tags at
+/// their `nominal` places.
+fn layout(s: &Scenario, nominal: &[[f64; 3]]) -> Result<Layout, String> {
     let antenna = s
         .readers
         .first()
@@ -97,22 +160,11 @@ fn layout(s: &Scenario, distance: f64) -> Result<Layout, String> {
         yaw.sin() * pitch.cos(),
         pitch.sin(),
     ];
-    if s.tags.len() != NOMINAL_X.len() {
-        return Err(format!(
-            "the rail scenario has {} tags, not 3",
-            s.tags.len()
-        ));
-    }
     let tags = s
         .tags
         .iter()
-        .zip(NOMINAL_X)
-        .map(|(t, x)| {
-            (
-                t.epc.to_ascii_uppercase(),
-                [x, first.y + distance, t.position[2]],
-            )
-        })
+        .zip(nominal)
+        .map(|(t, at)| (t.epc.to_ascii_uppercase(), *at))
         .collect();
     Ok(Layout {
         parks,
@@ -121,27 +173,78 @@ fn layout(s: &Scenario, distance: f64) -> Result<Layout, String> {
     })
 }
 
-/// `llrp-gateway bench realism`: every setup's table, exit 1 on an error.
+/// Scores the reads of `reads` (JSON Lines) against `layout` (JSON), judged against the real
+/// setup nearest to the tags' mean distance from the parks.
+pub fn score_file(reads: &Path, layout: &Path) -> Result<Outcome, String> {
+    let text = std::fs::read_to_string(layout).map_err(|e| format!("{}: {e}", layout.display()))?;
+    let mut de = serde_json::Deserializer::from_str(&text);
+    let layout: Layout = serde_path_to_error::deserialize(&mut de)
+        .map_err(|e| format!("{}: {}: {}", layout.display(), e.path(), e.inner()))?;
+    let file = std::fs::File::open(reads).map_err(|e| format!("{}: {e}", reads.display()))?;
+    let mut all = Vec::new();
+    for (n, line) in std::io::BufRead::lines(std::io::BufReader::new(file)).enumerate() {
+        let line = line.map_err(|e| format!("{}: {e}", reads.display()))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let r: crate::reads::Read = serde_json::from_str(&line)
+            .map_err(|e| format!("{} line {}: {e}", reads.display(), n + 1))?;
+        all.push(r);
+    }
+    let distance = nearest_setup(&layout);
+    let stats = stats::compute(&all, &layout);
+    Ok(judge(distance, stats))
+}
+
+/// The outcome of `stats` judged against the real setup at `distance`.
+fn judge(distance: f64, stats: Stats) -> Outcome {
+    let setup = DISTANCES
+        .iter()
+        .position(|&d| (d - distance).abs() < 1e-9)
+        .unwrap_or(0);
+    let outside = FIGURES
+        .iter()
+        .filter(|f| !(f.get)(&stats).is_some_and(|v| f.band.holds(v, setup)))
+        .map(|f| f.name)
+        .collect();
+    Outcome {
+        distance,
+        stats,
+        outside,
+    }
+}
+
+/// `llrp-gateway bench realism`: the table of the reads file, the scenario, or every rail
+/// setup; exit 1 on an error.
 pub fn run(args: BenchRealismArgs) -> ExitCode {
-    let mut outcomes = Vec::new();
-    for d in DISTANCES {
-        match run_setup(&args.dir, d, args.reader_model.as_deref()) {
-            Ok(o) => outcomes.push(o),
-            Err(e) => {
-                eprintln!("bench realism: {e}");
-                return ExitCode::FAILURE;
-            }
+    let model = args.reader_model.as_deref();
+    let outcomes = if let (Some(reads), Some(layout)) = (&args.reads, &args.layout) {
+        score_file(reads, layout).map(|o| vec![o])
+    } else if let Some(path) = &args.scenario {
+        run_scenario(path, model).map(|o| vec![o])
+    } else {
+        DISTANCES
+            .iter()
+            .map(|&d| run_setup(&args.dir, d, model))
+            .collect()
+    };
+    match outcomes {
+        Ok(outcomes) => {
+            print!("{}", table(&outcomes));
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("bench realism: {e}");
+            ExitCode::FAILURE
         }
     }
-    print!("{}", table(&outcomes));
-    ExitCode::SUCCESS
 }
 
 /// The Markdown table: each figure, real, and per setup the simulated value with ✗ outside.
 pub fn table(outcomes: &[Outcome]) -> String {
     let mut out = String::from("| statistic | real (0.88 / 0.68 / 0.51 m) |");
     for o in outcomes {
-        out.push_str(&format!(" simulated {:.2} m | band |", o.distance));
+        out.push_str(&format!(" measured, bands of {:.2} m | band |", o.distance));
     }
     out.push_str("\n|---|---|");
     for _ in outcomes {
