@@ -231,6 +231,11 @@ pub struct Scores {
     pub std: f64,
     /// Ingest and estimation of every tag, reads already in memory (s).
     pub seconds: f64,
+    /// Located tags whose true position lies inside the estimate's 95 % ellipse (ellipsoid
+    /// for a 3D estimate), of those located with a covariance.
+    pub covered: usize,
+    /// Located tags with a covariance.
+    pub with_covariance: usize,
     /// The estimates.
     pub estimates: Vec<Estimate>,
 }
@@ -258,6 +263,11 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
     if !references {
         g.references.clear();
     }
+    // On the robot's own poses their stated error widens each estimate's covariance, as the
+    // live localizer's does (docs/localize.md "The antenna poses' own error").
+    if source != PoseSource::True {
+        g.pose_error = run.pose_error;
+    }
     // The poses are in memory before the clock starts, as the reads are.
     let poses = if source == PoseSource::True {
         run.true_poses.clone()
@@ -279,6 +289,7 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
     };
     let seconds = start.elapsed().as_secs_f64();
     let mut errors = Vec::new();
+    let (mut covered, mut with_covariance) = (0, 0);
     let mut read = 0;
     for e in &estimates {
         let Some((_, p, reference)) = run.truth.iter().find(|(epc, _, _)| *epc == e.epc) else {
@@ -296,6 +307,13 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
                 0.0
             };
             errors.push(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + dz * dz).sqrt());
+            if let Some(inside) = e
+                .covariance
+                .and_then(|c| inside_95(&c, [q[0] - p[0], q[1] - p[1], dz]))
+            {
+                with_covariance += 1;
+                covered += usize::from(inside);
+            }
         }
     }
     let (mean, median, max, std) = stats(&mut errors);
@@ -309,7 +327,31 @@ pub fn score_on(run: &Run, estimator: Estimator, source: PoseSource, references:
         max,
         std,
         seconds,
+        covered,
+        with_covariance,
         estimates,
+    }
+}
+
+/// χ² quantiles at 95 % for 2 and 3 degrees of freedom.
+const CHI2_95: [f64; 2] = [5.991, 7.815];
+
+/// Whether the error `d` lies inside the 95 % region of `covariance` (3×3, row-major): the
+/// (x, y) block for a 2D estimate (no z variance), the whole for a 3D one; `None` for a
+/// covariance that is not positive definite.
+pub fn inside_95(covariance: &[f64; 9], d: [f64; 3]) -> Option<bool> {
+    let c = nalgebra::Matrix3::from_row_slice(covariance);
+    if c[(2, 2)] > 0.0 {
+        let inv = c.try_inverse()?;
+        let v = nalgebra::Vector3::from(d);
+        let m2 = (v.transpose() * inv * v)[0];
+        (m2.is_finite() && m2 >= 0.0).then_some(m2 <= CHI2_95[1])
+    } else {
+        let c2 = nalgebra::Matrix2::new(c[(0, 0)], c[(0, 1)], c[(1, 0)], c[(1, 1)]);
+        let inv = c2.try_inverse()?;
+        let v = nalgebra::Vector2::new(d[0], d[1]);
+        let m2 = (v.transpose() * inv * v)[0];
+        (m2.is_finite() && m2 >= 0.0).then_some(m2 <= CHI2_95[0])
     }
 }
 
@@ -360,5 +402,27 @@ pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
             Some("its reader is not calibrated (φ0 = 0 on every channel)")
         }
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::inside_95;
+
+    #[test]
+    fn the_95_percent_region_is_an_ellipse_in_2d_and_an_ellipsoid_in_3d() {
+        // σ 1 cm along x, 4 cm along y, no z: a 2D estimate.
+        let c2 = [1e-4, 0.0, 0.0, 0.0, 16e-4, 0.0, 0.0, 0.0, 0.0];
+        // √5.991 = 2.448 σ.
+        assert_eq!(inside_95(&c2, [0.024, 0.0, 5.0]), Some(true));
+        assert_eq!(inside_95(&c2, [0.025, 0.0, 0.0]), Some(false));
+        assert_eq!(inside_95(&c2, [0.0, 0.097, 0.0]), Some(true));
+        assert_eq!(inside_95(&c2, [0.0, 0.099, 0.0]), Some(false));
+        // With a z variance the z error counts, against √7.815 = 2.796 σ.
+        let c3 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
+        assert_eq!(inside_95(&c3, [0.0, 0.0, 0.027]), Some(true));
+        assert_eq!(inside_95(&c3, [0.0, 0.0, 0.029]), Some(false));
+        // A singular covariance says nothing.
+        assert_eq!(inside_95(&[0.0; 9], [0.0; 3]), None);
     }
 }

@@ -144,8 +144,8 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
     if !args.estimators.is_empty() && args.estimators.iter().all(|&e| why_not(&run, e).is_some()) {
         return ExitCode::FAILURE;
     }
-    println!("| estimator | poses | located | mean (mm) | median (mm) | max (mm) | std (mm) | compute (ms) |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| estimator | poses | located | mean (mm) | median (mm) | max (mm) | std (mm) | 95 % ellipse holds | compute (ms) |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let mut relock: Vec<Scores> = Vec::new();
     let references = !run.settings.geometry.references.is_empty();
     let mut rows: Vec<(Estimator, bool)> = applicable(&run)
@@ -182,7 +182,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
                 _ => e.to_string(),
             };
             println!(
-                "| {} | {} | {}/{} | {} | {} | {} | {} | {:.1} |",
+                "| {} | {} | {}/{} | {} | {} | {} | {} | {}/{} | {:.1} |",
                 name,
                 sc.poses,
                 sc.located,
@@ -191,6 +191,8 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
                 mm(sc.median),
                 mm(sc.max),
                 mm(sc.std),
+                sc.covered,
+                sc.with_covariance,
                 sc.seconds * 1e3
             );
             if e == Estimator::Relock && told && source != PoseSource::Refined {
