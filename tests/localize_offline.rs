@@ -75,8 +75,8 @@ fn truth() -> Vec<(String, [f64; 3])> {
         .collect()
 }
 
-/// Each S1 tag's 2D error (m) in `estimates`, every tag in the state `state`.
-fn errors(estimates: &serde_json::Value, state: &str) -> Vec<f64> {
+/// Each S1 tag's 2D error (m) in `estimates`, every tag in one of the states `states`.
+fn errors(estimates: &serde_json::Value, states: &[&str]) -> Vec<f64> {
     let tags = estimates["tags"].as_array().expect("tags");
     truth()
         .iter()
@@ -85,7 +85,7 @@ fn errors(estimates: &serde_json::Value, state: &str) -> Vec<f64> {
                 .iter()
                 .find(|t| t["epc"] == epc.as_str())
                 .unwrap_or_else(|| panic!("{epc} was not localized"));
-            assert_eq!(t["state"], state, "{t}");
+            assert!(states.iter().any(|s| t["state"] == *s), "{t}");
             let e = &t["estimate"];
             let (x, y) = (e["x"].as_f64().expect("x"), e["y"].as_f64().expect("y"));
             (x - p[0]).hypot(y - p[1])
@@ -131,7 +131,9 @@ fn the_s1_recording_with_the_robots_poses_localizes_every_tag_as_documented() {
     assert!(ok, "{stderr}");
     assert!(stderr.contains("10 tags from"), "{stderr}");
     let json = json.expect("estimates written");
-    let errors = errors(&json, "converged");
+    // relock's covariance counts its residuals' correlation along the pass (the poses' own
+    // error here), so a tag whose fix that error moved says "converging", not "converged".
+    let errors = errors(&json, &["converged", "converging"]);
     let mean = errors.iter().sum::<f64>() / errors.len() as f64;
     let max = errors.iter().cloned().fold(0.0, f64::max);
     // docs/localize.md: 32.5 mm mean, 71 mm max with the robot's own (localized) poses.
@@ -250,10 +252,10 @@ fn the_robots_pose_error_in_the_settings_brings_the_tags_closer_and_ellipses_tha
             // The stated pose error is in every covariance: honest ellipses, no tag
             // "converged" at its σ from the phases alone.
             ellipses_hold_the_truth(&json).unwrap_or_else(|e| panic!("{estimator}: {e}"));
-            let e = errors(&json, "converging");
+            let e = errors(&json, &["converging"]);
             e.iter().sum::<f64>() / e.len() as f64
         } else {
-            let e = errors(&json, "converged");
+            let e = errors(&json, &["converged", "converging"]);
             e.iter().sum::<f64>() / e.len() as f64
         }
     };
