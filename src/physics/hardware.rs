@@ -122,6 +122,9 @@ impl AntennaHardware {
             .get(usize::from(channel).wrapping_sub(1))
             .copied()
             .unwrap_or(0.0);
+        if self.channel_rssi_sigma <= 0.0 {
+            return band;
+        }
         let own = fixed_normal(
             seed::mix_on(self.prefix, &[FIXED_RSSI, tag as u64, u64::from(channel)]),
             self.channel_rssi_sigma,
@@ -131,6 +134,9 @@ impl AntennaHardware {
 
     /// The fixed per-channel phase (rad) of `tag` on `channel` (1-based).
     pub fn phase_rad(&self, tag: usize, channel: u16) -> f64 {
+        if self.channel_phase_sigma <= 0.0 {
+            return 0.0;
+        }
         fixed_normal(
             seed::mix_on(self.prefix, &[FIXED_PHASE, tag as u64, u64::from(channel)]),
             self.channel_phase_sigma,
