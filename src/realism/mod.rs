@@ -99,8 +99,8 @@ fn simulate_layout(scenario: &Scenario, layout: &Layout) -> Stats {
     stats::compute(&run.reads, layout)
 }
 
-/// The first recorded pose of the scenario's first antenna.
-fn first_pose(s: &Scenario) -> Result<crate::scenario::PoseSample, String> {
+/// The recorded poses of the scenario's first antenna.
+fn recorded(s: &Scenario) -> Result<&[crate::scenario::PoseSample], String> {
     let antenna = s
         .readers
         .first()
@@ -109,7 +109,15 @@ fn first_pose(s: &Scenario) -> Result<crate::scenario::PoseSample, String> {
     let Mount::Recorded { poses, .. } = &antenna.mount else {
         return Err("the rail scenario's antenna is not a recorded mount".to_string());
     };
-    poses.first().copied().ok_or_else(|| "no poses".to_string())
+    Ok(poses)
+}
+
+/// The first recorded pose of the scenario's first antenna.
+fn first_pose(s: &Scenario) -> Result<crate::scenario::PoseSample, String> {
+    recorded(s)?
+        .first()
+        .copied()
+        .ok_or_else(|| "no poses".to_string())
 }
 
 /// Of the real setups, the one nearest the tags' mean distance along the boresight.
@@ -132,14 +140,7 @@ fn nearest_setup(layout: &Layout) -> f64 {
 /// The parks of the scenario's recorded antenna (runs of equal positions) and its tags at
 /// their `nominal` places.
 fn layout(s: &Scenario, nominal: &[[f64; 3]]) -> Result<Layout, String> {
-    let antenna = s
-        .readers
-        .first()
-        .and_then(|r| r.antennas.first())
-        .ok_or("the rail scenario has no antenna")?;
-    let Mount::Recorded { poses, .. } = &antenna.mount else {
-        return Err("the rail scenario's antenna is not a recorded mount".to_string());
-    };
+    let poses = recorded(s)?;
     let mut parks = Vec::new();
     for w in poses.windows(2) {
         let (a, b) = (&w[0], &w[1]);

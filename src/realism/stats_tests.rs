@@ -17,6 +17,17 @@ fn read(epc: &str, t_us: u64, phase: f64, rssi: f64, f_hz: u64) -> Read {
     }
 }
 
+/// `n` parks of 0.9 s each second, `step` m apart along x.
+fn parks(n: u64, step: f64) -> Vec<Park> {
+    (0..n)
+        .map(|i| Park {
+            from_us: i * 1_000_000,
+            to_us: i * 1_000_000 + 900_000,
+            at: [i as f64 * step, 0.0, 0.0],
+        })
+        .collect()
+}
+
 /// An ideal aperture (phase exactly 4πfd/c plus per-channel constants, RSSI constant)
 /// gives zero residuals and the delay it was built with.
 #[test]
@@ -25,13 +36,7 @@ fn an_ideal_aperture_has_no_residual_and_its_own_delay() {
         ("A".to_string(), [0.3, 0.8, 0.0]),
         ("B".to_string(), [0.6, 0.8, 0.0]),
     ];
-    let parks: Vec<Park> = (0..20)
-        .map(|i| Park {
-            from_us: i * 1_000_000,
-            to_us: i * 1_000_000 + 900_000,
-            at: [i as f64 * 0.05, 0.0, 0.0],
-        })
-        .collect();
+    let parks = parks(20, 0.05);
     let freqs: Vec<u64> = (0..8).map(|k| 920_625_000 + k * 500_000).collect();
     let tau = 35e-9;
     let mut reads = Vec::new();
@@ -74,13 +79,7 @@ fn an_ideal_aperture_has_no_residual_and_its_own_delay() {
 fn a_misplaced_tag_is_found_by_the_fit() {
     let nominal = [0.5, 0.7, 0.0];
     let truth = [0.53, 0.69, 0.0];
-    let parks: Vec<Park> = (0..50)
-        .map(|i| Park {
-            from_us: i * 1_000_000,
-            to_us: i * 1_000_000 + 900_000,
-            at: [i as f64 * 0.02, 0.0, 0.0],
-        })
-        .collect();
+    let parks = parks(50, 0.02);
     let f = 922_000_000u64;
     let mut reads = Vec::new();
     for park in &parks {
