@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::defaults::*;
+
 use super::recorded::PoseSample;
 
 /// Axis-aligned box that contains every tag, antenna and waypoint of the scenario (metres).
@@ -514,55 +516,6 @@ pub struct AntennaSpec {
     pub phase_pattern_deg: f64,
 }
 
-fn default_listen() -> String {
-    "127.0.0.1:5084".to_string()
-}
-/// Marks a field whose default depends on other fields; replaced before validation.
-fn unset_f64() -> f64 {
-    f64::NAN
-}
-fn default_report_interval_ms() -> u32 {
-    1000
-}
-fn default_wheel_radius() -> f64 {
-    0.20
-}
-fn default_wheel_base() -> f64 {
-    0.50
-}
-fn default_k_odometry() -> f64 {
-    1e-5
-}
-fn default_k_v() -> f64 {
-    1.0
-}
-fn default_k_omega() -> f64 {
-    2.0
-}
-fn default_tolerance() -> f64 {
-    0.05
-}
-fn default_gain_dbi() -> f64 {
-    4.77
-}
-fn default_beamwidth() -> f64 {
-    70.0
-}
-fn default_tx_power() -> f64 {
-    30.0
-}
-fn default_cable_loss() -> f64 {
-    1.0
-}
-fn default_tag_sensitivity() -> f64 {
-    -18.0
-}
-fn default_phase_sign() -> f64 {
-    1.0
-}
-fn default_phase_noise() -> f64 {
-    0.025
-}
 /// \[G\] Table 1's RSS noise, the default of `rssi_noise`.
 pub const DEFAULT_RSSI_NOISE: f64 = 0.01;
 
@@ -571,38 +524,4 @@ impl AntennaSpec {
     pub fn eq5_noise(&self) -> f64 {
         self.rssi_noise.unwrap_or(DEFAULT_RSSI_NOISE)
     }
-}
-
-fn default_rssi_sigma() -> f64 {
-    0.4
-}
-fn default_rssi_resolution() -> f64 {
-    0.5
-}
-fn default_noise_ref() -> f64 {
-    -40.0
-}
-fn default_doppler_sigma() -> f64 {
-    5.0
-}
-fn default_cable_delay() -> f64 {
-    15.0
-}
-fn default_tag_spread() -> f64 {
-    1.0
-}
-fn default_range() -> f64 {
-    7.0
-}
-fn default_range_sigma() -> f64 {
-    0.05
-}
-fn default_phase_bits() -> u8 {
-    12
-}
-fn default_noise_exponent() -> f64 {
-    crate::physics::noise::WEAK_SIGNAL_EXPONENT
-}
-fn default_pattern_deg() -> f64 {
-    30.0
 }

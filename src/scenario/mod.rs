@@ -1,7 +1,9 @@
 //! Scenarios: the world a simulated reader lives in — tags, readers, antennas and how they
 //! move — read from JSON files and checked before use.
 
+mod defaults;
 mod format;
+mod hardware_checks;
 mod mount;
 pub mod profile;
 pub mod recorded;

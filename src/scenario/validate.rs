@@ -19,9 +19,9 @@ pub const MAX_REPORT_INTERVAL_MS: u32 = 3_600_000;
 /// Most antenna ports per reader.
 pub const MAX_ANTENNAS: usize = 64;
 
-type Check = Result<(), ScenarioError>;
+pub(super) type Check = Result<(), ScenarioError>;
 
-fn invalid(path: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
+pub(super) fn invalid(path: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
     ScenarioError::Invalid {
         path: path.into(),
         reason: reason.into(),
@@ -29,7 +29,7 @@ fn invalid(path: impl Into<String>, reason: impl Into<String>) -> ScenarioError 
 }
 
 /// `value` must be finite and within `[lo, hi]`.
-fn in_range(path: &str, value: f64, lo: f64, hi: f64) -> Check {
+pub(super) fn in_range(path: &str, value: f64, lo: f64, hi: f64) -> Check {
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
@@ -41,7 +41,7 @@ fn in_range(path: &str, value: f64, lo: f64, hi: f64) -> Check {
 }
 
 /// `value` must be finite and > 0 (and ≤ `hi`).
-fn positive(path: &str, value: f64, hi: f64) -> Check {
+pub(super) fn positive(path: &str, value: f64, hi: f64) -> Check {
     if value.is_finite() && value > 0.0 && value <= hi {
         Ok(())
     } else {
@@ -130,31 +130,7 @@ pub(super) fn validate(s: &Scenario) -> Check {
         0.0,
         6.0,
     )?;
-    let v = &s.tag_variation;
-    in_range(
-        "tag_variation.phase_pattern_rad",
-        v.phase_pattern_rad,
-        0.0,
-        10.0,
-    )?;
-    positive(
-        "tag_variation.phase_pattern_deg",
-        v.phase_pattern_deg,
-        360.0,
-    )?;
-    in_range("tag_variation.delay_sigma_ns", v.delay_sigma_ns, 0.0, 100.0)?;
-    in_range(
-        "tag_variation.channel_phase_sigma_rad",
-        v.channel_phase_sigma_rad,
-        0.0,
-        10.0,
-    )?;
-    in_range(
-        "tag_variation.channel_rssi_sigma_db",
-        v.channel_rssi_sigma_db,
-        0.0,
-        20.0,
-    )?;
+    super::hardware_checks::tag_variation(&s.tag_variation)?;
     if s.readers.is_empty() {
         return Err(invalid("readers", "must list at least one reader"));
     }
@@ -398,68 +374,7 @@ fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> 
     }
     positive(&format!("{p}.range_m"), a.range_m, 1000.0)?;
     in_range(&format!("{p}.range_sigma"), a.range_sigma, 0.0, 1.0)?;
-    validate_hardware(p, a)
-}
-
-/// The fields of what hardware adds (docs/measurement.md).
-fn validate_hardware(p: &str, a: &AntennaSpec) -> Check {
-    if !(1..=16).contains(&a.phase_resolution_bits) {
-        return Err(invalid(
-            format!("{p}.phase_resolution_bits"),
-            format!("must be 1 to 16, got {}", a.phase_resolution_bits),
-        ));
-    }
-    in_range(&format!("{p}.noise_exponent"), a.noise_exponent, 0.0, 2.0)?;
-    if a.phase_noise_dof != 0.0 && !(a.phase_noise_dof > 2.0 && a.phase_noise_dof <= 1000.0) {
-        return Err(invalid(
-            format!("{p}.phase_noise_dof"),
-            format!(
-                "must be 0 (Gaussian) or above 2 (a finite σ) up to 1000, got {}",
-                a.phase_noise_dof
-            ),
-        ));
-    }
-    in_range(
-        &format!("{p}.phase_outlier_rate"),
-        a.phase_outlier_rate,
-        0.0,
-        0.5,
-    )?;
-    in_range(
-        &format!("{p}.rssi_outlier_rate"),
-        a.rssi_outlier_rate,
-        0.0,
-        0.5,
-    )?;
-    in_range(
-        &format!("{p}.backscatter_compression"),
-        a.backscatter_compression,
-        0.0,
-        1.0,
-    )?;
-    in_range(
-        &format!("{p}.compression_knee_db"),
-        a.compression_knee_db,
-        0.0,
-        100.0,
-    )?;
-    in_range(
-        &format!("{p}.rssi_tilt_db_per_mhz"),
-        a.rssi_tilt_db_per_mhz,
-        -10.0,
-        10.0,
-    )?;
-    in_range(
-        &format!("{p}.phase_pattern_rad"),
-        a.phase_pattern_rad,
-        0.0,
-        10.0,
-    )?;
-    positive(
-        &format!("{p}.phase_pattern_deg"),
-        a.phase_pattern_deg,
-        360.0,
-    )
+    super::hardware_checks::antenna(p, a)
 }
 
 fn validate_pose(s: &Scenario, p: &str, pose: &Pose, in_world: bool) -> Check {
