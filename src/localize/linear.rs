@@ -31,6 +31,9 @@ pub struct Circle {
     pub radius_m: f64,
     /// Covariance of (centre's position along the path, radius), m², row-major 2×2.
     pub covariance: [f64; 4],
+    /// The covariance to report: at least `covariance` and at least the cluster-robust
+    /// (sandwich) one in every direction, for range errors correlated along the path.
+    pub reported: [f64; 4],
     /// Root-mean-square range residual, as phase (rad).
     pub rms_rad: f64,
     /// Phases behind it.
@@ -133,6 +136,11 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         })
         .sum();
     let cov_p = inv * (sse / (n - 3) as f64);
+    let reported_p = at_least_robust(&cov_p, &inv, n, |i| {
+        let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
+        let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
+        Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0) * (w * w * (l[i] * l[i] - dd[i] * dd[i] - fit))
+    });
     let (c, tau, k) = (p[0], p[1], p[2]);
     let d0_sq = c * c - tau * tau - k;
     if !(d0_sq > 0.0 && d0_sq.is_finite()) {
@@ -142,29 +150,68 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
     // (t*, d0) from p, to first order.
     let g_t = Vector3::new(0.0, 1.0, 0.0);
     let g_d = Vector3::new(c / d0, -tau / d0, -0.5 / d0);
-    let (ctt, ctd, cdd) = (
-        (g_t.transpose() * cov_p * g_t)[0],
-        (g_t.transpose() * cov_p * g_d)[0],
-        (g_d.transpose() * cov_p * g_d)[0],
-    );
+    let project = |c: &Matrix3<f64>| {
+        let (tt, td, dd) = (
+            (g_t.transpose() * c * g_t)[0],
+            (g_t.transpose() * c * g_d)[0],
+            (g_d.transpose() * c * g_d)[0],
+        );
+        [tt, td, td, dd]
+    };
     let along = t[r] + tau;
     Ok(Circle {
         centre: [0, 1, 2].map(|j| origin[j] + along * u[j]),
         direction: u,
         radius_m: d0,
-        covariance: [ctt, ctd, ctd, cdd],
+        covariance: project(&cov_p),
+        reported: project(&reported_p),
         rms_rad: (sse / n as f64).sqrt() * 4.0 * std::f64::consts::PI / lambda,
         samples: n,
     })
 }
 
+/// Clusters of consecutive samples a segment's sandwich covariance counts.
+const CLUSTERS: usize = 10;
+
+/// `classic` plus the positive part of (sandwich − `classic`): at least either in every
+/// direction. The sandwich is `bread`·(Σ g_c g_cᵀ)·`bread`·G/(G − 1), g_c the sum of `score`
+/// over [`CLUSTERS`] runs of consecutive samples (Liang & Zeger 1986; as relock's,
+/// docs/localize.md "Residuals correlated along the pass").
+fn at_least_robust(
+    classic: &Matrix3<f64>,
+    bread: &Matrix3<f64>,
+    n: usize,
+    score: impl Fn(usize) -> Vector3<f64>,
+) -> Matrix3<f64> {
+    let size = n.div_ceil(CLUSTERS).max(1);
+    let (mut meat, mut clusters) = (Matrix3::zeros(), 0usize);
+    for start in (0..n).step_by(size) {
+        let g: Vector3<f64> = (start..(start + size).min(n)).map(&score).sum();
+        meat += g * g.transpose();
+        clusters += 1;
+    }
+    let correction = if clusters > 1 {
+        clusters as f64 / (clusters - 1) as f64
+    } else {
+        1.0
+    };
+    let extra = bread * meat * bread * correction - classic;
+    if !extra.iter().all(|x| x.is_finite()) {
+        return *classic;
+    }
+    let eigen = SymmetricEigen::new(extra);
+    let positive = eigen.eigenvalues.map(|v| v.max(0.0));
+    classic
+        + eigen.eigenvectors * Matrix3::from_diagonal(&positive) * eigen.eigenvectors.transpose()
+}
+
 /// The tag's (x, y) at height `z` from one circle, on the side `facing` points to, with its
-/// covariance.
+/// covariance and the covariance to report.
 pub(crate) fn on_circle(
     c: &Circle,
     z: f64,
     facing: [f64; 2],
-) -> Option<(Vector2<f64>, Matrix2<f64>)> {
+) -> Option<(Vector2<f64>, Matrix2<f64>, Matrix2<f64>)> {
     let [ux, uy, uz] = c.direction;
     let horizontal = ux.hypot(uy);
     if uz.abs() > MAX_SLOPE || horizontal < 1e-9 {
@@ -182,9 +229,8 @@ pub(crate) fn on_circle(
     let h = h_sq.sqrt();
     let pos = Vector2::new(c.centre[0], c.centre[1]) + nrm * h;
     let j = Matrix2::from_columns(&[Vector2::new(ux, uy), nrm * (c.radius_m / h)]);
-    let [a, b, cc, d] = c.covariance;
-    let cov = j * Matrix2::new(a, b, cc, d) * j.transpose();
-    Some((pos, cov))
+    let map = |[a, b, cc, d]: [f64; 4]| j * Matrix2::new(a, b, cc, d) * j.transpose();
+    Some((pos, map(c.covariance), map(c.reported)))
 }
 
 /// The position of a tag at height `z` from `obs` (phase sign `sign`), on the side of the path
@@ -197,10 +243,12 @@ pub fn locate(obs: &[Obs], z: f64, sign: f64, facing: [f64; 2]) -> Result<Fix, N
         by_segment[o.segment].push(*o);
     }
     let (mut info, mut weighted) = (Matrix2::zeros(), Vector2::zeros());
+    // Σ W_s R_s W_s: the reported covariances through the classic weights W_s.
+    let mut spread = Matrix2::zeros();
     let (mut sq, mut used) = (0.0, 0usize);
     for seg in &by_segment {
         let Ok(c) = circle(seg, sign) else { continue };
-        let Some((pos, cov)) = on_circle(&c, z, facing) else {
+        let Some((pos, cov, reported)) = on_circle(&c, z, facing) else {
             continue;
         };
         let Some(inv) = cov.try_inverse() else {
@@ -208,11 +256,15 @@ pub fn locate(obs: &[Obs], z: f64, sign: f64, facing: [f64; 2]) -> Result<Fix, N
         };
         info += inv;
         weighted += inv * pos;
+        spread += inv * reported * inv;
         sq += c.rms_rad * c.rms_rad * c.samples as f64;
         used += c.samples;
     }
-    let cov = info.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
-    let pos = cov * weighted;
+    let combined = info.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
+    let pos = combined * weighted;
+    // The segments weighted by their classic covariances (the position as before), the
+    // covariance of that weighted mean from the ones reported.
+    let cov = combined * spread * combined;
     if used == 0 || !(pos.iter().chain(cov.iter()).all(|x| x.is_finite())) {
         return Err(NoFix::InsufficientGeometry);
     }
@@ -285,6 +337,26 @@ mod tests {
             assert!((fix.rms_rad - 0.1).abs() < 0.02, "{}", fix.rms_rad);
         }
         assert!(within >= 16, "{within} of 20 within the 95 % ellipse");
+    }
+
+    #[test]
+    fn a_phase_error_smooth_along_the_path_widens_the_covariance_to_hold_the_tag() {
+        // As relock's test: σ 0.01 rad of white noise and 0.3 rad turning over 0.8 m.
+        let tag = [0.8, 2.1, 0.5];
+        let mut held = 0;
+        for seed in 0..20 {
+            let mut obs = pass(tag, &[0.5], 0.01, seed);
+            let shift = seed as f64;
+            for o in &mut obs {
+                o.phase_rad += 0.3 * (o.antenna[0] * 8.0 + shift).sin();
+            }
+            let fix = locate(&obs, 0.5, 1.0, [0.0, 1.0]).expect("fix");
+            let (ex, ey) = (fix.position[0] - tag[0], fix.position[1] - tag[1]);
+            let [a, b, c, d] = fix.covariance;
+            let m2 = (d * ex * ex - (b + c) * ex * ey + a * ey * ey) / (a * d - b * c);
+            held += usize::from(m2 <= 5.991);
+        }
+        assert!(held >= 15, "{held} of 20 inside the 95 % ellipse");
     }
 
     #[test]
