@@ -18,6 +18,7 @@ use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned, Vector2};
 
 use super::linear::{line, MAX_PATH_RMS_M, MAX_SLOPE};
 use super::relock::{Fix, NoFix, Obs};
+use super::robust;
 
 /// The stride between anchors, as a fraction of the wavelength (ours).
 pub const STRIDE_WAVELENGTHS: f64 = 0.125;
@@ -275,10 +276,21 @@ pub fn locate_with_report(
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
     let dof = all.len().saturating_sub(2 + segments).max(1) as f64;
-    let cov = (j.transpose() * &j)
+    let bread = (j.transpose() * &j)
         .try_inverse()
-        .ok_or(NoFix::InsufficientGeometry)?
-        * (r.norm_squared() / dof);
+        .ok_or(NoFix::InsufficientGeometry)?;
+    let classic = &bread * (r.norm_squared() / dof);
+    // Reported: at least the cluster-robust covariance too, for range errors correlated along
+    // the path (runs of consecutive anchors of a segment; docs/localize.md).
+    let scores = DMatrix::from_fn(r.len(), j.ncols(), |i, a| j[(i, a)] * r[i]);
+    let segment_of: Vec<usize> = all.iter().map(|a| a.segment).collect();
+    let weight: Vec<f64> = all.iter().map(|a| a.n as f64).collect();
+    let cov = robust::at_least_sandwich(
+        &classic,
+        &bread,
+        &scores,
+        &robust::clusters(&segment_of, &weight),
+    );
     let (x, y) = (solved.p[0], solved.p[1]);
     // Every phase's own residual against the fit, as phase.
     let sq: f64 = obs

@@ -34,6 +34,7 @@ pub mod plot;
 pub mod poses;
 pub mod refine;
 pub mod relock;
+pub mod robust;
 pub mod series;
 pub mod shared;
 #[cfg(test)]

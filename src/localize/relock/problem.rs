@@ -5,6 +5,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
 use super::{NoFix, Obs, Search};
+use crate::localize::robust;
 
 /// The least-squares problem in the position alone: each segment's offset is at its best
 /// for the position (the mean residual of the segment), so residuals and Jacobian columns are
@@ -157,21 +158,14 @@ pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix>
     let bread = info.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
     let cov = &bread * variance;
     // What the fix reports: at least the classic and at least the sandwich in every
-    // direction (the classic plus the positive part of their difference); the classic one
-    // steers the search (joining, the weak axes), as before.
+    // direction (`robust`); the classic one steers the search (joining, the weak axes).
     let reported = match solved.residuals() {
         Some(r) if r.iter().all(|x| x.is_finite()) => {
-            let extra = clustered(&bread, &j, &r, solved.obs) - &cov;
-            // A non-finite matrix would keep the eigen solver from converging.
-            if extra.iter().all(|x| x.is_finite()) {
-                let eigen = nalgebra::SymmetricEigen::new(extra);
-                let positive = eigen.eigenvalues.map(|v| v.max(0.0));
-                &cov + &eigen.eigenvectors
-                    * DMatrix::from_diagonal(&positive)
-                    * eigen.eigenvectors.transpose()
-            } else {
-                cov.clone()
-            }
+            let scores = DMatrix::from_fn(r.len(), dims, |i, a| j[(i, a)] * r[i]);
+            let segment_of: Vec<usize> = solved.obs.iter().map(|o| o.segment).collect();
+            let weight: Vec<f64> = solved.obs.iter().map(|o| o.weight).collect();
+            let cluster_of = robust::clusters(&segment_of, &weight);
+            robust::at_least_sandwich(&cov, &bread, &scores, &cluster_of)
         }
         _ => cov.clone(),
     };
@@ -182,59 +176,6 @@ pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix>
         return Err(NoFix::InsufficientGeometry);
     }
     Ok((p, cov, (squares / reads.max(1.0)).sqrt(), reported))
-}
-
-/// Clusters per segment of the sandwich covariance ([`clustered`]).
-const CLUSTERS_PER_SEGMENT: f64 = 10.0;
-
-/// The cluster-robust (sandwich) covariance (JᵀJ)⁻¹·(Σ g_c g_cᵀ)·(JᵀJ)⁻¹·G/(G − 1), g_c the
-/// sum of J_iᵀ·r_i over cluster c: runs of consecutive phases of one segment holding about a
-/// tenth of its reads each. Residuals correlated along the path (an angle-dependent phase
-/// error, multipath) make the classic (JᵀJ)⁻¹·σ² far too small; summing within clusters counts
-/// each run once (Liang & Zeger 1986; Cameron & Miller, *A practitioner's guide to
-/// cluster-robust inference*, J. Human Resources 2015).
-fn clustered(
-    bread: &DMatrix<f64>,
-    j: &DMatrix<f64>,
-    r: &DVector<f64>,
-    obs: &[Obs],
-) -> DMatrix<f64> {
-    let dims = bread.nrows();
-    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-    let mut total = vec![0.0; segments];
-    for o in obs {
-        total[o.segment] += o.weight;
-    }
-    let mut meat = DMatrix::<f64>::zeros(dims, dims);
-    let mut g = DVector::<f64>::zeros(dims);
-    let (mut filled, mut clusters) = (0.0, 0usize);
-    let mut current = usize::MAX;
-    for (i, o) in obs.iter().enumerate() {
-        let limit = total[o.segment] / CLUSTERS_PER_SEGMENT;
-        if o.segment != current || filled >= limit {
-            if current != usize::MAX {
-                meat += &g * g.transpose();
-                clusters += 1;
-            }
-            g.fill(0.0);
-            filled = 0.0;
-            current = o.segment;
-        }
-        for a in 0..dims {
-            g[a] += j[(i, a)] * r[i];
-        }
-        filled += o.weight;
-    }
-    if current != usize::MAX {
-        meat += &g * g.transpose();
-        clusters += 1;
-    }
-    let correction = if clusters > 1 {
-        clusters as f64 / (clusters - 1) as f64
-    } else {
-        1.0
-    };
-    bread * meat * bread * correction
 }
 
 /// Levenberg–Marquardt with the relative tolerances at 1e-8 (the crate's default, 30 machine
@@ -249,5 +190,5 @@ fn solver() -> LevenbergMarquardt<f64> {
 }
 
 /// A solution: position, covariance ((JᵀJ)⁻¹·σ²), RMS residual, and the covariance reported
-/// ([`clustered`] where it is the wider).
+/// (at least the cluster-robust one too, [`robust::at_least_sandwich`]).
 pub(super) type Solution = (DVector<f64>, DMatrix<f64>, f64, DMatrix<f64>);
