@@ -36,6 +36,10 @@ enum Command {
         /// Scenario file (JSON); without it the embedded default scenario S1 runs.
         #[arg(long)]
         scenario: Option<PathBuf>,
+        /// Read as this reader model does (`ideal`, `impinj-r420`: as a real Impinj reader;
+        /// docs/measurement.md "Reader models"), in place of the scenario's own.
+        #[arg(long)]
+        reader_model: Option<String>,
         /// Listen address, overriding the scenario's; repeat for each reader in order.
         #[arg(long)]
         listen: Vec<String>,
@@ -137,6 +141,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Realism(args)) => llrp_gateway::realism::run(args),
         Command::Sim {
             scenario,
+            reader_model,
             listen,
             speed,
             truth,
@@ -153,6 +158,7 @@ fn main() -> ExitCode {
             publish,
         } => run_sim(
             scenario,
+            reader_model.as_deref(),
             SimLocalize {
                 http,
                 poses,
@@ -233,17 +239,25 @@ fn scenario_references(scenario: &Scenario) -> std::collections::BTreeSet<String
 }
 
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
-fn run_sim(scenario: Option<PathBuf>, localize: SimLocalize, mut opts: SimOptions) -> ExitCode {
+fn run_sim(
+    scenario: Option<PathBuf>,
+    reader_model: Option<&str>,
+    localize: SimLocalize,
+    mut opts: SimOptions,
+) -> ExitCode {
     llrp_gateway::stop::init_logging();
-    let scenario = match scenario {
-        Some(path) => match Scenario::load(&path) {
-            Ok(s) => s,
-            Err(e) => {
-                eprintln!("llrp-gateway sim: {}: {e}", path.display());
-                return ExitCode::FAILURE;
-            }
-        },
-        None => Scenario::default_s1(),
+    let loaded = match &scenario {
+        Some(path) => {
+            Scenario::load_with(path, reader_model).map_err(|e| format!("{}: {e}", path.display()))
+        }
+        None => Scenario::default_s1_with(reader_model).map_err(|e| format!("S1: {e}")),
+    };
+    let scenario = match loaded {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("llrp-gateway sim: {e}");
+            return ExitCode::FAILURE;
+        }
     };
     for notice in &scenario.notices {
         tracing::info!("scenario: {notice}");

@@ -451,3 +451,59 @@ fn a_clients_mistakes_are_answered_and_not_logged_as_errors() {
         "a client's mistake logged as an error:\n{log}"
     );
 }
+
+/// The phase codes (ImpinjRFPhaseAngle, 4096 a turn) of an `inventory --impinj` client's reads
+/// from `sim` on S1 at `--speed max` with `extra` arguments.
+fn phase_codes(extra: &[&str]) -> Vec<u32> {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("reads.jsonl");
+    let mut args = vec!["--speed", "max"];
+    args.extend_from_slice(extra);
+    let sim = spawn_sim(&args);
+    let status = bin()
+        .args([
+            "inventory",
+            &sim.addr,
+            "--impinj",
+            "--seconds",
+            "2",
+            "--output",
+        ])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .expect("inventory runs");
+    assert!(status.success());
+    let (_, _) = sim.terminate();
+    std::fs::read_to_string(&out)
+        .expect("reads written")
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|r| r["phase_rad"].as_f64())
+        .map(|p| (p / std::f64::consts::TAU * 4096.0).round() as u32)
+        .collect()
+}
+
+#[test]
+fn a_reader_model_on_the_command_line_reads_as_that_reader() {
+    // impinj-r420 reports every fourth code of the 12-bit phase field, as a real R420 does;
+    // the built-in model uses them all.
+    let r420 = phase_codes(&["--reader-model", "impinj-r420"]);
+    assert!(r420.len() > 100, "{} reads", r420.len());
+    assert!(r420.iter().all(|c| c % 4 == 0), "{:?}", &r420[..20]);
+    let ideal = phase_codes(&[]);
+    assert!(ideal.len() > 100, "{} reads", ideal.len());
+    assert!(ideal.iter().any(|c| c % 4 != 0));
+    // An unknown model is named with the known ones.
+    let out = bin()
+        .args(["sim", "--no-http", "--reader-model", "acme-9000"])
+        .output()
+        .expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("unknown reader model `acme-9000`") && err.contains("impinj-r420"),
+        "{err}"
+    );
+}

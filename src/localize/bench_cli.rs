@@ -60,23 +60,18 @@ pub fn scenario(name: &str) -> Result<Scenario, String> {
 /// The scenario `name` (a fixture's name or a file), run with the reader model `model` when
 /// given (docs/measurement.md "Reader models").
 pub fn scenario_with(name: &str, model: Option<&str>) -> Result<Scenario, String> {
-    let here = std::path::Path::new(".");
     let embedded = match name.to_ascii_uppercase().as_str() {
-        "S1" => include_str!("../../fixtures/scenarios/s1.json"),
+        "S1" => return Scenario::default_s1_with(model).map_err(|e| format!("{name}: {e}")),
         "S2" => include_str!("../../fixtures/scenarios/s2-side-by-side.json"),
         "S2-BACK-TO-BACK" => include_str!("../../fixtures/scenarios/s2-back-to-back.json"),
         "S3" => include_str!("../../fixtures/scenarios/s3.json"),
         _ => {
-            let path = std::path::Path::new(name);
-            let text = std::fs::read_to_string(path).map_err(|e| format!("{name}: {e}"))?;
-            let dir = path
-                .parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .unwrap_or(here);
-            return Scenario::from_json_with(&text, dir, model).map_err(|e| format!("{name}: {e}"));
+            return Scenario::load_with(std::path::Path::new(name), model)
+                .map_err(|e| format!("{name}: {e}"))
         }
     };
-    Scenario::from_json_with(embedded, here, model).map_err(|e| format!("{name}: {e}"))
+    Scenario::from_json_with(embedded, std::path::Path::new("."), model)
+        .map_err(|e| format!("{name}: {e}"))
 }
 
 /// Runs `bench localize`.

@@ -92,6 +92,15 @@ impl Scenario {
     /// Reads, parses and validates a scenario file; relative recorded-pose files resolve
     /// against the file's directory.
     pub fn load(path: &std::path::Path) -> Result<Scenario, ScenarioError> {
+        Self::load_with(path, None)
+    }
+
+    /// [`Scenario::load`] with the scenario-wide reader model `model` when given
+    /// ([`Scenario::from_json_with`]).
+    pub fn load_with(
+        path: &std::path::Path,
+        model: Option<&str>,
+    ) -> Result<Scenario, ScenarioError> {
         let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
             file: path.display().to_string(),
             source,
@@ -100,7 +109,16 @@ impl Scenario {
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or(std::path::Path::new("."));
-        Self::from_json_in(&text, dir)
+        Self::from_json_with(&text, dir, model)
+    }
+
+    /// The embedded default scenario S1 with the reader model `model` when given.
+    pub fn default_s1_with(model: Option<&str>) -> Result<Scenario, ScenarioError> {
+        Self::from_json_with(
+            include_str!("../../fixtures/scenarios/s1.json"),
+            std::path::Path::new("."),
+            model,
+        )
     }
 
     /// The embedded default scenario S1 (`fixtures/scenarios/s1.json`).
