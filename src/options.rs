@@ -124,7 +124,12 @@ pub const RANGES: &[Range] = &[
     ),
     real("presence-move-m", 0.0, 1e6, "metres, 0 or more"),
     real("live-speed", 0.0, 1e6, "0 (no live run) or a speed factor"),
-    int("runs", 0.0, 1e6, "0 (no Monte-Carlo variants) or a number of runs"),
+    int(
+        "runs",
+        0.0,
+        1e6,
+        "0 (no Monte-Carlo variants) or a number of runs",
+    ),
     int("repeat", 1.0, 1e6, "at least one repetition"),
     real("min-rssi", -200.0, 50.0, "dBm"),
     int(
