@@ -51,13 +51,16 @@ pub struct Outcome {
     pub outside: Vec<&'static str>,
 }
 
+/// The scenario at `path` with `reader_model` if given; the error names the file.
+fn load(path: &Path, reader_model: Option<&str>) -> Result<Scenario, String> {
+    Scenario::load_with(path, reader_model).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 /// Runs the rail replica at `distance` from the scenario in `dir`, with `reader_model` if
 /// given.
 pub fn run_setup(dir: &Path, distance: f64, reader_model: Option<&str>) -> Result<Outcome, String> {
     let path = dir.join(format!("rail-{distance:.2}.json"));
-    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let scenario = Scenario::from_json_with(&text, dir, reader_model)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let scenario = load(&path, reader_model)?;
     if scenario.tags.len() != NOMINAL_X.len() {
         return Err(format!(
             "{}: the rail scenario has {} tags, not 3",
@@ -79,13 +82,7 @@ pub fn run_setup(dir: &Path, distance: f64, reader_model: Option<&str>) -> Resul
 /// Runs any parked-aperture scenario (a recorded antenna that stops at points), its tags'
 /// own positions taken as nominal, judged against the real setup nearest its distance.
 pub fn run_scenario(path: &Path, reader_model: Option<&str>) -> Result<Outcome, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let scenario = Scenario::from_json_with(&text, dir, reader_model)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let scenario = load(path, reader_model)?;
     let nominal: Vec<[f64; 3]> = scenario.tags.iter().map(|t| t.position).collect();
     let layout = layout(&scenario, &nominal)?;
     let distance = nearest_setup(&layout);

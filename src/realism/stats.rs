@@ -194,11 +194,6 @@ fn propagation(f_hz: f64, d: f64) -> f64 {
     4.0 * PI * f_hz * d / SPEED_OF_LIGHT
 }
 
-/// RMS of a residual sequence after its mean is removed.
-fn rms_about_mean(xs: &[f64]) -> Option<f64> {
-    population_std(xs)
-}
-
 /// Computes every statistic of the reads of `layout`.
 pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
     let epcs: HashMap<&str, usize> = layout
@@ -539,7 +534,8 @@ fn aperture_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: 
             })
             .collect();
         unwrap(&mut r);
-        rms_about_mean(&r)
+        // RMS about the series' own mean: the constant offset removed.
+        population_std(&r)
     };
     let mut nominal = Vec::new();
     let mut fitted = Vec::new();
