@@ -121,8 +121,9 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         for i in 0..n {
             let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
             let row = Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0);
-            nm += row * row.transpose() * (w * w);
-            v += row * ((l[i] * l[i] - dd[i] * dd[i]) * w * w);
+            let w2 = w * w * seg[i].weight;
+            nm += row * row.transpose() * w2;
+            v += row * ((l[i] * l[i] - dd[i] * dd[i]) * w2);
         }
         let inv = nm.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
         p = inv * v;
@@ -133,14 +134,17 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         .map(|i| {
             let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
             let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
-            (w * (l[i] * l[i] - dd[i] * dd[i] - fit)).powi(2)
+            seg[i].weight * (w * (l[i] * l[i] - dd[i] * dd[i] - fit)).powi(2)
         })
         .sum();
-    let cov_p = inv * (sse / (n - 3) as f64);
+    // The reads the phases stand for ([`Obs::weight`]; a resting antenna's weigh less).
+    let reads: f64 = seg.iter().map(|o| o.weight).sum();
+    let cov_p = inv * (sse / (reads - 3.0).max(1.0));
     let reported_p = at_least_robust(&cov_p, &inv, n, |i| {
         let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
         let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
-        Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0) * (w * w * (l[i] * l[i] - dd[i] * dd[i] - fit))
+        let r = l[i] * l[i] - dd[i] * dd[i] - fit;
+        Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0) * (w * w * seg[i].weight * r)
     });
     let (c, tau, k) = (p[0], p[1], p[2]);
     let d0_sq = c * c - tau * tau - k;
@@ -166,7 +170,7 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         radius_m: d0,
         covariance: project(&cov_p),
         reported: project(&reported_p),
-        rms_rad: (sse / n as f64).sqrt() * 4.0 * std::f64::consts::PI / lambda,
+        rms_rad: (sse / reads.max(f64::MIN_POSITIVE)).sqrt() * 4.0 * std::f64::consts::PI / lambda,
         samples: n,
     })
 }

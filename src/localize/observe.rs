@@ -8,8 +8,10 @@ use std::collections::BTreeMap;
 use super::calibrate::Calibration;
 use super::geometry::Geometry;
 use super::ingest::Ingest;
+use super::linear;
 use super::mhekf::PoseObs;
 use super::relock::Obs;
+use super::series::SAME_PLACE_M;
 
 /// One tag's phases for the phase estimators.
 #[derive(Clone, Debug, PartialEq)]
@@ -46,7 +48,14 @@ pub fn calibrated_observations(
     let mut per_reader: BTreeMap<&str, usize> = BTreeMap::new();
     let mut reader_of_group = Vec::new();
     let mut numbers: BTreeMap<&str, usize> = BTreeMap::new();
+    // Per phase, its (reader, antenna) track's number, for straightening the tracks.
+    let mut track_of: Vec<usize> = Vec::new();
+    // Per phase, its antenna position as reported (before any correction).
+    let mut reported: Vec<[f64; 3]> = Vec::new();
+    let mut tracks: BTreeMap<(&str, u16), usize> = BTreeMap::new();
     for (group, (key, series)) in ingest.tag_series(epc).enumerate() {
+        let next = tracks.len();
+        let track = *tracks.entry((key.1.as_str(), key.2)).or_insert(next);
         let next = numbers.len();
         reader_of_group.push(*numbers.entry(key.1.as_str()).or_insert(next));
         let (lambda, period_rad) = (series.wavelength_m(), series.ambiguity().period());
@@ -61,6 +70,8 @@ pub fn calibrated_observations(
             let segment = obs.last().map_or(0, |o| o.segment + 1);
             for s in seg {
                 last_us = last_us.max(s.t_us);
+                track_of.push(track);
+                reported.push(s.antenna);
                 let antenna = match &g.pose_corrections {
                     Some(c) => {
                         let d = c.at(&key.1, s.t_us);
@@ -83,6 +94,16 @@ pub fn calibrated_observations(
             }
         }
     }
+    if let Some(m) = &g.pose_error {
+        straighten(&mut obs, &track_of, tracks.len(), m.sigma_m);
+        weigh_parked(
+            &mut obs,
+            &reported,
+            &track_of,
+            tracks.len(),
+            m.correlation_s,
+        );
+    }
     // The most-read reader, the first by name on a tie.
     let facing = per_reader
         .iter()
@@ -93,6 +114,107 @@ pub fn calibrated_observations(
         last_us,
         facing,
         reader_of_group,
+    }
+}
+
+/// Each (reader, antenna) track of `obs` (`track_of` its number per phase) whose antenna
+/// positions lie within [`linear::MAX_PATH_RMS_M`] and three pose-error σ (`sigma_m`) RMS of a
+/// straight line, moved onto that line: a robot's own pose estimate scatters about the
+/// straight path it drives, and that scatter is its error, not the antenna's motion (the
+/// prior `linear` and `hyperbolic` make; docs/localize.md "Straight tracks").
+fn straighten(obs: &mut [Obs], track_of: &[usize], tracks: usize, sigma_m: f64) {
+    let limit = linear::MAX_PATH_RMS_M.min(3.0 * sigma_m);
+    for track in 0..tracks {
+        let points: Vec<[f64; 3]> = obs
+            .iter()
+            .zip(track_of)
+            .filter(|(_, &k)| k == track)
+            .map(|(o, _)| o.antenna)
+            .collect();
+        let Some((origin, u, perp)) = linear::line(&points) else {
+            continue;
+        };
+        if perp > limit || u[2].abs() > linear::MAX_SLOPE {
+            continue;
+        }
+        for (o, _) in obs.iter_mut().zip(track_of).filter(|(_, &k)| k == track) {
+            let a = o.antenna;
+            let t: f64 = (0..3).map(|k| (a[k] - origin[k]) * u[k]).sum();
+            o.antenna = [origin[0] + t * u[0], origin[1] + t * u[1], a[2]];
+        }
+    }
+}
+
+/// The phases of each run of a track (`track_of` its number per phase) read from one
+/// reported place (`reported`, within [`SAME_PLACE_M`]) for longer than the pose error's
+/// correlation time `correlation_s`, weighted down so that the run weighs as much as the
+/// track's reads of one correlation time while it moves: a resting robot's pose error rests
+/// too, so the run's reads share one error that more reads do not average away
+/// (docs/localize.md "Straight tracks"). Against the moving reads' rate, not the rest's own,
+/// so that the weights stay as they were when the live localizer thins a tag's older reads.
+fn weigh_parked(
+    obs: &mut [Obs],
+    reported: &[[f64; 3]],
+    track_of: &[usize],
+    tracks: usize,
+    correlation_s: f64,
+) {
+    let tau_us = correlation_s * 1e6;
+    for track in 0..tracks {
+        let mut idx: Vec<usize> = (0..obs.len()).filter(|&i| track_of[i] == track).collect();
+        idx.sort_by_key(|&i| obs[i].t_us);
+        // The runs at one place, and which of them are rests.
+        let mut runs: Vec<(std::ops::Range<usize>, bool)> = Vec::new();
+        let mut start = 0;
+        while start < idx.len() {
+            let first = reported[idx[start]];
+            let same = |i: usize| {
+                (reported[i][0] - first[0]).hypot(reported[i][1] - first[1]) <= SAME_PLACE_M
+            };
+            let end = (start..idx.len())
+                .find(|&k| !same(idx[k]))
+                .unwrap_or(idx.len());
+            let span_us = (obs[idx[end - 1]].t_us - obs[idx[start]].t_us) as f64;
+            runs.push((start..end, span_us > tau_us));
+            start = end;
+        }
+        // The moving reads' weight per µs: from the first to the last moving read, less the
+        // rests between them.
+        let moving: Vec<&std::ops::Range<usize>> =
+            runs.iter().filter(|r| !r.1).map(|r| &r.0).collect();
+        let rate = match (moving.first(), moving.last()) {
+            (Some(a), Some(b)) => {
+                let (t0, t1) = (obs[idx[a.start]].t_us, obs[idx[b.end - 1]].t_us);
+                let resting: u64 = runs
+                    .iter()
+                    .filter(|r| r.1)
+                    .map(|r| (obs[idx[r.0.start]].t_us, obs[idx[r.0.end - 1]].t_us))
+                    .filter(|&(a, b)| a >= t0 && b <= t1)
+                    .map(|(a, b)| b - a)
+                    .sum();
+                let weight: f64 = moving
+                    .iter()
+                    .flat_map(|r| idx[(*r).clone()].iter())
+                    .map(|&i| obs[i].weight)
+                    .sum();
+                let span = t1.saturating_sub(t0).saturating_sub(resting) as f64;
+                (span > 0.0).then(|| weight / span)
+            }
+            _ => None,
+        };
+        for (run, rest) in runs {
+            if !rest {
+                continue;
+            }
+            let run = &idx[run];
+            let total: f64 = run.iter().map(|&i| obs[i].weight).sum();
+            let span_us = (obs[run[run.len() - 1]].t_us - obs[run[0]].t_us) as f64;
+            // A track that never moves weighs its rest by the rest's own rate.
+            let target = rate.map_or(total * tau_us / span_us, |r| r * tau_us);
+            for &i in run {
+                obs[i].weight *= target / total;
+            }
+        }
     }
 }
 
@@ -230,5 +352,81 @@ mod tests {
             .estimate
             .is_some_and(|p| (p[0] - b[0]).hypot(p[1] - b[1]) < 0.05);
         assert!(!found, "{wrong:?}");
+    }
+
+    /// A phase of track `track` read at `t_us` from `antenna`.
+    fn at(t_us: u64, antenna: [f64; 3]) -> Obs {
+        Obs {
+            phase_rad: 0.0,
+            antenna,
+            wavelength_m: 0.33,
+            segment: 0,
+            group: 0,
+            joint: 0,
+            period_rad: 2.0 * std::f64::consts::PI,
+            weight: 1.0,
+            scatter_rad2: 0.0,
+            t_us,
+        }
+    }
+
+    #[test]
+    fn a_straight_track_that_wobbles_is_moved_onto_its_line_and_a_bent_one_is_left() {
+        // Track 0: along y = 0 with a 1 cm wobble (a pose error of σ 15 mm); track 1: an arc
+        // 30 cm deep over 2 m.
+        let mut obs: Vec<Obs> = (0..200)
+            .map(|k| {
+                let x = 0.01 * k as f64;
+                at(k * 10_000, [x, 0.01 * (x * 7.0).sin(), 0.5])
+            })
+            .collect();
+        obs.extend((0..200).map(|k| {
+            let x = 0.01 * k as f64;
+            at(k * 10_000, [x, 2.0 + 0.3 * (1.0 - (x - 1.0).powi(2)), 0.5])
+        }));
+        let track_of: Vec<usize> = (0..400).map(|i| i / 200).collect();
+        let before = obs.clone();
+        straighten(&mut obs, &track_of, 2, 0.015);
+        let points: Vec<[f64; 3]> = obs[..200].iter().map(|o| o.antenna).collect();
+        let (_, u, perp) = linear::line(&points).expect("a line");
+        assert!(perp < 1e-9, "{perp} m off the line");
+        assert!(u[0].abs() > 0.999, "{u:?}");
+        for (a, b) in obs[..200].iter().zip(&before) {
+            assert!(
+                (a.antenna[0] - b.antenna[0]).abs() < 0.002,
+                "{a:?} from {b:?}"
+            );
+            assert_eq!(a.antenna[2], b.antenna[2]);
+        }
+        assert_eq!(obs[200..], before[200..]);
+    }
+
+    #[test]
+    fn a_rest_longer_than_the_correlation_time_weighs_as_one_correlation_time_of_driving() {
+        // 2 s of driving, then 20 s at rest, then 1 s at rest elsewhere (shorter than the
+        // correlation time: as driving), a read every 10 ms: 300 reads in 3 s of driving.
+        let track = |rest: &mut dyn Iterator<Item = u64>| {
+            let mut obs: Vec<Obs> = (0..200)
+                .map(|k| at(k * 10_000, [0.005 * k as f64, 0.0, 0.5]))
+                .collect();
+            obs.extend(rest.map(|k| at(k * 10_000, [1.0, 0.0004, 0.5])));
+            obs.extend((2200..2300).map(|k| at(k * 10_000, [1.5, 0.0, 0.5])));
+            let reported: Vec<[f64; 3]> = obs.iter().map(|o| o.antenna).collect();
+            let track_of = vec![0; obs.len()];
+            weigh_parked(&mut obs, &reported, &track_of, 1, 2.0);
+            obs
+        };
+        for obs in [
+            track(&mut (200..2200)),
+            // As the live localizer's thinning leaves a rest: its first 16 reads and its last.
+            track(&mut (200..216).chain(2199..2200)),
+        ] {
+            let n = obs.len();
+            assert!(obs[..200].iter().all(|o| o.weight == 1.0));
+            assert!(obs[n - 100..].iter().all(|o| o.weight == 1.0));
+            // The rest weighs as 2 s of driving's 100 reads a second, however many it holds.
+            let rest: f64 = obs[200..n - 100].iter().map(|o| o.weight).sum();
+            assert!((rest - 200.0).abs() < 1e-6, "{rest}");
+        }
     }
 }

@@ -14,6 +14,7 @@ use super::estimate::{estimate_all, Estimate, Estimator, Geometry};
 use super::ingest::Ingest;
 use super::live::Settings;
 use super::poses::{PoseSample, Poses};
+use super::series::Places;
 use crate::reads::Read;
 
 /// The pose error the smoother assumes: x and y, each a Gauss–Markov process.
@@ -62,8 +63,13 @@ fn residuals(
             let reader = &key.1;
             let k = sign_of(reader) * series.wavelength_m() / (4.0 * std::f64::consts::PI);
             for seg in series.segments().filter(|s| s.len() >= 3) {
+                // A resting antenna's reads as thinning keeps them, whether or not it has
+                // (the live localizer's [`super::series::Series::thin_places`]): many reads from one place
+                // pin its pose error to whatever bias the tags' estimates have.
+                let mut place = Places::default();
                 let rows: Vec<(u64, Vector2<f64>, f64)> = seg
                     .iter()
+                    .filter(|s| place.keeps(s.antenna))
                     .map(|s| {
                         let d = [
                             t[0] - s.antenna[0],
@@ -214,8 +220,9 @@ pub fn refine(
 /// The tags `linear` locates in `ingest` on its poses as reported (the estimator a pose
 /// error throws least, docs/localize.md): what the corrections are measured against.
 fn linear_tags(ingest: &Ingest, g: &Geometry) -> BTreeMap<String, [f64; 3]> {
+    // With the pose error kept, so that a resting antenna's reads weigh as they do in the
+    // estimates (docs/localize.md "Straight tracks"); its share of the covariance is unused.
     let plain = Geometry {
-        pose_error: None,
         pose_corrections: None,
         ..g.clone()
     };

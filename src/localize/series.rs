@@ -54,6 +54,25 @@ pub const SAME_PLACE_M: f64 = 0.005;
 /// Reads of one place a thinned series keeps (besides a segment's last).
 pub const KEPT_AT_ONE_PLACE: usize = 16;
 
+/// The rule of [`Series::thin_places`] over one segment's antenna positions in order: of each
+/// run within [`SAME_PLACE_M`] of its first, the first [`KEPT_AT_ONE_PLACE`] are kept.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Places {
+    anchor: Option<[f64; 3]>,
+    run: usize,
+}
+
+impl Places {
+    /// Whether the phase read at `antenna`, next in its segment, is one the rule keeps.
+    pub fn keeps(&mut self, antenna: [f64; 3]) -> bool {
+        match self.anchor {
+            Some(a) if distance(antenna, a) <= SAME_PLACE_M => self.run += 1,
+            _ => (self.anchor, self.run) = (Some(antenna), 0),
+        }
+        self.run < KEPT_AT_ONE_PLACE
+    }
+}
+
 /// Why a series starts a new segment between two reads.
 #[derive(Clone, Copy)]
 enum Split {
@@ -306,19 +325,12 @@ impl Series {
         for k in 0..self.starts.len() {
             let (a, b) = self.bounds(k);
             self.starts[k] = kept;
-            let mut anchor = self.samples.get(a).map_or([0.0; 3], |s| s.antenna);
-            let mut run = 0usize;
+            let mut place = Places::default();
             for i in a..b {
-                let here = self.samples[i].antenna;
-                if distance(here, anchor) > SAME_PLACE_M {
-                    anchor = here;
-                    run = 0;
-                }
-                if run < KEPT_AT_ONE_PLACE || i + 1 == b {
+                if place.keeps(self.samples[i].antenna) || i + 1 == b {
                     self.samples[kept] = self.samples[i];
                     kept += 1;
                 }
-                run += 1;
             }
         }
         self.samples.truncate(kept);
