@@ -11,7 +11,7 @@ use super::ingest::Ingest;
 use super::linear;
 use super::mhekf::PoseObs;
 use super::relock::Obs;
-use super::series::SAME_PLACE_M;
+use super::series::{Places, SAME_PLACE_M};
 
 /// One tag's phases for the phase estimators.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,11 +125,15 @@ pub fn calibrated_observations(
 fn straighten(obs: &mut [Obs], track_of: &[usize], tracks: usize, sigma_m: f64) {
     let limit = linear::MAX_PATH_RMS_M.min(3.0 * sigma_m);
     for track in 0..tracks {
-        let points: Vec<[f64; 3]> = obs
+        // The line through the positions in time order as thinning keeps them (a rest's
+        // first reads), so that neither a long rest nor its thinning moves it.
+        let mut idx: Vec<usize> = (0..obs.len()).filter(|&i| track_of[i] == track).collect();
+        idx.sort_by_key(|&i| obs[i].t_us);
+        let mut place = Places::default();
+        let points: Vec<[f64; 3]> = idx
             .iter()
-            .zip(track_of)
-            .filter(|(_, &k)| k == track)
-            .map(|(o, _)| o.antenna)
+            .map(|&i| obs[i].antenna)
+            .filter(|&a| place.keeps(a))
             .collect();
         let Some((origin, u, perp)) = linear::line(&points) else {
             continue;
