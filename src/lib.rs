@@ -3,6 +3,7 @@
 
 pub mod alloc;
 pub mod decode;
+pub mod eval;
 pub mod files;
 pub mod fleet;
 pub mod gateway;

@@ -121,7 +121,7 @@ enum Command {
 enum BenchCommand {
     /// Simulate a scenario faster than real time and localize it with every applicable
     /// estimator: errors against the truth and compute times.
-    Localize(llrp_gateway::localize::bench_cli::BenchLocalizeArgs),
+    Localize(llrp_gateway::eval::cli::BenchLocalizeArgs),
     /// Run the parked-rail replica of a real Impinj measurement and print its reads'
     /// statistics beside the real ones (docs/measurement.md "Validation").
     Realism(llrp_gateway::realism::BenchRealismArgs),
@@ -135,9 +135,7 @@ fn main() -> ExitCode {
         Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),
         Command::Import(args) => llrp_gateway::record::pcapng::run_import(&args),
         Command::Localize(args) => llrp_gateway::localize::command::run(args),
-        Command::Bench(BenchCommand::Localize(args)) => {
-            llrp_gateway::localize::bench_cli::run(args)
-        }
+        Command::Bench(BenchCommand::Localize(args)) => llrp_gateway::eval::cli::run(args),
         Command::Bench(BenchCommand::Realism(args)) => llrp_gateway::realism::run(args),
         Command::Sim {
             scenario,

@@ -491,7 +491,10 @@ mod tests {
                     865_700_000
                 };
                 let lambda = crate::localize::SPEED_OF_LIGHT / f as f64;
-                let d = crate::physics::geometry::distance(o.antenna, tag);
+                let d = (0..3)
+                    .map(|k| (o.antenna[k] - tag[k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
                 Read {
                     epc: epc.into(),
                     reader: Some(reader.into()),

@@ -7,13 +7,11 @@
 //! ([`hyperbolic`]), 3D by loci intersection ([`loci3d`]), fingerprinting ([`fingerprint`]),
 //! the multi-hypothesis EKF ([`mhekf`]) and distributed WLS by consensus ([`wls`]); estimates
 //! with covariance and state ([`estimate`]), the pose error's share of it ([`uncertainty`]); the live worker ([`live`], [`shared`]), the
-//! `localize` command ([`command`], [`offline`]) and `bench localize` ([`mod@bench`]). It sees
+//! `localize` command ([`command`], [`offline`]); `bench localize` drives it from above
+//! ([`crate::eval`]). It sees
 //! only reads and poses, never simulator internals, so it works the same on a real reader's
 //! data.
 
-pub mod bench;
-pub mod bench_cli;
-pub mod bench_live;
 pub mod calibrate;
 pub mod command;
 pub mod estimate;
@@ -27,10 +25,8 @@ pub mod linear;
 pub mod live;
 pub mod loci3d;
 pub mod mhekf;
-pub mod montecarlo;
 pub mod observe;
 pub mod offline;
-pub mod plot;
 pub mod poses;
 pub mod refine;
 pub mod relock;

@@ -9,7 +9,7 @@ pub mod stats;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use crate::localize::bench::{simulate_with, Inventory};
+use crate::eval::bench::{simulate_with, Inventory};
 use crate::scenario::{Mount, Scenario};
 use real::{short, DISTANCES, FIGURES};
 use stats::{Layout, Park, Stats};

@@ -5,11 +5,11 @@
 
 use std::time::Instant;
 
-use super::estimate::{estimate_all, Estimate, Estimator, Geometry};
-use super::ingest::Ingest;
-use super::live::Settings;
-use super::poses::{PoseSample, Poses};
-use super::refine::{localize_refined, PoseErrorModel};
+use crate::localize::estimate::{estimate_all, Estimate, Estimator, Geometry};
+use crate::localize::ingest::Ingest;
+use crate::localize::live::Settings;
+use crate::localize::poses::{PoseSample, Poses};
+use crate::localize::refine::{localize_refined, PoseErrorModel};
 use crate::physics::{AntennaPose, Model, World};
 use crate::reader::session::Now;
 use crate::reader::{Reader, ReaderProfile};
@@ -41,7 +41,7 @@ pub struct Run {
     /// EKF and WLS of \[M\] assume.
     pub calibrated: bool,
     /// The robots' pose error as the scenario states it, where they report a localization
-    /// stack's pose (`localized`): what [`super::refine`] assumes.
+    /// stack's pose (`localized`): what [`crate::localize::refine`] assumes.
     pub pose_error: Option<PoseErrorModel>,
 }
 
@@ -52,7 +52,7 @@ pub enum PoseSource {
     True,
     /// The poses the robots report.
     Estimated,
-    /// The poses the robots report, refined from the tags' phases ([`super::refine`]).
+    /// The poses the robots report, refined from the tags' phases ([`crate::localize::refine`]).
     Refined,
 }
 

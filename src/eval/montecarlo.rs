@@ -6,7 +6,7 @@
 use rand::{Rng, SeedableRng};
 
 use super::bench::{score, simulate, Run};
-use super::estimate::Estimator;
+use crate::localize::estimate::Estimator;
 use crate::scenario::{Mount, Scenario};
 
 /// One variant of S3.

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use super::bench::{
     applicable, duration_s, score_on, simulate_with, why_not, Inventory, PoseSource, Scores,
 };
-use super::estimate::Estimator;
+use crate::localize::estimate::Estimator;
 use crate::scenario::Scenario;
 
 /// `llrp-gateway bench localize`.
@@ -121,7 +121,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         let weak = run
             .reads
             .iter()
-            .filter(|r| super::ingest::under_floor(r, Some(floor)))
+            .filter(|r| crate::localize::ingest::under_floor(r, Some(floor)))
             .count();
         println!(
             "Reads weaker than {floor} dBm set aside: {weak} of {}\n",
@@ -200,7 +200,7 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
         println!("relock (calibrated): the offsets between antennas measured on the reference tags; (not calibrated): the references not told to relock.");
     }
     if args.live_speed > 0.0 {
-        match super::bench_live::measure(&run, args.live_speed) {
+        match super::live::measure(&run, args.live_speed) {
             Ok(l) => println!(
                 "\nLive (relock, true poses, the reads offered at {}x real time, {:.0} reads/s): {} estimate updates over HTTP (/api/events); read-to-HTTP latency p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} inputs dropped.",
                 args.live_speed,

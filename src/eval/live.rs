@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 
 use super::bench::Run;
-use super::live::{Input, Live, Settings};
+use crate::localize::live::{Input, Live, Settings};
 
 /// Latency percentiles of the live updates (s).
 #[derive(Clone, Debug, PartialEq)]

@@ -1,0 +1,11 @@
+//! Evaluation tools that drive the simulator and the localizer from above: `bench localize`
+//! ([`cli`], [`mod@bench`]: a scenario simulated faster than real time, localized by every
+//! estimator, scored against the truth), its live part ([`live`]: read-to-HTTP latency), the
+//! Monte-Carlo variants of S3 ([`montecarlo`]) and the plot ([`plot`]). The localizer itself
+//! ([`crate::localize`]) sees only reads and poses; these tools hold the truth beside them.
+
+pub mod bench;
+pub mod cli;
+pub mod live;
+pub mod montecarlo;
+pub mod plot;
