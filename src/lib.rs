@@ -2,6 +2,7 @@
 //! client and frame decoder. The LLRP codec lives in the `llrp` crate (`protocol/`).
 
 pub mod alloc;
+pub mod cli;
 pub mod decode;
 pub mod eval;
 pub mod files;

@@ -100,7 +100,7 @@ enum Command {
     /// Gateway: turn the LLRP streams of a pcap or pcapng capture into a recording.
     Import(llrp_gateway::record::pcapng::ImportArgs),
     /// Localizer: locate every tag of a recording or a reads file (docs/localize.md).
-    Localize(llrp_gateway::localize::command::LocalizeArgs),
+    Localize(llrp_gateway::cli::localize::LocalizeArgs),
     /// Tool: decode LLRP frames and print one JSON object per message (docs/codec.md).
     Decode {
         /// Input file with LLRP frames; `-` or nothing reads standard input.
@@ -134,7 +134,7 @@ fn main() -> ExitCode {
         Command::Inventory(args) => llrp_gateway::inventory::run(args),
         Command::Export(args) => llrp_gateway::record::pcapng::run_export(&args),
         Command::Import(args) => llrp_gateway::record::pcapng::run_import(&args),
-        Command::Localize(args) => llrp_gateway::localize::command::run(args),
+        Command::Localize(args) => llrp_gateway::cli::localize::run(args),
         Command::Bench(BenchCommand::Localize(args)) => llrp_gateway::eval::cli::run(args),
         Command::Bench(BenchCommand::Realism(args)) => llrp_gateway::realism::run(args),
         Command::Sim {

@@ -143,14 +143,6 @@ const LAYERS: &[Layer] = &[
 /// Uses from before the rules, as (file under `src/`, name): each one is a layering fault to
 /// remove (issue 42), and is listed here only so that the test catches new ones meanwhile.
 const KNOWN: &[(&str, &str)] = &[
-    // The `localize` command reads recordings and files, and starts MQTT workers: it belongs
-    // with the application's commands.
-    ("localize/command.rs", "fleet"),
-    ("localize/command.rs", "files"),
-    // Offline localization reads recordings: the reading belongs to the application.
-    ("localize/offline.rs", "record"),
-    // Phase series use the physics' 3-vector and distance: the shared vocabulary's to hold.
-    ("localize/series.rs", "physics"),
     // The published state carries the HTTP event stream's tokio broadcast channel: the
     // feed's to carry, between the localizer and the application.
     ("localize/shared.rs", "tokio"),

@@ -7,7 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use llrp_gateway::localize::offline::{load_reads, SettingsFile};
+use llrp_gateway::cli::localize::load_reads;
+use llrp_gateway::localize::offline::SettingsFile;
 use llrp_gateway::localize::poses::Poses;
 use llrp_gateway::reads::{write_jsonl, AntennaPose};
 

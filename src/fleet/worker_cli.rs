@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use super::schema::DEFAULT_SHARDS;
 use super::url::BrokerUrl;
 use super::worker::{parse_shards, Worker, WorkerOptions};
-use crate::localize::command::LocalizeArgs;
+use crate::cli::localize::LocalizeArgs;
 use crate::localize::offline::SettingsFile;
 use crate::localize::poses::Poses;
 

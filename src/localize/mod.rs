@@ -6,14 +6,13 @@
 //! [`calibrate`]), the min-distance linear model ([`linear`]), hyperbolic intersection
 //! ([`hyperbolic`]), 3D by loci intersection ([`loci3d`]), fingerprinting ([`fingerprint`]),
 //! the multi-hypothesis EKF ([`mhekf`]) and distributed WLS by consensus ([`wls`]); estimates
-//! with covariance and state ([`estimate`]), the pose error's share of it ([`uncertainty`]); the live worker ([`live`], [`shared`]), the
-//! `localize` command ([`command`], [`offline`]); `bench localize` drives it from above
-//! ([`crate::eval`]). It sees
+//! with covariance and state ([`estimate`]), the pose error's share of it ([`uncertainty`]); the live worker ([`live`], [`shared`]), offline
+//! localization ([`offline`]); the `localize` command ([`crate::cli::localize`]) and `bench
+//! localize` ([`crate::eval`]) drive it from above. It sees
 //! only reads and poses, never simulator internals, so it works the same on a real reader's
 //! data.
 
 pub mod calibrate;
-pub mod command;
 pub mod estimate;
 pub mod fingerprint;
 pub mod geometry;
@@ -38,6 +37,14 @@ mod synthetic;
 pub mod tap;
 pub mod uncertainty;
 pub mod wls;
+
+/// A point or vector in metres (x, y, z).
+pub type Vec3 = [f64; 3];
+
+/// Distance between two points (m).
+pub fn distance(a: Vec3, b: Vec3) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+}
 
 /// Speed of light (m/s), for a channel's wavelength.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;

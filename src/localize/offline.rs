@@ -7,7 +7,6 @@
 //! height and on the side its yaw faces, with the phase sign +1.
 
 use std::collections::BTreeMap;
-use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -18,8 +17,7 @@ use super::poses::{PoseError, Poses};
 use super::refine::{refined_poses, PoseErrorModel};
 use super::series::Ambiguity;
 use super::shared::{TagJson, TagsJson};
-use crate::reads::{Read, ReadDecoder};
-use crate::record::{Direction, RecordError, Recording};
+use crate::reads::Read;
 
 /// Why `localize` could not run.
 #[derive(Debug, thiserror::Error)]
@@ -31,14 +29,6 @@ pub enum OfflineError {
         path: PathBuf,
         /// Why.
         source: std::io::Error,
-    },
-    /// The recording is bad.
-    #[error("{path}: {source}")]
-    Recording {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        source: RecordError,
     },
     /// A line of the reads file is bad.
     #[error("{path}: line {line}: {message}")]
@@ -207,46 +197,6 @@ impl SettingsFile {
         }
         Ok(s)
     }
-}
-
-/// The reads of a recording (every connection's frames from the reader) or a reads file
-/// (one JSON read a line), told apart by the first line.
-pub fn load_reads(path: &Path) -> Result<Vec<Read>, OfflineError> {
-    let io = |source| OfflineError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let file = std::fs::File::open(path).map_err(io)?;
-    let mut input = std::io::BufReader::new(file);
-    let first = input.fill_buf().map_err(io)?;
-    if !first.starts_with(b"{\"llrp_recording\"") {
-        return crate::reads::read_jsonl(input).map_err(|e| OfflineError::Reads {
-            path: path.to_owned(),
-            line: e.line,
-            message: e.message,
-        });
-    }
-    let recording = Recording::read(input).map_err(|source| OfflineError::Recording {
-        path: path.to_owned(),
-        source,
-    })?;
-    let upstream = &recording.header.upstream;
-    let reader = upstream
-        .strip_prefix("sim:")
-        .unwrap_or(upstream)
-        .to_string();
-    let mut reads = Vec::new();
-    for conn in recording.connections() {
-        let mut decoder = ReadDecoder::new(Some(reader.clone()));
-        for (at, dir, frame) in recording.frames(conn) {
-            // An RO_ACCESS_REPORT that does not decode is skipped: its reads are lost, the
-            // others are not.
-            if dir == Direction::FromReader {
-                let _ = decoder.frame(frame, at.utc_us, &mut reads);
-            }
-        }
-    }
-    Ok(reads)
 }
 
 /// What a `localize` run found.

@@ -10,7 +10,7 @@
 //! halves to λ/8. A series never crosses
 //! channels: each channel has its own λ and φ0.
 
-use crate::physics::geometry::{distance, Vec3};
+use super::{distance, Vec3};
 
 /// How a reader's phase is ambiguous.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

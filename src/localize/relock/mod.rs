@@ -10,7 +10,7 @@ use std::borrow::Cow;
 
 use nalgebra::DVector;
 
-use super::{join, lanes};
+use super::{distance, join, lanes};
 
 mod bins;
 mod cost;
@@ -292,11 +292,6 @@ const FINE_TOP: usize = 8;
 /// The position of a solution's parameters.
 fn position(p: &DVector<f64>, s: &Search) -> [f64; 3] {
     [p[0], p[1], if s.dims == 3 { p[2] } else { s.z }]
-}
-
-/// Distance between two points (m).
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
 }
 
 /// The antennas' box over `obs` (m).

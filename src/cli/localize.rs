@@ -1,12 +1,15 @@
 //! The `localize` command line: reads a recording or a reads file, localizes every tag and
 //! writes the estimates as `GET /api/tags` does, with a progress bar on long inputs.
 
-use std::path::PathBuf;
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use super::estimate::Estimator;
-use super::offline::{self, Progress, SettingsFile};
-use super::poses::Poses;
+use crate::localize::estimate::Estimator;
+use crate::localize::offline::{self, Progress, SettingsFile};
+use crate::localize::poses::Poses;
+use crate::reads::{Read, ReadDecoder};
+use crate::record::{Direction, RecordError, Recording};
 
 /// Inputs this long (reads) get a progress bar on a terminal.
 const PROGRESS_FROM: usize = 100_000;
@@ -85,7 +88,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         inputs.extend(args.settings.as_deref());
         Some(crate::files::Output::create(output, &inputs, args.force).map_err(|e| e.to_string())?)
     };
-    let reads = offline::load_reads(input).map_err(|e| e.to_string())?;
+    let reads = load_reads(input).map_err(|e| e.to_string())?;
     let bar = if reads.len() >= PROGRESS_FROM {
         indicatif::ProgressBar::new(reads.len() as u64)
     } else {
@@ -175,4 +178,75 @@ fn set_aside_hints(a: &crate::localize::ingest::SetAside, have_poses: bool) -> V
         ));
     }
     hints
+}
+
+/// Why the reads of `localize`'s input could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadsError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The recording is bad.
+    #[error("{path}: {source}")]
+    Recording {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: RecordError,
+    },
+    /// A line of the reads file is bad.
+    #[error("{path}: line {line}: {message}")]
+    Reads {
+        /// The file.
+        path: PathBuf,
+        /// The line.
+        line: usize,
+        /// Why.
+        message: String,
+    },
+}
+
+/// The reads of a recording (every connection's frames from the reader) or a reads file
+/// (one JSON read a line), told apart by the first line.
+pub fn load_reads(path: &Path) -> Result<Vec<Read>, ReadsError> {
+    let io = |source| ReadsError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut input = std::io::BufReader::new(file);
+    let first = input.fill_buf().map_err(io)?;
+    if !first.starts_with(b"{\"llrp_recording\"") {
+        return crate::reads::read_jsonl(input).map_err(|e| ReadsError::Reads {
+            path: path.to_owned(),
+            line: e.line,
+            message: e.message,
+        });
+    }
+    let recording = Recording::read(input).map_err(|source| ReadsError::Recording {
+        path: path.to_owned(),
+        source,
+    })?;
+    let upstream = &recording.header.upstream;
+    let reader = upstream
+        .strip_prefix("sim:")
+        .unwrap_or(upstream)
+        .to_string();
+    let mut reads = Vec::new();
+    for conn in recording.connections() {
+        let mut decoder = ReadDecoder::new(Some(reader.clone()));
+        for (at, dir, frame) in recording.frames(conn) {
+            // An RO_ACCESS_REPORT that does not decode is skipped: its reads are lost, the
+            // others are not.
+            if dir == Direction::FromReader {
+                let _ = decoder.frame(frame, at.utc_us, &mut reads);
+            }
+        }
+    }
+    Ok(reads)
 }
