@@ -406,6 +406,28 @@ mod tests {
     }
 
     #[test]
+    fn a_long_rest_does_not_turn_the_line_of_its_track() {
+        // A wobbling drive along y = 0, then 2,000 reads at rest where the estimate says
+        // y = 12 mm (its error frozen with the robot).
+        let mut obs: Vec<Obs> = (0..200)
+            .map(|k| {
+                let x = 0.01 * k as f64;
+                at(k * 10_000, [x, 0.01 * (x * 7.0).sin(), 0.5])
+            })
+            .collect();
+        obs.extend((200..2200).map(|k| at(k * 10_000, [2.0, 0.012, 0.5])));
+        let moving: Vec<[f64; 3]> = obs[..200].iter().map(|o| o.antenna).collect();
+        let (origin, u, _) = linear::line(&moving).expect("a line");
+        let track_of = vec![0; obs.len()];
+        straighten(&mut obs, &track_of, 1, 0.015);
+        // Where the drive's own line is at the first read's along-line position.
+        let a = obs[0].antenna;
+        let t: f64 = (0..2).map(|k| (a[k] - origin[k]) * u[k]).sum();
+        let y = origin[1] + t * u[1];
+        assert!((a[1] - y).abs() < 0.002, "{} mm off", (a[1] - y) * 1e3);
+    }
+
+    #[test]
     fn a_rest_longer_than_the_correlation_time_weighs_as_one_correlation_time_of_driving() {
         // 2 s of driving, then 20 s at rest, then 1 s at rest elsewhere (shorter than the
         // correlation time: as driving), a read every 10 ms: 300 reads in 3 s of driving.

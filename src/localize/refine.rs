@@ -450,4 +450,26 @@ mod tests {
         let corrected = refine(&ingest, &reported, &tags, &|_| 1.0, &m);
         assert_eq!(corrected.samples(), reported.samples());
     }
+
+    #[test]
+    fn a_resting_antennas_reads_give_residuals_as_thinning_keeps_them() {
+        // 100 reads 1 cm apart, then 500 from one place: the rest gives its first 16.
+        let tag = [0.5, 1.0, 0.5];
+        let lambda = crate::localize::SPEED_OF_LIGHT / FREQUENCY_HZ as f64;
+        let at = |k: u64| [0.01 * k.min(100) as f64, 0.0, 0.5];
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        for k in 0..600u64 {
+            let d = crate::localize::distance(at(k), tag);
+            ingest.push(&read(
+                "AA",
+                k * 10_000,
+                4.0 * std::f64::consts::PI * d / lambda,
+                at(k),
+            ));
+        }
+        let tags = BTreeMap::from([("AA".to_string(), tag)]);
+        let res = residuals(&ingest, &tags, &|_| 1.0);
+        let n: usize = res.values().map(Vec::len).sum();
+        assert_eq!(n, 100 + crate::localize::series::KEPT_AT_ONE_PLACE);
+    }
 }
