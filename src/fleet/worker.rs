@@ -515,7 +515,10 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// Publishes every estimate update, retained, and the presence events they and the silences
 /// make, until `stop`.
 fn publish_estimates(out: &Out, presence: &Mutex<Presence>, stop: &AtomicBool) {
-    let mut rx = out.shared.subscribe();
+    let (tx, mut rx) = tokio::sync::broadcast::channel(crate::localize::shared::EVENT_BUFFER);
+    // No subscriber (this loop gone) is not an error.
+    out.shared
+        .on_publish(move |view| drop(tx.send(std::sync::Arc::clone(view))));
     let mut ticked = Instant::now();
     while !stop.load(Ordering::Relaxed) {
         if ticked.elapsed() >= Duration::from_millis(200) {

@@ -96,7 +96,7 @@ pub(super) async fn events(
     closing: Option<Extension<Closing>>,
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let start = Feed {
-        rx: state.shared.subscribe(),
+        rx: state.events.subscribe(),
         closing: closing.map(|Extension(Closing(rx))| rx),
         opened: false,
     };

@@ -83,6 +83,8 @@ pub struct AppState {
     pub options: Arc<HttpOptions>,
     /// The OpenAPI document, serialised once.
     openapi: Arc<String>,
+    /// Estimate updates for the event stream, from the localizer's [`Shared::on_publish`].
+    events: tokio::sync::broadcast::Sender<Arc<crate::localize::shared::TagView>>,
 }
 
 /// Whether a listener on `addr` must require the token on every route: it is not loopback.
@@ -131,8 +133,13 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
     let body_limit = options.body_limit;
     let body_read = options.limits.body_read;
     let cors = cors(&options.browser);
+    let (events, _) = tokio::sync::broadcast::channel(crate::localize::shared::EVENT_BUFFER);
+    let tx = events.clone();
+    // No subscriber is not an error.
+    shared.on_publish(move |view| drop(tx.send(Arc::clone(view))));
     let state = AppState {
         shared,
+        events,
         tap,
         options: Arc::new(options),
         openapi: Arc::new(openapi),

@@ -8,21 +8,33 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
+use super::estimate::{Estimate, State};
+use super::poses::PoseSample;
+use crate::reads::Read;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::histogram::Histogram;
 use prometheus_client::registry::Registry;
 use serde::Serialize;
-use tokio::sync::broadcast;
-
-use super::estimate::{Estimate, State};
-use super::poses::PoseSample;
-use crate::reads::Read;
 
 /// Recent reads kept per tag for its detail view.
 pub const RECENT_READS: usize = 32;
 
-/// Estimate updates buffered for a slow event-stream subscriber before it misses some.
+/// Estimate updates an event stream should buffer for a slow subscriber before it misses
+/// some (the HTTP event stream's and the MQTT publisher's).
 pub const EVENT_BUFFER: usize = 1024;
+
+/// One told of every published estimate ([`Shared::on_publish`]).
+type Subscriber = Box<dyn Fn(&Arc<TagView>) + Send + Sync>;
+
+/// Those told of every published estimate.
+#[derive(Default)]
+struct Subscribers(RwLock<Vec<Subscriber>>);
+
+impl std::fmt::Debug for Subscribers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} subscribers", read(&self.0).len())
+    }
+}
 
 /// One tag as the API shows it.
 #[derive(Clone, Debug, Serialize)]
@@ -317,7 +329,7 @@ pub struct Shared {
     tags: RwLock<BTreeMap<String, TagView>>,
     readers: RwLock<BTreeMap<String, ReaderView>>,
     truth: RwLock<Option<Truth>>,
-    events: broadcast::Sender<Arc<TagView>>,
+    subscribers: Subscribers,
     /// Counters for `/metrics`.
     pub metrics: Metrics,
     generation: AtomicU64,
@@ -345,7 +357,7 @@ impl Shared {
             tags: RwLock::default(),
             readers: RwLock::default(),
             truth: RwLock::default(),
-            events: broadcast::channel(EVENT_BUFFER).0,
+            subscribers: Subscribers::default(),
             metrics: Metrics::new(),
             generation: AtomicU64::new(0),
         }
@@ -371,10 +383,10 @@ impl Shared {
         read(&self.truth).clone()
     }
 
-    /// Estimate updates from now on (a subscriber too slow for [`EVENT_BUFFER`] of them
-    /// is told how many it missed).
-    pub fn subscribe(&self) -> broadcast::Receiver<Arc<TagView>> {
-        self.events.subscribe()
+    /// Calls `f` with every estimate published from now on, on the localizer's thread: `f`
+    /// must not block (the application's event streams hand it to a bounded channel).
+    pub fn on_publish(&self, f: impl Fn(&Arc<TagView>) + Send + Sync + 'static) {
+        write(&self.subscribers.0).push(Box::new(f));
     }
 
     /// How many times the tags changed (for pollers).
@@ -424,8 +436,9 @@ impl Shared {
             Arc::new(view.clone())
         };
         self.generation.fetch_add(1, Ordering::Relaxed);
-        // No subscriber is not an error.
-        let _ = self.events.send(snapshot);
+        for f in read(&self.subscribers.0).iter() {
+            f(&snapshot);
+        }
     }
 }
 
