@@ -1,5 +1,16 @@
-//! UTC times as text: one formatter for every timestamp the project writes (MQTT read
-//! messages, pcapng comments), correct for every `u64` of microseconds a reader may send.
+//! UTC times: the wall clock ([`now_us`]) every layer stamps with, and one formatter for
+//! every timestamp the project writes (MQTT read messages, pcapng comments), correct for
+//! every `u64` of microseconds a reader may send.
+
+use std::time::{SystemTime, UNIX_EPOCH};
+
+/// The wall clock now, UTC µs since the Unix epoch (0 if the clock is before it).
+pub fn now_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0)
+}
 
 /// `us` (UTC µs since the Unix epoch) as RFC 3339 with microseconds, e.g.
 /// `2023-11-14T22:13:20.000010Z`. RFC 3339 has four-digit years only: a time past

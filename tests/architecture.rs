@@ -76,6 +76,26 @@ const LAYERS: &[Layer] = &[
         modules: &[SIMULATOR, &["localize"], APPLICATION],
         crates: ASYNC,
     },
+    // Recordings (format, recorder, replay session, pcapng) know the codec, reads, files and
+    // the wall clock; the servers and clients that feed them are above.
+    Layer {
+        dir: "record",
+        modules: &[
+            SIMULATOR,
+            &[
+                "localize",
+                "net",
+                "http",
+                "fleet",
+                "gateway",
+                "inventory",
+                "cli",
+                "eval",
+                "realism",
+            ],
+        ],
+        crates: &["axum", "hyper", "hyper_util", "rumqttc"],
+    },
 ];
 
 /// Uses from before the rules, as (file under `src/`, name): each one is a layering fault to

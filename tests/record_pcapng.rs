@@ -21,8 +21,8 @@ use llrp_gateway::net::client::{is_unsolicited, Client, ClientError};
 use llrp_gateway::net::clock::Speed;
 use llrp_gateway::record::format::{encode_entry, encode_header};
 use llrp_gateway::record::pcapng;
-use llrp_gateway::record::writer::utc_now_us;
 use llrp_gateway::record::{Direction, Entry, Event, Header, Recording, Stamp};
+use llrp_gateway::utc::now_us as utc_now_us;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))

@@ -62,7 +62,7 @@ impl PublishOptions {
         PublishOptions {
             url,
             gateway: gateway.to_owned(),
-            run: crate::net::clock::utc_now_us(),
+            run: crate::utc::now_us(),
             shard_count: schema::DEFAULT_SHARDS,
             queue: 10_000,
             window: Duration::ZERO,

@@ -2,17 +2,9 @@
 
 use std::str::FromStr;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use crate::reader::session::Deadline;
-
-/// The wall clock now, UTC µs since the Unix epoch (0 if the clock is before it).
-pub fn utc_now_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0)
-}
 
 /// How fast simulated time runs.
 #[derive(Clone, Copy, Debug, PartialEq)]

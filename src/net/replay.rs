@@ -20,7 +20,7 @@ use super::connection::{Connection, Io};
 use super::tls::Acceptor;
 use crate::localize::live::{Input, Tap};
 use crate::record::replay::{ReplayOptions, ReplaySession, Script};
-use crate::record::writer::utc_now_us;
+use crate::utc::now_us as utc_now_us;
 
 /// Bytes queued for the client before the session stops moving due frames to it.
 const QUEUE_BYTES: usize = 256 * 1024;

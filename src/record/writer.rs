@@ -34,7 +34,7 @@ pub struct RecordOptions {
     pub max_bytes: Option<u64>,
 }
 
-pub use crate::net::clock::utc_now_us;
+use crate::utc::now_us as utc_now_us;
 
 /// A handle to a running recording; cheap to clone, one per connection.
 #[derive(Clone, Debug)]

@@ -305,7 +305,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     let world = World::new(scenario);
     // Simulated time 0 is this instant: the readers' UTC timestamps then track the wall clock
     // at real-time speed, however long the world took to build.
-    let utc0 = crate::net::clock::utc_now_us();
+    let utc0 = crate::utc::now_us();
     let clock = Arc::new(Clock::new(opts.speed));
     let (shutdown, rx) = watch::channel(false);
     let mut addrs = Vec::new();

@@ -36,7 +36,7 @@ mod read_stream;
 mod spec;
 
 pub use backoff::Backoff;
-pub use read_stream::{utc_now_us, ReadStream};
+pub use read_stream::ReadStream;
 pub use spec::InventorySpec;
 
 /// Errors of the client.

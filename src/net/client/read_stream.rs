@@ -1,5 +1,5 @@
 //! [`ReadStream`]: a running inventory on one connection, its reports turned into typed
-//! [`Read`]s, and [`utc_now_us`], the time stamp they get.
+//! [`Read`]s, stamped with the wall clock ([`crate::utc::now_us`]).
 
 use std::time::Duration;
 
@@ -9,7 +9,7 @@ use llrp::Message;
 use super::{Client, ClientError, InventorySpec};
 use crate::reads::{Read, ReadDecoder};
 
-pub use crate::net::clock::utc_now_us;
+use crate::utc::now_us as utc_now_us;
 
 /// A running inventory on one connection: its reports as typed [`Read`]s, its keepalives
 /// answered, and its channel frequencies from the hop table the reader itself advertises.

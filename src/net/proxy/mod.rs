@@ -42,8 +42,8 @@ use pump::{pump, write_flushed, End, Tee};
 use super::stream::{Stream, WriteHalf};
 use super::tls;
 use crate::reads::Read;
-use crate::record::writer::utc_now_us;
 use crate::record::{Direction, Event, Recorder};
+use crate::utc::now_us as utc_now_us;
 
 /// Bytes one direction reads at a time.
 const CHUNK: usize = 64 * 1024;

@@ -15,8 +15,8 @@ use tokio::sync::watch;
 use super::keepalive::LinkNote;
 use super::{Session, Tapped, CHUNK};
 use crate::reads::{Read, ReadDecoder};
-use crate::record::writer::utc_now_us;
 use crate::record::{Direction, Entry, ReaderInfo, Recorder};
+use crate::utc::now_us as utc_now_us;
 
 /// How a forwarding direction ended.
 pub(super) enum End {
