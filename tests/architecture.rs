@@ -96,11 +96,29 @@ const LAYERS: &[Layer] = &[
         ],
         crates: &["axum", "hyper", "hyper_util", "rumqttc"],
     },
+    // MQTT publishing and workers take the localizer's feed and state; they do not reach into
+    // the simulator, the HTTP server or the other commands.
+    Layer {
+        dir: "fleet",
+        modules: &[
+            SIMULATOR,
+            &["http", "gateway", "inventory", "cli", "eval", "realism"],
+        ],
+        crates: &["axum", "hyper", "hyper_util"],
+    },
 ];
 
 /// Uses from before the rules, as (file under `src/`, name): each one is a layering fault to
 /// remove (issue 42), and is listed here only so that the test catches new ones meanwhile.
-const KNOWN: &[(&str, &str)] = &[];
+const KNOWN: &[(&str, &str)] = &[
+    // The worker's command assembles localizer, settings, HTTP and MQTT itself, as `sim` and
+    // `proxy` do theirs: one composition root for every command is to replace them.
+    ("fleet/worker_cli.rs", "cli"),
+    ("fleet/worker_cli.rs", "gateway"),
+    ("fleet/worker_cli.rs", "http"),
+    ("fleet/worker_cli.rs", "scenario"),
+    ("fleet/worker_cli.rs", "sim"),
+];
 
 /// Every `.rs` file under `dir`.
 fn sources(dir: &Path) -> Vec<PathBuf> {

@@ -286,7 +286,7 @@ impl Run {
             },
             ["refs"] => return self.batch(&rest, p, true),
             ["status", "gateway", _] | ["status", _] => self.status(&p.payload),
-            ["poses", _, _] => match crate::http::poses::parse_poses(&p.payload) {
+            ["poses", _, _] => match crate::localize::poses::parse_poses(&p.payload) {
                 Ok(poses) => {
                     self.offer(Input::Poses(poses));
                     true

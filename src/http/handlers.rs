@@ -195,7 +195,8 @@ pub(super) async fn post_poses(
             ApiError::new(r.status(), r.body_text())
         }
     })?;
-    let poses = super::parse_poses(&body).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
+    let poses = crate::localize::poses::parse_poses(&body)
+        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
     let n = poses.len();
     if !state.tap.offer(Input::Poses(poses)) {
         return Err(ApiError::new(

@@ -27,12 +27,10 @@ mod events;
 pub mod guard;
 mod handlers;
 pub mod launch;
-pub mod poses;
 pub mod schema;
 mod serve;
 
 pub use guard::BrowserRules;
-pub use poses::parse_poses;
 pub use serve::{serve, ServerLimits};
 
 /// Default largest request body (`POST /api/poses`): 1 MiB.

@@ -16,6 +16,10 @@ use serde::{Deserialize, Serialize};
 
 use super::series::fold;
 
+mod message;
+
+pub use message::parse_poses;
+
 /// One pose sample: a line of the pose file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -1,8 +1,9 @@
-//! The body of `POST /api/poses`: one pose object, a JSON array of them, or JSON Lines.
+//! A pose message: one pose object, a JSON array of them, or JSON Lines, as `POST /api/poses`
+//! takes it and a localizer worker takes it from MQTT.
 
 use serde_json::Value;
 
-use crate::localize::poses::{validate, PoseSample};
+use super::{validate, PoseSample};
 
 /// The poses of `body` (one JSON object, an array of them, or JSON Lines: objects separated
 /// by whitespace), every one checked; else why not, naming the pose's index (0-based), the
