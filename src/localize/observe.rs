@@ -95,14 +95,9 @@ pub fn calibrated_observations(
         }
     }
     if let Some(m) = &g.pose_error {
-        straighten(&mut obs, &track_of, tracks.len(), m.sigma_m);
-        weigh_parked(
-            &mut obs,
-            &reported,
-            &track_of,
-            tracks.len(),
-            m.correlation_s,
-        );
+        let by_track = in_time(&obs, &track_of, tracks.len());
+        straighten(&mut obs, &by_track, m.sigma_m);
+        weigh_parked(&mut obs, &reported, &by_track, m.correlation_s);
     }
     // The most-read reader, the first by name on a tie.
     let facing = per_reader
@@ -117,18 +112,29 @@ pub fn calibrated_observations(
     }
 }
 
-/// Each (reader, antenna) track of `obs` (`track_of` its number per phase) whose antenna
+/// Per track, the indices of its phases in `obs` in time order (`track_of`: each phase's
+/// track, of `tracks`).
+fn in_time(obs: &[Obs], track_of: &[usize], tracks: usize) -> Vec<Vec<usize>> {
+    let mut by_track = vec![Vec::new(); tracks];
+    for (i, &k) in track_of.iter().enumerate() {
+        by_track[k].push(i);
+    }
+    for idx in &mut by_track {
+        idx.sort_by_key(|&i| obs[i].t_us);
+    }
+    by_track
+}
+
+/// Each (reader, antenna) track of `obs` (`by_track`: its phases in time order) whose antenna
 /// positions lie within [`linear::MAX_PATH_RMS_M`] and three pose-error σ (`sigma_m`) RMS of a
 /// straight line, moved onto that line: a robot's own pose estimate scatters about the
 /// straight path it drives, and that scatter is its error, not the antenna's motion (the
 /// prior `linear` and `hyperbolic` make; docs/localize.md "Straight tracks").
-fn straighten(obs: &mut [Obs], track_of: &[usize], tracks: usize, sigma_m: f64) {
+fn straighten(obs: &mut [Obs], by_track: &[Vec<usize>], sigma_m: f64) {
     let limit = linear::MAX_PATH_RMS_M.min(3.0 * sigma_m);
-    for track in 0..tracks {
+    for idx in by_track {
         // The line through the positions in time order as thinning keeps them (a rest's
         // first reads), so that neither a long rest nor its thinning moves it.
-        let mut idx: Vec<usize> = (0..obs.len()).filter(|&i| track_of[i] == track).collect();
-        idx.sort_by_key(|&i| obs[i].t_us);
         let mut place = Places::default();
         let points: Vec<[f64; 3]> = idx
             .iter()
@@ -141,15 +147,15 @@ fn straighten(obs: &mut [Obs], track_of: &[usize], tracks: usize, sigma_m: f64) 
         if perp > limit || u[2].abs() > linear::MAX_SLOPE {
             continue;
         }
-        for (o, _) in obs.iter_mut().zip(track_of).filter(|(_, &k)| k == track) {
-            let a = o.antenna;
+        for &i in idx {
+            let a = obs[i].antenna;
             let t: f64 = (0..3).map(|k| (a[k] - origin[k]) * u[k]).sum();
-            o.antenna = [origin[0] + t * u[0], origin[1] + t * u[1], a[2]];
+            obs[i].antenna = [origin[0] + t * u[0], origin[1] + t * u[1], a[2]];
         }
     }
 }
 
-/// The phases of each run of a track (`track_of` its number per phase) read from one
+/// The phases of each run of a track (`by_track`: its phases in time order) read from one
 /// reported place (`reported`, within [`SAME_PLACE_M`]) for longer than the pose error's
 /// correlation time `correlation_s`, weighted down so that the run weighs as much as the
 /// track's reads of one correlation time while it moves: a resting robot's pose error rests
@@ -159,14 +165,11 @@ fn straighten(obs: &mut [Obs], track_of: &[usize], tracks: usize, sigma_m: f64) 
 fn weigh_parked(
     obs: &mut [Obs],
     reported: &[[f64; 3]],
-    track_of: &[usize],
-    tracks: usize,
+    by_track: &[Vec<usize>],
     correlation_s: f64,
 ) {
     let tau_us = correlation_s * 1e6;
-    for track in 0..tracks {
-        let mut idx: Vec<usize> = (0..obs.len()).filter(|&i| track_of[i] == track).collect();
-        idx.sort_by_key(|&i| obs[i].t_us);
+    for idx in by_track {
         // The runs at one place, and which of them are rests.
         let mut runs: Vec<(std::ops::Range<usize>, bool)> = Vec::new();
         let mut start = 0;
@@ -358,7 +361,7 @@ mod tests {
         assert!(!found, "{wrong:?}");
     }
 
-    /// A phase of track `track` read at `t_us` from `antenna`.
+    /// A phase read at `t_us` from `antenna`.
     fn at(t_us: u64, antenna: [f64; 3]) -> Obs {
         Obs {
             phase_rad: 0.0,
@@ -390,7 +393,8 @@ mod tests {
         }));
         let track_of: Vec<usize> = (0..400).map(|i| i / 200).collect();
         let before = obs.clone();
-        straighten(&mut obs, &track_of, 2, 0.015);
+        let by_track = in_time(&obs, &track_of, 2);
+        straighten(&mut obs, &by_track, 0.015);
         let points: Vec<[f64; 3]> = obs[..200].iter().map(|o| o.antenna).collect();
         let (_, u, perp) = linear::line(&points).expect("a line");
         assert!(perp < 1e-9, "{perp} m off the line");
@@ -419,7 +423,8 @@ mod tests {
         let moving: Vec<[f64; 3]> = obs[..200].iter().map(|o| o.antenna).collect();
         let (origin, u, _) = linear::line(&moving).expect("a line");
         let track_of = vec![0; obs.len()];
-        straighten(&mut obs, &track_of, 1, 0.015);
+        let by_track = in_time(&obs, &track_of, 1);
+        straighten(&mut obs, &by_track, 0.015);
         // Where the drive's own line is at the first read's along-line position.
         let a = obs[0].antenna;
         let t: f64 = (0..2).map(|k| (a[k] - origin[k]) * u[k]).sum();
@@ -439,7 +444,8 @@ mod tests {
             obs.extend((2200..2300).map(|k| at(k * 10_000, [1.5, 0.0, 0.5])));
             let reported: Vec<[f64; 3]> = obs.iter().map(|o| o.antenna).collect();
             let track_of = vec![0; obs.len()];
-            weigh_parked(&mut obs, &reported, &track_of, 1, 2.0);
+            let by_track = in_time(&obs, &track_of, 1);
+            weigh_parked(&mut obs, &reported, &by_track, 2.0);
             obs
         };
         for obs in [
