@@ -217,10 +217,11 @@ fn an_antenna_facing_no_tag_moves_on_after_one_empty_round() {
         reads(&s, spec, 10).values().map(Vec::len).sum()
     };
     let (alone, with_empty) = (count(vec![1]), count(vec![1, 2]));
-    // A fixed 25 ms dwell on the empty antenna would halve the reads; one empty round
-    // (about a millisecond in the default mode) costs at most a few per cent.
+    // A fixed 25 ms dwell on the empty antenna would halve the reads. One empty round (about
+    // a millisecond in the default mode) costs a few per cent, and leaving antenna 1 cuts its
+    // round in progress at every dwell's end (alone, its rounds run on): about a tenth.
     assert!(
-        with_empty as f64 > 0.9 * alone as f64 && with_empty <= alone,
+        with_empty as f64 > 0.8 * alone as f64 && with_empty <= alone,
         "antenna 1 alone {alone}, with the empty antenna 2 {with_empty}"
     );
 }

@@ -79,6 +79,9 @@ pub struct Air {
     pub session: u8,
     /// Search target.
     pub target: Target,
+    /// The antenna is its AISpec's only one, so the reader never leaves it: rounds run on
+    /// across epochs ([`super::rounds`]).
+    pub alone: bool,
 }
 
 impl Default for Air {
@@ -88,6 +91,7 @@ impl Default for Air {
             mode: RfMode::impinj(1000).unwrap_or(RfMode::IMPINJ_MODE_2),
             session: 2,
             target: Target::Dual,
+            alone: false,
         }
     }
 }

@@ -5,8 +5,16 @@
 //! that answers alone (or is captured) becomes a read if the channel at that instant lets the
 //! reader decode it (`Model::reply_at`).
 //!
-//! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), so
-//! the reads of a window are those of the epochs it overlaps that fall inside it: a window
+//! An antenna the AISpec's rotation never leaves ([`Air::alone`]) runs its rounds on across
+//! epochs, each round with the field of the epoch it starts in, within blocks of
+//! [`BLOCK_EPOCHS`] epochs that cut the round in progress at their end (as a hop would), so
+//! every tag is read once a round, as a real reader reads a few tags (docs/measurement.md
+//! "Read rate"). Elsewhere the antenna's dwell ends with its epoch and cuts the round in
+//! progress, as the reader moves to the next antenna.
+//!
+//! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), and in
+//! a block on the block's epochs before it, so the reads of a window are those of the epochs
+//! it overlaps (computed from its first block's start) that fall inside it: a window
 //! split in two gives the same reads as the whole, and windows may be computed in any order
 //! and on any thread. A single-target inventory (sessions 1–3) is the exception: it depends on
 //! the reader's flags, so the reader runs each of its epochs once, in time order, from when the
@@ -26,6 +34,15 @@ pub const MAX_EPOCHS: u64 = 1 << 20;
 
 /// EPC length the slot durations are worked out for (the common 96 bits).
 const EPC_BITS: u32 = 96;
+
+/// Epochs in a block of an antenna the reader never leaves (200 ms, about a hop's dwell).
+pub const BLOCK_EPOCHS: u64 = 8;
+
+/// The end (µs) of the block holding `t_us`.
+pub fn block_end(t_us: u64) -> u64 {
+    let block = BLOCK_EPOCHS * FIELD_BUCKET_US;
+    (t_us / block + 1).saturating_mul(block)
+}
 
 /// The channel of each instant, looked up again only when the time leaves the hop dwell.
 pub(super) struct ChannelClock {
@@ -192,18 +209,37 @@ impl Model {
         ]);
         let mut clock = ChannelClock::new(pinned);
         let mut classified: Option<Arc<Classified>> = None;
+        // Rounds run on across the epochs of a block (from its start) only where the reader
+        // never leaves the antenna and nothing carries from call to call.
+        let chain = air.alone && pinned.is_none() && flags.is_none();
         let first = t0_us / FIELD_BUCKET_US;
         let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
+        let first = if chain {
+            first / BLOCK_EPOCHS * BLOCK_EPOCHS
+        } else {
+            first
+        };
+        // In a block: how far into this epoch the round begun before it runs (µs).
+        let mut carry = 0.0;
         let mut field = Vec::new();
         let mut levels = Vec::new();
         let mut scratch = gen2::Scratch::default();
         for epoch in first..=last {
             let start = epoch * FIELD_BUCKET_US;
+            if epoch % BLOCK_EPOCHS == 0 {
+                carry = 0.0;
+            }
+            if chain && carry >= FIELD_BUCKET_US as f64 {
+                // A round begun earlier runs through this whole epoch.
+                carry -= FIELD_BUCKET_US as f64;
+                continue;
+            }
             let ch = clock.at(self, start);
             self.open_bucket(antenna, tx, start, ch, &mut classified, bucket);
             self.field_of(bucket, &mut field);
             if field.is_empty() {
                 first_round = false;
+                carry = 0.0;
                 continue;
             }
             levels.clear();
@@ -249,7 +285,9 @@ impl Model {
             let length = to.saturating_sub(from) as f64;
             radio.from_epoch_us = from - start;
             let mut rng = seed::stream_on(prefix, &[epoch, from - start]);
-            let mut spent = 0.0;
+            let block_end_us = block_end(start) as f64;
+            let mut spent = if chain { carry } else { 0.0 };
+            carry = 0.0;
             while spent < length {
                 radio.round_start_us = from as f64 + spent;
                 // Single target: only the tags still in A at the round's start answer.
@@ -275,12 +313,17 @@ impl Model {
                     }
                     _ => &field,
                 };
+                let budget = if chain {
+                    block_end_us - (from as f64 + spent)
+                } else {
+                    length - spent
+                };
                 let r = gen2::round_in(
                     &mut rng,
                     &times,
                     part,
                     qfp,
-                    length - spent,
+                    budget,
                     &mut radio,
                     &mut scratch,
                 );
@@ -289,6 +332,9 @@ impl Model {
                 }
                 spent += r.duration_us;
                 qfp = r.qfp;
+            }
+            if chain && spent > length {
+                carry = spent - length;
             }
         }
         (reads, none_in_a)

@@ -174,7 +174,8 @@ impl Specs {
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
-        let air = super::air::air_for(ips, ctx.config, antenna);
+        let mut air = super::air::air_for(ips, ctx.config, antenna);
+        air.alone = antennas.len() == 1;
         let want = Want {
             phase: content.impinj.phase,
             doppler: content.impinj.doppler,
@@ -345,8 +346,22 @@ impl Specs {
         if self.no_prefetch {
             return slice.compute(ctx.model);
         }
+        // An antenna the reader never leaves is computed a block at a time (its rounds run
+        // on across the block's epochs).
+        let end_of = |alone: bool, t_us: u64| {
+            if alone {
+                crate::physics::rounds::block_end(t_us)
+            } else {
+                dwell_end(t_us)
+            }
+        };
         let dwell = Slice {
-            t1_us: run.slice_end_us.max(slice.t1_us),
+            t1_us: if slice.air.alone {
+                end_of(true, slice.t0_us)
+            } else {
+                run.slice_end_us
+            }
+            .max(slice.t1_us),
             ..*slice
         };
         let config = ctx.config;
@@ -365,7 +380,8 @@ impl Specs {
                 {
                     return None;
                 }
-                let air = super::air::air_for(ips, config, antenna);
+                let mut air = super::air::air_for(ips, config, antenna);
+                air.alone = n == 1;
                 if air.suppresses() {
                     return None;
                 }
@@ -379,7 +395,7 @@ impl Specs {
                     power_dbm: antenna_power(ips, config, antenna),
                     want: slice.want,
                     t0_us,
-                    t1_us: dwell_end(t0_us),
+                    t1_us: end_of(air.alone, t0_us),
                 };
                 t0_us = s.t1_us;
                 return Some(s);
