@@ -79,9 +79,9 @@ pub struct Air {
     pub session: u8,
     /// Search target.
     pub target: Target,
-    /// The antenna is its AISpec's only one, so the reader never leaves it: rounds run on
-    /// across epochs ([`super::rounds`]).
-    pub alone: bool,
+    /// Where the reader never leaves this antenna (its AISpec's only one): when its first
+    /// round began (µs); its rounds run back to back from there ([`super::rounds`]).
+    pub anchor_us: Option<u64>,
 }
 
 impl Default for Air {
@@ -91,7 +91,7 @@ impl Default for Air {
             mode: RfMode::impinj(1000).unwrap_or(RfMode::IMPINJ_MODE_2),
             session: 2,
             target: Target::Dual,
-            alone: false,
+            anchor_us: None,
         }
     }
 }

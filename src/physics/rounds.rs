@@ -5,16 +5,15 @@
 //! that answers alone (or is captured) becomes a read if the channel at that instant lets the
 //! reader decode it (`Model::reply_at`).
 //!
-//! An antenna the AISpec's rotation never leaves ([`Air::alone`]) runs its rounds on across
-//! epochs, each round with the field of the epoch it starts in, within blocks of
-//! [`BLOCK_EPOCHS`] epochs that cut the round in progress at their end (as a hop would), so
-//! every tag is read once a round, as a real reader reads a few tags (docs/measurement.md
-//! "Read rate"). Elsewhere the antenna's dwell ends with its epoch and cuts the round in
-//! progress, as the reader moves to the next antenna.
+//! An antenna the reader never leaves (its AISpec's only one, [`Air::anchor_us`]) is not cut
+//! into epochs: its rounds run back to back from the anchor (when the AISpec's first round
+//! began), each with the field of the epoch it starts in, in blocks of [`BLOCK_US`] whose end
+//! cuts the round in progress (as a hop would); so every tag is read once a round, as a real
+//! reader reads a few tags (docs/measurement.md "Read rate"). A block depends only on the
+//! anchor and its own start (`Model::chained_rounds`).
 //!
-//! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), and in
-//! a block on the block's epochs before it, so the reads of a window are those of the epochs
-//! it overlaps (computed from its first block's start) that fall inside it: a window
+//! An epoch depends only on (seed, reader, antenna, epoch, power, pinned channel, air), so
+//! the reads of a window are those of the epochs it overlaps that fall inside it: a window
 //! split in two gives the same reads as the whole, and windows may be computed in any order
 //! and on any thread. A single-target inventory (sessions 1–3) is the exception: it depends on
 //! the reader's flags, so the reader runs each of its epochs once, in time order, from when the
@@ -35,13 +34,13 @@ pub const MAX_EPOCHS: u64 = 1 << 20;
 /// EPC length the slot durations are worked out for (the common 96 bits).
 const EPC_BITS: u32 = 96;
 
-/// Epochs in a block of an antenna the reader never leaves (200 ms, about a hop's dwell).
-pub const BLOCK_EPOCHS: u64 = 8;
+/// A block of an antenna the reader never leaves (µs; about a hop's dwell).
+pub const BLOCK_US: u64 = 200_000;
 
-/// The end (µs) of the block holding `t_us`.
-pub fn block_end(t_us: u64) -> u64 {
-    let block = BLOCK_EPOCHS * FIELD_BUCKET_US;
-    (t_us / block + 1).saturating_mul(block)
+/// The end (µs) of the block holding `t_us` when blocks start at `anchor_us`.
+pub fn block_end(anchor_us: u64, t_us: u64) -> u64 {
+    let k = t_us.saturating_sub(anchor_us) / BLOCK_US + 1;
+    anchor_us.saturating_add(k.saturating_mul(BLOCK_US))
 }
 
 /// The channel of each instant, looked up again only when the time leaves the hop dwell.
@@ -200,6 +199,15 @@ impl Model {
         if t1_us <= t0_us {
             return (reads, none_in_a);
         }
+        if let Some(anchor) = air
+            .anchor_us
+            .filter(|_| pinned.is_none() && flags.is_none())
+        {
+            return (
+                self.chained_rounds(antenna, anchor, t0_us, t1_us, tx, want, air, bucket),
+                false,
+            );
+        }
         let times = air.mode.slot_times(EPC_BITS);
         let prefix = seed::mix(&[
             self.seed,
@@ -209,37 +217,18 @@ impl Model {
         ]);
         let mut clock = ChannelClock::new(pinned);
         let mut classified: Option<Arc<Classified>> = None;
-        // Rounds run on across the epochs of a block (from its start) only where the reader
-        // never leaves the antenna and nothing carries from call to call.
-        let chain = air.alone && pinned.is_none() && flags.is_none();
         let first = t0_us / FIELD_BUCKET_US;
         let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
-        let first = if chain {
-            first / BLOCK_EPOCHS * BLOCK_EPOCHS
-        } else {
-            first
-        };
-        // In a block: how far into this epoch the round begun before it runs (µs).
-        let mut carry = 0.0;
         let mut field = Vec::new();
         let mut levels = Vec::new();
         let mut scratch = gen2::Scratch::default();
         for epoch in first..=last {
             let start = epoch * FIELD_BUCKET_US;
-            if epoch % BLOCK_EPOCHS == 0 {
-                carry = 0.0;
-            }
-            if chain && carry >= FIELD_BUCKET_US as f64 {
-                // A round begun earlier runs through this whole epoch.
-                carry -= FIELD_BUCKET_US as f64;
-                continue;
-            }
             let ch = clock.at(self, start);
             self.open_bucket(antenna, tx, start, ch, &mut classified, bucket);
             self.field_of(bucket, &mut field);
             if field.is_empty() {
                 first_round = false;
-                carry = 0.0;
                 continue;
             }
             levels.clear();
@@ -285,9 +274,7 @@ impl Model {
             let length = to.saturating_sub(from) as f64;
             radio.from_epoch_us = from - start;
             let mut rng = seed::stream_on(prefix, &[epoch, from - start]);
-            let block_end_us = block_end(start) as f64;
-            let mut spent = if chain { carry } else { 0.0 };
-            carry = 0.0;
+            let mut spent = 0.0;
             while spent < length {
                 radio.round_start_us = from as f64 + spent;
                 // Single target: only the tags still in A at the round's start answer.
@@ -313,17 +300,12 @@ impl Model {
                     }
                     _ => &field,
                 };
-                let budget = if chain {
-                    block_end_us - (from as f64 + spent)
-                } else {
-                    length - spent
-                };
                 let r = gen2::round_in(
                     &mut rng,
                     &times,
                     part,
                     qfp,
-                    budget,
+                    length - spent,
                     &mut radio,
                     &mut scratch,
                 );
@@ -333,11 +315,115 @@ impl Model {
                 spent += r.duration_us;
                 qfp = r.qfp;
             }
-            if chain && spent > length {
-                carry = spent - length;
-            }
         }
         (reads, none_in_a)
+    }
+
+    /// The reads in `[t0_us, t1_us)` of an antenna the reader never leaves, whose rounds began
+    /// at `anchor_us` (see the module's doc): those of the blocks the window overlaps, each
+    /// run from its start. Rounds run back to back, each with the field of the epoch it
+    /// starts in (an empty field waits for the next epoch); a block's end cuts the last.
+    #[allow(clippy::too_many_arguments)]
+    fn chained_rounds(
+        &self,
+        antenna: u16,
+        anchor_us: u64,
+        t0_us: u64,
+        t1_us: u64,
+        tx: f64,
+        want: Want,
+        air: &Air,
+        bucket: &mut Bucket,
+    ) -> Vec<Read> {
+        let mut reads = Vec::new();
+        let t0_us = t0_us.max(anchor_us);
+        if t1_us <= t0_us {
+            return reads;
+        }
+        let times = air.mode.slot_times(EPC_BITS);
+        let prefix = seed::mix(&[
+            self.seed,
+            seed::domain::GEN2,
+            self.reader as u64,
+            u64::from(antenna),
+        ]);
+        let mut clock = ChannelClock::new(None);
+        let mut classified: Option<Arc<Classified>> = None;
+        let mut field = Vec::new();
+        let mut levels = Vec::new();
+        let mut scratch = gen2::Scratch::default();
+        let mut block_start = block_end(anchor_us, t0_us) - BLOCK_US;
+        // Bounded as the epochs are (about seven hours).
+        let last = t1_us.min(block_start.saturating_add(MAX_EPOCHS * FIELD_BUCKET_US));
+        while block_start < last {
+            let end = block_start + BLOCK_US;
+            let mut now = block_start as f64;
+            let mut open = None;
+            let mut qfp = 0.0;
+            while now < end as f64 {
+                let t = now as u64;
+                let epoch = t / FIELD_BUCKET_US;
+                let start = epoch * FIELD_BUCKET_US;
+                if open != Some(epoch) {
+                    open = Some(epoch);
+                    self.open_bucket(
+                        antenna,
+                        tx,
+                        start,
+                        clock.at(self, start),
+                        &mut classified,
+                        bucket,
+                    );
+                    self.field_of(bucket, &mut field);
+                    levels.clear();
+                    levels.resize(field.len(), f64::NAN);
+                    qfp = gen2::settled_qfp(field.len());
+                }
+                if field.is_empty() {
+                    now = (start + FIELD_BUCKET_US).min(end) as f64;
+                    continue;
+                }
+                // Each round's draws are named by the epoch and where in it the round began.
+                let offset = t - start;
+                let mut rng = seed::stream_on(prefix, &[epoch, offset, 1]);
+                let mut radio = EpochRadio {
+                    model: self,
+                    antenna,
+                    tx_power_dbm: tx,
+                    want,
+                    round_start_us: now,
+                    bucket: &mut *bucket,
+                    clock: &mut clock,
+                    prefix,
+                    epoch,
+                    from_epoch_us: offset,
+                    replies: 0,
+                    field: &field,
+                    levels: &mut levels,
+                    epoch_start_us: start,
+                    read_here: None,
+                    from_us: t0_us,
+                    until_us: t1_us,
+                    out: &mut reads,
+                };
+                let r = gen2::round_in(
+                    &mut rng,
+                    &times,
+                    &field,
+                    qfp,
+                    end as f64 - now,
+                    &mut radio,
+                    &mut scratch,
+                );
+                if r.duration_us <= 0.0 {
+                    break;
+                }
+                now += r.duration_us;
+                qfp = r.qfp;
+            }
+            block_start = end;
+        }
+        reads
     }
 
     /// How long `antenna` spends on the epoch holding `t_us` when no tag can be in its field at

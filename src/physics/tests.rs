@@ -575,7 +575,7 @@ fn lone_antenna_reads(alone: bool, t0_us: u64, t1_us: u64) -> Vec<(u64, usize)> 
     let tags = [[2.0, -0.3, 1.0], [2.2, 0.0, 1.0], [2.0, 0.3, 1.0]];
     let m = Model::new(&fixed_scenario(&tags, serde_json::json!({})), 0);
     let air = gen2::Air {
-        alone,
+        anchor_us: alone.then_some(0),
         ..Default::default()
     };
     let want = Want {

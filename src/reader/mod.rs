@@ -71,6 +71,8 @@ pub struct ReaderProfile {
     /// How often an AISpec without its own end reports under ROReportTrigger 1 with N = 0,
     /// µs (0: only when the ROSpec ends).
     pub report_interval_us: u64,
+    /// Time at each AISpec's start before its first inventory round, µs.
+    pub aispec_setup_us: u64,
 }
 
 impl ReaderProfile {
@@ -94,6 +96,8 @@ impl ReaderProfile {
             antenna_gain_dbi: r.antennas.iter().map(|a| a.gain_dbi).collect(),
             reader_id: id,
             report_interval_us: u64::from(r.report_interval_ms) * 1000,
+            // Validated finite and in [0, 10 s].
+            aispec_setup_us: (r.aispec_setup_ms * 1000.0).round() as u64,
         }
     }
 }

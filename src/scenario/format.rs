@@ -191,6 +191,11 @@ pub struct ReaderSpec {
     /// as Impinj readers do; 0 holds the reads until the ROSpec ends, the letter of LLRP.
     #[serde(default = "default_report_interval_ms")]
     pub report_interval_ms: u32,
+    /// Time the reader takes at the start of every AISpec before its first inventory round,
+    /// ms (0: none; the `impinj-r420` model's is fitted to an R420 whose AISpec ends at each
+    /// tag, docs/measurement.md "Reader models").
+    #[serde(default)]
+    pub aispec_setup_ms: f64,
     /// Antennas; antenna port `i + 1` is `antennas[i]`.
     pub antennas: Vec<AntennaSpec>,
     /// The reader model whose defaults this reader's antennas took (else the scenario's).

@@ -169,6 +169,11 @@ fn errors_name_the_field_path_and_the_reason() {
             "",
         ),
         (
+            Box::new(|v| v["readers"][0]["aispec_setup_ms"] = (-1.5).into()),
+            "readers[0].aispec_setup_ms: must be in [0, 10000], got -1.5",
+            "",
+        ),
+        (
             Box::new(|v| v["tags"][0]["tid"] = "E28011".into()),
             "tags[0].tid: must be whole 16-bit words",
             "",

@@ -16,6 +16,8 @@ pub const MAX_TAG_SPEED: f64 = 10.0;
 pub const MAX_READS_PER_SECOND: f64 = 100_000.0;
 /// Longest interval between the reports of an AISpec without its own end (one hour), ms.
 pub const MAX_REPORT_INTERVAL_MS: u32 = 3_600_000;
+/// Longest AISpec setup a scenario may give (ms).
+pub const MAX_AISPEC_SETUP_MS: f64 = 10_000.0;
 /// Most antenna ports per reader.
 pub const MAX_ANTENNAS: usize = 64;
 
@@ -261,6 +263,12 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
     if let Some(rate) = r.reads_per_second {
         positive(&format!("{p}.reads_per_second"), rate, MAX_READS_PER_SECOND)?;
     }
+    in_range(
+        &format!("{p}.aispec_setup_ms"),
+        r.aispec_setup_ms,
+        0.0,
+        MAX_AISPEC_SETUP_MS,
+    )?;
     if r.report_interval_ms > MAX_REPORT_INTERVAL_MS {
         return Err(invalid(
             format!("{p}.report_interval_ms"),

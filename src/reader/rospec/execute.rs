@@ -174,8 +174,14 @@ impl Specs {
         let mut ai_done = ai_end.is_some_and(|e| end >= e);
         let ro_done = ro_end.is_some_and(|e| end >= e);
         let mut run = run;
+        // The reader's setup at the AISpec's start: no round before it is over.
+        let ready = run
+            .spec_started_us
+            .saturating_add(ctx.profile.aispec_setup_us);
+        let air_t = t.max(ready);
         let mut air = super::air::air_for(ips, ctx.config, antenna);
-        air.alone = antennas.len() == 1;
+        // The reader never leaves an AISpec's only antenna: its rounds run on from the first.
+        air.anchor_us = (antennas.len() == 1).then_some(ready);
         let want = Want {
             phase: content.impinj.phase,
             doppler: content.impinj.doppler,
@@ -193,8 +199,8 @@ impl Specs {
             }
             self.idle_antennas[port] = idle.is_some();
         }
-        if air.suppresses() && end > t && idle.is_none() && !run.slice_idle {
-            let none_in_a = self.flagged_epoch(ctx, antenna, t, power, channel, want, &air);
+        if air.suppresses() && end > air_t && idle.is_none() && !run.slice_idle {
+            let none_in_a = self.flagged_epoch(ctx, antenna, air_t, power, channel, want, &air);
             if fresh && none_in_a {
                 idle = Some(air.empty_round_us());
             }
@@ -206,12 +212,12 @@ impl Specs {
             reached = (t + idle).min(end);
         } else if run.slice_idle {
             // The rest of an empty round.
-        } else if end > t {
+        } else if end > air_t {
             // Phase and Doppler are worked out only when reported.
             let slice = Slice {
                 antenna,
                 power_dbm: power,
-                t0_us: t,
+                t0_us: air_t,
                 t1_us: end,
                 want,
                 air,
@@ -222,7 +228,7 @@ impl Specs {
                 _ if air.suppresses() => self.take_flagged(antenna, end),
                 Some(_) => ctx
                     .model
-                    .inventory_with(antenna, t, end, power, channel, want, &air),
+                    .inventory_with(antenna, air_t, end, power, channel, want, &air),
                 None => {
                     let until = [ai_end, ro_end].into_iter().flatten().min();
                     self.prefetched(ctx, &slice, &run, &antennas, ips, until)
@@ -347,17 +353,15 @@ impl Specs {
             return slice.compute(ctx.model);
         }
         // An antenna the reader never leaves is computed a block at a time (its rounds run
-        // on across the block's epochs).
-        let end_of = |alone: bool, t_us: u64| {
-            if alone {
-                crate::physics::rounds::block_end(t_us)
-            } else {
-                dwell_end(t_us)
-            }
+        // on from its anchor).
+        let anchor = slice.air.anchor_us;
+        let end_of = |t_us: u64| match anchor {
+            Some(a) => crate::physics::rounds::block_end(a, t_us),
+            None => dwell_end(t_us),
         };
         let dwell = Slice {
-            t1_us: if slice.air.alone {
-                end_of(true, slice.t0_us)
+            t1_us: if anchor.is_some() {
+                end_of(slice.t0_us)
             } else {
                 run.slice_end_us
             }
@@ -381,7 +385,7 @@ impl Specs {
                     return None;
                 }
                 let mut air = super::air::air_for(ips, config, antenna);
-                air.alone = n == 1;
+                air.anchor_us = anchor.filter(|_| n == 1);
                 if air.suppresses() {
                     return None;
                 }
@@ -395,7 +399,7 @@ impl Specs {
                     power_dbm: antenna_power(ips, config, antenna),
                     want: slice.want,
                     t0_us,
-                    t1_us: end_of(air.alone, t0_us),
+                    t1_us: end_of(t0_us),
                 };
                 t0_us = s.t1_us;
                 return Some(s);
