@@ -15,9 +15,6 @@
 //! collision, unchanged after a single reply; when round(Qfp) changes the reader sends a
 //! QueryAdjust and the tags not yet read draw new slots among 2^Q.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use rand::RngCore;
 
 /// Bits of a Query command.
@@ -261,14 +258,51 @@ pub fn round<R: RngCore + ?Sized>(
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     waiting: Vec<usize>,
-    /// The waiting tags by slot (a min-heap's storage): slot << 32 | index into `waiting`.
-    order: Vec<Reverse<u64>>,
-    /// The replies in the current slot.
-    answering: Vec<u64>,
+    /// The replies in the current slot (indices into `waiting`).
+    answering: Vec<usize>,
     read_now: Vec<usize>,
 }
 
+/// A uniform draw in [0, 1).
+fn unit<R: RngCore + ?Sized>(rng: &mut R) -> f64 {
+    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// A uniform index in [0, n) (n > 0).
+fn below<R: RngCore + ?Sized>(rng: &mut R, n: usize) -> usize {
+    ((u128::from(rng.next_u64()) * n as u128) >> 64) as usize
+}
+
+/// How many of `m` tags not yet placed in this frame pick the next slot when `left` slots
+/// remain (each tag's slot uniform among the frame's: Binomial(m, 1/left)).
+fn in_next_slot<R: RngCore + ?Sized>(rng: &mut R, m: usize, left: u64) -> usize {
+    if left <= 1 || m == 0 {
+        return m;
+    }
+    let p = 1.0 / left as f64;
+    let mut prob = (1.0 - p).powi(m.min(i32::MAX as usize) as i32);
+    if prob < 1e-200 {
+        // Far too many tags for the frame (a collision for certain): one draw each.
+        return (0..m).filter(|_| unit(rng) < p).count();
+    }
+    // Inversion: the smallest k whose cumulative probability reaches the draw.
+    let u = unit(rng);
+    let (mut k, mut cdf) = (0usize, prob);
+    let ratio = p / (1.0 - p);
+    while u >= cdf && k < m {
+        prob *= (m - k) as f64 / (k + 1) as f64 * ratio;
+        k += 1;
+        cdf += prob;
+    }
+    k
+}
+
 /// [`round`] with the caller's buffers.
+///
+/// Each tag's slot is uniform among the frame's and independent of the others'; the slots are
+/// drawn as the reader reaches them (how many of the tags not yet placed pick this one, then
+/// which), so a frame that a QueryAdjust or the budget ends a few slots in costs those slots,
+/// not a draw for every tag in the field.
 pub fn round_in<R: RngCore + ?Sized>(
     rng: &mut R,
     times: &SlotTimes,
@@ -284,7 +318,6 @@ pub fn round_in<R: RngCore + ?Sized>(
     };
     let Scratch {
         waiting,
-        order,
         answering,
         read_now,
     } = scratch;
@@ -296,36 +329,28 @@ pub fn round_in<R: RngCore + ?Sized>(
     'frames: while frames < MAX_FRAMES {
         frames += 1;
         let q = out.qfp.round() as u32;
-        let frame = 1usize << q;
-        // Each tag draws its slot among 2^Q (the top Q bits of one draw: exactly uniform);
-        // (slot, tag) packed in one word in a min-heap, so a frame costs its tags plus the
-        // slots it gets through (a frame often ends at a QueryAdjust a few slots in).
-        order.clear();
-        order.extend(waiting.iter().enumerate().map(|(i, _)| {
-            let slot = if q == 0 {
-                0
-            } else {
-                rng.next_u64() >> (64 - q)
-            };
-            Reverse((slot << 32) | i as u64)
-        }));
-        let mut heap = BinaryHeap::from(std::mem::take(order));
+        let frame = 1u64 << q;
+        // waiting[..free] have no slot yet in this frame; the slots reached keep theirs past it.
+        let mut free = waiting.len();
         let mut progressed = false;
         let mut collided = false;
-        for slot in 0..frame as u64 {
+        for slot in 0..frame {
             answering.clear();
-            while let Some(&Reverse(top)) = heap.peek() {
-                if top >> 32 != slot {
-                    break;
-                }
-                answering.push(top);
-                heap.pop();
+            let k = if free == 0 {
+                0
+            } else {
+                in_next_slot(rng, free, frame - slot)
+            };
+            for _ in 0..k {
+                let i = below(rng, free);
+                free -= 1;
+                waiting.swap(i, free);
+                answering.push(free);
             }
-            let answering = &answering[..];
             // The reply the reader may decode: a lone one, or a captured one.
-            let (candidate, collision) = match answering {
+            let (candidate, collision) = match answering.as_slice() {
                 [] => (None, false),
-                [packed] => (Some((packed & 0xFFFF_FFFF) as usize), false),
+                [i] => (Some(*i), false),
                 many => (captured(waiting, many, t, radio), true),
             };
             let decoded = candidate
@@ -353,10 +378,9 @@ pub fn round_in<R: RngCore + ?Sized>(
                 1 if decoded.is_none() => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
                 _ => {}
             }
-            if out.qfp.round() as u32 != q && slot + 1 < frame as u64 {
+            if out.qfp.round() as u32 != q && slot + 1 < frame {
                 // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
                 t += times.adjust_extra_us;
-                *order = heap.into_vec();
                 remove_read(waiting, read_now);
                 if waiting.is_empty() {
                     break 'frames;
@@ -364,7 +388,6 @@ pub fn round_in<R: RngCore + ?Sized>(
                 continue 'frames;
             }
         }
-        *order = heap.into_vec();
         remove_read(waiting, read_now);
         if waiting.is_empty() || !(progressed || collided) {
             break;
@@ -389,14 +412,13 @@ fn remove_read(waiting: &mut Vec<usize>, read: &mut Vec<usize>) {
 /// strongest, if it stands [`CAPTURE_MARGIN_DB`] above all others.
 fn captured(
     waiting: &[usize],
-    answering: &[u64],
+    answering: &[usize],
     t_us: f64,
     radio: &mut impl Radio,
 ) -> Option<usize> {
     let mut best: Option<(f64, usize)> = None;
     let mut second = f64::NEG_INFINITY;
-    for &packed in answering {
-        let i = (packed & 0xFFFF_FFFF) as usize;
+    for &i in answering {
         let r = radio.level(waiting[i], t_us);
         match best {
             Some((b, _)) if r <= b => second = second.max(r),
