@@ -125,6 +125,9 @@ enum BenchCommand {
     /// Run the parked-rail replica of a real Impinj measurement and print its reads'
     /// statistics beside the real ones (docs/measurement.md "Validation").
     Realism(llrp_gateway::realism::BenchRealismArgs),
+    /// The simulated reader's read rate against the tags in the field, per RF mode, beside
+    /// published measurements (docs/measurement.md "Read rate against population").
+    Readrate(llrp_gateway::eval::readrate::BenchReadRateArgs),
 }
 
 fn main() -> ExitCode {
@@ -137,6 +140,7 @@ fn main() -> ExitCode {
         Command::Localize(args) => llrp_gateway::cli::localize::run(args),
         Command::Bench(BenchCommand::Localize(args)) => llrp_gateway::eval::cli::run(args),
         Command::Bench(BenchCommand::Realism(args)) => llrp_gateway::realism::run(args),
+        Command::Bench(BenchCommand::Readrate(args)) => llrp_gateway::eval::readrate::run(args),
         Command::Sim {
             scenario,
             reader_model,

@@ -16,7 +16,7 @@ const FONTS: &[&str] = &[
 
 /// Registers a system font for the labels; `false` when none is there (the plot then has
 /// no text).
-fn font() -> bool {
+pub(super) fn font() -> bool {
     static FOUND: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *FOUND.get_or_init(|| {
         FONTS.iter().any(|p| match std::fs::read(p) {

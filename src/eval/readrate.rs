@@ -1,0 +1,244 @@
+//! `bench readrate`: the simulated reader's read rate against the number of tags in the field,
+//! per RF mode, through its own LLRP output, printed beside the published measurements of
+//! Impinj readers (docs/measurement.md "Read rate against population") and drawn with them.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use plotters::prelude::*;
+
+use super::bench::{simulate_with, Inventory};
+use crate::scenario::Scenario;
+
+/// Arguments of `bench readrate`.
+#[derive(clap::Args, Debug)]
+pub struct BenchReadRateArgs {
+    /// Simulated seconds per point.
+    #[arg(long, default_value_t = 10.0, value_parser = crate::options::parser::<f64>("seconds"))]
+    pub seconds: f64,
+    /// Reader model the field is read with (docs/measurement.md "Reader models").
+    #[arg(long, default_value = "impinj-r420")]
+    pub reader_model: String,
+    /// Also draw the curves and the published points to this PNG.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// Tag counts the curve is measured at.
+pub const POPULATIONS: [usize; 10] = [1, 2, 3, 5, 8, 16, 32, 64, 128, 300];
+
+/// RF modes the curve is measured in (ModeIdentifier), with their names.
+pub const MODES: [(u16, &str); 3] = [
+    (0, "mode 0 (FM0, 640 kHz)"),
+    (2, "mode 2 (Miller 4, 274 kHz)"),
+    (1000, "mode 1000 (AutoSet: Miller 4, 250 kHz)"),
+];
+
+/// A published measurement: tags in the field, reads/s in all, and where and how it was made.
+pub struct Published {
+    /// Tags in the field.
+    pub tags: usize,
+    /// Reads (or tags) per second, all tags together.
+    pub reads_per_s: f64,
+    /// Reader, conditions and source.
+    pub source: &'static str,
+}
+
+/// The measurements found (docs/measurement.md gives each one's source in full).
+pub const PUBLISHED: [Published; 5] = [
+    Published {
+        tags: 1,
+        reads_per_s: 130.0,
+        source: "Indy RS500 module, population estimate 1 (manual, Table 5-12)",
+    },
+    Published {
+        tags: 16,
+        reads_per_s: 50.0,
+        source: "Indy RS500 module, estimate 16 (manual, Table 5-12)",
+    },
+    Published {
+        tags: 1,
+        reads_per_s: 69.0,
+        source: "R420 with sllurp, an AISpec per tag (crozenboom/RFID-Locate-main Test11-2)",
+    },
+    Published {
+        tags: 15,
+        reads_per_s: 125.0,
+        source: "R420 with sllurp, an AISpec per 4 tags (same data set, Test10-2; median)",
+    },
+    Published {
+        tags: 5,
+        reads_per_s: 140.0,
+        source: "a Speedway with sllurp, settings not stated (sllurp issue #23)",
+    },
+];
+
+/// `n` static tags on a grid 2–3.2 m before one fixed antenna (FCC hopping), read as
+/// `reader_model` reads.
+pub fn field(n: usize, reader_model: &str) -> Result<Scenario, String> {
+    let tags: Vec<serde_json::Value> = (0..n)
+        .map(|i| {
+            serde_json::json!({
+                "epc": format!("E2000000000000000000{i:04X}"),
+                "position": [
+                    2.0 + (i % 3) as f64 * 0.6,
+                    -1.0 + ((i / 3) % 5) as f64 * 0.5,
+                    0.6 + (i / 15) as f64 * 0.02,
+                ],
+            })
+        })
+        .collect();
+    let v = serde_json::json!({
+        "name": format!("field-{n}"), "seed": 4, "reader_model": reader_model,
+        "world": { "min": [-2, -5, 0], "max": [10, 5, 3] },
+        "tags": tags,
+        "readers": [{ "name": "r", "listen": "127.0.0.1:0", "region": "fcc",
+            "antennas": [{ "mount": { "type": "fixed", "pose": { "position": [0, 0, 1] } },
+                           "beamwidth_deg": 120 }] }]
+    });
+    Scenario::from_json(&v.to_string()).map_err(|e| e.to_string())
+}
+
+/// Reads per second, all tags together, of `n` tags read for `seconds` in RF mode `mode` by
+/// one antenna with a continuous AISpec and a report per read (the project's own client).
+pub fn rate(n: usize, mode: u16, reader_model: &str, seconds: f64) -> Result<f64, String> {
+    let s = field(n, reader_model)?;
+    let inventory = Inventory {
+        mode: Some(mode),
+        session: None,
+    };
+    let run = simulate_with(&s, seconds, inventory);
+    Ok(run.reads.len() as f64 / seconds)
+}
+
+/// Runs `bench readrate`.
+pub fn run(args: BenchReadRateArgs) -> ExitCode {
+    match run_inner(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("llrp-gateway bench readrate: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run_inner(args: &BenchReadRateArgs) -> Result<(), String> {
+    let mut curves = Vec::new();
+    for (mode, _) in MODES {
+        let mut points = Vec::new();
+        for n in POPULATIONS {
+            points.push((n, rate(n, mode, &args.reader_model, args.seconds)?));
+        }
+        curves.push(points);
+    }
+    println!(
+        "Reads/s, all tags together, one antenna, a continuous AISpec, reader model {}, {} s \
+         simulated a point:\n",
+        args.reader_model, args.seconds
+    );
+    let head: Vec<&str> = MODES.iter().map(|m| m.1).collect();
+    println!("| tags | {} |", head.join(" | "));
+    println!("|---:|{}", "---:|".repeat(MODES.len()));
+    for (k, n) in POPULATIONS.iter().enumerate() {
+        let cells: Vec<String> = curves.iter().map(|c| format!("{:.0}", c[k].1)).collect();
+        println!("| {n} | {} |", cells.join(" | "));
+    }
+    println!("\nPublished (conditions differ; docs/measurement.md):\n");
+    println!("| tags | reads/s | reader, conditions, source |\n|---:|---:|---|");
+    for p in &PUBLISHED {
+        println!("| {} | {:.0} | {} |", p.tags, p.reads_per_s, p.source);
+    }
+    if let Some(path) = &args.plot {
+        plot(path, &curves)?;
+        println!("\nPlot: {}", path.display());
+    }
+    Ok(())
+}
+
+/// Draws the curves (one per mode of [`MODES`]) and the [`PUBLISHED`] points to `path`.
+fn plot(path: &Path, curves: &[Vec<(usize, f64)>]) -> Result<(), String> {
+    let text = super::plot::font();
+    let top = curves.iter().flatten().map(|p| p.1).fold(200.0, f64::max) * 1.1;
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(20);
+    if text {
+        builder
+            .caption("Read rate against tags in the field", ("sans-serif", 22))
+            .x_label_area_size(40)
+            .y_label_area_size(60);
+    }
+    let mut chart = builder
+        .build_cartesian_2d((0.8f64..400.0).log_scale(), 0.0..top)
+        .map_err(|e| e.to_string())?;
+    let mut mesh = chart.configure_mesh();
+    if text {
+        mesh.x_desc("tags in the field").y_desc("reads/s, all tags");
+    } else {
+        mesh.disable_x_axis().disable_y_axis();
+    }
+    mesh.draw().map_err(|e| e.to_string())?;
+    let colors = [BLUE, RED, GREEN];
+    for ((points, (_, name)), color) in curves.iter().zip(MODES).zip(colors) {
+        let line: Vec<(f64, f64)> = points.iter().map(|&(n, r)| (n as f64, r)).collect();
+        let series = chart
+            .draw_series(LineSeries::new(line.iter().copied(), color.stroke_width(2)))
+            .map_err(|e| e.to_string())?;
+        if text {
+            series
+                .label(format!("simulated, {name}"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+    }
+    let series = chart
+        .draw_series(
+            PUBLISHED
+                .iter()
+                .map(|p| Cross::new((p.tags as f64, p.reads_per_s), 7, BLACK.stroke_width(2))),
+        )
+        .map_err(|e| e.to_string())?;
+    if text {
+        series
+            .label("published (RS500; R420 and Speedway with sllurp)")
+            .legend(|(x, y)| Cross::new((x + 10, y), 6, BLACK.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rate_falls_from_one_tag_to_many_and_a_faster_mode_reads_more() {
+        let one = rate(1, 1000, "impinj-r420", 2.0).expect("runs");
+        let many = rate(64, 1000, "impinj-r420", 2.0).expect("runs");
+        let fast = rate(64, 0, "impinj-r420", 2.0).expect("runs");
+        // One tag a round against framed ALOHA's share of the slots: the total falls, by
+        // about a tenth (docs/measurement.md "The population curve").
+        assert!(
+            many < one && many > 0.7 * one,
+            "1 tag {one}/s, 64 tags {many}/s"
+        );
+        assert!(fast > 3.0 * many, "mode 0 {fast}/s, mode 1000 {many}/s");
+    }
+
+    #[test]
+    fn an_unknown_reader_model_is_named_with_the_known_ones() {
+        let e = run_inner(&BenchReadRateArgs {
+            seconds: 1.0,
+            reader_model: "acme-9000".into(),
+            plot: None,
+        })
+        .expect_err("refused");
+        assert!(e.contains("acme-9000") && e.contains("impinj-r420"), "{e}");
+    }
+}
