@@ -209,12 +209,7 @@ impl Model {
             );
         }
         let times = air.mode.slot_times(EPC_BITS);
-        let prefix = seed::mix(&[
-            self.seed,
-            seed::domain::GEN2,
-            self.reader as u64,
-            u64::from(antenna),
-        ]);
+        let prefix = self.gen2_prefix(antenna);
         let mut clock = ChannelClock::new(pinned);
         let mut classified: Option<Arc<Classified>> = None;
         let first = t0_us / FIELD_BUCKET_US;
@@ -341,12 +336,7 @@ impl Model {
             return reads;
         }
         let times = air.mode.slot_times(EPC_BITS);
-        let prefix = seed::mix(&[
-            self.seed,
-            seed::domain::GEN2,
-            self.reader as u64,
-            u64::from(antenna),
-        ]);
+        let prefix = self.gen2_prefix(antenna);
         let mut clock = ChannelClock::new(None);
         let mut classified: Option<Arc<Classified>> = None;
         let mut field = Vec::new();
@@ -455,6 +445,16 @@ impl Model {
         Some(air.empty_round_us())
     }
 
+    /// The seed prefix of `antenna`'s rounds and replies.
+    fn gen2_prefix(&self, antenna: u16) -> u64 {
+        seed::mix(&[
+            self.seed,
+            seed::domain::GEN2,
+            self.reader as u64,
+            u64::from(antenna),
+        ])
+    }
+
     /// Every tag of `bucket`'s field, in tag order, into `field` (settling each undecided
     /// candidate).
     fn field_of(&self, bucket: &mut Bucket, field: &mut Vec<usize>) {
@@ -466,3 +466,6 @@ impl Model {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;
