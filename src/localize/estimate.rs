@@ -255,6 +255,7 @@ pub fn estimate_from(
         last_us: last,
         facing,
         reader_of_group,
+        ..
     } = calibrated_observations(ingest, epc, g, calibration);
     let base = Estimate {
         epc: epc.to_string(),

@@ -26,6 +26,7 @@ pub mod loci3d;
 pub mod mhekf;
 pub mod observe;
 pub mod offline;
+pub mod outliers;
 pub mod poses;
 pub mod refine;
 pub mod relock;

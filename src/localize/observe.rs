@@ -10,6 +10,7 @@ use super::geometry::Geometry;
 use super::ingest::Ingest;
 use super::linear;
 use super::mhekf::PoseObs;
+use super::outliers::outliers;
 use super::relock::Obs;
 use super::series::{Places, SAME_PLACE_M};
 
@@ -25,6 +26,8 @@ pub struct Observed {
     pub facing: [f64; 2],
     /// Per group (series), its reader's number among the tag's readers.
     pub reader_of_group: Vec<usize>,
+    /// Phases left out as outliers ([`outliers`]).
+    pub outliers: usize,
 }
 
 /// Tag `epc`'s phases, each reader's by its own settings in `g`.
@@ -94,6 +97,18 @@ pub fn calibrated_observations(
             }
         }
     }
+    // Outliers out, with their entries in the parallel lists.
+    let outlier = outliers(&obs);
+    let left_out = outlier.iter().filter(|&&x| x).count();
+    if left_out > 0 {
+        fn keep<T>(v: &mut Vec<T>, outlier: &[bool]) {
+            let mut flags = outlier.iter();
+            v.retain(|_| !flags.next().copied().unwrap_or(false));
+        }
+        keep(&mut obs, &outlier);
+        keep(&mut track_of, &outlier);
+        keep(&mut reported, &outlier);
+    }
     if let Some(m) = &g.pose_error {
         let by_track = in_time(&obs, &track_of, tracks.len());
         straighten(&mut obs, &by_track, m.sigma_m);
@@ -109,6 +124,7 @@ pub fn calibrated_observations(
         last_us,
         facing,
         reader_of_group,
+        outliers: left_out,
     }
 }
 
@@ -359,6 +375,28 @@ mod tests {
             .estimate
             .is_some_and(|p| (p[0] - b[0]).hypot(p[1] - b[1]) < 0.05);
         assert!(!found, "{wrong:?}");
+    }
+
+    #[test]
+    fn outliers_are_left_out_of_the_phases_and_counted() {
+        let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 1_000_000);
+        let mut reads = pass("p", "AA", [0.3, 1.2], 1.0);
+        for (k, r) in reads.iter_mut().enumerate() {
+            // 0.02 rad of noise, and 1 rad off at three reads.
+            let off = 0.02 * ((k as f64) * 2.39).sin() + if k % 97 == 50 { 1.0 } else { 0.0 };
+            let p = r.phase_rad.expect("a phase") + off;
+            r.phase_rad = Some(p.rem_euclid(std::f64::consts::TAU));
+        }
+        for r in &reads {
+            ingest.push(r);
+        }
+        let g = crate::localize::live::Settings::default().geometry;
+        let seen = observations(&ingest, "AA", &g);
+        assert_eq!((seen.outliers, seen.obs.len()), (3, 297));
+        assert!(seen
+            .obs
+            .iter()
+            .all(|o| ![50, 147, 244].contains(&(o.t_us / 10_000))));
     }
 
     /// A phase read at `t_us` from `antenna`.

@@ -144,8 +144,8 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
 /// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
 /// times the residual variance) and the RMS residual, both per read (a bin's scatter
-/// counted), and the covariance to report. A solution outside the search box of `s` is no fix: the phases did not pin the
-/// tag down.
+/// counted), and the phases it was solved on. A solution outside the search box of `s` is no
+/// fix: the phases did not pin the tag down.
 pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
     let (dims, segments) = (problem.dims, problem.inverse_weights.len());
     let (reads, scatter) = (problem.reads, problem.scatter_rad2);
@@ -157,25 +157,52 @@ pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix>
     let info = DMatrix::from_fn(dims, dims, |a, b| j.column(a).dot(&j.column(b)));
     let bread = info.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
     let cov = &bread * variance;
-    // What the fix reports: at least the classic and at least the sandwich in every
-    // direction (`robust`); the classic one steers the search (joining, the weak axes).
-    let reported = match solved.residuals() {
-        Some(r) if r.iter().all(|x| x.is_finite()) => {
-            let scores = DMatrix::from_fn(r.len(), dims, |i, a| j[(i, a)] * r[i]);
-            let segment_of: Vec<usize> = solved.obs.iter().map(|o| o.segment).collect();
-            let weight: Vec<f64> = solved.obs.iter().map(|o| o.weight).collect();
-            let cluster_of = robust::clusters(&segment_of, &weight);
-            robust::at_least_sandwich(&cov, &bread, &scores, &cluster_of)
-        }
-        _ => cov.clone(),
-    };
     let p = solved.p;
     let inside = (0..2).all(|a| p[a].is_finite() && p[a] >= s.lo[a] && p[a] <= s.hi[a]);
     let finite = (0..dims).all(|a| p[a].is_finite() && cov[(a, a)].is_finite());
     if !(inside && finite) {
         return Err(NoFix::InsufficientGeometry);
     }
-    Ok((p, cov, (squares / reads.max(1.0)).sqrt(), reported))
+    Ok((
+        p,
+        cov,
+        (squares / reads.max(1.0)).sqrt(),
+        solved.obs.to_vec(),
+    ))
+}
+
+/// The covariance to report for `fit`, once it is chosen: at least its classic one, the
+/// cluster-robust (sandwich) one and the one of a smooth angle-dependent phase error in
+/// every direction (`robust`); the classic one steers the search (joining, the weak axes).
+pub(super) fn reported(fit: &Solution, s: &Search) -> DMatrix<f64> {
+    let (p, cov, _, obs) = fit;
+    let problem = Problem::new(obs, s.dims, s.z, s.sign, p.as_slice());
+    let (Some(r), Some(j)) = (problem.residuals(), problem.jacobian()) else {
+        return cov.clone();
+    };
+    let dims = s.dims;
+    let info = DMatrix::from_fn(dims, dims, |a, b| j.column(a).dot(&j.column(b)));
+    let (Some(bread), true) = (info.try_inverse(), r.iter().all(|x| x.is_finite())) else {
+        return cov.clone();
+    };
+    let scores = DMatrix::from_fn(r.len(), dims, |i, a| j[(i, a)] * r[i]);
+    let segment_of: Vec<usize> = obs.iter().map(|o| o.segment).collect();
+    let weight: Vec<f64> = obs.iter().map(|o| o.weight).collect();
+    let cluster_of = robust::clusters(&segment_of, &weight);
+    let sandwich = robust::at_least_sandwich(cov, &bread, &scores, &cluster_of);
+    let rows: Vec<robust::Row> = obs
+        .iter()
+        .zip(&problem.to)
+        .map(|(o, &(v, d))| robust::Row {
+            direction: v.map(|x| x / d),
+            weight: o.weight,
+            segment: o.segment,
+        })
+        .collect();
+    match robust::smooth_error(&bread, &j, &r, &rows, true) {
+        Some(smooth) => robust::at_least(&sandwich, &smooth),
+        None => sandwich,
+    }
 }
 
 /// Levenberg–Marquardt with the relative tolerances at 1e-8 (the crate's default, 30 machine
@@ -189,6 +216,6 @@ fn solver() -> LevenbergMarquardt<f64> {
         .with_gtol(TOL)
 }
 
-/// A solution: position, covariance ((JᵀJ)⁻¹·σ²), RMS residual, and the covariance reported
-/// (at least the cluster-robust one too, [`robust::at_least_sandwich`]).
-pub(super) type Solution = (DVector<f64>, DMatrix<f64>, f64, DMatrix<f64>);
+/// A solution: position, covariance ((JᵀJ)⁻¹·σ²), RMS residual, and the phases it was solved
+/// on (for the covariance [`reported`]).
+pub(super) type Solution = (DVector<f64>, DMatrix<f64>, f64, Vec<Obs>);
