@@ -27,6 +27,17 @@ pub fn s1() -> Scenario {
     s
 }
 
+/// [`s1`] on the `ideal` reader model (S1's own is `impinj-r420`): clean reads, for what the
+/// localizer's pipeline does when the phase holds no hardware error.
+#[allow(dead_code)]
+pub fn s1_ideal() -> Scenario {
+    let mut s = Scenario::default_s1_with(Some("ideal")).expect("the embedded S1 is valid");
+    for r in &mut s.readers {
+        r.listen = "127.0.0.1:0".into();
+    }
+    s
+}
+
 /// Starts the simulator for `scenario` at `speed`.
 pub async fn start(scenario: &Scenario, speed: Speed) -> RunningSim {
     sim::start(
