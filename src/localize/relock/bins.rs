@@ -218,7 +218,7 @@ mod tests {
             |obs: &[Obs]| solve(Problem::new(obs, 3, 0.0, 1.0, &start), &s).expect("a solution");
         for width in [BIN_M, SEPARATE_BIN_M] {
             let clean = dense(tag, 0.0, 1);
-            let (p, _, _, _) = solve_on(&bin(&clean, width));
+            let (p, _, _) = solve_on(&bin(&clean, width));
             let err = (0..3).map(|a| (p[a] - tag[a]).powi(2)).sum::<f64>().sqrt();
             // The bias of a bin's mean phase on a curved phase grows as its width squared:
             // under 0.1 mm at 2 cm (0.12 mm at 4 cm).

@@ -158,7 +158,7 @@ fn grid(
 /// it explains the phases clearly worse. A fit outside the box in height (under the floor,
 /// say) is the mirror image of the tag about the antennas' path, which the phases could not
 /// tell from it: no fix.
-fn fit(all: &[Obs], s: &Search) -> Result<Solution, NoFix> {
+fn fit<'a>(all: &'a [Obs], s: &Search) -> Result<(Solution, Cow<'a, [Obs]>), NoFix> {
     let binned = |width: f64| {
         if all.len() > BIN_ABOVE {
             Cow::Owned(bin(all, width))
@@ -189,7 +189,9 @@ fn fit(all: &[Obs], s: &Search) -> Result<Solution, NoFix> {
     };
     let separate = in_box(solve(Problem::new(obs, s.dims, s.z, s.sign, &start), s));
     if !join::joinable(obs) {
-        return separate.ok_or(NoFix::InsufficientGeometry);
+        return separate
+            .map(|f| (f, separate_obs.clone()))
+            .ok_or(NoFix::InsufficientGeometry);
     }
     // Separate offsets that already pin the tag down are kept: joining adds nothing there but
     // risk, where the poses are not exact.
@@ -199,15 +201,20 @@ fn fit(all: &[Obs], s: &Search) -> Result<Solution, NoFix> {
             .fold(0.0, f64::max)
             .sqrt();
         if worst <= JOIN_ABOVE_SIGMA_M {
-            return Ok(sep.clone());
+            return Ok((sep.clone(), separate_obs.clone()));
         }
     }
     let near = separate.as_ref().map(|f| position(&f.0, s));
     // Joined segments must explain the phases about as well as separate offsets do: over a
     // pose track that drifts (odometry), one offset does not hold for long.
-    match (in_box(split::fit(&binned(BIN_M), s, near)), separate) {
-        (Some(joined), Some(separate)) if joined.2 > separate.2 * 1.5 + 0.02 => Ok(separate),
-        (Some(joined), _) => Ok(joined),
+    let joined = split::fit(&binned(BIN_M), s, near)
+        .ok()
+        .and_then(|(f, o)| in_box(Ok(f)).map(|f| (f, o)));
+    match (joined, separate) {
+        (Some(joined), Some(separate)) if joined.0 .2 > separate.2 * 1.5 + 0.02 => {
+            Ok((separate, separate_obs.clone()))
+        }
+        (Some((joined, o)), _) => Ok((joined, Cow::Owned(o))),
         // Separate offsets leave the tag loose (above), and no joined fit stands (its phases
         // incoherent, or it is the mirror image under the floor): the phases do not fix it.
         (None, _) => Err(NoFix::InsufficientGeometry),
@@ -345,8 +352,8 @@ pub fn locate_from(
         hi: [max[0] + reach_m, max[1] + reach_m, z],
         hint,
     };
-    let solution = fit(obs, &search)?;
-    let (p, rms, cov) = (&solution.0, solution.2, reported(&solution, &search));
+    let (solution, used) = fit(obs, &search)?;
+    let (p, rms, cov) = (&solution.0, solution.2, reported(&solution, &used, &search));
     Ok(Fix {
         position: [p[0], p[1], z],
         covariance: [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]],
@@ -401,8 +408,8 @@ pub fn locate3d_from(
         hi: [max[0] + reach_m, max[1] + reach_m, max[2] + 1.0],
         hint,
     };
-    let solution = fit(obs, &search)?;
-    let (p, rms, cov) = (&solution.0, solution.2, reported(&solution, &search));
+    let (solution, used) = fit(obs, &search)?;
+    let (p, rms, cov) = (&solution.0, solution.2, reported(&solution, &used, &search));
     let mut covariance = [0.0; 9];
     for a in 0..3 {
         for b in 0..3 {

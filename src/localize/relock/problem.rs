@@ -144,8 +144,8 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
 /// Runs Levenberg–Marquardt from `problem`'s start; the solution, its covariance ((JᵀJ)⁻¹
 /// times the residual variance) and the RMS residual, both per read (a bin's scatter
-/// counted), and the phases it was solved on. A solution outside the search box of `s` is no
-/// fix: the phases did not pin the tag down.
+/// counted). A solution outside the search box of `s` is no fix: the phases did not pin the
+/// tag down.
 pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix> {
     let (dims, segments) = (problem.dims, problem.inverse_weights.len());
     let (reads, scatter) = (problem.reads, problem.scatter_rad2);
@@ -163,19 +163,14 @@ pub(super) fn solve(problem: Problem<'_>, s: &Search) -> Result<Solution, NoFix>
     if !(inside && finite) {
         return Err(NoFix::InsufficientGeometry);
     }
-    Ok((
-        p,
-        cov,
-        (squares / reads.max(1.0)).sqrt(),
-        solved.obs.to_vec(),
-    ))
+    Ok((p, cov, (squares / reads.max(1.0)).sqrt()))
 }
 
-/// The covariance to report for `fit`, once it is chosen: at least its classic one, the
-/// cluster-robust (sandwich) one and the one of a smooth angle-dependent phase error in
+/// The covariance to report for `fit` of `obs`, once it is chosen: at least its classic one,
+/// the cluster-robust (sandwich) one and the one of a smooth angle-dependent phase error in
 /// every direction (`robust`); the classic one steers the search (joining, the weak axes).
-pub(super) fn reported(fit: &Solution, s: &Search) -> DMatrix<f64> {
-    let (p, cov, _, obs) = fit;
+pub(super) fn reported(fit: &Solution, obs: &[Obs], s: &Search) -> DMatrix<f64> {
+    let (p, cov, _) = fit;
     let problem = Problem::new(obs, s.dims, s.z, s.sign, p.as_slice());
     let (Some(r), Some(j)) = (problem.residuals(), problem.jacobian()) else {
         return cov.clone();
@@ -216,6 +211,6 @@ fn solver() -> LevenbergMarquardt<f64> {
         .with_gtol(TOL)
 }
 
-/// A solution: position, covariance ((JᵀJ)⁻¹·σ²), RMS residual, and the phases it was solved
-/// on (for the covariance [`reported`]).
-pub(super) type Solution = (DVector<f64>, DMatrix<f64>, f64, Vec<Obs>);
+/// A solution: position, covariance ((JᵀJ)⁻¹·σ²) and RMS residual (the covariance to report
+/// is [`reported`]'s, from the phases it was solved on).
+pub(super) type Solution = (DVector<f64>, DMatrix<f64>, f64);

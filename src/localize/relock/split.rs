@@ -137,7 +137,11 @@ fn pair_cost_kernel(columns: [&[f32]; 8], p: [f32; 3]) -> f64 {
 
 /// The fit of a tag with split series, as the module describes it; `near`: the position of
 /// the fit with separate offsets, the first start.
-pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Solution, NoFix> {
+pub(super) fn fit(
+    obs: &[Obs],
+    s: &Search,
+    near: Option<[f64; 3]>,
+) -> Result<(Solution, Vec<Obs>), NoFix> {
     let (dims, sign) = (s.dims, s.sign);
     // The phases with each calibrated antenna's series in one group: what a fit is judged by.
     let joint: Vec<Obs> = obs
@@ -157,13 +161,13 @@ pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Sol
             .into_iter()
             .map(move |c| refine(s, c, None, &mut |p| fine.at(p)))
     });
-    let mut best: Option<(f64, Solution)> = None;
+    let mut best: Option<(f64, (Solution, Vec<Obs>))> = None;
     for c in near.into_iter().chain(grid) {
         let q = join::search_box(obs, c, (dims, START_BOX_M, 0.04, 80), sign);
         let Ok(fit) = join_from(obs, q, s) else {
             continue;
         };
-        let score = join::coherence(&joint, position(&fit.0, s), sign);
+        let score = join::coherence(&joint, position(&fit.0 .0, s), sign);
         if best.as_ref().map_or(true, |b| score > b.0) {
             best = Some((score, fit));
         }
@@ -176,9 +180,14 @@ pub(super) fn fit(obs: &[Obs], s: &Search, near: Option<[f64; 3]>) -> Result<Sol
         return Ok(fit);
     }
     // No start was coherent: a wider box around the best fit.
-    let q = join::search_box(obs, position(&fit.0, s), (dims, WIDE_BOX_M, 0.05, 60), sign);
+    let q = join::search_box(
+        obs,
+        position(&fit.0 .0, s),
+        (dims, WIDE_BOX_M, 0.05, 60),
+        sign,
+    );
     let (score, fit) = match join_from(obs, q, s) {
-        Ok(wide) => match join::coherence(&joint, position(&wide.0, s), sign) {
+        Ok(wide) => match join::coherence(&joint, position(&wide.0 .0, s), sign) {
             w if w > score => (w, wide),
             _ => (score, fit),
         },
@@ -205,7 +214,8 @@ const COHERENT: f64 = 0.6;
 /// From `start` (a coherent point of the series): 2.5 cm steps around it, the segments of each
 /// series joined there and solved, then joined again from the fit while that merges more; then,
 /// where antennas are calibrated, their series joined into one group the same way.
-fn join_from(obs: &[Obs], start: [f64; 3], s: &Search) -> Result<Solution, NoFix> {
+/// The fit, and the phases as joined for it.
+fn join_from(obs: &[Obs], start: [f64; 3], s: &Search) -> Result<(Solution, Vec<Obs>), NoFix> {
     let q = join::search_box(obs, start, (s.dims, 0.05, 0.025, 400), s.sign);
     let (current, segments) = join::join(obs, q, s.sign);
     let fit = solve(Problem::new(&current, s.dims, s.z, s.sign, &q), s)?;
@@ -216,9 +226,9 @@ fn join_from(obs: &[Obs], start: [f64; 3], s: &Search) -> Result<Solution, NoFix
         }
         // One more than there are, so that the first round runs even if it merges nothing.
         let segments = current.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-        (_, fit) = rejoin(current, segments + 1, fit, s);
+        (current, fit) = rejoin(current, segments + 1, fit, s);
     }
-    Ok(fit)
+    Ok((fit, current))
 }
 
 /// Rounds of search (± 3σ along the weak axes), join and solve while joining merges segments
