@@ -222,19 +222,23 @@ pub fn run(args: BenchLocalizeArgs) -> ExitCode {
             "\nS3 Monte-Carlo variants ({} runs each: own random paths and noise seed per run; odometry-only poses; error of the final estimate):\n",
             args.runs
         );
-        println!("| variant | estimator | located | mean (mm) | median (mm) |");
-        println!("|---|---|---|---|---|");
+        println!(
+            "| variant | estimator | located | mean (mm) | median (mm) | 95 % ellipse holds |"
+        );
+        println!("|---|---|---|---|---|---|");
         let base = include_str!("../../fixtures/scenarios/s3.json");
         for v in super::montecarlo::variants() {
             match super::montecarlo::run_variant(base, &v, args.runs) {
                 Ok(o) => println!(
-                    "| {} | {} | {}/{} | {:.1} | {:.1} |",
+                    "| {} | {} | {}/{} | {:.1} | {:.1} | {}/{} |",
                     v.name,
                     o.estimator,
                     o.located,
                     o.runs,
                     o.mean * 1e3,
-                    o.median * 1e3
+                    o.median * 1e3,
+                    o.covered,
+                    o.with_covariance
                 ),
                 Err(e) => {
                     eprintln!("llrp-gateway bench localize: S3 {}: {e}", v.name);

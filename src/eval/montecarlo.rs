@@ -205,6 +205,11 @@ pub struct Outcome {
     pub mean: f64,
     /// Median error.
     pub median: f64,
+    /// Located runs whose true position lies inside the estimate's 95 % ellipse, of those
+    /// with a covariance.
+    pub covered: usize,
+    /// Located runs with a covariance.
+    pub with_covariance: usize,
 }
 
 /// Runs `v` `runs` times (odometry poses) and scores the final estimate of each.
@@ -214,7 +219,7 @@ pub fn run_variant(base: &str, v: &Variant, runs: usize) -> Result<Outcome, Stri
     } else {
         Estimator::Mhekf
     };
-    let mut errors = Vec::new();
+    let (mut errors, mut covered, mut with_covariance) = (Vec::new(), 0, 0);
     for k in 0..runs {
         let s = scenario(base, v, k as u64)?;
         let run: Run = simulate(&s, super::bench::duration_s(&s));
@@ -222,6 +227,8 @@ pub fn run_variant(base: &str, v: &Variant, runs: usize) -> Result<Outcome, Stri
         if sc.located > 0 {
             errors.push(sc.mean);
         }
+        covered += sc.covered;
+        with_covariance += sc.with_covariance;
     }
     let located = errors.len();
     errors.sort_by(f64::total_cmp);
@@ -238,6 +245,8 @@ pub fn run_variant(base: &str, v: &Variant, runs: usize) -> Result<Outcome, Stri
         located,
         mean,
         median,
+        covered,
+        with_covariance,
     })
 }
 

@@ -5,11 +5,12 @@
 //! maximum-degree weights, F_i ← F_i + Σ_{j∈N_i} (F_j − F_i)/(1 + d_max) (the same for a_i),
 //! and each node's estimate F_i⁻¹ a_i approaches the centralised WLS solution F⁻¹ a.
 
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{DMatrix, Matrix2, Vector2};
 use rand::{Rng, SeedableRng};
 
 use super::mhekf::{self, PoseObs};
 use super::relock::{Fix, NoFix};
+use super::robust;
 
 /// The exchange's settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,7 +156,9 @@ fn disagreement_with_the_rest(own: &Node, agreed: &Node, n: usize) -> f64 {
 /// information; a robot whose fix the others' contradict (Mahalanobis distance² above
 /// `s.gate`) withdraws, one at a time while three or more remain, and the rest exchange again
 /// (ours: \[M\] combines every fix). The result is the first remaining robot's node, its
-/// covariance (n·F_i)⁻¹.
+/// covariance (n·F_i)⁻¹, made at least (ours) what the combination's weights give the fixes'
+/// [`mhekf::honest`] covariances: the filters' own covariances weigh and gate, as in \[M\],
+/// but leave out a phase error smooth in the direction the tag is read from.
 pub fn locate(
     robots: &[Vec<Vec<PoseObs>>],
     z: f64,
@@ -163,19 +166,22 @@ pub fn locate(
     facing: Option<[f64; 2]>,
     s: &Settings,
 ) -> Result<(Fix, ConsensusReport), NoFix> {
-    let mut nodes = Vec::new();
+    let (mut nodes, mut honest) = (Vec::new(), Vec::new());
     let (mut sq, mut reads) = (0.0, 0usize);
     for tracks in robots {
-        let fixes: Vec<Fix> = tracks
+        let (fixes, wide): (Vec<Fix>, Vec<Fix>) = tracks
             .iter()
             .filter_map(|obs| {
-                let fix = mhekf::locate(obs, z, sign, facing, &s.filter).ok()?;
+                let fix = mhekf::filtered(obs, z, sign, facing, &s.filter).ok()?;
                 sq += fix.rms_rad.powi(2) * obs.len() as f64;
                 reads += obs.len();
-                Some(fix)
+                Some((fix.clone(), mhekf::honest(fix, obs, sign)))
             })
-            .collect();
-        nodes.extend(Node::from_fixes(&fixes));
+            .unzip();
+        if let Some(node) = Node::from_fixes(&fixes) {
+            nodes.push(node);
+            honest.push((fixes, wide));
+        }
     }
     if nodes.is_empty() {
         return Err(NoFix::InsufficientGeometry);
@@ -228,6 +234,24 @@ pub fn locate(
     let cov = (first.information * n as f64)
         .try_inverse()
         .ok_or(NoFix::InsufficientGeometry)?;
+    // x ≈ Σ F⁻¹C_f⁻¹ z_f over the fixes f of the robots still in: its covariance with each
+    // fix's honest one.
+    let weights = f_sum.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
+    let mut spread = Matrix2::zeros();
+    for &i in &active {
+        for (own, wide) in honest[i].0.iter().zip(&honest[i].1) {
+            let [a, b, c, d] = own.covariance;
+            let [e, f, g, h] = wide.covariance;
+            if let Some(inv) = Matrix2::new(a, b, c, d).try_inverse() {
+                let k = weights * inv;
+                spread += k * Matrix2::new(e, f, g, h) * k.transpose();
+            }
+        }
+    }
+    let cov = robust::at_least(
+        &DMatrix::from_column_slice(2, 2, cov.as_slice()),
+        &DMatrix::from_column_slice(2, 2, spread.as_slice()),
+    );
     let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
     if !(x.iter().chain(&covariance).all(|v| v.is_finite()) && disagreement.is_finite()) {
         return Err(NoFix::InsufficientGeometry);

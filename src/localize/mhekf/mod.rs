@@ -16,6 +16,8 @@ use std::f64::consts::{PI, TAU};
 
 use super::relock::{Fix, NoFix};
 
+mod smooth;
+
 type V5 = SVector<f64, 5>;
 type M5 = SMatrix<f64, 5, 5>;
 
@@ -197,7 +199,30 @@ impl Hypothesis {
 /// The fix of a tag at height `z` from one robot's reads `obs` (in time order; one antenna),
 /// phase sign `sign` (+1, or −1 for \[M\]'s φ = mod(−4πρ/λ, 2π)). When the mirror images weigh
 /// within a factor 100, the one on the side `facing` points to (from the last position) wins.
+/// Its covariance is the filter's made [`honest`].
 pub fn locate(
+    obs: &[PoseObs],
+    z: f64,
+    sign: f64,
+    facing: Option<[f64; 2]>,
+    s: &Settings,
+) -> Result<Fix, NoFix> {
+    filtered(obs, z, sign, facing, s).map(|fix| honest(fix, obs, sign))
+}
+
+/// `fix` (of a tag from `obs`, phase sign `sign`) with its covariance made at least that of a
+/// phase error smooth in the direction the tag is read from, which the filter, taking its
+/// phases as independent, leaves out (docs/localize.md).
+pub fn honest(fix: Fix, obs: &[PoseObs], sign: f64) -> Fix {
+    let reads: Vec<&PoseObs> = obs.iter().filter(|o| o.read).collect();
+    Fix {
+        covariance: smooth::at_least(fix.covariance, fix.position, &reads, sign),
+        ..fix
+    }
+}
+
+/// [`locate`]'s fix with the filter's own covariance J P Jᵀ (\[M\] eqs. 37–38).
+pub fn filtered(
     obs: &[PoseObs],
     z: f64,
     sign: f64,
