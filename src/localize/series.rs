@@ -353,6 +353,23 @@ impl Series {
         self.samples.truncate(kept);
     }
 
+    /// Drops the segments numbered in `which` (0 the oldest).
+    pub fn drop_segments(&mut self, which: &[usize]) {
+        let mut kept = 0;
+        let mut starts = Vec::with_capacity(self.starts.len());
+        for k in 0..self.starts.len() {
+            if which.contains(&k) {
+                continue;
+            }
+            let (a, b) = self.bounds(k);
+            starts.push(kept);
+            self.samples.copy_within(a..b, kept);
+            kept += b - a;
+        }
+        self.samples.truncate(kept);
+        self.starts = starts;
+    }
+
     /// Drops the `n` oldest segments.
     pub fn drop_oldest(&mut self, n: usize) {
         let n = n.min(self.starts.len());

@@ -79,6 +79,9 @@ pub struct Air {
     /// Where the reader never leaves this antenna (its AISpec's only one): when its first
     /// round began (µs); its rounds run back to back from there ([`super::rounds`]).
     pub anchor_us: Option<u64>,
+    /// The reader's pause after each inventory round before its next Query (µs): its own
+    /// processing, which a real reader's continuous inventory of one tag shows.
+    pub gap_us: f64,
 }
 
 impl Default for Air {
@@ -89,6 +92,7 @@ impl Default for Air {
             session: 2,
             target: Target::Dual,
             anchor_us: None,
+            gap_us: 0.0,
         }
     }
 }
@@ -101,11 +105,13 @@ impl Air {
         self.target == Target::Single && self.session != 0
     }
 
-    /// A round nobody answers (a Query and one empty slot at Q = 0), in whole µs: what an
-    /// antenna facing no tag costs before the reader moves on.
+    /// A round nobody answers (a Query and one empty slot at Q = 0) and the pause after it, in
+    /// whole µs: what an antenna facing no tag costs before the reader moves on.
     pub fn empty_round_us(&self) -> u64 {
         let times = self.mode.slot_times(96);
-        (times.query_extra_us + times.empty_us).ceil().max(1.0) as u64
+        (times.query_extra_us + times.empty_us + self.gap_us.max(0.0))
+            .ceil()
+            .max(1.0) as u64
     }
 }
 

@@ -307,7 +307,7 @@ impl Model {
                 if r.duration_us <= 0.0 {
                     break;
                 }
-                spent += r.duration_us;
+                spent += r.duration_us + air.gap_us.max(0.0);
                 qfp = r.qfp;
             }
         }
@@ -408,7 +408,7 @@ impl Model {
                 if r.duration_us <= 0.0 {
                     break;
                 }
-                now += r.duration_us;
+                now += r.duration_us + air.gap_us.max(0.0);
                 qfp = r.qfp;
             }
             block_start = end;

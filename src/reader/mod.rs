@@ -73,6 +73,8 @@ pub struct ReaderProfile {
     pub report_interval_us: u64,
     /// Time at each AISpec's start before its first inventory round, µs.
     pub aispec_setup_us: u64,
+    /// The reader's pause after each inventory round before the next, µs.
+    pub round_gap_us: u64,
 }
 
 impl ReaderProfile {
@@ -98,6 +100,8 @@ impl ReaderProfile {
             report_interval_us: u64::from(r.report_interval_ms) * 1000,
             // Validated finite and in [0, 10 s].
             aispec_setup_us: (r.aispec_setup_ms * 1000.0).round() as u64,
+            // Validated finite and in [0, 1 s].
+            round_gap_us: (r.round_gap_ms * 1000.0).round() as u64,
         }
     }
 }

@@ -196,6 +196,11 @@ pub struct ReaderSpec {
     /// tag, docs/measurement.md "Reader models").
     #[serde(default)]
     pub aispec_setup_ms: f64,
+    /// The reader's pause after each inventory round before its next Query, ms (0: none; the
+    /// `impinj-r420` model's is fitted to R420s reading one to 40 tags continuously,
+    /// docs/measurement.md "Read rate against population").
+    #[serde(default)]
+    pub round_gap_ms: f64,
     /// Antennas; antenna port `i + 1` is `antennas[i]`.
     pub antennas: Vec<AntennaSpec>,
     /// The reader model whose defaults this reader's antennas took (else the scenario's).

@@ -62,8 +62,10 @@ fn defaults(model: &str) -> Option<Defaults> {
     };
     Some(Defaults {
         // Fitted: an R420 whose AISpec ends at each tag rereads one tag every 14.1 ms; the
-        // setup plus one round of the default mode (4.3 ms) makes that period.
-        reader: json!({ "aispec_setup_ms": 9.8 }),
+        // setup plus one round of the default mode (4.3 ms) makes that period. R420s reading
+        // continuously read a lone tag 63 times a second (Tagwatch) and, in mode 0, each of 6
+        // to 21 tags 35–53 times (Tagbeat): a 15 ms pause after every round.
+        reader: json!({ "aispec_setup_ms": 9.8, "round_gap_ms": 15.0 }),
         antenna,
         tags,
     })
@@ -162,6 +164,7 @@ mod tests {
             .is_none());
         assert_eq!(v["tag_variation"]["backscatter_sigma_db"], 2.8);
         assert_eq!(v["readers"][0]["aispec_setup_ms"], 9.8);
+        assert_eq!(v["readers"][0]["round_gap_ms"], 15.0);
         assert!(v["readers"][1].get("aispec_setup_ms").is_none());
     }
 

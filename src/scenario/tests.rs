@@ -174,6 +174,11 @@ fn errors_name_the_field_path_and_the_reason() {
             "",
         ),
         (
+            Box::new(|v| v["readers"][0]["round_gap_ms"] = 2000.0.into()),
+            "readers[0].round_gap_ms: must be in [0, 1000], got 2000",
+            "",
+        ),
+        (
             Box::new(|v| v["tags"][0]["tid"] = "E28011".into()),
             "tags[0].tid: must be whole 16-bit words",
             "",

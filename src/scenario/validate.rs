@@ -18,6 +18,8 @@ pub const MAX_READS_PER_SECOND: f64 = 100_000.0;
 pub const MAX_REPORT_INTERVAL_MS: u32 = 3_600_000;
 /// Longest AISpec setup a scenario may give (ms).
 pub const MAX_AISPEC_SETUP_MS: f64 = 10_000.0;
+/// Longest pause after an inventory round (ms).
+pub const MAX_ROUND_GAP_MS: f64 = 1_000.0;
 /// Most antenna ports per reader.
 pub const MAX_ANTENNAS: usize = 64;
 
@@ -268,6 +270,12 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
         r.aispec_setup_ms,
         0.0,
         MAX_AISPEC_SETUP_MS,
+    )?;
+    in_range(
+        &format!("{p}.round_gap_ms"),
+        r.round_gap_ms,
+        0.0,
+        MAX_ROUND_GAP_MS,
     )?;
     if r.report_interval_ms > MAX_REPORT_INTERVAL_MS {
         return Err(invalid(

@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use rustc_hash::FxHashMap;
 
 use super::poses::{Poses, Track};
-use super::series::{Ambiguity, Series};
+use super::series::{Ambiguity, Sample, Series};
 use super::SPEED_OF_LIGHT;
 use crate::reads::Read;
 
@@ -325,10 +325,12 @@ impl Ingest {
 
     /// Keeps tag `epc` within `bound` phases once it is over: first the reads that add no
     /// aperture go (a parked antenna's: [`Series::thin_places`]); if that leaves more than
-    /// three quarters of the bound, its series are thinned ([`Ingest::thin_tag`]), and if
-    /// that still leaves more (segments of one or two phases, as of a series split at every
-    /// channel visit, do not thin), its oldest segments are dropped down to half the bound
-    /// ([`Ingest::trim_tag`]).
+    /// three quarters of the bound, its segments read from one place (an antenna whose
+    /// position, as its own estimate gives it, wandered but never left [`PARKED_SPAN_M`]) are
+    /// dropped down to half the bound; then its series are thinned ([`Ingest::thin_tag`]),
+    /// and if that still leaves more (segments of one or two phases, as of a series split at
+    /// every channel visit, do not thin), its oldest segments are dropped down to half the
+    /// bound ([`Ingest::trim_tag`]).
     pub fn bound_tag(&mut self, epc: &str, bound: usize) {
         if self.tag_samples(epc) <= bound {
             return;
@@ -339,40 +341,55 @@ impl Ingest {
         if self.tag_samples(epc) <= bound / 4 * 3 {
             return;
         }
+        self.drop_segments_of(epc, bound / 2, true);
+        if self.tag_samples(epc) <= bound / 4 * 3 {
+            return;
+        }
         self.thin_tag(epc);
         if self.tag_samples(epc) > bound / 4 * 3 {
             self.trim_tag(epc, bound / 2);
         }
     }
 
-    /// Drops tag `epc`'s oldest segments, whichever series they are in, until it holds at
-    /// most `target` phases; a series left with none is forgotten.
+    /// Drops tag `epc`'s segments, whichever series they are in, until it holds at most
+    /// `target` phases: first those read from one place (an antenna that stayed within
+    /// [`PARKED_SPAN_M`] through the segment, which adds no aperture), oldest first, then the
+    /// oldest; a series' last segment (being extended) goes only in the second round. A series
+    /// left with none is forgotten.
     pub fn trim_tag(&mut self, epc: &str, target: usize) {
+        self.drop_segments_of(epc, target, false);
+    }
+
+    /// [`Ingest::trim_tag`], or with `parked_only` its first round alone.
+    fn drop_segments_of(&mut self, epc: &str, target: usize, parked_only: bool) {
         let of_tag = self.by_tag.get(epc).map_or(&[][..], Vec::as_slice);
-        let mut starts: Vec<(u64, usize, usize)> = of_tag
+        // (adds aperture or is being extended, first read's time, phases, series, segment)
+        let mut segments: Vec<(bool, u64, usize, usize, usize)> = of_tag
             .iter()
             .map(|s| s.index)
             .flat_map(|i| {
-                self.series[i]
-                    .1
-                    .segments()
-                    .map(move |seg| (seg.first().map_or(0, |x| x.t_us), seg.len(), i))
+                let series = &self.series[i].1;
+                let last = series.segments().len().saturating_sub(1);
+                series.segments().enumerate().map(move |(k, seg)| {
+                    let first = seg.first().map_or(0, |x| x.t_us);
+                    (k == last || !parked(seg), first, seg.len(), i, k)
+                })
             })
             .collect();
-        let mut held: usize = starts.iter().map(|s| s.1).sum();
-        starts.sort_unstable_by_key(|s| s.0);
-        let mut drops: BTreeMap<usize, usize> = BTreeMap::new();
-        for (_, len, i) in starts {
-            if held <= target {
+        let mut held: usize = segments.iter().map(|s| s.2).sum();
+        segments.sort_unstable_by_key(|s| (s.0, s.1));
+        let mut drops: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for (aperture, _, len, i, k) in segments {
+            if held <= target || (parked_only && aperture) {
                 break;
             }
             held -= len;
-            *drops.entry(i).or_default() += 1;
+            drops.entry(i).or_default().push(k);
         }
         // From the last place down, so that a removal moves no series still to be trimmed.
-        for (i, n) in drops.into_iter().rev() {
+        for (i, which) in drops.into_iter().rev() {
             let series = &mut self.series[i].1;
-            series.drop_oldest(n);
+            series.drop_segments(&which);
             if series.is_empty() {
                 self.remove_series(i);
             }
@@ -409,6 +426,24 @@ impl Ingest {
     pub fn set_aside(&self) -> SetAside {
         self.set_aside
     }
+}
+
+/// A segment whose antenna stays this close (m) to where it began is read from one place when
+/// a tag is trimmed ([`Ingest::trim_tag`]): a parked robot's own pose estimate wanders a few
+/// centimetres (S1's stack: σ 15 mm over 2 s), while a pass at 0.3 m/s covers 12 cm in a
+/// 400 ms channel visit.
+pub const PARKED_SPAN_M: f64 = 0.05;
+
+/// Whether every phase of `segment` was read within [`PARKED_SPAN_M`] of its first one's
+/// antenna position.
+fn parked(segment: &[Sample]) -> bool {
+    let Some(first) = segment.first() else {
+        return true;
+    };
+    segment.iter().all(|s| {
+        let d = [0, 1, 2].map(|k| s.antenna[k] - first.antenna[k]);
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() <= PARKED_SPAN_M
+    })
 }
 
 #[cfg(test)]

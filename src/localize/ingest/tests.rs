@@ -298,3 +298,36 @@ fn a_parked_antennas_reads_do_not_thin_away_the_pass_before_it() {
         "the newest read stays (the next one is unwrapped against it)"
     );
 }
+
+#[test]
+fn a_parked_robots_wandering_pose_estimate_does_not_trim_away_the_pass_before_it() {
+    // As above, but the parked antenna's position is a robot's own estimate, wandering a
+    // couple of centimetres (no two reads at one place), and the channel changes every 40
+    // reads with a gap between visits: short segments, which thinning cannot make room
+    // among, so segments are dropped. Those read from one place go before the drive's.
+    let mut ingest = Ingest::new(Poses::new(), Ambiguity::None, 100_000);
+    let end = 11.99;
+    for k in 0..1_200u64 {
+        ingest.push(&posed("C4", k * 10_000, k as f64 * 0.01, 915_250_000));
+        ingest.bound_tag("C4", 4096);
+    }
+    for k in 1_200..31_200u64 {
+        let wander = 0.02 * ((k as f64) * 0.002).sin() + 0.0005 * (k % 7) as f64;
+        let f = 902_750_000 + (k / 40 % 50) * 500_000;
+        let t = k * 10_000 + (k / 40) * 200_000;
+        ingest.push(&posed("C4", t, end + wander, f));
+        ingest.bound_tag("C4", 4096);
+    }
+    assert!(ingest.tag_samples("C4") <= 4096);
+    let samples: Vec<Sample> = ingest
+        .tag_series("C4")
+        .flat_map(|(_, s)| s.samples().to_vec())
+        .collect();
+    let drive = samples.iter().filter(|s| s.antenna[0] < end - 0.05).count();
+    assert!(drive >= 300, "{drive} reads of the drive left");
+    assert_eq!(
+        samples.iter().map(|s| s.t_us).min(),
+        Some(0),
+        "the drive's first read stays"
+    );
+}

@@ -10,11 +10,13 @@
 //! aside. Whether a read waits depends on its own time and the poses alone, not on other
 //! tags' reads, so workers on different shards file a tag's reads alike.
 //!
-//! Memory is bounded per tag: when a tag holds more than [`Settings::max_samples_per_tag`]
-//! phases, every series of it is thinned to every other sample (the newest kept), so the
-//! aperture stays and the density falls off with age; if that leaves more than three
-//! quarters of the bound (segments of one or two phases, which do not thin), the tag's
-//! oldest segments are dropped down to half the bound.
+//! Memory is bounded per tag ([`super::ingest::Ingest::bound_tag`]): when a tag holds more
+//! than [`Settings::max_samples_per_tag`] phases, the reads that add no aperture go first
+//! (a parked antenna's), then its segments read from one place, then every series of it is
+//! thinned to every other sample (the newest kept), so the aperture stays and the density
+//! falls off with age; if that leaves more than three quarters of the bound (segments of one
+//! or two phases, which do not thin), the tag's oldest segments are dropped down to half the
+//! bound.
 //!
 //! A tag that `relock` has located (converged) is updated from its last fix instead of the
 //! grid search, which is most of an update's cost; an update that does not converge from

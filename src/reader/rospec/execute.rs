@@ -180,6 +180,7 @@ impl Specs {
             .saturating_add(ctx.profile.aispec_setup_us);
         let air_t = t.max(ready);
         let mut air = super::air::air_for(ips, ctx.config, antenna);
+        air.gap_us = ctx.profile.round_gap_us as f64;
         // The reader never leaves an AISpec's only antenna: its rounds run on from the first.
         air.anchor_us = (antennas.len() == 1).then_some(ready);
         let want = Want {
@@ -369,6 +370,7 @@ impl Specs {
             ..*slice
         };
         let config = ctx.config;
+        let gap_us = ctx.profile.round_gap_us as f64;
         let idle = &self.idle_antennas;
         // The antennas in turn from the one after this, a dwell each, except those whose
         // field was empty when last looked at: one empty round, then the next.
@@ -386,6 +388,7 @@ impl Specs {
                 }
                 let mut air = super::air::air_for(ips, config, antenna);
                 air.anchor_us = anchor.filter(|_| n == 1);
+                air.gap_us = gap_us;
                 if air.suppresses() {
                     return None;
                 }
