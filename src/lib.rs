@@ -15,10 +15,10 @@ pub mod net;
 pub mod options;
 pub mod physics;
 pub mod reader;
-pub mod reads;
 pub mod realism;
 pub mod record;
 pub mod scenario;
 pub mod sim;
 pub mod stop;
-pub mod utc;
+
+pub use llrp_gateway_vocab::{reads, utc};

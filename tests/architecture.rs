@@ -70,12 +70,6 @@ const LAYERS: &[Layer] = &[
         modules: &[&["sim", "localize"], APPLICATION],
         crates: ASYNC,
     },
-    // Reads in SI units, decoded from LLRP: below the localizer, beside the codec.
-    Layer {
-        dir: "reads",
-        modules: &[SIMULATOR, &["localize"], APPLICATION],
-        crates: ASYNC,
-    },
     // Recordings (format, recorder, replay session, pcapng) know the codec, reads, files and
     // the wall clock; the servers and clients that feed them are above.
     Layer {
@@ -299,6 +293,47 @@ fn the_codec_crate_depends_on_no_async_or_network_crate() {
                 .any(|l| l.trim_start().starts_with(&format!("{c} "))
                     || l.trim_start().starts_with(&format!("{c}="))),
             "protocol/ depends on {c}"
+        );
+    }
+}
+
+/// The keys of `manifest`'s `[dependencies]` table.
+fn dependencies(manifest: &str) -> Vec<String> {
+    manifest
+        .split("\n[")
+        .find(|t| t.starts_with("dependencies]"))
+        .expect("a [dependencies] table")
+        .lines()
+        .skip(1)
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .filter_map(|l| l.split(['=', ' ']).next().map(str::to_string))
+        .collect()
+}
+
+#[test]
+fn the_vocabulary_crate_depends_only_on_the_codec_and_serialization() {
+    // Reads in SI units and the wall clock sit below the localizer, the simulator and the
+    // application: the crate names none of them (the compiler enforces it once the manifest
+    // does not list them) and no async or network crate.
+    let manifest = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/vocab/Cargo.toml"),
+    )
+    .expect("crates/vocab/Cargo.toml");
+    let allowed = [
+        "llrp",
+        "serde",
+        "serde_json",
+        "serde_path_to_error",
+        "thiserror",
+    ];
+    let deps = dependencies(&manifest);
+    assert!(deps.contains(&"llrp".to_string()), "{deps:?}");
+    for d in &deps {
+        assert!(
+            allowed.contains(&d.as_str()),
+            "crates/vocab depends on {d}: the vocabulary may name the codec and serialization \
+             only (ARCHITECTURE.md)"
         );
     }
 }

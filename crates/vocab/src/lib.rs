@@ -1,0 +1,6 @@
+//! The vocabulary every layer of llrp-gateway shares, below the localizer, the simulator and
+//! the application: tag reads in SI units decoded from LLRP ([`reads`]) and the wall clock
+//! ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
+
+pub mod reads;
+pub mod utc;
