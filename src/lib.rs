@@ -13,12 +13,10 @@ pub mod inventory;
 pub mod localize;
 pub mod net;
 pub mod options;
-pub mod physics;
-pub mod reader;
 pub mod realism;
 pub mod record;
-pub mod scenario;
 pub mod sim;
 pub mod stop;
 
+pub use llrp_gateway_sim::{physics, reader, scenario};
 pub use llrp_gateway_vocab::{reads, utc};

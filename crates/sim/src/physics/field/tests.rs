@@ -83,7 +83,7 @@ fn check(m: &Model, tx: f64, starts: impl Iterator<Item = u64>) -> (usize, usize
 
 fn fixture(name: &str) -> Scenario {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures/scenarios")
+        .join("../../fixtures/scenarios")
         .join(format!("{name}.json"));
     Scenario::load(&path).expect("fixture loads")
 }

@@ -2,7 +2,7 @@
 
 use super::*;
 
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios");
+const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../fixtures/scenarios");
 
 /// A small valid scenario as JSON, to be broken by the tests.
 fn base() -> serde_json::Value {
@@ -34,7 +34,7 @@ fn error_of(v: &serde_json::Value) -> String {
 
 #[test]
 fn default_s1_is_valid() {
-    let s = Scenario::from_json(include_str!("../../fixtures/scenarios/s1.json"));
+    let s = Scenario::from_json(include_str!("../../../../fixtures/scenarios/s1.json"));
     assert!(s.is_ok(), "{:?}", s.err());
 }
 

@@ -15,7 +15,10 @@ const ON_AI_END: RoReportTriggerType = RoReportTriggerType::UponNTagsOrEndOfAiSp
 const ON_RO_END: RoReportTriggerType = RoReportTriggerType::UponNTagsOrEndOfRoSpec;
 
 fn s2_reader() -> Reader {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fixtures/scenarios/s2.json"
+    );
     let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
     let model = Arc::new(Model::new(&s, 0));
     let profile = ReaderProfile::from_scenario(&s, 0, &model);

@@ -430,7 +430,10 @@ mod tests {
 
     /// The channel model of scenario S2.
     fn s2() -> Arc<Model> {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fixtures/scenarios/s2.json"
+        );
         let s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
         Arc::new(Model::new(&s, 0))
     }

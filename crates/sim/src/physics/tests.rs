@@ -314,7 +314,7 @@ fn multipath_changes_rssi_and_phase_consistently() {
 
 #[test]
 fn every_scenario_fixture_loads_without_notices_and_produces_reads() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/scenarios");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .expect("fixtures/scenarios lists")
         .map(|e| e.expect("directory entry").path())
@@ -388,7 +388,7 @@ fn aim_is_that_of_the_true_pose() {
     let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-13);
     for name in ["s1", "s2", "s3"] {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fixtures/scenarios")
+            .join("../../fixtures/scenarios")
             .join(format!("{name}.json"));
         let m = Model::new(&Scenario::load(&path).expect("fixture loads"), 0);
         for antenna in 0..=m.antenna_count() + 1 {
@@ -412,7 +412,10 @@ fn aim_is_that_of_the_true_pose() {
 #[test]
 fn leaving_out_phase_and_doppler_changes_nothing_else() {
     // S2 while the robot passes the first banner: extra phase noise from the scenario too.
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/s2.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fixtures/scenarios/s2.json"
+    );
     let mut s = Scenario::load(std::path::Path::new(path)).expect("S2 loads");
     s.readers[0].antennas[0].extra_phase_noise = Some(crate::scenario::NoiseDist::Gamma {
         shape: 2.0,

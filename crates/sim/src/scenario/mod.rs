@@ -115,7 +115,7 @@ impl Scenario {
     /// The embedded default scenario S1 with the reader model `model` when given.
     pub fn default_s1_with(model: Option<&str>) -> Result<Scenario, ScenarioError> {
         Self::from_json_with(
-            include_str!("../../fixtures/scenarios/s1.json"),
+            include_str!("../../../../fixtures/scenarios/s1.json"),
             std::path::Path::new("."),
             model,
         )
@@ -123,7 +123,7 @@ impl Scenario {
 
     /// The embedded default scenario S1 (`fixtures/scenarios/s1.json`).
     pub fn default_s1() -> Scenario {
-        Scenario::from_json(include_str!("../../fixtures/scenarios/s1.json"))
+        Scenario::from_json(include_str!("../../../../fixtures/scenarios/s1.json"))
             // The embedded file is validated by the unit test `default_s1_is_valid`.
             .expect("embedded s1.json is a valid scenario")
     }
