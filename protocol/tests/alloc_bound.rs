@@ -1,5 +1,6 @@
-//! Decoding never allocates more than a small constant times the frame length, whatever the
-//! bytes say (counts and lengths are checked against the frame before anything is allocated).
+//! Decoding never allocates more than a small constant times the frame length, plus the typed
+//! message's own size, whatever the bytes say (counts and lengths are checked against the
+//! frame before anything is allocated).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -12,6 +13,11 @@ use proptest::prelude::*;
 /// Bytes allocated per frame byte that decoding may use (Rust structs are larger than their
 /// wire form: a 4-byte empty TLV becomes a struct with list headers).
 const FACTOR: usize = 32;
+
+/// Bytes a decode may allocate whatever the frame's length: the typed message itself. A
+/// 16-byte SET_READER_CONFIG (ResetToFactoryDefault and a 5-byte unknown parameter kept as
+/// it came) allocates 573 bytes, its struct and the kept parameter; proptest found it.
+const FIXED: usize = 1024;
 
 struct Counting;
 
@@ -65,7 +71,7 @@ fn huge_counts_in_tiny_frames_allocate_nothing_big() {
     let status = [0x01, 0x1F, 0x00, 0x0A, 0x00, 0x00, 0xFF, 0xFF, 0x41, 0x42];
     let frame = frame_of(11, &status);
     assert!(Message::decode(&frame).is_err());
-    assert!(allocated_by_decode(&frame) <= FACTOR * frame.len());
+    assert!(allocated_by_decode(&frame) <= FACTOR * frame.len() + FIXED);
 }
 
 proptest! {
@@ -77,14 +83,14 @@ proptest! {
         let msg = Message::new(1, MessageBody::sample_typed(k % MessageBody::TYPED.len(), &mut g));
         let frame = msg.to_bytes();
         let used = allocated_by_decode(&frame);
-        prop_assert!(used <= FACTOR * frame.len(), "{}: {} bytes for a {}-byte frame", msg.name(), used, frame.len());
+        prop_assert!(used <= FACTOR * frame.len() + FIXED, "{}: {} bytes for a {}-byte frame", msg.name(), used, frame.len());
     }
 
     #[test]
     fn arbitrary_bytes_stay_within_bound(ty in 0u16..1024, body in proptest::collection::vec(any::<u8>(), 0..400)) {
         let frame = frame_of(ty, &body);
         let used = allocated_by_decode(&frame);
-        prop_assert!(used <= FACTOR * frame.len(), "type {}: {} bytes for a {}-byte frame", ty, used, frame.len());
+        prop_assert!(used <= FACTOR * frame.len() + FIXED, "type {}: {} bytes for a {}-byte frame", ty, used, frame.len());
     }
 
     #[test]
@@ -97,6 +103,6 @@ proptest! {
             frame[p] = val;
         }
         let used = allocated_by_decode(&frame);
-        prop_assert!(used <= FACTOR * frame.len(), "{}: {} bytes for a {}-byte frame", msg.name(), used, frame.len());
+        prop_assert!(used <= FACTOR * frame.len() + FIXED, "{}: {} bytes for a {}-byte frame", msg.name(), used, frame.len());
     }
 }
