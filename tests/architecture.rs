@@ -316,31 +316,37 @@ fn dependencies(manifest: &str) -> Vec<String> {
         .collect()
 }
 
+/// Checks that the manifest at `path` (from the workspace root) lists `expected` among its
+/// `[dependencies]` (so the check reads the right table) and nothing outside `allowed`.
+fn depends_only_on(path: &str, expected: &str, allowed: &[&str]) {
+    let manifest = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(path))
+        .unwrap_or_else(|e| panic!("{path}: {e}"));
+    let deps = dependencies(&manifest);
+    assert!(deps.iter().any(|d| d == expected), "{path}: {deps:?}");
+    for d in &deps {
+        assert!(
+            allowed.contains(&d.as_str()),
+            "{path} lists {d}: not allowed below the application (ARCHITECTURE.md)"
+        );
+    }
+}
+
 #[test]
 fn the_vocabulary_crate_depends_only_on_the_codec_and_serialization() {
     // Reads in SI units and the wall clock sit below the localizer, the simulator and the
     // application: the crate names none of them (the compiler enforces it once the manifest
     // does not list them) and no async or network crate.
-    let manifest = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/vocab/Cargo.toml"),
-    )
-    .expect("crates/vocab/Cargo.toml");
-    let allowed = [
+    depends_only_on(
+        "crates/vocab/Cargo.toml",
         "llrp",
-        "serde",
-        "serde_json",
-        "serde_path_to_error",
-        "thiserror",
-    ];
-    let deps = dependencies(&manifest);
-    assert!(deps.contains(&"llrp".to_string()), "{deps:?}");
-    for d in &deps {
-        assert!(
-            allowed.contains(&d.as_str()),
-            "crates/vocab depends on {d}: the vocabulary may name the codec and serialization \
-             only (ARCHITECTURE.md)"
-        );
-    }
+        &[
+            "llrp",
+            "serde",
+            "serde_json",
+            "serde_path_to_error",
+            "thiserror",
+        ],
+    );
 }
 
 #[test]
@@ -348,29 +354,20 @@ fn the_simulator_crate_depends_on_no_async_crate_localizer_or_application() {
     // The scenario format, the pure channel model and the sans-IO reader: the codec, numbers
     // and serialization, nothing above them (the compiler enforces it once the manifest does
     // not list them).
-    let manifest = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/sim/Cargo.toml"),
-    )
-    .expect("crates/sim/Cargo.toml");
-    let allowed = [
-        "llrp",
-        "bytes",
-        "serde",
-        "serde_json",
-        "serde_path_to_error",
-        "thiserror",
-        "tracing",
+    depends_only_on(
+        "crates/sim/Cargo.toml",
         "rand",
-        "rand_chacha",
-        "rand_distr",
-    ];
-    let deps = dependencies(&manifest);
-    assert!(deps.contains(&"rand".to_string()), "{deps:?}");
-    for d in &deps {
-        assert!(
-            allowed.contains(&d.as_str()),
-            "crates/sim depends on {d}: the simulator may name the codec, numbers and \
-             serialization only (ARCHITECTURE.md)"
-        );
-    }
+        &[
+            "llrp",
+            "bytes",
+            "serde",
+            "serde_json",
+            "serde_path_to_error",
+            "thiserror",
+            "tracing",
+            "rand",
+            "rand_chacha",
+            "rand_distr",
+        ],
+    );
 }
