@@ -182,6 +182,7 @@ fn main() -> ExitCode {
                     .zip(tls_key)
                     .map(|(cert, key)| llrp_gateway::net::tls::ServerFiles { cert, key }),
                 localize: None,
+                ..SimOptions::default()
             },
         ),
         Command::Proxy(args) => llrp_gateway::gateway::run(args),
@@ -315,6 +316,7 @@ fn run_sim(
             {
                 Ok(Some(h)) => {
                     eprintln!("llrp-gateway sim: HTTP API and live map on http://{}/", h.addr);
+                    opts.frames_in = l.shared.metrics.frames_in.clone();
                     opts.localize = Some(sim::LocalizeFeed {
                         tap: l.tap.clone(),
                         poses: localize.poses,
@@ -350,7 +352,7 @@ fn run_sim(
         if let Some(p) = &publisher {
             let tap = match &opts.localize {
                 Some(l) => l.tap.clone(),
-                None => llrp_gateway::localize::live::Tap::detached(shared.clone()),
+                None => llrp_gateway::localize::live::Tap::detached(shared.links().clone()),
             };
             opts.localize = Some(sim::LocalizeFeed {
                 tap: tap.with_mirror(p.mirror()),

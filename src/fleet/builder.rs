@@ -231,6 +231,8 @@ impl Builder {
                 }
             }
             Input::Poses(poses) => self.poses(poses),
+            // A simulation's ground truth is not published.
+            Input::Truth(_) => {}
             Input::Status { reader, online } => {
                 if online {
                     self.came(&reader);

@@ -315,7 +315,7 @@ impl Run {
         match &s.reader {
             Some(reader) => {
                 self.gateways.insert(reader.clone(), s.gateway.clone());
-                self.shared.update_reader(reader, |v| v.connected = online);
+                self.shared.links().update(reader, |l| l.connected = online);
                 let now = Instant::now();
                 for (rest, &last) in &s.last_seq {
                     let key = (s.gateway.clone(), reader.clone(), rest.clone());
@@ -328,7 +328,7 @@ impl Run {
             None if !online => {
                 for (reader, gateway) in &self.gateways {
                     if *gateway == s.gateway {
-                        self.shared.update_reader(reader, |v| v.connected = false);
+                        self.shared.links().update(reader, |l| l.connected = false);
                     }
                 }
             }

@@ -13,6 +13,8 @@ use crate::localize::poses::Poses;
 use crate::localize::series::Ambiguity;
 use crate::net::proxy::keepalive::{self, Change, Links};
 use crate::net::proxy::Tapped;
+use llrp_gateway_vocab::feed::Inventory;
+use prometheus_client::metrics::counter::Counter;
 
 /// The localizer options of `proxy` and `replay`.
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -41,12 +43,18 @@ pub struct Sinks {
     localizer: Option<Running>,
     publisher: Option<crate::fleet::publish::Publisher>,
     tap: Option<Tap>,
+    keepalive_losses: Counter,
 }
 
 impl Sinks {
     /// Where to offer the reads, when anything takes them.
     pub fn tap(&self) -> Option<Tap> {
         self.tap.clone()
+    }
+
+    /// Where proxied readers' lost keepalive links are counted.
+    pub fn keepalive_losses(&self) -> Counter {
+        self.keepalive_losses.clone()
     }
 
     /// Stops the publisher (its readers' and gateway's `offline` published), then the API
@@ -86,7 +94,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String
         (l, p) => {
             let tap = l
                 .as_ref()
-                .map_or_else(|| Tap::detached(shared), |l| l.tap());
+                .map_or_else(|| Tap::detached(shared.links().clone()), |l| l.tap());
             Some(match p {
                 Some(p) => {
                     eprintln!(
@@ -103,6 +111,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String
         localizer,
         publisher,
         tap,
+        keepalive_losses: shared.metrics.keepalive_losses.clone(),
     })
 }
 
@@ -209,8 +218,13 @@ const LINK_POLL: Duration = Duration::from_millis(50);
 
 /// Hands the proxy's tapped reads and events to the localizer (and its mirrors) until the
 /// proxy's tap closes, and watches its sessions' keepalive links (`links`): a link lost or
-/// restored is logged, counted and handed on as [`Input::Keepalive`].
-pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, links: Links, tap: Tap) {
+/// restored is logged, counted in `losses` and handed on as [`Input::Keepalive`].
+pub async fn forward(
+    mut rx: tokio::sync::mpsc::Receiver<Tapped>,
+    links: Links,
+    tap: Tap,
+    losses: Counter,
+) {
     let mut poll = tokio::time::interval(LINK_POLL);
     poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -221,7 +235,7 @@ pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, links: Links, 
             },
             _ = poll.tick() => {
                 for (reader, change) in links.poll(Instant::now()) {
-                    keepalive_change(&tap, &reader, change);
+                    keepalive_change(&tap, &losses, &reader, change);
                 }
             }
         }
@@ -229,11 +243,11 @@ pub async fn forward(mut rx: tokio::sync::mpsc::Receiver<Tapped>, links: Links, 
 }
 
 /// Logs, counts and hands on a change of `reader`'s keepalive link.
-fn keepalive_change(tap: &Tap, reader: &str, change: Change) {
+fn keepalive_change(tap: &Tap, losses: &Counter, reader: &str, change: Change) {
     let ms = |d: Duration| u64::try_from(d.as_millis()).unwrap_or(u64::MAX);
     let (lost, period, silent) = match change {
         Change::Lost { period, silent } => {
-            tap.shared().metrics.keepalive_losses.inc();
+            losses.inc();
             tracing::warn!(
                 reader,
                 period_ms = ms(period),
@@ -288,9 +302,13 @@ fn forward_one(t: Tapped, tap: &Tap) {
                     reader: reader.clone(),
                     online: c,
                 });
-                tap.shared().update_reader(&reader, |v| {
-                    v.connected = c;
-                    v.inventory = if c { "client" } else { "idle" }.into();
+                tap.links().update(&reader, |l| {
+                    l.connected = c;
+                    l.inventory = if c {
+                        Inventory::Client
+                    } else {
+                        Inventory::Idle
+                    };
                 });
             }
         }

@@ -407,7 +407,7 @@ pub fn run(args: ProxyArgs) -> ExitCode {
             // costs a third of the throughput.
             let tap = sinks.tap().map(|t| {
                 let (tap, rx) = crate::net::proxy::Tap::new(4096);
-                tokio::spawn(live::forward(rx, tap.links(), t));
+                tokio::spawn(live::forward(rx, tap.links(), t, sinks.keepalive_losses()));
                 tap
             });
             let proxy = match Proxy::bind(config, recorder, tap).await {

@@ -35,7 +35,6 @@ pub mod series;
 pub mod shared;
 #[cfg(test)]
 mod synthetic;
-pub mod tap;
 pub mod uncertainty;
 pub mod wls;
 

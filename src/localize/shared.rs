@@ -4,13 +4,15 @@
 //!
 //! The localizer's worker writes it; readers take short read locks and copy what they need.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 use super::estimate::{Estimate, State};
 use super::poses::PoseSample;
 use crate::reads::Read;
+use llrp_gateway_vocab::feed::Links;
+pub use llrp_gateway_vocab::feed::{Truth, TruthTag};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::histogram::Histogram;
 use prometheus_client::registry::Registry;
@@ -84,7 +86,19 @@ pub struct AntennaView {
     pub pose: Option<PoseSample>,
 }
 
-/// One reader as the API shows it.
+/// What the localizer keeps of one reader: its reads and its antennas' newest poses.
+#[derive(Clone, Debug, Default)]
+pub struct ReaderStats {
+    /// Reads taken in from this reader.
+    pub reads: u64,
+    /// Reads per second of reader time over the last rate window.
+    pub reads_per_s: f64,
+    /// Antennas, by port.
+    pub antennas: Vec<AntennaView>,
+}
+
+/// One reader as the API shows it: its link (from the feed's sources) and its statistics
+/// (from the localizer).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct ReaderView {
     /// The reader's name.
@@ -103,26 +117,6 @@ pub struct ReaderView {
     pub reads_per_s: f64,
     /// Antennas, by port.
     pub antennas: Vec<AntennaView>,
-}
-
-/// Ground truth of a simulation, for `GET /api/truth`.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct Truth {
-    /// Every tag's true position.
-    pub tags: Vec<TruthTag>,
-    /// Every antenna's true pose now.
-    pub antennas: Vec<PoseSample>,
-}
-
-/// One tag's true position.
-#[derive(Clone, Debug, Serialize)]
-pub struct TruthTag {
-    /// EPC, upper-case hex.
-    pub epc: String,
-    /// Position (m).
-    pub position: [f64; 3],
-    /// A reference tag (its position is known to the localizer).
-    pub reference: bool,
 }
 
 /// The localizer's counters, exported as Prometheus text by `GET /metrics`.
@@ -327,7 +321,8 @@ impl Metrics {
 #[derive(Debug)]
 pub struct Shared {
     tags: RwLock<BTreeMap<String, TagView>>,
-    readers: RwLock<BTreeMap<String, ReaderView>>,
+    readers: RwLock<BTreeMap<String, ReaderStats>>,
+    links: Arc<Links>,
     truth: RwLock<Option<Truth>>,
     subscribers: Subscribers,
     /// Counters for `/metrics`.
@@ -356,6 +351,7 @@ impl Shared {
         Shared {
             tags: RwLock::default(),
             readers: RwLock::default(),
+            links: Arc::default(),
             truth: RwLock::default(),
             subscribers: Subscribers::default(),
             metrics: Metrics::new(),
@@ -373,9 +369,32 @@ impl Shared {
         read(&self.tags).get(&epc.to_ascii_uppercase()).cloned()
     }
 
-    /// Every reader, by name.
+    /// Every reader, by name: those with a link and those read from.
     pub fn readers(&self) -> Vec<ReaderView> {
-        read(&self.readers).values().cloned().collect()
+        let links = self.links.all();
+        let stats = read(&self.readers);
+        let names: BTreeSet<&String> = links.keys().chain(stats.keys()).collect();
+        names
+            .into_iter()
+            .map(|name| {
+                let link = links.get(name).cloned().unwrap_or_default();
+                let s = stats.get(name).cloned().unwrap_or_default();
+                ReaderView {
+                    name: name.clone(),
+                    connected: link.connected,
+                    peer: link.peer,
+                    inventory: link.inventory.as_str().to_owned(),
+                    reads: s.reads,
+                    reads_per_s: s.reads_per_s,
+                    antennas: s.antennas,
+                }
+            })
+            .collect()
+    }
+
+    /// The readers' links, which the feed's sources write.
+    pub fn links(&self) -> &Arc<Links> {
+        &self.links
     }
 
     /// The simulation's ground truth; `None` for a real reader.
@@ -399,17 +418,13 @@ impl Shared {
         *write(&self.truth) = Some(truth);
     }
 
-    /// Changes reader `name`'s view (created empty if new).
-    pub fn update_reader(&self, name: &str, f: impl FnOnce(&mut ReaderView)) {
+    /// Changes reader `name`'s statistics (created empty if new).
+    pub(crate) fn update_reader(&self, name: &str, f: impl FnOnce(&mut ReaderStats)) {
         let mut readers = write(&self.readers);
-        let view = readers
-            .entry(name.to_string())
-            .or_insert_with(|| ReaderView {
-                name: name.to_string(),
-                inventory: "idle".into(),
-                ..ReaderView::default()
-            });
-        f(view);
+        match readers.get_mut(name) {
+            Some(stats) => f(stats),
+            None => f(readers.entry(name.to_owned()).or_default()),
+        }
     }
 
     /// Changes tag `epc`'s view with `f` (creating it from `new` if it is not there yet).

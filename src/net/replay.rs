@@ -21,6 +21,7 @@ use super::tls::Acceptor;
 use crate::localize::live::{Input, Tap};
 use crate::record::replay::{ReplayOptions, ReplaySession, Script};
 use crate::utc::now_us as utc_now_us;
+use llrp_gateway_vocab::feed::Inventory;
 
 /// Bytes queued for the client before the session stops moving due frames to it.
 const QUEUE_BYTES: usize = 256 * 1024;
@@ -95,18 +96,18 @@ pub async fn serve_tapped(
                     let slot = Slot(&busy);
                     tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
                     if let Some((name, t)) = &tap {
-                        t.shared().update_reader(name, |v| {
-                            v.connected = true;
-                            v.peer = Some(peer.to_string());
-                            v.inventory = "client".into();
+                        t.links().update(name, |l| {
+                            l.connected = true;
+                            l.peer = Some(peer.to_string());
+                            l.inventory = Inventory::Client;
                         });
                     }
                     let result = session(conn, peer, &script, options, stop, tap.as_ref()).await;
                     if let Some((name, t)) = &tap {
-                        t.shared().update_reader(name, |v| {
-                            v.connected = false;
-                            v.peer = None;
-                            v.inventory = "idle".into();
+                        t.links().update(name, |l| {
+                            l.connected = false;
+                            l.peer = None;
+                            l.inventory = Inventory::Idle;
                         });
                     }
                     match result {

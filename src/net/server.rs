@@ -29,6 +29,8 @@ use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
 use crate::record::{Direction, Entry, Event, Recorder};
+use llrp_gateway_vocab::feed::Inventory;
+use prometheus_client::metrics::counter::Counter;
 
 /// Sees the reader after each step (writes ground truth).
 pub type Observer = Box<dyn FnMut(&Reader) + Send>;
@@ -72,6 +74,8 @@ pub struct LiveHook {
     pub tap: Tap,
     /// Told whether a client is connected (the simulator's own inventory runs while not).
     pub client: watch::Sender<bool>,
+    /// Counts the frames the client sends the reader.
+    pub frames_in: Counter,
 }
 
 impl SimReader {
@@ -369,7 +373,7 @@ pub async fn serve_tls(
                 match r {
                     Ok(Io::Frame(inbound)) => {
                         if let Some(l) = &live {
-                            l.tap.shared().metrics.frames_in.inc();
+                            l.frames_in.inc();
                         }
                         if let (Some(r), llrp::Inbound::Frame(f)) = (&recorder, &inbound) {
                             let _ = r.frame(r.now(), c.rec, Direction::ToReader, f.clone()).await;
@@ -478,13 +482,17 @@ fn tell_live(
     live.client
         .send_if_modified(|c| std::mem::replace(c, connected) != connected);
     let peer = client.as_ref().map(|c| c.peer.clone());
-    live.tap.shared().update_reader(&live.name, |v| {
-        v.connected = connected;
-        v.peer = peer;
+    live.tap.links().update(&live.name, |l| {
+        l.connected = connected;
+        l.peer = peer;
         if connected {
-            v.inventory = if inventorying { "client" } else { "idle" }.into();
-        } else if v.inventory == "client" {
-            v.inventory = "idle".into();
+            l.inventory = if inventorying {
+                Inventory::Client
+            } else {
+                Inventory::Idle
+            };
+        } else if l.inventory == Inventory::Client {
+            l.inventory = Inventory::Idle;
         }
     });
 }

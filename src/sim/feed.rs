@@ -12,10 +12,10 @@ use crate::localize::live::{Input, Settings, Tap};
 use crate::localize::poses::PoseSample;
 use crate::localize::refine::PoseErrorModel;
 use crate::localize::series::Ambiguity;
-use crate::localize::shared::{Truth, TruthTag};
 use crate::physics::{AntennaPose, Model, World};
 use crate::reads::PoseAt;
 use crate::scenario::{Mount, PoseEstimateKind, Scenario};
+use llrp_gateway_vocab::feed::{Truth, TruthTag};
 
 /// Simulated time between two pose samples of an antenna by default, µs (10 Hz).
 pub const POSE_INTERVAL_US: u64 = 100_000;
@@ -144,7 +144,7 @@ impl Feed {
                     })
                     .collect(),
             };
-            self.tap.shared().set_truth(truth);
+            self.tap.offer(Input::Truth(truth));
         }
     }
 }

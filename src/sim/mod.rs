@@ -21,6 +21,7 @@ use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::Scenario;
+use prometheus_client::metrics::counter::Counter;
 
 pub mod feed;
 pub mod own;
@@ -57,6 +58,8 @@ pub struct SimOptions {
     /// the ground truth; while no client is connected (and time runs by the wall clock)
     /// each reader inventories by itself for it.
     pub localize: Option<LocalizeFeed>,
+    /// Counts the LLRP frames clients send the readers (`/metrics`' `frames_in`).
+    pub frames_in: Counter,
 }
 
 /// What the simulator feeds the live localizer.
@@ -83,6 +86,7 @@ impl Default for SimOptions {
             record_options: RecordOptions::default(),
             tls: None,
             localize: None,
+            frames_in: Counter::default(),
         }
     }
 }
@@ -388,6 +392,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
                 name: spec.name.clone(),
                 tap: l.tap.clone(),
                 client,
+                frames_in: opts.frames_in.clone(),
             });
             if opts.speed != Speed::Max {
                 let (model, profile) = (model.clone(), profile.clone());

@@ -22,6 +22,7 @@ use crate::net::clock::Clock;
 use crate::physics::pool::Pool;
 use crate::reader::session::{Accepted, ClientId, Now, Session};
 use crate::reader::Reader;
+use llrp_gateway_vocab::feed::Inventory;
 
 /// ROSpecID of the own inventory's ROSpec.
 pub const ROSPEC_ID: u32 = 0x4F57_4E00;
@@ -160,8 +161,8 @@ pub async fn run(
             return;
         };
         task.tap
-            .shared()
-            .update_reader(&task.name, |v| v.inventory = "self".into());
+            .links()
+            .update(&task.name, |l| l.inventory = Inventory::Own);
         tracing::info!(reader = %task.name, "no client: the reader inventories by itself for the localizer");
         loop {
             if let Some(bytes) = own.take_output() {

@@ -1,6 +1,9 @@
 //! The vocabulary every layer of llrp-gateway shares, below the localizer, the simulator and
-//! the application: tag reads in SI units decoded from LLRP ([`reads`]) and the wall clock
-//! ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
+//! the application: tag reads in SI units decoded from LLRP ([`reads`]), antenna pose
+//! samples ([`pose`]), the feed that carries both from any source to any consumer ([`feed`])
+//! and the wall clock ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
 
+pub mod feed;
+pub mod pose;
 pub mod reads;
 pub mod utc;

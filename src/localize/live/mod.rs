@@ -45,7 +45,7 @@ use super::series::Ambiguity;
 use super::shared::{AntennaView, Shared, TagView, RECENT_READS};
 use crate::reads::Read;
 
-pub use super::tap::{Input, Mirror, Tap};
+pub use llrp_gateway_vocab::feed::{Input, Mirror, Tap};
 
 mod refinement;
 mod rounds;
@@ -151,7 +151,11 @@ impl Live {
             .name("localizer".into())
             .spawn(move || worker.run(rx, &stopping))?;
         Ok(Live {
-            tap: Tap::new(tx, shared.clone()),
+            tap: Tap::new(
+                tx,
+                shared.metrics.dropped_taps.clone(),
+                shared.links().clone(),
+            ),
             shared,
             worker: Some(handle),
             stop,
@@ -421,10 +425,10 @@ impl Worker {
                 }
                 self.derive(new, &[]);
             }
-            Input::Status { reader, online } => {
-                self.shared.update_reader(&reader, |v| v.connected = online);
-            }
-            Input::Event { .. } | Input::Keepalive { .. } => {}
+            // A reader's link is written by its source (`Tap::links`); events and keepalives
+            // are for mirrors.
+            Input::Status { .. } | Input::Event { .. } | Input::Keepalive { .. } => {}
+            Input::Truth(truth) => self.shared.set_truth(truth),
         }
     }
 

@@ -12,7 +12,6 @@ use std::collections::BTreeMap;
 use std::io::BufRead;
 
 use rustc_hash::FxHashMap;
-use serde::{Deserialize, Serialize};
 
 use super::series::fold;
 
@@ -20,30 +19,7 @@ mod message;
 
 pub use message::parse_poses;
 
-/// One pose sample: a line of the pose file.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PoseSample {
-    /// Robot (or site) time, µs.
-    pub t_us: u64,
-    /// Reader name.
-    #[serde(default)]
-    pub reader: String,
-    /// Antenna port, 1-based.
-    pub antenna: u16,
-    /// Position (m).
-    pub x: f64,
-    /// Position (m).
-    pub y: f64,
-    /// Position (m).
-    pub z: f64,
-    /// Boresight azimuth about +z (degrees, 0 = +x).
-    #[serde(default)]
-    pub yaw_deg: f64,
-    /// Boresight elevation (degrees, positive up).
-    #[serde(default)]
-    pub pitch_deg: f64,
-}
+pub use llrp_gateway_vocab::pose::PoseSample;
 
 /// Why a pose file could not be read: the line and the reason, naming the field.
 #[derive(Debug, thiserror::Error)]

@@ -1,17 +1,24 @@
-//! The localizer's input ([`Input`]) and the tap that hands it over without waiting
-//! ([`Tap`]), with copies for mirrors such as an MQTT publisher ([`Mirror`]).
+//! The feed: what any source of reads (the simulator, the proxy, a replay, the inventory
+//! client) hands any consumer (the localizer, an MQTT publisher): [`Input`], through a [`Tap`]
+//! that never waits and counts what it drops, with copies for mirrors ([`Mirror`]); and each
+//! reader's link ([`Links`]), which a source writes and a consumer shows.
 
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::Arc;
 
 use bytes::Bytes;
 use llrp::units::HopTable;
+use prometheus_client::metrics::counter::Counter;
+use serde::Serialize;
 
-use super::poses::PoseSample;
-use super::shared::Shared;
+use crate::pose::PoseSample;
 use crate::reads::Read;
 
-/// What goes into the localizer.
+mod links;
+
+pub use links::{Inventory, Link, Links};
+
+/// What a source hands on: to the localizer, and to any mirror beside it.
 #[derive(Clone, Debug)]
 pub enum Input {
     /// A reader is known by this name; its reads' channels are looked up in `hop_table`
@@ -42,6 +49,8 @@ pub enum Input {
     Reads(Vec<Read>),
     /// Antenna pose samples (a simulator, a pose file, `POST /api/poses`).
     Poses(Vec<PoseSample>),
+    /// A simulation's ground truth now (the localizer shows it beside its estimates).
+    Truth(Truth),
     /// Reader `reader` came (its upstream connection is up) or went.
     Status {
         /// The reader's name.
@@ -71,6 +80,26 @@ pub enum Input {
     },
 }
 
+/// Ground truth of a simulation, for `GET /api/truth`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Truth {
+    /// Every tag's true position.
+    pub tags: Vec<TruthTag>,
+    /// Every antenna's true pose now.
+    pub antennas: Vec<PoseSample>,
+}
+
+/// One tag's true position.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TruthTag {
+    /// EPC, upper-case hex.
+    pub epc: String,
+    /// Position (m).
+    pub position: [f64; 3],
+    /// A reference tag (its position is known to the localizer).
+    pub reference: bool,
+}
+
 impl Input {
     /// How many reads or poses the input counts for when dropped (1 for anything else).
     pub fn weight(&self) -> u64 {
@@ -82,13 +111,15 @@ impl Input {
     }
 }
 
-/// The sending side of the localizer (and of any mirror beside it, such as an MQTT
+/// The sending side of the feed, to the localizer and any mirror beside it (such as an MQTT
 /// publisher): never waits.
 #[derive(Clone, Debug)]
 pub struct Tap {
     /// `None`: no localizer runs (a tap for mirrors only).
     tx: Option<SyncSender<Input>>,
-    shared: Arc<Shared>,
+    /// Inputs (reads or poses, one by one) the localizer was behind for.
+    dropped: Counter,
+    links: Arc<Links>,
     mirrors: Vec<Mirror>,
 }
 
@@ -98,25 +129,28 @@ pub struct Mirror {
     /// Where the copies go.
     pub tx: SyncSender<Input>,
     /// Inputs (reads or poses, one by one) dropped because it was behind.
-    pub dropped: prometheus_client::metrics::counter::Counter,
+    pub dropped: Counter,
 }
 
 impl Tap {
-    /// The tap of a localizer taking its input from `tx`.
-    pub(super) fn new(tx: SyncSender<Input>, shared: Arc<Shared>) -> Tap {
+    /// The tap of a localizer taking its input from `tx`; what it is behind for counts in
+    /// `dropped`, and the sources write their readers' links to `links`.
+    pub fn new(tx: SyncSender<Input>, dropped: Counter, links: Arc<Links>) -> Tap {
         Tap {
             tx: Some(tx),
-            shared,
+            dropped,
+            links,
             mirrors: Vec::new(),
         }
     }
 
     /// A tap with no localizer behind it: what it is offered goes to its mirrors only;
-    /// `shared` still takes the readers' states and the metrics.
-    pub fn detached(shared: Arc<Shared>) -> Tap {
+    /// `links` still takes the readers' links.
+    pub fn detached(links: Arc<Links>) -> Tap {
         Tap {
             tx: None,
-            shared,
+            dropped: Counter::default(),
+            links,
             mirrors: Vec::new(),
         }
     }
@@ -146,7 +180,7 @@ impl Tap {
         match tx.try_send(input) {
             Ok(()) => true,
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.shared.metrics.dropped_taps.inc_by(weight);
+                self.dropped.inc_by(weight);
                 false
             }
         }
@@ -166,7 +200,7 @@ impl Tap {
             Err(TrySendError::Full(i)) => Err(i),
             Err(TrySendError::Disconnected(i)) => {
                 // The localizer has stopped: waiting would not help.
-                self.shared.metrics.dropped_taps.inc_by(i.weight());
+                self.dropped.inc_by(i.weight());
                 Ok(())
             }
         };
@@ -176,8 +210,8 @@ impl Tap {
         taken
     }
 
-    /// The localizer's published state.
-    pub fn shared(&self) -> &Arc<Shared> {
-        &self.shared
+    /// The readers' links the sources behind this tap write.
+    pub fn links(&self) -> &Arc<Links> {
+        &self.links
     }
 }
