@@ -10,7 +10,6 @@ pub mod fleet;
 pub mod gateway;
 pub mod http;
 pub mod inventory;
-pub mod localize;
 pub mod net;
 pub mod options;
 pub mod realism;
@@ -18,5 +17,6 @@ pub mod record;
 pub mod sim;
 pub mod stop;
 
+pub use llrp_gateway_localize as localize;
 pub use llrp_gateway_sim::{physics, reader, scenario};
 pub use llrp_gateway_vocab::{reads, utc};

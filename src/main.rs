@@ -289,6 +289,7 @@ fn run_sim(
         if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
             let settings = llrp_gateway::localize::live::Settings {
                 estimator: localize.estimator,
+                release_memory: Some(llrp_gateway::alloc::release_free),
                 ..Default::default()
             };
             let mut settings = sim::feed::settings(&scenario, settings);

@@ -66,12 +66,6 @@ const LAYERS: &[Layer] = &[
         modules: &[&["sim", "localize"], APPLICATION],
         crates: ASYNC,
     },
-    // The localizer sees reads and poses, never the simulator, and knows no sockets.
-    Layer {
-        dir: "localize",
-        modules: &[SIMULATOR, APPLICATION],
-        crates: ASYNC,
-    },
     // Recordings (format, recorder, replay session, pcapng) know the codec, reads, files and
     // the wall clock; the servers and clients that feed them are above.
     Layer {
@@ -90,7 +84,14 @@ const LAYERS: &[Layer] = &[
                 "realism",
             ],
         ],
-        crates: &["axum", "hyper", "hyper_util", "rumqttc"],
+        crates: &[
+            "axum",
+            "hyper",
+            "hyper_util",
+            "rumqttc",
+            "llrp_gateway_sim",
+            "llrp_gateway_localize",
+        ],
     },
     // MQTT publishing and workers take the localizer's feed and state; they do not reach into
     // the simulator, the HTTP server or the other commands.
@@ -100,7 +101,7 @@ const LAYERS: &[Layer] = &[
             SIMULATOR,
             &["http", "gateway", "inventory", "cli", "eval", "realism"],
         ],
-        crates: &["axum", "hyper", "hyper_util"],
+        crates: &["axum", "hyper", "hyper_util", "llrp_gateway_sim"],
     },
 ];
 
@@ -348,6 +349,31 @@ fn the_vocabulary_crate_depends_only_on_the_codec_and_serialization() {
             "serde_json",
             "serde_path_to_error",
             "thiserror",
+        ],
+    );
+}
+
+#[test]
+fn the_localizer_crate_depends_only_on_the_vocabulary_and_numeric_crates() {
+    // The localizer sees reads and poses (the vocabulary's), never the simulator, and knows
+    // no sockets, HTTP or MQTT: so it works the same on a real reader's data and runs in any
+    // host. Its counters are metric handles (prometheus-client's, without IO).
+    depends_only_on(
+        "crates/localize/Cargo.toml",
+        "llrp-gateway-vocab",
+        &[
+            "llrp-gateway-vocab",
+            "nalgebra",
+            "levenberg-marquardt",
+            "rustc-hash",
+            "rand",
+            "rand_chacha",
+            "rand_distr",
+            "serde",
+            "serde_json",
+            "serde_path_to_error",
+            "thiserror",
+            "prometheus-client",
         ],
     );
 }

@@ -39,6 +39,7 @@ pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
         let settings = Settings {
             geometry: run.settings.geometry.clone(),
             ambiguity: run.settings.ambiguity,
+            release_memory: Some(crate::alloc::release_free),
             ..Settings::default()
         };
         let live = Live::start(settings).map_err(|e| e.to_string())?;

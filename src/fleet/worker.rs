@@ -101,7 +101,10 @@ impl Worker {
         let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, opts.tls.clone())?;
         mqtt.set_manual_acks(true);
         let (client, connection) = Client::new(mqtt, 10_000);
-        let live = Live::start(opts.settings.clone())?;
+        let live = Live::start(Settings {
+            release_memory: Some(crate::alloc::release_free),
+            ..opts.settings.clone()
+        })?;
         for (reader, offset) in &opts.clock_offsets_us {
             live.tap.offer(Input::Reader {
                 name: reader.clone(),

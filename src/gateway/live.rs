@@ -170,7 +170,10 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
         }
         None => Poses::new(),
     };
-    let settings = settings_from(&file, &poses, args.estimator);
+    let settings = Settings {
+        release_memory: Some(crate::alloc::release_free),
+        ..settings_from(&file, &poses, args.estimator)
+    };
     let live = Live::start(settings).map_err(|e| format!("cannot start the localizer: {e}"))?;
     for (reader, offset) in &file.clock_offsets_us {
         live.tap.offer(Input::Reader {

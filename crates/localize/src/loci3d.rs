@@ -1,0 +1,259 @@
+//! 3D by loci intersection (\[A\] §III-A3): each antenna on a straight path, treated alone
+//! with the tag at its own height, gives a circle around the path (centre the path's point
+//! nearest the tag, radius the perpendicular distance d0, normal along the path), here from
+//! the min-distance linear model ([`crate::linear::circle`], one circle per segment). The tag's
+//! position along the path is the mean of the circles' centres; across the path and in height
+//! it minimises Σ w_i((y_i − y)² + (z_i − z)² − R_i²)² by Levenberg–Marquardt, on the side the
+//! antennas face. Circles at two heights at least are needed.
+//!
+//! Ours, where \[A\] is silent: the mean of the centres and the terms of the sum are weighted
+//! by the inverse variances from the circles (w_i = 1/(4R_i²σ_R²)); the covariance of (y, z)
+//! is (JᵀWJ)⁻¹, scaled up by the reduced χ² when that exceeds 1; cross terms between the
+//! position along the path and (y, z) are taken as 0.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Matrix3, Owned, Vector2};
+
+use crate::linear::{circle, Circle, MAX_SLOPE};
+use crate::relock::{NoFix, Obs};
+
+/// Least spread of the circles' heights for a 3D fix (m, ours).
+pub const MIN_HEIGHT_SPREAD_M: f64 = 0.05;
+/// Largest angle between a circle's path and the reference circle's (rad, ours).
+pub const MAX_PATH_ANGLE_RAD: f64 = 0.05;
+
+/// A 3D estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fix3 {
+    /// Position (m).
+    pub position: [f64; 3],
+    /// Covariance of (x, y, z), m², row-major 3×3.
+    pub covariance: [f64; 9],
+    /// Root-mean-square phase residual (rad), over the phases behind it.
+    pub rms_rad: f64,
+}
+
+/// One circle in the path's frame: across-path and height of its centre, radius, and the
+/// radius's standard deviation.
+struct Locus {
+    y: f64,
+    z: f64,
+    r: f64,
+    sigma_r: f64,
+}
+
+struct Problem<'a> {
+    loci: &'a [Locus],
+    p: DVector<f64>,
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.p.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.p.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        Some(DVector::from_iterator(
+            self.loci.len(),
+            self.loci.iter().map(|l| {
+                let w = 1.0 / (2.0 * l.r * l.sigma_r);
+                w * ((l.y - self.p[0]).powi(2) + (l.z - self.p[1]).powi(2) - l.r * l.r)
+            }),
+        ))
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let mut j = DMatrix::zeros(self.loci.len(), 2);
+        for (i, l) in self.loci.iter().enumerate() {
+            let w = 1.0 / (2.0 * l.r * l.sigma_r);
+            j[(i, 0)] = -2.0 * w * (l.y - self.p[0]);
+            j[(i, 1)] = -2.0 * w * (l.z - self.p[1]);
+        }
+        Some(j)
+    }
+}
+
+/// The tag's 3D position from `obs` (phase sign `sign`; one straight segment per antenna pass,
+/// at least two heights), on the side of the path that `facing` points to.
+pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let mut by_segment: Vec<Vec<Obs>> = vec![Vec::new(); segments];
+    for o in obs {
+        by_segment[o.segment].push(*o);
+    }
+    let circles: Vec<Circle> = by_segment
+        .iter()
+        .filter_map(|s| circle(s, sign).ok())
+        .filter(|c| c.covariance[0] > 0.0 && c.covariance[3] > 0.0)
+        .collect();
+    // The frame: the best-sampled circle's path, made horizontal; n across it, facing.
+    let reference = circles
+        .iter()
+        .max_by_key(|c| c.samples)
+        .ok_or(NoFix::InsufficientGeometry)?;
+    let [ux, uy, uz] = reference.direction;
+    let horizontal = ux.hypot(uy);
+    if uz.abs() > MAX_SLOPE || horizontal < 1e-9 {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let u = [ux / horizontal, uy / horizontal];
+    let mut n = [-u[1], u[0]];
+    if n[0] * facing[0] + n[1] * facing[1] < 0.0 {
+        n = [-n[0], -n[1]];
+    }
+    let o = reference.centre;
+    let parallel: Vec<&Circle> = circles
+        .iter()
+        .filter(|c| {
+            let d = c.direction;
+            (d[0] * u[0] + d[1] * u[1]).abs() >= MAX_PATH_ANGLE_RAD.cos()
+        })
+        .collect();
+    let (mut sx, mut wx) = (0.0, 0.0);
+    let mut loci = Vec::new();
+    for c in &parallel {
+        let (dx, dy) = (c.centre[0] - o[0], c.centre[1] - o[1]);
+        let w = 1.0 / c.covariance[0];
+        sx += w * (dx * u[0] + dy * u[1]);
+        wx += w;
+        loci.push(Locus {
+            y: dx * n[0] + dy * n[1],
+            z: c.centre[2],
+            r: c.radius_m,
+            sigma_r: c.covariance[3].sqrt(),
+        });
+    }
+    let (z_lo, z_hi) = loci.iter().fold((f64::MAX, f64::MIN), |(lo, hi), l| {
+        (lo.min(l.z), hi.max(l.z))
+    });
+    if loci.len() < 2 || z_hi - z_lo < MIN_HEIGHT_SPREAD_M {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let x = sx / wx;
+    let count = loci.len() as f64;
+    let y_mean = loci.iter().map(|l| l.y).sum::<f64>() / count;
+    let z_mean = loci.iter().map(|l| l.z).sum::<f64>() / count;
+    let r_mean = loci.iter().map(|l| l.r).sum::<f64>() / count;
+    // Started on the facing side, at the mean radius out from the centres.
+    let problem = Problem {
+        loci: &loci,
+        p: DVector::from_vec(vec![y_mean + r_mean, z_mean]),
+    };
+    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
+    let (y, z) = (solved.p[0], solved.p[1]);
+    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
+    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
+    let dof = loci.len().saturating_sub(2);
+    let chi2 = if dof > 0 {
+        (r.norm_squared() / dof as f64).max(1.0)
+    } else {
+        1.0
+    };
+    let cov_yz = (j.transpose() * &j)
+        .try_inverse()
+        .ok_or(NoFix::InsufficientGeometry)?
+        * chi2;
+    if !(y > y_mean && y.is_finite() && z.is_finite()) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let rot = Matrix3::new(u[0], n[0], 0.0, u[1], n[1], 0.0, 0.0, 0.0, 1.0);
+    let mut path = Matrix3::zeros();
+    path[(0, 0)] = 1.0 / wx;
+    path.fixed_view_mut::<2, 2>(1, 1).copy_from(&cov_yz);
+    let cov = rot * path * rot.transpose();
+    let across = Vector2::from(n) * y;
+    let position = [o[0] + x * u[0] + across[0], o[1] + x * u[1] + across[1], z];
+    let covariance: [f64; 9] = std::array::from_fn(|k| cov[(k / 3, k % 3)]);
+    if !covariance.iter().all(|v| v.is_finite()) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let (sq, used) = parallel.iter().fold((0.0, 0usize), |(sq, used), c| {
+        (
+            sq + c.rms_rad * c.rms_rad * c.samples as f64,
+            used + c.samples,
+        )
+    });
+    Ok(Fix3 {
+        position,
+        covariance,
+        rms_rad: (sq / used.max(1) as f64).sqrt(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic;
+
+    /// Passes at `heights`, phase offsets 0.3 apart.
+    fn pass(tag: [f64; 3], heights: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
+        synthetic::passes(tag, heights, (0.0, 0.3), noise, seed)
+    }
+
+    const HEIGHTS: [f64; 4] = [0.3, 0.6, 0.9, 1.2];
+
+    fn err(fix: &Fix3, tag: [f64; 3]) -> f64 {
+        (0..3)
+            .map(|k| (fix.position[k] - tag[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    #[test]
+    fn a_noise_free_tag_is_recovered_within_a_millimetre_in_3d() {
+        for tag in [[0.8f64, 1.5, 0.75], [1.234, -1.2, 1.4], [0.3, 0.9, 0.1]] {
+            let facing = [0.0, tag[1].signum()];
+            let fix = locate(&pass(tag, &HEIGHTS, 0.0, 1), 1.0, facing).expect("a fix");
+            assert!(err(&fix, tag) < 1e-3, "{tag:?}: {fix:?}");
+        }
+        // Two heights are enough.
+        let tag = [0.5, 1.3, 0.9];
+        let fix = locate(&pass(tag, &[0.4, 1.1], 0.0, 1), 1.0, [0.0, 1.0]).expect("a fix");
+        assert!(err(&fix, tag) < 1e-3, "{fix:?}");
+        assert!(fix.covariance[8] > 0.0, "the height is estimated: {fix:?}");
+    }
+
+    #[test]
+    fn with_noise_the_error_stays_within_the_covariance() {
+        let tag = [0.8, 1.5, 0.75];
+        let mut within = 0;
+        for seed in 0..20 {
+            let fix = locate(&pass(tag, &HEIGHTS, 0.1, seed), 1.0, [0.0, 1.0]).expect("a fix");
+            assert!(err(&fix, tag) < 0.05, "seed {seed}: {} m", err(&fix, tag));
+            // Mahalanobis distance² of a 3D Gaussian error: ≤ 7.81 holds 95 % of the time.
+            let c = Matrix3::from_row_slice(&fix.covariance);
+            let e = nalgebra::Vector3::from(fix.position) - nalgebra::Vector3::from(tag);
+            let m2 = (e.transpose() * c.try_inverse().expect("invertible") * e)[0];
+            within += usize::from(m2 <= 7.81);
+        }
+        assert!(within >= 16, "{within} of 20 within the 95 % ellipsoid");
+    }
+
+    #[test]
+    fn one_height_or_too_little_is_insufficient_geometry() {
+        let insufficient = Err(NoFix::InsufficientGeometry);
+        let tag = [0.8, 1.5, 0.75];
+        // Two passes at one height: the circles cannot fix z.
+        assert_eq!(
+            locate(&pass(tag, &[0.5, 0.5], 0.0, 1), 1.0, [0.0, 1.0]),
+            insufficient
+        );
+        assert_eq!(
+            locate(&pass(tag, &[0.5], 0.0, 1), 1.0, [0.0, 1.0]),
+            insufficient
+        );
+        assert_eq!(locate(&[], 1.0, [0.0, 1.0]), insufficient);
+        // Two heights but one pass too short for its circle.
+        let mut obs = pass(tag, &[0.3, 1.2], 0.0, 1);
+        obs.retain(|o| o.segment == 0 || o.antenna[0] < -0.95);
+        assert_eq!(locate(&obs, 1.0, [0.0, 1.0]), insufficient);
+    }
+}

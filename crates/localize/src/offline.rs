@@ -1,0 +1,394 @@
+//! `llrp-gateway localize`: estimates from a recording or a reads file, with a pose file or
+//! the reads' own `antenna_pose`, written as the same JSON as `GET /api/tags`.
+//!
+//! The per-reader settings a real reader's data cannot carry (the phase sign, the side the
+//! antennas face, the tags' assumed height, the reference tags, the readers' clock offsets)
+//! come from a settings file; without one, the tags are assumed at the first antenna pose's
+//! height and on the side its yaw faces, with the phase sign +1.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::estimate::{self, Estimate, Estimator, Geometry, ReaderGeometry};
+use crate::ingest::{Ingest, SetAside};
+use crate::poses::{PoseError, Poses};
+use crate::refine::{refined_poses, PoseErrorModel};
+use crate::series::Ambiguity;
+use crate::shared::{TagJson, TagsJson};
+use llrp_gateway_vocab::reads::Read;
+
+/// Why `localize` could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum OfflineError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A line of the reads file is bad.
+    #[error("{path}: line {line}: {message}")]
+    Reads {
+        /// The file.
+        path: PathBuf,
+        /// The line.
+        line: usize,
+        /// Why.
+        message: String,
+    },
+    /// The pose file is bad.
+    #[error("{path}: {source}")]
+    Poses {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: PoseError,
+    },
+    /// The settings file is bad.
+    #[error("{path}: {message}")]
+    Settings {
+        /// The file.
+        path: PathBuf,
+        /// Why, naming the field.
+        message: String,
+    },
+}
+
+/// A reference tag of the settings file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceTag {
+    /// EPC, hex.
+    pub epc: String,
+    /// x (m).
+    pub x: f64,
+    /// y (m).
+    pub y: f64,
+    /// z (m).
+    pub z: f64,
+}
+
+/// The settings file (JSON; every key optional).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SettingsFile {
+    /// Height assumed for the tags by the 2D estimators (m).
+    pub tag_height_m: Option<f64>,
+    /// +1, or −1 for a reader that reports the phase negated.
+    pub phase_sign: Option<f64>,
+    /// The side the antennas face, `[x, y]`.
+    pub facing: Option<[f64; 2]>,
+    /// Farthest a tag is searched for from the path (m).
+    pub reach_m: Option<f64>,
+    /// The reader reports phase with Impinj's π ambiguity.
+    #[serde(default)]
+    pub pi_ambiguity: bool,
+    /// Reads weaker than this (dBm) are set aside: their phase noise slips the unwrapping.
+    pub min_rssi_dbm: Option<f64>,
+    /// Reference tags at known positions (fingerprinting).
+    #[serde(default)]
+    pub references: Vec<ReferenceTag>,
+    /// Per reader, reader time − robot time of the pose file (µs).
+    #[serde(default)]
+    pub clock_offsets_us: BTreeMap<String, i64>,
+    /// Per reader name, its own phase sign and facing (the keys above for the others).
+    #[serde(default)]
+    pub readers: BTreeMap<String, ReaderSettings>,
+    /// The robot's pose error, where its poses come from a localization stack: the poses
+    /// are then refined from the tags' phases ([`crate::refine`]).
+    pub pose_error: Option<PoseErrorSettings>,
+}
+
+/// The pose error of the settings file's `pose_error`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PoseErrorSettings {
+    /// σ of the error in x and in y (m).
+    pub sigma_m: f64,
+    /// Its correlation time (s).
+    pub correlation_s: f64,
+}
+
+/// One reader's own settings in the settings file.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ReaderSettings {
+    /// +1, or −1 for a reader that reports the phase negated.
+    pub phase_sign: Option<f64>,
+    /// The side its antennas face, `[x, y]`.
+    pub facing: Option<[f64; 2]>,
+}
+
+/// Why `phase_sign` is not one a reader has.
+fn check_sign(sign: Option<f64>) -> Result<(), String> {
+    match sign.filter(|&v| v != 1.0 && v != -1.0) {
+        Some(v) => Err(format!("must be 1 or -1, got {v}")),
+        None => Ok(()),
+    }
+}
+
+/// Why `facing` is not a direction.
+fn check_facing(facing: Option<[f64; 2]>) -> Result<(), String> {
+    match facing.filter(|f| {
+        let n = f[0].hypot(f[1]);
+        n.is_nan() || n.is_infinite() || n <= 0.0
+    }) {
+        Some(f) => Err(format!("must be a non-zero direction, got {f:?}")),
+        None => Ok(()),
+    }
+}
+
+impl SettingsFile {
+    /// Reads and checks a settings file.
+    pub fn load(path: &Path) -> Result<SettingsFile, OfflineError> {
+        let text = std::fs::read_to_string(path).map_err(|source| OfflineError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let bad = |message: String| OfflineError::Settings {
+            path: path.to_owned(),
+            message,
+        };
+        let mut de = serde_json::Deserializer::from_str(&text);
+        let s: SettingsFile = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| bad(format!("{}: {}", e.path(), e.inner())))?;
+        check_sign(s.phase_sign).map_err(|e| bad(format!("phase_sign: {e}")))?;
+        if let Some(v) = s.min_rssi_dbm.filter(|v| !v.is_finite()) {
+            return Err(bad(format!("min_rssi_dbm: not a finite number: {v}")));
+        }
+        if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
+            return Err(bad(format!("tag_height_m: not a finite number: {h}")));
+        }
+        if let Some(r) = s
+            .reach_m
+            .filter(|&r| r.is_nan() || r.is_infinite() || r <= 0.0)
+        {
+            return Err(bad(format!("reach_m: must be a positive number, got {r}")));
+        }
+        check_facing(s.facing).map_err(|e| bad(format!("facing: {e}")))?;
+        for (name, r) in &s.readers {
+            check_sign(r.phase_sign).map_err(|e| bad(format!("readers.{name}.phase_sign: {e}")))?;
+            check_facing(r.facing).map_err(|e| bad(format!("readers.{name}.facing: {e}")))?;
+        }
+        if let Some(e) = &s.pose_error {
+            let positive = |v: f64| v.is_finite() && v > 0.0;
+            if !positive(e.sigma_m) {
+                let v = e.sigma_m;
+                return Err(bad(format!(
+                    "pose_error.sigma_m: must be a positive number, got {v}"
+                )));
+            }
+            if !positive(e.correlation_s) {
+                let v = e.correlation_s;
+                return Err(bad(format!(
+                    "pose_error.correlation_s: must be a positive number, got {v}"
+                )));
+            }
+        }
+        for (i, r) in s.references.iter().enumerate() {
+            let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
+            if !hex || r.epc.is_empty() {
+                return Err(bad(format!("references[{i}].epc: not hex: {:?}", r.epc)));
+            }
+        }
+        Ok(s)
+    }
+}
+
+/// What a `localize` run found.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    /// One estimate per tag, in EPC order, with its newest read time and read rate.
+    pub tags: TagsJson,
+    /// Reads filed into series.
+    pub taken: u64,
+    /// Reads set aside, by reason.
+    pub set_aside: SetAside,
+}
+
+/// The estimator's settings for `reads` and `poses` under `file`: what the file gives, the
+/// rest from the first pose (its height, the side its yaw faces).
+pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry {
+    let first = reads
+        .iter()
+        .find_map(|r| r.antenna_pose.as_ref().map(|p| (p.z, p.yaw_deg)))
+        .or_else(|| poses.first().map(|p| (p.z, p.yaw_deg)));
+    let (z, yaw) = first.unwrap_or((0.0, 90.0));
+    let towards = |yaw_deg: f64| [yaw_deg.to_radians().cos(), yaw_deg.to_radians().sin()];
+    let facing = file.facing.unwrap_or(towards(yaw));
+    let phase_sign = file.phase_sign.unwrap_or(1.0);
+    // Each reader faces where its own first pose does, unless the file says otherwise.
+    let mut own: BTreeMap<String, [f64; 2]> = BTreeMap::new();
+    for p in poses.first_samples() {
+        own.entry(p.reader.clone()).or_insert(towards(p.yaw_deg));
+    }
+    for r in reads {
+        if let (Some(reader), Some(p)) = (&r.reader, &r.antenna_pose) {
+            own.entry(reader.clone()).or_insert(towards(p.yaw_deg));
+        }
+    }
+    for name in file.readers.keys() {
+        own.entry(name.clone()).or_insert(facing);
+    }
+    let readers = own
+        .into_iter()
+        .map(|(name, derived)| {
+            let mine = file.readers.get(&name).cloned().unwrap_or_default();
+            let r = ReaderGeometry {
+                phase_sign: mine.phase_sign.unwrap_or(phase_sign),
+                facing: mine.facing.or(file.facing).unwrap_or(derived),
+            };
+            (name, r)
+        })
+        .collect();
+    Geometry {
+        tag_height_m: file.tag_height_m.unwrap_or(z),
+        phase_sign,
+        facing,
+        reach_m: file.reach_m.unwrap_or(4.0),
+        references: file
+            .references
+            .iter()
+            .map(|r| (r.epc.to_ascii_uppercase(), [r.x, r.y, r.z]))
+            .collect(),
+        readers,
+        pose_error: file
+            .pose_error
+            .as_ref()
+            .map(|e| PoseErrorModel::new(e.sigma_m, e.correlation_s)),
+        pose_corrections: None,
+    }
+}
+
+/// Localizes every tag of `reads` with `estimator`; `progress` is told of each read filed
+/// and each tag estimated.
+pub fn localize(
+    mut reads: Vec<Read>,
+    mut poses: Poses,
+    file: &SettingsFile,
+    estimator: Estimator,
+    progress: &mut dyn FnMut(Progress),
+) -> Outcome {
+    for (reader, offset) in &file.clock_offsets_us {
+        poses.set_offset(reader, *offset);
+    }
+    let g = geometry(file, &reads, &poses);
+    let ambiguity = if file.pi_ambiguity {
+        Ambiguity::Pi
+    } else {
+        Ambiguity::None
+    };
+    // Series want their reads in time order (a recording of several connections, or a
+    // merged reads file, may not be).
+    reads.sort_by_key(|r| r.t_us);
+    let mut stats: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
+    let ingest_on = |poses: Poses| {
+        Ingest::new(poses, ambiguity, crate::series::DEFAULT_MAX_GAP_US)
+            .with_min_rssi(file.min_rssi_dbm)
+    };
+    let mut ingest = ingest_on(poses);
+    for r in &reads {
+        ingest.push(r);
+        let s = stats.entry(r.epc.clone()).or_insert((r.t_us, r.t_us, 0));
+        s.1 = s.1.max(r.t_us);
+        s.2 += 1;
+        progress(Progress::Read);
+    }
+    if let Some(e) = &file.pose_error {
+        // The poses refined once, the reads filed again.
+        let m = PoseErrorModel::new(e.sigma_m, e.correlation_s);
+        let corrected = refined_poses(&ingest, &g, &m);
+        ingest = ingest_on(corrected);
+        for r in &reads {
+            ingest.push(r);
+        }
+    }
+    let epcs: Vec<String> = ingest.tags().map(String::from).collect();
+    let mut estimates: BTreeMap<String, Estimate> = BTreeMap::new();
+    let calibration = estimate::calibration(&ingest, estimator, &g);
+    for epc in epcs {
+        let e = estimate::estimate_calibrated(&ingest, &epc, estimator, &g, &calibration);
+        estimates.insert(epc, e);
+        progress(Progress::Tag);
+    }
+    let tags = stats
+        .into_iter()
+        .map(|(epc, (first, last, n))| {
+            let span = (last - first) as f64 / 1e6;
+            let rate = if span > 0.0 { n as f64 / span } else { 0.0 };
+            let e = estimates.remove(&epc).unwrap_or_else(|| Estimate {
+                epc: epc.clone(),
+                estimator: estimator.name(),
+                estimate: None,
+                covariance: None,
+                samples: 0,
+                state: estimate::State::InsufficientGeometry,
+                last_update_us: 0,
+                pose_sigma_m: None,
+            });
+            TagJson::new(&e, last, rate)
+        })
+        .collect();
+    Outcome {
+        tags: TagsJson { tags },
+        taken: ingest.taken(),
+        set_aside: ingest.set_aside(),
+    }
+}
+
+/// A step of a `localize` run, for a progress bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Progress {
+    /// A read was filed.
+    Read,
+    /// A tag was estimated.
+    Tag,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::poses::PoseSample;
+
+    fn pose(reader: &str, yaw_deg: f64) -> PoseSample {
+        PoseSample {
+            t_us: 0,
+            reader: reader.into(),
+            antenna: 1,
+            x: 0.0,
+            y: 0.0,
+            z: 0.8,
+            yaw_deg,
+            pitch_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn each_reader_faces_where_its_first_pose_does_unless_the_file_says_otherwise() {
+        let mut poses = Poses::new();
+        poses.add(pose("left", 90.0));
+        poses.add(pose("right", -90.0));
+        let mut file = SettingsFile::default();
+        let g = geometry(&file, &[], &poses);
+        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-9;
+        assert!(near(g.facing_of("left"), [0.0, 1.0]), "{g:?}");
+        assert!(near(g.facing_of("right"), [0.0, -1.0]), "{g:?}");
+        assert_eq!(g.sign_of("right"), 1.0);
+        // The file's own values: a default facing for all, a reader's own above it.
+        file.facing = Some([1.0, 0.0]);
+        file.readers.insert(
+            "right".into(),
+            ReaderSettings {
+                phase_sign: Some(-1.0),
+                facing: None,
+            },
+        );
+        let g = geometry(&file, &[], &poses);
+        assert!(near(g.facing_of("left"), [1.0, 0.0]) && near(g.facing_of("right"), [1.0, 0.0]));
+        assert_eq!((g.sign_of("left"), g.sign_of("right")), (1.0, -1.0));
+    }
+}
