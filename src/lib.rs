@@ -10,6 +10,7 @@ pub mod fleet;
 pub mod gateway;
 pub mod http;
 pub mod inventory;
+pub mod metrics;
 pub mod net;
 pub mod options;
 pub mod realism;

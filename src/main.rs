@@ -286,6 +286,11 @@ fn run_sim(
         // ask: with --no-http neither runs).
         let mut live = None;
         let mut http = None;
+        // One registry for what runs: the readers' links, the localizer, the publisher.
+        let metrics = llrp_gateway::metrics::Metrics::new();
+        let links = llrp_gateway::metrics::LinkMetrics::default();
+        metrics.register(|r| links.register(r));
+        opts.frames_in = links.frames_in.clone();
         if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
             let settings = llrp_gateway::localize::live::Settings {
                 estimator: localize.estimator,
@@ -305,6 +310,7 @@ fn run_sim(
                     return ExitCode::FAILURE;
                 }
             };
+            metrics.register(|r| l.shared.metrics.register(r));
             match llrp_gateway::http::launch::launch(
                 &addr,
                 chosen,
@@ -312,12 +318,12 @@ fn run_sim(
                 true,
                 l.shared.clone(),
                 l.tap.clone(),
+                metrics.clone(),
             )
             .await
             {
                 Ok(Some(h)) => {
                     eprintln!("llrp-gateway sim: HTTP API and live map on http://{}/", h.addr);
-                    opts.frames_in = l.shared.metrics.frames_in.clone();
                     opts.localize = Some(sim::LocalizeFeed {
                         tap: l.tap.clone(),
                         poses: localize.poses,
@@ -343,7 +349,9 @@ fn run_sim(
             .map(|l: &llrp_gateway::localize::live::Live| l.shared.clone())
             .unwrap_or_default();
         let references = scenario_references(&scenario);
-        let publisher = match localize.publish.start(shared.clone(), references) {
+        let mqtt = llrp_gateway::fleet::metrics::MqttMetrics::default();
+        metrics.register(|r| mqtt.register(r));
+        let publisher = match localize.publish.start(mqtt, references) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("llrp-gateway sim: {e}");

@@ -50,6 +50,7 @@ pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
             false,
             live.shared.clone(),
             live.tap.clone(),
+            crate::metrics::Metrics::of_localizer(&live.shared),
         )
         .await
         .map_err(|e| e.to_string())?

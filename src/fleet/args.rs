@@ -4,10 +4,10 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
+use super::metrics::MqttMetrics;
 use super::publish::{PublishOptions, Publisher};
 use super::schema::DEFAULT_SHARDS;
 use super::url::BrokerUrl;
-use crate::localize::shared::Shared;
 
 /// Publishing to an MQTT broker (docs/fleet.md).
 #[derive(Clone, Debug, Default, PartialEq, clap::Args)]
@@ -54,11 +54,11 @@ impl PublishArgs {
             .unwrap_or_default()
     }
 
-    /// Starts the publisher when `--publish` was given; `references` are the reference
-    /// tags' EPCs.
+    /// Starts the publisher when `--publish` was given, counting in `metrics`; `references`
+    /// are the reference tags' EPCs.
     pub fn start(
         &self,
-        shared: Arc<Shared>,
+        metrics: MqttMetrics,
         references: BTreeSet<String>,
     ) -> Result<Option<Publisher>, String> {
         let Some(url) = &self.publish else {
@@ -71,7 +71,7 @@ impl PublishArgs {
         opts.window = Duration::from_millis(self.publish_window_ms);
         opts.references = references;
         opts.tls = tls_config(self.mqtt_ca.as_deref())?;
-        Publisher::start(opts, shared)
+        Publisher::start(opts, metrics)
             .map(Some)
             .map_err(|e| format!("--publish: {e}"))
     }

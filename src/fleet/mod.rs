@@ -6,6 +6,7 @@
 pub mod args;
 mod builder;
 mod json;
+pub mod metrics;
 pub mod presence;
 pub mod publish;
 pub mod schema;

@@ -19,10 +19,10 @@ use std::time::{Duration, Instant};
 
 use rumqttc::{Client, Connection, ConnectionError, Event, LastWill, MqttOptions, Packet, QoS};
 
+use super::metrics::MqttMetrics;
 use super::schema::{self, Status, VERSION};
 use super::url::BrokerUrl;
 use crate::localize::live::Mirror;
-use crate::localize::shared::Shared;
 
 /// Largest MQTT packet sent or accepted (bytes).
 pub const MAX_PACKET: usize = 1 << 20;
@@ -146,7 +146,7 @@ pub(super) struct Link {
     acked: AtomicU64,
     /// Publishes handed to the connection.
     sent: AtomicU64,
-    shared: Arc<Shared>,
+    metrics: MqttMetrics,
     pub(super) stopping: AtomicBool,
 }
 
@@ -166,9 +166,9 @@ impl Link {
         let mut q = lock(&self.outbox);
         if q.len() >= self.queue {
             drop(q);
-            self.shared.metrics.mqtt_dropped.inc_by(weight);
+            self.metrics.dropped.inc_by(weight);
             if sequenced {
-                self.shared.metrics.mqtt_dropped_messages.inc();
+                self.metrics.dropped_messages.inc();
             }
             return false;
         }
@@ -208,11 +208,11 @@ impl Link {
         {
             Ok(()) => {
                 self.sent.fetch_add(1, Ordering::Relaxed);
-                self.shared.metrics.mqtt_published.inc();
+                self.metrics.published.inc();
             }
             // The request channel holds the window and more: only a stopped connection.
             Err(_) => {
-                self.shared.metrics.mqtt_dropped_messages.inc();
+                self.metrics.dropped_messages.inc();
             }
         }
     }
@@ -290,7 +290,7 @@ pub struct Publisher {
 impl Publisher {
     /// Connects to the broker (waiting up to 3 s for its answer: a refusal is an error, an
     /// unreachable broker is retried in the background) and starts publishing.
-    pub fn start(opts: PublishOptions, shared: Arc<Shared>) -> Result<Publisher, PublishError> {
+    pub fn start(opts: PublishOptions, metrics: MqttMetrics) -> Result<Publisher, PublishError> {
         let id = format!("llrp-gateway-{}", topic_level(&opts.gateway));
         let mut mqtt = mqtt_options(&opts.url, &id, false, opts.tls.clone())?;
         let gone = Status {
@@ -324,7 +324,7 @@ impl Publisher {
             connected: AtomicBool::new(false),
             acked: AtomicU64::new(0),
             sent: AtomicU64::new(0),
-            shared: shared.clone(),
+            metrics: metrics.clone(),
             stopping: AtomicBool::new(false),
         });
         let (first_tx, first_rx) = mpsc::channel();
@@ -350,7 +350,7 @@ impl Publisher {
         let (tx, rx) = mpsc::sync_channel(opts.mirror_capacity.max(1));
         let mirror = Mirror {
             tx,
-            dropped: shared.metrics.mqtt_dropped.clone(),
+            dropped: metrics.dropped.clone(),
         };
         let l = link.clone();
         let builder = std::thread::Builder::new()
@@ -410,7 +410,7 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
                     // A new session: the connection dropped what awaited acknowledgement.
                     let sent = link.sent.load(Ordering::Relaxed);
                     let lost = sent.saturating_sub(link.acked.swap(sent, Ordering::Relaxed));
-                    link.shared.metrics.mqtt_dropped_messages.inc_by(lost);
+                    link.metrics.dropped_messages.inc_by(lost);
                 }
                 link.direct(link.status_message(None, true, BTreeMap::new()));
                 let online: Vec<String> = lock(&link.online).iter().cloned().collect();
@@ -439,7 +439,7 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
                     let _ = f.send(Ok(()));
                 }
                 if outage.is_none() {
-                    link.shared.metrics.mqtt_disconnects.inc();
+                    link.metrics.disconnects.inc();
                     tracing::warn!(broker = %link.url, error = %e, "broker connection lost: queueing (bounded) and retrying");
                     outage = Some((Instant::now(), e.to_string()));
                 }

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
 
+use super::metrics::MqttMetrics;
 use super::presence::{Presence, PresenceEvent};
 use super::publish::{mqtt_options, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
@@ -61,6 +62,8 @@ pub struct WorkerOptions {
 pub struct Worker {
     /// Its localizer.
     pub live: Live,
+    /// Its MQTT counters.
+    pub metrics: MqttMetrics,
     client: Client,
     stopping: Arc<AtomicBool>,
     connection: Option<JoinHandle<()>>,
@@ -114,6 +117,7 @@ impl Worker {
                 poses: None,
             });
         }
+        let metrics = MqttMetrics::default();
         let stopping = Arc::new(AtomicBool::new(false));
         let presence = Arc::new(Mutex::new(Presence::new(
             opts.presence_silence,
@@ -125,6 +129,7 @@ impl Worker {
             client: client.clone(),
             live_tap: live.tap.clone(),
             shared: live.shared.clone(),
+            metrics: metrics.clone(),
             seen: HashMap::new(),
             ticked: Instant::now(),
             gateways: HashMap::new(),
@@ -148,6 +153,7 @@ impl Worker {
         }
         let out = Out {
             shared: live.shared.clone(),
+            metrics: metrics.clone(),
             client: client.clone(),
             url: opts.url.clone(),
         };
@@ -157,6 +163,7 @@ impl Worker {
             .spawn(move || publish_estimates(&out, &presence, &stop))?;
         Ok(Worker {
             live,
+            metrics,
             client,
             stopping,
             connection: Some(connection),
@@ -184,6 +191,7 @@ struct Run {
     client: Client,
     live_tap: crate::localize::live::Tap,
     shared: Arc<Shared>,
+    metrics: MqttMetrics,
     /// Per (gateway, reader, topic): the sequence numbers seen and the batches held.
     seen: HashMap<(String, String, String), Seq<Held>>,
     /// When the held batches were last looked at.
@@ -261,7 +269,7 @@ impl Run {
                         let _ = f.send(Ok(()));
                     }
                     if !std::mem::replace(&mut down, true) {
-                        self.shared.metrics.mqtt_disconnects.inc();
+                        self.metrics.disconnects.inc();
                         tracing::warn!(broker = %self.opts.url, error = %e, "broker connection lost: retrying");
                     }
                     std::thread::sleep(backoff);
@@ -274,10 +282,10 @@ impl Run {
     /// Files one message (or holds a batch ahead of a gap), or counts it as malformed; a
     /// message is acknowledged once the localizer has it, or skipped.
     fn message(&mut self, p: Publish) {
-        self.shared.metrics.mqtt_received.inc();
+        self.metrics.received.inc();
         let base = self.opts.url.topic(&format!("v{VERSION}/"));
         let Some(rest) = p.topic.strip_prefix(&base).map(str::to_owned) else {
-            self.shared.metrics.mqtt_malformed.inc();
+            self.metrics.malformed.inc();
             self.ack(&p);
             return;
         };
@@ -299,7 +307,7 @@ impl Run {
             _ => false,
         };
         if !ok {
-            self.shared.metrics.mqtt_malformed.inc();
+            self.metrics.malformed.inc();
         }
         self.ack(&p);
     }
@@ -346,7 +354,7 @@ impl Run {
         let batch = match serde_json::from_slice::<ReadBatch>(&publish.payload) {
             Ok(b) if b.v == VERSION => b,
             _ => {
-                self.shared.metrics.mqtt_malformed.inc();
+                self.metrics.malformed.inc();
                 self.ack(&publish);
                 return;
             }
@@ -367,10 +375,10 @@ impl Run {
             if let Some(p) = seen.held_mut(seq).and_then(|h| h.publish.take()) {
                 self.ack(&p);
             }
-            self.shared.metrics.mqtt_reordered.inc();
+            self.metrics.reordered.inc();
             tracing::debug!(topic = rest, seq, expected, "batch ahead of a gap: held");
         } else if step.late {
-            self.shared.metrics.mqtt_filed_late.inc();
+            self.metrics.filed_late.inc();
             tracing::debug!(
                 topic = rest,
                 seq,
@@ -395,9 +403,9 @@ impl Run {
 
     /// Files, skips and counts what a step of a topic's sequence gives.
     fn take(&mut self, step: Step<Held>) {
-        self.shared.metrics.mqtt_gaps.inc_by(step.lost);
+        self.metrics.gaps.inc_by(step.lost);
         if let Some(dup) = step.duplicate {
-            self.shared.metrics.mqtt_duplicates.inc();
+            self.metrics.duplicates.inc();
             if let Some(p) = dup.publish {
                 self.ack(&p);
             }
@@ -426,6 +434,7 @@ impl Run {
             };
             let out = Out {
                 shared: self.shared.clone(),
+                metrics: self.metrics.clone(),
                 client: self.client.clone(),
                 url: self.opts.url.clone(),
             };
@@ -483,6 +492,7 @@ struct Held {
 /// Where a worker publishes.
 struct Out {
     shared: Arc<Shared>,
+    metrics: MqttMetrics,
     client: Client,
     url: BrokerUrl,
 }
@@ -496,9 +506,9 @@ impl Out {
             .try_publish(topic, QoS::AtLeastOnce, retain, payload)
             .is_ok()
         {
-            self.shared.metrics.mqtt_published.inc();
+            self.metrics.published.inc();
         } else {
-            self.shared.metrics.mqtt_dropped.inc();
+            self.metrics.dropped.inc();
         }
     }
 
@@ -547,7 +557,7 @@ fn publish_estimates(out: &Out, presence: &Mutex<Presence>, stop: &AtomicBool) {
                 }
             }
             Err(tokio::sync::broadcast::error::TryRecvError::Lagged(n)) => {
-                out.shared.metrics.mqtt_dropped.inc_by(n);
+                out.metrics.dropped.inc_by(n);
             }
             Err(tokio::sync::broadcast::error::TryRecvError::Empty) => {
                 std::thread::sleep(Duration::from_millis(5));

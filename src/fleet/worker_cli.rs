@@ -113,6 +113,9 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         let worker = Worker::start(opts).map_err(|e| e.to_string())?;
         let http = match w.http.address(None) {
             Some((addr, chosen)) => {
+                // The localizer's metrics and the worker's MQTT counters.
+                let metrics = crate::metrics::Metrics::of_localizer(&worker.live.shared);
+                metrics.register(|r| worker.metrics.register(r));
                 let h = crate::http::launch::launch(
                     &addr,
                     chosen,
@@ -120,6 +123,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
                     false,
                     worker.live.shared.clone(),
                     worker.live.tap.clone(),
+                    metrics,
                 )
                 .await
                 .map_err(|e| e.to_string())?

@@ -3,14 +3,17 @@
 //! per-reader settings from a settings file.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::fleet::metrics::MqttMetrics;
 use crate::http::launch::{launch, HttpArgs, Launched};
 use crate::localize::estimate::Estimator;
 use crate::localize::live::{Input, Live, Settings, Tap};
 use crate::localize::offline::{geometry, SettingsFile};
 use crate::localize::poses::Poses;
 use crate::localize::series::Ambiguity;
+use crate::metrics::{LinkMetrics, Metrics};
 use crate::net::proxy::keepalive::{self, Change, Links};
 use crate::net::proxy::Tapped;
 use llrp_gateway_vocab::feed::Inventory;
@@ -74,7 +77,11 @@ impl Sinks {
 /// Starts the localizer and its API when `--http` was given and the publisher when
 /// `--publish` was; `command` names the command in messages.
 pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String> {
-    let localizer = start(args, command).await?;
+    // One registry for what runs: the links' counters, the localizer's, the publisher's.
+    let metrics = Metrics::new();
+    let links = LinkMetrics::default();
+    metrics.register(|r| links.register(r));
+    let localizer = start(args, command, &metrics).await?;
     let shared = localizer
         .as_ref()
         .map(|l| l.live.shared.clone())
@@ -88,7 +95,9 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String
             .collect(),
         _ => Default::default(),
     };
-    let publisher = args.publish.start(shared.clone(), references)?;
+    let mqtt = MqttMetrics::default();
+    metrics.register(|r| mqtt.register(r));
+    let publisher = args.publish.start(mqtt, references)?;
     let tap = match (&localizer, &publisher) {
         (None, None) => None,
         (l, p) => {
@@ -111,7 +120,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String
         localizer,
         publisher,
         tap,
-        keepalive_losses: shared.metrics.keepalive_losses.clone(),
+        keepalive_losses: links.keepalive_losses,
     })
 }
 
@@ -153,9 +162,13 @@ pub fn settings_from(file: &SettingsFile, poses: &Poses, estimator: Estimator) -
     }
 }
 
-/// Starts the localizer and its API when `--http` was given; `command` names the command in
-/// messages.
-pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, String> {
+/// Starts the localizer and its API when `--http` was given, its metrics registered in
+/// `metrics` (which the API serves); `command` names the command in messages.
+pub async fn start(
+    args: &LiveArgs,
+    command: &str,
+    metrics: &Arc<Metrics>,
+) -> Result<Option<Running>, String> {
     let Some((addr, chosen)) = args.http.address(None) else {
         return Ok(None);
     };
@@ -175,6 +188,7 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
         ..settings_from(&file, &poses, args.estimator)
     };
     let live = Live::start(settings).map_err(|e| format!("cannot start the localizer: {e}"))?;
+    metrics.register(|r| live.shared.metrics.register(r));
     for (reader, offset) in &file.clock_offsets_us {
         live.tap.offer(Input::Reader {
             name: reader.clone(),
@@ -205,6 +219,7 @@ pub async fn start(args: &LiveArgs, command: &str) -> Result<Option<Running>, St
         false,
         live.shared.clone(),
         live.tap.clone(),
+        metrics.clone(),
     )
     .await
     .map_err(|e| e.to_string())?

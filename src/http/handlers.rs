@@ -74,7 +74,7 @@ pub(super) async fn healthz() -> &'static str {
 pub(super) async fn metrics(State(state): State<AppState>) -> Response {
     (
         [(header::CONTENT_TYPE, METRICS_CONTENT_TYPE)],
-        state.shared.metrics.render(),
+        state.metrics.render(),
     )
         .into_response()
 }

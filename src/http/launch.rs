@@ -14,6 +14,7 @@ use super::{
 };
 use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
+use crate::metrics::Metrics;
 
 /// The `--http` options of a command.
 #[derive(Clone, Debug, Default, PartialEq, clap::Args)]
@@ -111,9 +112,10 @@ impl Launched {
     }
 }
 
-/// Starts the API on `addr` over `shared` and `tap`, with the token and browser rules of
-/// `args`. When `chosen` is false (the command's default address) and the address is taken,
-/// `Ok(None)`: the caller says so and runs on.
+/// Starts the API on `addr` over `shared` and `tap`, serving `metrics` at `/metrics`, with
+/// the token and browser rules of `args`. When `chosen` is false (the command's default
+/// address) and the address is taken, `Ok(None)`: the caller says so and runs on.
+#[allow(clippy::too_many_arguments)]
 pub async fn launch(
     addr: &str,
     chosen: bool,
@@ -121,6 +123,7 @@ pub async fn launch(
     simulation: bool,
     shared: Arc<Shared>,
     tap: Tap,
+    metrics: Arc<Metrics>,
 ) -> Result<Option<Launched>, LaunchError> {
     let listener = match tokio::net::TcpListener::bind(addr).await {
         Ok(l) => l,
@@ -148,6 +151,7 @@ pub async fn launch(
         body_limit: DEFAULT_BODY_LIMIT,
         limits: ServerLimits::default(),
         browser: args.browser(&bound),
+        metrics: Some(metrics),
     };
     let limits = options.limits;
     let app = router(shared, tap, options);
@@ -199,6 +203,7 @@ mod tests {
             false,
             live.shared.clone(),
             live.tap.clone(),
+            crate::metrics::Metrics::of_localizer(&live.shared),
         )
         .await
         .expect("a taken default is no error");
@@ -210,6 +215,7 @@ mod tests {
             false,
             live.shared.clone(),
             live.tap.clone(),
+            crate::metrics::Metrics::of_localizer(&live.shared),
         )
         .await
         .err()

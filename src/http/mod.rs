@@ -22,6 +22,7 @@ use utoipa_axum::routes;
 
 use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
+use crate::metrics::Metrics;
 
 mod events;
 pub mod guard;
@@ -52,6 +53,8 @@ pub struct HttpOptions {
     pub limits: ServerLimits,
     /// What browser pages of other origins and other host names may do.
     pub browser: BrowserRules,
+    /// The process's metrics, served by `GET /metrics`; `None`: the localizer's alone.
+    pub metrics: Option<Arc<Metrics>>,
 }
 
 impl Default for HttpOptions {
@@ -66,6 +69,7 @@ impl Default for HttpOptions {
                 check_host: true,
                 ..BrowserRules::default()
             },
+            metrics: None,
         }
     }
 }
@@ -79,6 +83,8 @@ pub struct AppState {
     pub tap: Tap,
     /// How the API is served.
     pub options: Arc<HttpOptions>,
+    /// What `GET /metrics` serves.
+    pub metrics: Arc<Metrics>,
     /// The OpenAPI document, serialised once.
     openapi: Arc<String>,
     /// Estimate updates for the event stream, from the localizer's [`Shared::on_publish`].
@@ -135,8 +141,13 @@ pub fn router(shared: Arc<Shared>, tap: Tap, options: HttpOptions) -> axum::Rout
     let tx = events.clone();
     // No subscriber is not an error.
     shared.on_publish(move |view| drop(tx.send(Arc::clone(view))));
+    let metrics = options
+        .metrics
+        .clone()
+        .unwrap_or_else(|| Metrics::of_localizer(&shared));
     let state = AppState {
         shared,
+        metrics,
         events,
         tap,
         options: Arc::new(options),

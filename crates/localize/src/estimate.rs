@@ -10,8 +10,8 @@ use crate::mhekf::{self, PoseObs};
 pub use crate::observe::{
     calibrated_observations, observations, pose_observations, Observed, PoseTrack,
 };
-use crate::relock;
 use crate::{fingerprint, hyperbolic, linear, loci3d, uncertainty, wls};
+use crate::{fix, relock};
 use std::collections::BTreeMap;
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
@@ -123,13 +123,13 @@ impl std::str::FromStr for Estimator {
 }
 
 /// `p` lies within twice `reach_m` (horizontally) of an antenna position of `obs`.
-fn near_the_path(p: &[f64; 3], obs: &[relock::Obs], reach_m: f64) -> bool {
+fn near_the_path(p: &[f64; 3], obs: &[fix::Obs], reach_m: f64) -> bool {
     obs.iter()
         .any(|o| (p[0] - o.antenna[0]).hypot(p[1] - o.antenna[1]) <= 2.0 * reach_m)
 }
 
 /// Tag `epc`'s MHEKF fix: one filter bank per track, the fix with the least covariance trace.
-fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
+fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<fix::Fix, fix::NoFix> {
     let s = mhekf::Settings {
         max_range_m: g.reach_m,
         ..mhekf::Settings::default()
@@ -141,14 +141,14 @@ fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, re
             mhekf::locate(&t.obs, g.tag_height_m, 1.0, Some(facing), &s).ok()
         })
         .min_by(|a, b| {
-            let tr = |f: &relock::Fix| f.covariance[0] + f.covariance[3];
+            let tr = |f: &fix::Fix| f.covariance[0] + f.covariance[3];
             tr(a).total_cmp(&tr(b))
         })
-        .ok_or(relock::NoFix::InsufficientGeometry)
+        .ok_or(fix::NoFix::InsufficientGeometry)
 }
 
 /// Tag `epc`'s distributed WLS fix: each reader a robot, its tracks its filters.
-fn wls_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<relock::Fix, relock::NoFix> {
+fn wls_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<fix::Fix, fix::NoFix> {
     let s = wls::Settings {
         filter: mhekf::Settings {
             max_range_m: g.reach_m,
@@ -193,7 +193,7 @@ fn fingerprint_tag(
     ingest: &Ingest,
     epc: &str,
     g: &Geometry,
-) -> Result<([f64; 3], [f64; 9]), relock::NoFix> {
+) -> Result<([f64; 3], [f64; 9]), fix::NoFix> {
     let mut tracks = BTreeMap::new();
     let target = readings(ingest, epc, &mut tracks);
     let references: Vec<([f64; 3], Vec<fingerprint::Reading>)> = g
@@ -270,7 +270,7 @@ pub fn estimate_from(
     // The phases are times their readers' signs: the estimators see s = +1.
     let sign = 1.0;
     // A 2D fix's covariance as 3×3 with the z row and column 0.
-    let planar = |fix: relock::Fix| {
+    let planar = |fix: fix::Fix| {
         let [a, b, c, d] = fix.covariance;
         (fix.position, [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0])
     };
@@ -301,7 +301,7 @@ pub fn estimate_from(
         if near_the_path(&p, &obs, g.reach_m) {
             Ok((p, c))
         } else {
-            Err(relock::NoFix::InsufficientGeometry)
+            Err(fix::NoFix::InsufficientGeometry)
         }
     });
     // The poses' own error, where it is known, widens the covariance by its share.
@@ -338,7 +338,7 @@ pub fn estimate_from(
             pose_sigma_m,
             ..base
         },
-        Err(relock::NoFix::InsufficientGeometry) => base,
+        Err(fix::NoFix::InsufficientGeometry) => base,
     }
 }
 

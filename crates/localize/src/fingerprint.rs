@@ -14,8 +14,8 @@
 
 use std::collections::BTreeMap;
 
-use crate::loci3d::Fix3;
-use crate::relock::NoFix;
+use crate::fix::Fix3;
+use crate::fix::NoFix;
 
 /// References the estimate is the weighted mean of (LANDMARC's k).
 pub const K: usize = 4;

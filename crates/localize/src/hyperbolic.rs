@@ -16,8 +16,8 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned, Vector2};
 
+use crate::fix::{Fix, NoFix, Obs};
 use crate::linear::{line, MAX_PATH_RMS_M, MAX_SLOPE};
-use crate::relock::{Fix, NoFix, Obs};
 use crate::robust;
 
 /// The stride between anchors, as a fraction of the wavelength (ours).

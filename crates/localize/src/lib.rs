@@ -15,6 +15,7 @@
 pub mod calibrate;
 pub mod estimate;
 pub mod fingerprint;
+pub mod fix;
 pub mod geometry;
 pub mod hyperbolic;
 pub mod ingest;

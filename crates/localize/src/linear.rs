@@ -10,7 +10,7 @@
 
 use nalgebra::{DMatrix, Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
 
-use crate::relock::{Fix, NoFix, Obs};
+use crate::fix::{Fix, NoFix, Obs};
 use crate::robust;
 
 /// Fewest phases a segment needs (ours).

@@ -14,24 +14,13 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix3, Owned, Vector2};
 
+use crate::fix::{Fix3, NoFix, Obs};
 use crate::linear::{circle, Circle, MAX_SLOPE};
-use crate::relock::{NoFix, Obs};
 
 /// Least spread of the circles' heights for a 3D fix (m, ours).
 pub const MIN_HEIGHT_SPREAD_M: f64 = 0.05;
 /// Largest angle between a circle's path and the reference circle's (rad, ours).
 pub const MAX_PATH_ANGLE_RAD: f64 = 0.05;
-
-/// A 3D estimate.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Fix3 {
-    /// Position (m).
-    pub position: [f64; 3],
-    /// Covariance of (x, y, z), m², row-major 3×3.
-    pub covariance: [f64; 9],
-    /// Root-mean-square phase residual (rad), over the phases behind it.
-    pub rms_rad: f64,
-}
 
 /// One circle in the path's frame: across-path and height of its centre, radius, and the
 /// radius's standard deviation.

@@ -6,12 +6,12 @@
 use std::collections::BTreeMap;
 
 use crate::calibrate::Calibration;
+use crate::fix::Obs;
 use crate::geometry::Geometry;
 use crate::ingest::Ingest;
 use crate::linear;
 use crate::mhekf::PoseObs;
 use crate::outliers::outliers;
-use crate::relock::Obs;
 use crate::series::{Places, SAME_PLACE_M};
 
 /// One tag's phases for the phase estimators.

@@ -9,7 +9,7 @@
 //! largest of three is a candidate. σ is 1.4826 × its median magnitude over the segment;
 //! O(n). Reads first and last in their segment are never flagged.
 
-use crate::relock::Obs;
+use crate::fix::Obs;
 
 /// A phase whose test is further out than this many robust σ is an outlier (the notes count
 /// phases beyond 5 robust σ).

@@ -119,11 +119,10 @@ pub struct ReaderView {
     pub antennas: Vec<AntennaView>,
 }
 
-/// The localizer's counters, exported as Prometheus text by `GET /metrics`.
+/// The localizer's counters and histograms; the application registers them
+/// ([`Metrics::register`]) beside its other subsystems' and serves them at `GET /metrics`.
 #[derive(Debug)]
 pub struct Metrics {
-    /// LLRP frames clients sent to the readers.
-    pub frames_in: Counter,
     /// LLRP frames the readers sent to their clients, as the localizer took them in (frames
     /// the tap dropped count in `dropped_taps` instead).
     pub frames_out: Counter,
@@ -144,30 +143,6 @@ pub struct Metrics {
     pub update_latency_seconds: Histogram,
     /// From a read's arrival at the localizer to its filing: the wait for its pose (s).
     pub pose_wait_seconds: Histogram,
-    /// MQTT messages handed to the broker connection.
-    pub mqtt_published: Counter,
-    /// Reads, poses and messages the MQTT publisher dropped (its tap or its queue full).
-    pub mqtt_dropped: Counter,
-    /// MQTT messages the publisher dropped (its queue full, or lost with a broker session):
-    /// each leaves a gap in its topic's sequence numbers.
-    pub mqtt_dropped_messages: Counter,
-    /// MQTT messages a worker took in.
-    pub mqtt_received: Counter,
-    /// MQTT messages skipped: not JSON of the schema, or on a topic not ours.
-    pub mqtt_malformed: Counter,
-    /// Messages missing by sequence number, as a worker counts them.
-    pub mqtt_gaps: Counter,
-    /// Messages received again (QoS 1 redelivery), as a worker counts them.
-    pub mqtt_duplicates: Counter,
-    /// Read batches a worker held because they came ahead of a missing one.
-    pub mqtt_reordered: Counter,
-    /// Read batches a worker filed behind later ones (they came after their gap was skipped).
-    pub mqtt_filed_late: Counter,
-    /// Connections to the broker lost.
-    pub mqtt_disconnects: Counter,
-    /// Proxied readers' keepalive links taken for lost (no KEEPALIVE for three periods).
-    pub keepalive_losses: Counter,
-    registry: Registry,
 }
 
 impl Metrics {
@@ -181,8 +156,7 @@ impl Metrics {
                 .into_iter(),
             )
         };
-        let m = Metrics {
-            frames_in: Counter::default(),
+        Metrics {
             frames_out: Counter::default(),
             reads: Counter::default(),
             decode_errors: Counter::default(),
@@ -192,127 +166,59 @@ impl Metrics {
             estimator_seconds: buckets(),
             update_latency_seconds: buckets(),
             pose_wait_seconds: buckets(),
-            mqtt_published: Counter::default(),
-            mqtt_dropped: Counter::default(),
-            mqtt_dropped_messages: Counter::default(),
-            mqtt_received: Counter::default(),
-            mqtt_malformed: Counter::default(),
-            mqtt_gaps: Counter::default(),
-            mqtt_duplicates: Counter::default(),
-            mqtt_reordered: Counter::default(),
-            mqtt_filed_late: Counter::default(),
-            mqtt_disconnects: Counter::default(),
-            keepalive_losses: Counter::default(),
-            registry: Registry::with_prefix("llrp_gateway"),
-        };
-        let mut registry = Registry::with_prefix("llrp_gateway");
-        // (The metrics are handles: the clones registered count with the fields.)
-        registry.register(
-            "frames_in",
-            "LLRP frames clients sent to the readers",
-            m.frames_in.clone(),
-        );
+        }
+    }
+
+    /// Registers the localizer's metrics in `registry` (the metrics are handles: the clones
+    /// registered count with the fields).
+    pub fn register(&self, registry: &mut Registry) {
         registry.register(
             "frames_out",
             "LLRP frames the readers sent to their clients, as the localizer took them in",
-            m.frames_out.clone(),
+            self.frames_out.clone(),
         );
-        registry.register("reads", "Tag reads taken in", m.reads.clone());
+        registry.register("reads", "Tag reads taken in", self.reads.clone());
         registry.register(
             "decode_errors",
             "Frames from a reader that did not decode",
-            m.decode_errors.clone(),
+            self.decode_errors.clone(),
         );
         registry.register(
             "dropped_taps",
             "Reads and poses the localizer's tap dropped because the localizer was behind",
-            m.dropped_taps.clone(),
+            self.dropped_taps.clone(),
         );
         registry.register(
             "reads_set_aside",
             "Reads without a phase, a channel frequency or a pose within reach",
-            m.set_aside.clone(),
+            self.set_aside.clone(),
         );
-        registry.register("poses", "Pose samples taken in", m.poses.clone());
-        registry.register(
-            "keepalive_losses",
-            "Proxied readers' keepalive links taken for lost",
-            m.keepalive_losses.clone(),
-        );
+        registry.register("poses", "Pose samples taken in", self.poses.clone());
         registry.register(
             "estimator_seconds",
             "Compute time of one tag's estimate",
-            m.estimator_seconds.clone(),
+            self.estimator_seconds.clone(),
         );
         registry.register(
             "update_latency_seconds",
             "From a read's filing (its pose in) to its tag's updated estimate",
-            m.update_latency_seconds.clone(),
+            self.update_latency_seconds.clone(),
         );
         registry.register(
             "pose_wait_seconds",
             "From a read's arrival at the localizer to its filing: the wait for its pose",
-            m.pose_wait_seconds.clone(),
+            self.pose_wait_seconds.clone(),
         );
-        let mqtt = [
-            (
-                "mqtt_published",
-                "MQTT messages handed to the broker connection",
-                &m.mqtt_published,
-            ),
-            (
-                "mqtt_dropped",
-                "Reads, poses and messages the MQTT publisher dropped",
-                &m.mqtt_dropped,
-            ),
-            (
-                "mqtt_dropped_messages",
-                "MQTT messages the publisher dropped",
-                &m.mqtt_dropped_messages,
-            ),
-            ("mqtt_received", "MQTT messages taken in", &m.mqtt_received),
-            (
-                "mqtt_malformed",
-                "MQTT messages skipped as malformed or foreign",
-                &m.mqtt_malformed,
-            ),
-            (
-                "mqtt_gaps",
-                "MQTT messages missing by sequence number",
-                &m.mqtt_gaps,
-            ),
-            (
-                "mqtt_duplicates",
-                "MQTT messages received again",
-                &m.mqtt_duplicates,
-            ),
-            (
-                "mqtt_reordered",
-                "MQTT read batches held for an earlier missing one",
-                &m.mqtt_reordered,
-            ),
-            (
-                "mqtt_filed_late",
-                "MQTT read batches filed behind later ones",
-                &m.mqtt_filed_late,
-            ),
-            (
-                "mqtt_disconnects",
-                "Connections to the MQTT broker lost",
-                &m.mqtt_disconnects,
-            ),
-        ];
-        for (name, help, counter) in mqtt {
-            registry.register(name, help, counter.clone());
-        }
-        Metrics { registry, ..m }
     }
 
-    /// The counters in the Prometheus text exposition format.
+    /// The localizer's metrics alone in the Prometheus text exposition format, named as the
+    /// application serves them (`llrp_gateway_reads_total`, …).
     pub fn render(&self) -> String {
+        let mut registry = Registry::with_prefix("llrp_gateway");
+        self.register(&mut registry);
         let mut out = String::new();
         // Writing into a String cannot fail.
-        let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
+        let _ = prometheus_client::encoding::text::encode(&mut out, &registry);
         out
     }
 }

@@ -4,7 +4,7 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::relock::Obs;
+use crate::fix::Obs;
 use llrp_gateway_vocab::reads::{AntennaPose, Read};
 
 /// The wavelength of the synthetic channel (m).
@@ -80,7 +80,7 @@ pub const FREQUENCY_HZ: u64 = 866_900_000;
 /// noise and 0.3 rad of an error turning over 0.8 m of path (an antenna's phase pattern), how
 /// many fixes by `locate` hold the tag inside their 95 % ellipse. A covariance that takes the
 /// 300 reads as independent holds about half.
-pub fn held_under_a_smooth_error(locate: &dyn Fn(&[Obs]) -> crate::relock::Fix) -> usize {
+pub fn held_under_a_smooth_error(locate: &dyn Fn(&[Obs]) -> crate::fix::Fix) -> usize {
     let tag = [0.8, 2.1, 0.5];
     (0..20u64)
         .filter(|&seed| {
@@ -100,10 +100,7 @@ pub fn held_under_a_smooth_error(locate: &dyn Fn(&[Obs]) -> crate::relock::Fix) 
 /// and an error of RMS 0.3 rad smooth in the angle the tag is read from (eight cosines of that
 /// angle, each turning over 30–80°: a phase pattern, not a function of the path), how many
 /// fixes by `locate` hold the tag inside their 95 % ellipse.
-pub fn held_under_an_angle_error(
-    locate: &dyn Fn(&[Obs]) -> crate::relock::Fix,
-    seeds: u64,
-) -> usize {
+pub fn held_under_an_angle_error(locate: &dyn Fn(&[Obs]) -> crate::fix::Fix, seeds: u64) -> usize {
     use rand::Rng;
     let tag = [0.8, 2.1, 0.5];
     (0..seeds)

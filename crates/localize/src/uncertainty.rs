@@ -11,8 +11,8 @@
 
 use nalgebra::{DMatrix, SMatrix};
 
+use crate::fix::Obs;
 use crate::refine::PoseErrorModel;
-use crate::relock::Obs;
 
 /// One phase's Bᵢ: its centred Jacobian row (per position axis) times kᵢ uᵢᵀ; dims × 2.
 type B = SMatrix<f64, 3, 2>;

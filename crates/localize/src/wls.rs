@@ -8,8 +8,8 @@
 use nalgebra::{DMatrix, Matrix2, Vector2};
 use rand::{Rng, SeedableRng};
 
+use crate::fix::{Fix, NoFix};
 use crate::mhekf::{self, PoseObs};
-use crate::relock::{Fix, NoFix};
 use crate::robust;
 
 /// The exchange's settings.

@@ -20,8 +20,8 @@
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
+use crate::fix::Obs;
 use crate::lanes::{lanes, runs, sin_cos_f32, sum_f32, wide, LANES};
-use crate::relock::Obs;
 
 /// A weak direction is searched when its σ is at least this (m).
 pub const SEARCH_MIN_SIGMA_M: f64 = 0.005;

@@ -14,7 +14,7 @@
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::{PI, TAU};
 
-use crate::relock::{Fix, NoFix};
+use crate::fix::{Fix, NoFix};
 
 mod smooth;
 

@@ -2,7 +2,8 @@
 //! within a bin's width of path ([`BIN_M`], [`SEPARATE_BIN_M`]) one phase, weighted by its
 //! reads, its noise kept as its scatter.
 
-use super::{distance, Obs};
+use super::distance;
+use crate::fix::Obs;
 use crate::lanes;
 
 /// Neighbouring phases of one segment within this of the first's antenna position (m) are

@@ -1,7 +1,8 @@
 //! The separate-offsets cost of the start's grids: the residual sum of squares of some phases
 //! at any point, each segment's offset at its best, in vector registers.
 
-use super::{lanes, Obs};
+use super::lanes;
+use crate::fix::Obs;
 
 /// The residual sum of squares of some phases at any point, each segment's offset at its best
 /// (the segment's mean residual): in `f32`, structure of arrays, so that the residuals are

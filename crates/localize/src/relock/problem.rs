@@ -4,7 +4,8 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
-use super::{NoFix, Obs, Search};
+use super::Search;
+use crate::fix::{NoFix, Obs};
 use crate::robust;
 
 /// The least-squares problem in the position alone: each segment's offset is at its best
