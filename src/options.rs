@@ -109,6 +109,12 @@ pub const RANGES: &[Range] = &[
         "milliseconds, at most an hour",
     ),
     int("shard-count", 1.0, u16::MAX as f64, "at least one shard"),
+    int(
+        "max-clients",
+        1.0,
+        65_536.0,
+        "at least one client, at most 65536",
+    ),
     int("publish-queue", 1.0, 100_000_000.0, "at least one message"),
     int(
         "publish-window-ms",

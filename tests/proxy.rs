@@ -842,3 +842,72 @@ async fn reader_answering_close(listener: TcpListener) -> bool {
     }
     false
 }
+
+#[tokio::test]
+async fn a_client_over_the_limit_is_told_and_closed_and_a_freed_place_is_taken_again() {
+    // A reader that greets each connection and counts them.
+    let reader = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let upstream = reader.local_addr().expect("bound").to_string();
+    let (seen_tx, mut seen) = mpsc::unbounded_channel();
+    tokio::spawn(async move {
+        let mut held = Vec::new();
+        while let Ok((s, _)) = reader.accept().await {
+            let mut conn = llrp_gateway::net::connection::Connection::new(s);
+            let _ = conn
+                .write_message(&Message::new(0, KeepaliveAck::default()))
+                .await;
+            held.push(conn);
+            let _ = seen_tx.send(held.len());
+        }
+    });
+    let config = ProxyConfig {
+        name: "limited".into(),
+        upstream,
+        listen: "127.0.0.1:0".into(),
+        record: None,
+        region: None,
+        connect_timeout: Duration::from_secs(5),
+        tls: None,
+        upstream_tls: None,
+    };
+    let p = Proxy::bind(config, None, None)
+        .await
+        .expect("binds")
+        .with_max_clients(1);
+    let addr = p.local_addr().expect("bound");
+    let (stop, rx) = watch::channel(false);
+    let task = tokio::spawn(p.run(rx));
+    // The first client holds the one place: the reader has its connection.
+    let first = TcpStream::connect(addr).await.expect("connect");
+    assert_eq!(seen.recv().await, Some(1));
+    // The second is told as when the reader cannot be reached, and closed; the reader never
+    // hears of it.
+    let mut second = llrp_gateway::net::client::Client::connect(addr)
+        .await
+        .expect("the proxy accepts");
+    let m = second.recv(T).await.expect("a notification");
+    assert_eq!(
+        connection_status(&m),
+        Some(ConnectionAttemptStatus::FailedOtherReason),
+        "{m:?}"
+    );
+    second.until_closed(T).await.expect("then closed");
+    // Once the first leaves, a new client reaches the reader (after the proxy has seen the
+    // first go: until then it is told as the second was).
+    drop(first);
+    let mut reached = false;
+    for _ in 0..1000 {
+        let mut c = TcpStream::connect(addr).await.expect("connect");
+        let mut greeting = [0u8; 10];
+        let _ = c.read(&mut greeting).await;
+        if FrameHeader::peek(&greeting).map(|h| h.msg_type) == Some(KeepaliveAck::TYPE) {
+            reached = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    assert!(reached, "a freed place is taken again");
+    assert_eq!(seen.recv().await, Some(2));
+    stop.send(true).expect("the proxy listens");
+    task.await.expect("joined").expect("proxy ran");
+}

@@ -45,6 +45,10 @@ pub struct ProxyArgs {
     /// reads until the reader's capabilities are seen.
     #[arg(long)]
     pub region: Option<Region>,
+    /// Most clients served at once (each with its own connection to the reader); one more
+    /// gets a failed ConnectionAttemptEvent and is closed.
+    #[arg(long, value_name = "N", default_value_t = crate::net::proxy::MAX_CLIENTS as u64, value_parser = crate::options::parser::<u64>("max-clients"))]
+    pub max_clients: u64,
     /// Longest wait for the reader to accept the connection, in milliseconds.
     #[arg(long, default_value = "5000", value_parser = crate::options::parser::<u64>("connect-timeout-ms"))]
     pub connect_timeout_ms: u64,
@@ -411,7 +415,9 @@ pub fn run(args: ProxyArgs) -> ExitCode {
                 tap
             });
             let proxy = match Proxy::bind(config, recorder, tap).await {
-                Ok(p) => p,
+                Ok(p) => {
+                    p.with_max_clients(usize::try_from(args.max_clients).unwrap_or(usize::MAX))
+                }
                 Err(err) => {
                     eprintln!(
                         "llrp-gateway proxy: {}: cannot listen on {}: {err}",

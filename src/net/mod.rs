@@ -1,6 +1,7 @@
 //! Sockets: one framed [`connection::Connection`] for every LLRP socket (plain TCP or TLS,
-//! [`stream::Stream`], [`tls`]), the simulated reader's server, an LLRP client, the proxy, and
-//! the simulated clock.
+//! [`stream::Stream`], [`tls`]), what every server shares ([`serve`]: the accept loop with its
+//! connection limit, back-off and shutdown), the simulated reader's server, the replay, an
+//! LLRP client, the proxy, and the simulated clock.
 
 pub mod client;
 pub mod clock;
@@ -8,6 +9,7 @@ pub mod connection;
 pub mod proxy;
 pub mod replay;
 pub mod report_buffer;
+pub mod serve;
 pub mod server;
 pub mod stream;
 pub mod tls;

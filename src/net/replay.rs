@@ -17,6 +17,7 @@ use tokio::net::TcpListener;
 use tokio::sync::watch;
 
 use super::connection::{Connection, Io};
+use super::serve;
 use super::tls::Acceptor;
 use crate::localize::live::{Input, Tap};
 use crate::record::replay::{ReplayOptions, ReplaySession, Script};
@@ -25,6 +26,13 @@ use llrp_gateway_vocab::feed::Inventory;
 
 /// Bytes queued for the client before the session stops moving due frames to it.
 const QUEUE_BYTES: usize = 256 * 1024;
+
+/// Connections held at once: the one client served and those being refused or in their TLS
+/// handshake; one more is refused at once.
+pub const MAX_CONNECTIONS: usize = 16;
+
+/// How long a refused client gets to take its refusal.
+const REFUSAL_WRITE: Duration = Duration::from_millis(500);
 
 /// Serves `script` on `listener` until `shutdown` turns true; over TLS when `tls` is given.
 pub async fn serve(
@@ -44,81 +52,78 @@ pub async fn serve_tapped(
     script: Arc<Script>,
     options: ReplayOptions,
     tls: Option<Acceptor>,
-    mut shutdown: watch::Receiver<bool>,
+    shutdown: watch::Receiver<bool>,
     tap: Option<(String, Tap)>,
 ) -> io::Result<()> {
     // Whether a client is being served; taken once a client's TLS handshake (if any) is
     // done, so a client that never finishes one does not keep the next one out.
     let busy = Arc::new(AtomicBool::new(false));
-    loop {
-        tokio::select! {
-            changed = shutdown.changed() => {
-                // A dropped sender can never ask again: taken as the stop.
-                if changed.is_err() || *shutdown.borrow() {
-                    return Ok(());
-                }
-            }
-            accepted = listener.accept() => {
-                let (stream, peer) = match accepted {
-                    Ok(a) => a,
-                    Err(e) => {
-                        tracing::warn!("accept failed: {e}");
-                        tokio::time::sleep(Duration::from_millis(100)).await;
-                        continue;
-                    }
+    let plain = tls.is_none();
+    serve::accept_loop(
+        &listener,
+        MAX_CONNECTIONS,
+        shutdown.clone(),
+        "replay",
+        |stream, peer| {
+            let script = Arc::clone(&script);
+            let busy = Arc::clone(&busy);
+            let stop = shutdown.clone();
+            let tls = tls.clone();
+            let tap = tap.clone();
+            async move {
+                let conn = match &tls {
+                    None => Ok(Connection::new(stream)),
+                    Some(a) => a.accept(stream).await.map(Connection::from_stream),
                 };
-                let script = Arc::clone(&script);
-                let busy = Arc::clone(&busy);
-                let stop = shutdown.clone();
-                let tls = tls.clone();
-                let tap = tap.clone();
-                tokio::spawn(async move {
-                    let conn = match &tls {
-                        None => Ok(Connection::new(stream)),
-                        Some(a) => a.accept(stream).await.map(Connection::from_stream),
-                    };
-                    let conn = match conn {
-                        Ok(c) => c,
-                        Err(e) => {
-                            tracing::warn!(%peer, "TLS handshake failed: {e}");
-                            return;
-                        }
-                    };
-                    let refused = busy
-                        .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
-                        .is_err();
-                    if refused {
-                        tracing::info!(%peer, "refusing a second client");
-                        refuse(conn).await;
+                let conn = match conn {
+                    Ok(c) => c,
+                    Err(e) => {
+                        tracing::warn!(%peer, "TLS handshake failed: {e}");
                         return;
                     }
-                    // Frees the slot however the session ends (a panic included).
-                    let slot = Slot(&busy);
-                    tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
-                    if let Some((name, t)) = &tap {
-                        t.links().update(name, |l| {
-                            l.connected = true;
-                            l.peer = Some(peer.to_string());
-                            l.inventory = Inventory::Client;
-                        });
-                    }
-                    let result = session(conn, peer, &script, options, stop, tap.as_ref()).await;
-                    if let Some((name, t)) = &tap {
-                        t.links().update(name, |l| {
-                            l.connected = false;
-                            l.peer = None;
-                            l.inventory = Inventory::Idle;
-                        });
-                    }
-                    match result {
-                        Ok(()) => tracing::info!(%peer, "client disconnected"),
-                        Err(e) => tracing::info!(%peer, "connection ended: {e}"),
-                    }
-                    drop(slot);
-                });
+                };
+                let refused = busy
+                    .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+                    .is_err();
+                if refused {
+                    tracing::info!(%peer, "refusing a second client");
+                    refuse(conn).await;
+                    return;
+                }
+                // Frees the slot however the session ends (a panic included).
+                let slot = Slot(&busy);
+                tracing::info!(%peer, "replaying connection {} of the recording", script.conn());
+                if let Some((name, t)) = &tap {
+                    t.links().update(name, |l| {
+                        l.connected = true;
+                        l.peer = Some(peer.to_string());
+                        l.inventory = Inventory::Client;
+                    });
+                }
+                let result = session(conn, peer, &script, options, stop, tap.as_ref()).await;
+                if let Some((name, t)) = &tap {
+                    t.links().update(name, |l| {
+                        l.connected = false;
+                        l.peer = None;
+                        l.inventory = Inventory::Idle;
+                    });
+                }
+                match result {
+                    Ok(()) => tracing::info!(%peer, "client disconnected"),
+                    Err(e) => tracing::info!(%peer, "connection ended: {e}"),
+                }
+                drop(slot);
             }
-        }
-    }
+        },
+        // Over the limit, told as a second client is (a TLS client is closed: a refusal in
+        // the clear means nothing to it before its handshake).
+        move |stream, _| async move {
+            if plain {
+                serve::refuse(stream, &refusal(), REFUSAL_WRITE).await;
+            }
+        },
+    )
+    .await
 }
 
 /// One client's replay.
@@ -157,8 +162,7 @@ async fn session(
         };
         tokio::select! {
             changed = shutdown.changed() => {
-                // A dropped sender can never ask again: taken as the stop.
-                if changed.is_err() || *shutdown.borrow() {
+                if serve::stopping(changed, &shutdown) {
                     let _ = tokio::time::timeout(Duration::from_secs(1), conn.shutdown()).await;
                     return Ok(());
                 }
@@ -182,26 +186,27 @@ async fn session(
                 Io::Closed => return Ok(()),
                 Io::Flushed => {}
             },
-            _ = sleep_until(wake) => {}
+            _ = serve::sleep_until(wake) => {}
         }
     }
 }
 
-async fn sleep_until(at: Option<tokio::time::Instant>) {
-    match at {
-        Some(t) => tokio::time::sleep_until(t).await,
-        None => std::future::pending().await,
-    }
-}
-
-/// Refuses a second client as a reader does.
-async fn refuse(mut conn: Connection) {
+/// What a reader tells a second client: a READER_EVENT_NOTIFICATION with
+/// FailedClientInitiatedConnectionExists.
+fn refusal() -> Vec<u8> {
     let mut body = crate::net::proxy::connection_failed(utc_now_us());
     if let Some(e) = &mut body.reader_event_notification_data.connection_attempt_event {
         e.status = ConnectionAttemptStatus::FailedClientInitiatedConnectionExists;
     }
-    conn.queue(&Message::new(0, body));
-    let _ = tokio::time::timeout(Duration::from_millis(500), conn.shutdown()).await;
+    let mut bytes = bytes::BytesMut::new();
+    Message::new(0, body).encode(&mut bytes);
+    bytes.to_vec()
+}
+
+/// Refuses a second client as a reader does, then closes.
+async fn refuse(mut conn: Connection) {
+    conn.queue_bytes(&refusal());
+    let _ = tokio::time::timeout(REFUSAL_WRITE, conn.shutdown()).await;
 }
 
 /// The replay's one client slot, held while a client is served.

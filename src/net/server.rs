@@ -14,7 +14,6 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinSet;
@@ -22,6 +21,7 @@ use tokio::task::JoinSet;
 use super::clock::{Clock, Speed};
 use super::connection::{Connection, Io};
 use super::report_buffer::{ReportBuffer, REPORT_BUFFER_BYTES};
+use super::serve::{refuse, sleep_until, stopping, AcceptBackoff};
 use super::stream::Stream;
 use super::tls;
 use crate::localize::live::{Input, Tap};
@@ -50,9 +50,6 @@ const TURN: Duration = Duration::from_millis(2);
 const SHUTDOWN_FLUSH: Duration = Duration::from_millis(500);
 /// How long a refused client gets to take its refusal.
 const REFUSAL_WRITE: Duration = Duration::from_millis(200);
-/// First and longest pause after a failed accept (e.g. out of file descriptors).
-const ACCEPT_BACKOFF_MIN: Duration = Duration::from_millis(10);
-const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 /// Most TLS handshakes under way at once; accepting waits while this many run.
 pub const MAX_HANDSHAKES: usize = 16;
 
@@ -254,7 +251,7 @@ pub async fn serve_tls(
     let mut arrived: VecDeque<llrp::Inbound> = VecDeque::new();
     let mut client: Option<Client> = None;
     let mut flushed = Instant::now();
-    let mut backoff = ACCEPT_BACKOFF_MIN;
+    let mut backoff = AcceptBackoff::default();
     let mut accept_after: Option<tokio::time::Instant> = None;
     let live = here.as_mut().and_then(|s| s.live.take());
     let mut told: Option<(bool, bool)> = None;
@@ -341,9 +338,7 @@ pub async fn serve_tls(
         tokio::select! {
             biased;
             changed = shutdown.changed() => {
-                // A dropped sender can never ask again: taken as the stop (not polled again
-                // and again).
-                if changed.is_err() || *shutdown.borrow() {
+                if stopping(changed, &shutdown) {
                     let mut sim = match (here.take(), away.take()) {
                         (Some(s), _) => s,
                         (None, Some(a)) => home(a).await?,
@@ -408,7 +403,7 @@ pub async fn serve_tls(
                 let Some(sim) = here.as_deref_mut() else { continue };
                 match accepted {
                     Ok((stream, peer)) => {
-                        backoff = ACCEPT_BACKOFF_MIN;
+                        backoff.succeeded();
                         match &tls {
                             Some(acceptor) => {
                                 let acceptor = acceptor.clone();
@@ -422,9 +417,9 @@ pub async fn serve_tls(
                         }
                     }
                     Err(e) => {
-                        tracing::warn!("accept failed: {e}; pausing accepts for {backoff:?}");
-                        accept_after = Some(tokio::time::Instant::now() + backoff);
-                        backoff = (backoff * 2).min(ACCEPT_BACKOFF_MAX);
+                        let pause = backoff.failed();
+                        tracing::warn!("accept failed: {e}; pausing accepts for {pause:?}");
+                        accept_after = Some(tokio::time::Instant::now() + pause);
                     }
                 }
             }
@@ -518,13 +513,6 @@ async fn client_io(client: &mut Option<Client>, flush: bool) -> io::Result<Io> {
     }
 }
 
-async fn sleep_until(at: Option<tokio::time::Instant>) {
-    match at {
-        Some(t) => tokio::time::sleep_until(t).await,
-        None => std::future::pending().await,
-    }
-}
-
 /// A new client (its TLS handshake done, if any): the session takes it, or refuses it when
 /// another client is connected.
 async fn admit(
@@ -554,7 +542,7 @@ async fn admit(
             let rec = recorder.as_ref().map_or(0, Recorder::next_conn);
             record_marker(recorder, rec, Event::Connect, format!("client {peer}{tls}")).await;
             record_sent(recorder, rec, &bytes).await;
-            refuse(stream, &bytes).await;
+            refuse(stream, &bytes, REFUSAL_WRITE).await;
             record_marker(
                 recorder,
                 rec,
@@ -564,15 +552,4 @@ async fn admit(
             .await;
         }
     }
-}
-
-/// Tells a second client it is refused, then closes (a client that does not read in time is
-/// closed all the same).
-async fn refuse(mut stream: Stream, bytes: &[u8]) {
-    let _ = tokio::time::timeout(REFUSAL_WRITE, async {
-        stream.write_all(bytes).await?;
-        stream.flush().await?;
-        stream.shutdown().await
-    })
-    .await;
 }

@@ -32,7 +32,6 @@ use llrp::Message;
 use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
-use tokio::task::JoinSet;
 
 pub mod keepalive;
 mod pump;
@@ -40,7 +39,7 @@ mod pump;
 use pump::{pump, write_flushed, End, Tee};
 
 use super::stream::{Stream, WriteHalf};
-use super::tls;
+use super::{serve, tls};
 use crate::reads::Read;
 use crate::record::{Direction, Event, Recorder};
 use crate::utc::now_us as utc_now_us;
@@ -143,7 +142,11 @@ pub struct Proxy {
     recorder: Option<Recorder>,
     tap: Option<Tap>,
     stats: Arc<Stats>,
+    max_clients: usize,
 }
+
+/// Clients a proxy serves at once unless told otherwise (`proxy --max-clients`).
+pub const MAX_CLIENTS: usize = 64;
 
 /// Counters of a proxy, over all its sessions (cheap: one atomic add per frame).
 #[derive(Debug, Default)]
@@ -191,6 +194,7 @@ impl Proxy {
             recorder,
             tap,
             stats: Arc::default(),
+            max_clients: MAX_CLIENTS,
         })
     }
 
@@ -204,46 +208,47 @@ impl Proxy {
         self.listener.local_addr()
     }
 
-    /// Accepts clients until `shutdown` turns true; then each session sends CLOSE_CONNECTION
-    /// upstream and closes, and this returns once all have ended.
-    pub async fn run(self, mut shutdown: watch::Receiver<bool>) -> io::Result<()> {
-        let mut sessions = JoinSet::new();
-        let mut backoff = Duration::from_millis(10);
-        loop {
-            tokio::select! {
-                changed = shutdown.changed() => {
-                    // A dropped sender can never ask again: taken as the stop.
-                    if changed.is_err() || *shutdown.borrow() {
-                        break;
-                    }
+    /// This proxy serving at most `max` clients at once (each with its own connection to the
+    /// reader); one more is told, as when the reader cannot be reached, and closed.
+    pub fn with_max_clients(mut self, max: usize) -> Proxy {
+        self.max_clients = max.max(1);
+        self
+    }
+
+    /// Accepts clients until `shutdown` turns true (at most [`Proxy::with_max_clients`] at
+    /// once, [`MAX_CLIENTS`] unless set); then each session sends CLOSE_CONNECTION upstream
+    /// and closes, and this returns once all have ended.
+    pub async fn run(self, shutdown: watch::Receiver<bool>) -> io::Result<()> {
+        let what = format!("proxy {}", self.config.name);
+        let plain = self.config.tls.is_none();
+        serve::accept_loop(
+            &self.listener,
+            self.max_clients,
+            shutdown.clone(),
+            &what,
+            |stream, peer| {
+                let conn = self.recorder.as_ref().map_or(0, Recorder::next_conn);
+                let id = self.stats.sessions.fetch_add(1, Ordering::Relaxed);
+                let s = Session {
+                    config: Arc::clone(&self.config),
+                    recorder: self.recorder.clone(),
+                    tap: self.tap.clone(),
+                    stats: Arc::clone(&self.stats),
+                    conn,
+                    id,
+                    peer,
+                };
+                s.run(stream, shutdown.clone())
+            },
+            // (A TLS client over the limit is closed: a refusal in the clear means nothing
+            // to it before its handshake.)
+            move |stream, _| async move {
+                if plain {
+                    refuse(Stream::from(stream)).await;
                 }
-                Some(_) = sessions.join_next(), if !sessions.is_empty() => {}
-                accepted = self.listener.accept() => match accepted {
-                    Ok((stream, peer)) => {
-                        backoff = Duration::from_millis(10);
-                        let conn = self.recorder.as_ref().map_or(0, Recorder::next_conn);
-                        let id = self.stats.sessions.fetch_add(1, Ordering::Relaxed);
-                        let s = Session {
-                            config: Arc::clone(&self.config),
-                            recorder: self.recorder.clone(),
-                            tap: self.tap.clone(),
-                            stats: Arc::clone(&self.stats),
-                            conn,
-                            id,
-                            peer,
-                        };
-                        sessions.spawn(s.run(stream, shutdown.clone()));
-                    }
-                    Err(e) => {
-                        tracing::warn!(proxy = %self.config.name, "accept failed: {e}; pausing accepts for {backoff:?}");
-                        tokio::time::sleep(backoff).await;
-                        backoff = (backoff * 2).min(Duration::from_secs(1));
-                    }
-                },
-            }
-        }
-        while sessions.join_next().await.is_some() {}
-        Ok(())
+            },
+        )
+        .await
     }
 }
 
@@ -514,15 +519,11 @@ impl Session {
 
 /// Tells a client whose reader cannot be reached: a READER_EVENT_NOTIFICATION with a failed
 /// ConnectionAttemptEvent, as a reader that cannot take the connection sends; then closes.
-async fn refuse(mut client: Stream) {
+async fn refuse(client: Stream) {
     let m = Message::new(0, connection_failed(utc_now_us()));
     let mut bytes = BytesMut::new();
     m.encode(&mut bytes);
-    let _ = tokio::time::timeout(Duration::from_millis(500), async {
-        write_flushed(&mut client, &bytes).await?;
-        client.shutdown().await
-    })
-    .await;
+    serve::refuse(client, &bytes, Duration::from_millis(500)).await;
 }
 
 /// The READER_EVENT_NOTIFICATION a client gets when the proxy cannot reach the reader.
