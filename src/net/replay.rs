@@ -45,7 +45,7 @@ pub async fn serve(
     serve_tapped(listener, script, options, tls, shutdown, None).await
 }
 
-/// [`serve`], offering every frame sent to the client to the live localizer's `tap` under the
+/// [`serve()`], offering every frame sent to the client to the live localizer's `tap` under the
 /// reader name given with it.
 pub async fn serve_tapped(
     listener: TcpListener,
