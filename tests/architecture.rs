@@ -400,3 +400,135 @@ fn the_simulator_crate_depends_on_no_async_crate_localizer_or_application() {
         ],
     );
 }
+
+/// The resolved crate graph of the workspace on this platform (`cargo metadata`, offline: the
+/// build before the tests fetched every crate): per package name, its normal (not dev, not
+/// build) dependencies' names.
+fn crate_graph() -> std::collections::BTreeMap<String, BTreeSet<String>> {
+    // This machine's platform only: the others' crates (Windows', …) are not downloaded.
+    let rustc = std::process::Command::new("rustc")
+        .arg("-vV")
+        .output()
+        .expect("rustc runs");
+    let host = String::from_utf8_lossy(&rustc.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
+        .expect("rustc names its host");
+    let out = std::process::Command::new(env!("CARGO"))
+        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
+        .args(["--filter-platform", &host])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        out.status.success(),
+        "cargo metadata: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let name_of: std::collections::BTreeMap<&str, &str> = meta["packages"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .map(|p| {
+            (
+                p["id"].as_str().expect("an id"),
+                p["name"].as_str().expect("a name"),
+            )
+        })
+        .collect();
+    let mut graph = std::collections::BTreeMap::new();
+    for node in meta["resolve"]["nodes"].as_array().expect("resolved nodes") {
+        let deps: BTreeSet<String> = node["deps"]
+            .as_array()
+            .expect("deps")
+            .iter()
+            .filter(|d| {
+                d["dep_kinds"]
+                    .as_array()
+                    .expect("kinds")
+                    .iter()
+                    .any(|k| k["kind"].is_null())
+            })
+            .map(|d| name_of[d["pkg"].as_str().expect("a package")].to_string())
+            .collect();
+        graph.insert(
+            name_of[node["id"].as_str().expect("an id")].to_string(),
+            deps,
+        );
+    }
+    graph
+}
+
+/// Every crate `name` depends on, directly or not (normal dependencies).
+fn closure(
+    graph: &std::collections::BTreeMap<String, BTreeSet<String>>,
+    name: &str,
+) -> BTreeSet<String> {
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![name.to_string()];
+    while let Some(n) = stack.pop() {
+        for d in graph.get(&n).into_iter().flatten() {
+            if seen.insert(d.clone()) {
+                stack.push(d.clone());
+            }
+        }
+    }
+    seen
+}
+
+#[test]
+fn the_crate_graph_is_the_layering() {
+    // Between the workspace's crates, each edge is one ARCHITECTURE.md draws: the codec at the
+    // bottom, the vocabulary on it, the simulator on the codec, the localizer on the
+    // vocabulary, the application on all of them; and below the application no crate reaches
+    // an async runtime, a server or a broker's client, however indirectly.
+    let graph = crate_graph();
+    let workspace = [
+        "llrp",
+        "llrp-gateway-vocab",
+        "llrp-gateway-sim",
+        "llrp-gateway-localize",
+        "llrp-gateway",
+    ];
+    let edges = |name: &str| -> BTreeSet<&str> {
+        graph[name]
+            .iter()
+            .filter_map(|d| workspace.iter().copied().find(|w| w == d))
+            .filter(|d| *d != name)
+            .collect()
+    };
+    let expected: [(&str, &[&str]); 5] = [
+        ("llrp", &[]),
+        ("llrp-gateway-vocab", &["llrp"]),
+        ("llrp-gateway-sim", &["llrp"]),
+        ("llrp-gateway-localize", &["llrp-gateway-vocab"]),
+        (
+            "llrp-gateway",
+            &[
+                "llrp",
+                "llrp-gateway-vocab",
+                "llrp-gateway-sim",
+                "llrp-gateway-localize",
+            ],
+        ),
+    ];
+    for (name, deps) in expected {
+        assert_eq!(
+            edges(name),
+            deps.iter().copied().collect::<BTreeSet<&str>>(),
+            "{name}'s workspace dependencies (ARCHITECTURE.md)"
+        );
+    }
+    for name in &workspace[..4] {
+        let reached = closure(&graph, name);
+        for forbidden in ["tokio", "mio", "axum", "hyper", "rumqttc", "tokio-rustls"] {
+            assert!(
+                !reached.contains(forbidden),
+                "{name} reaches {forbidden}: below the application (ARCHITECTURE.md)"
+            );
+        }
+    }
+    // The application does reach them: the check sees what it looks for.
+    assert!(closure(&graph, "llrp-gateway").contains("tokio"));
+}

@@ -33,6 +33,7 @@ pub mod refine;
 pub mod relock;
 pub mod robust;
 pub mod series;
+pub mod settings;
 pub mod shared;
 #[cfg(test)]
 mod synthetic;

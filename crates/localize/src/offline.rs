@@ -7,15 +7,17 @@
 //! height and on the side its yaw faces, with the phase sign +1.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-
-use serde::Deserialize;
+use std::path::PathBuf;
 
 use crate::estimate::{self, Estimate, Estimator, Geometry, ReaderGeometry};
 use crate::ingest::{Ingest, SetAside};
 use crate::poses::{PoseError, Poses};
-use crate::refine::{refined_poses, PoseErrorModel};
+use crate::refine::refined_poses;
 use crate::series::Ambiguity;
+use crate::settings::PoseErrorModel;
+pub use crate::settings::{
+    PoseErrorSettings, ReaderSettings, ReferenceTag, SettingsError, SettingsFile,
+};
 use crate::shared::{TagJson, TagsJson};
 use llrp_gateway_vocab::reads::Read;
 
@@ -48,155 +50,9 @@ pub enum OfflineError {
         /// Why.
         source: PoseError,
     },
-    /// The settings file is bad.
-    #[error("{path}: {message}")]
-    Settings {
-        /// The file.
-        path: PathBuf,
-        /// Why, naming the field.
-        message: String,
-    },
-}
-
-/// A reference tag of the settings file.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ReferenceTag {
-    /// EPC, hex.
-    pub epc: String,
-    /// x (m).
-    pub x: f64,
-    /// y (m).
-    pub y: f64,
-    /// z (m).
-    pub z: f64,
-}
-
-/// The settings file (JSON; every key optional).
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SettingsFile {
-    /// Height assumed for the tags by the 2D estimators (m).
-    pub tag_height_m: Option<f64>,
-    /// +1, or −1 for a reader that reports the phase negated.
-    pub phase_sign: Option<f64>,
-    /// The side the antennas face, `[x, y]`.
-    pub facing: Option<[f64; 2]>,
-    /// Farthest a tag is searched for from the path (m).
-    pub reach_m: Option<f64>,
-    /// The reader reports phase with Impinj's π ambiguity.
-    #[serde(default)]
-    pub pi_ambiguity: bool,
-    /// Reads weaker than this (dBm) are set aside: their phase noise slips the unwrapping.
-    pub min_rssi_dbm: Option<f64>,
-    /// Reference tags at known positions (fingerprinting).
-    #[serde(default)]
-    pub references: Vec<ReferenceTag>,
-    /// Per reader, reader time − robot time of the pose file (µs).
-    #[serde(default)]
-    pub clock_offsets_us: BTreeMap<String, i64>,
-    /// Per reader name, its own phase sign and facing (the keys above for the others).
-    #[serde(default)]
-    pub readers: BTreeMap<String, ReaderSettings>,
-    /// The robot's pose error, where its poses come from a localization stack: the poses
-    /// are then refined from the tags' phases ([`crate::refine`]).
-    pub pose_error: Option<PoseErrorSettings>,
-}
-
-/// The pose error of the settings file's `pose_error`.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct PoseErrorSettings {
-    /// σ of the error in x and in y (m).
-    pub sigma_m: f64,
-    /// Its correlation time (s).
-    pub correlation_s: f64,
-}
-
-/// One reader's own settings in the settings file.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ReaderSettings {
-    /// +1, or −1 for a reader that reports the phase negated.
-    pub phase_sign: Option<f64>,
-    /// The side its antennas face, `[x, y]`.
-    pub facing: Option<[f64; 2]>,
-}
-
-/// Why `phase_sign` is not one a reader has.
-fn check_sign(sign: Option<f64>) -> Result<(), String> {
-    match sign.filter(|&v| v != 1.0 && v != -1.0) {
-        Some(v) => Err(format!("must be 1 or -1, got {v}")),
-        None => Ok(()),
-    }
-}
-
-/// Why `facing` is not a direction.
-fn check_facing(facing: Option<[f64; 2]>) -> Result<(), String> {
-    match facing.filter(|f| {
-        let n = f[0].hypot(f[1]);
-        n.is_nan() || n.is_infinite() || n <= 0.0
-    }) {
-        Some(f) => Err(format!("must be a non-zero direction, got {f:?}")),
-        None => Ok(()),
-    }
-}
-
-impl SettingsFile {
-    /// Reads and checks a settings file.
-    pub fn load(path: &Path) -> Result<SettingsFile, OfflineError> {
-        let text = std::fs::read_to_string(path).map_err(|source| OfflineError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        let bad = |message: String| OfflineError::Settings {
-            path: path.to_owned(),
-            message,
-        };
-        let mut de = serde_json::Deserializer::from_str(&text);
-        let s: SettingsFile = serde_path_to_error::deserialize(&mut de)
-            .map_err(|e| bad(format!("{}: {}", e.path(), e.inner())))?;
-        check_sign(s.phase_sign).map_err(|e| bad(format!("phase_sign: {e}")))?;
-        if let Some(v) = s.min_rssi_dbm.filter(|v| !v.is_finite()) {
-            return Err(bad(format!("min_rssi_dbm: not a finite number: {v}")));
-        }
-        if let Some(h) = s.tag_height_m.filter(|h| !h.is_finite()) {
-            return Err(bad(format!("tag_height_m: not a finite number: {h}")));
-        }
-        if let Some(r) = s
-            .reach_m
-            .filter(|&r| r.is_nan() || r.is_infinite() || r <= 0.0)
-        {
-            return Err(bad(format!("reach_m: must be a positive number, got {r}")));
-        }
-        check_facing(s.facing).map_err(|e| bad(format!("facing: {e}")))?;
-        for (name, r) in &s.readers {
-            check_sign(r.phase_sign).map_err(|e| bad(format!("readers.{name}.phase_sign: {e}")))?;
-            check_facing(r.facing).map_err(|e| bad(format!("readers.{name}.facing: {e}")))?;
-        }
-        if let Some(e) = &s.pose_error {
-            let positive = |v: f64| v.is_finite() && v > 0.0;
-            if !positive(e.sigma_m) {
-                let v = e.sigma_m;
-                return Err(bad(format!(
-                    "pose_error.sigma_m: must be a positive number, got {v}"
-                )));
-            }
-            if !positive(e.correlation_s) {
-                let v = e.correlation_s;
-                return Err(bad(format!(
-                    "pose_error.correlation_s: must be a positive number, got {v}"
-                )));
-            }
-        }
-        for (i, r) in s.references.iter().enumerate() {
-            let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
-            if !hex || r.epc.is_empty() {
-                return Err(bad(format!("references[{i}].epc: not hex: {:?}", r.epc)));
-            }
-        }
-        Ok(s)
-    }
+    /// The settings file cannot be read or is bad.
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
 }
 
 /// What a `localize` run found.

@@ -15,30 +15,8 @@ use crate::ingest::Ingest;
 use crate::live::Settings;
 use crate::poses::{PoseSample, Poses};
 use crate::series::Places;
+pub use crate::settings::PoseErrorModel;
 use llrp_gateway_vocab::reads::Read;
-
-/// The pose error the smoother assumes: x and y, each a Gauss–Markov process.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PoseErrorModel {
-    /// σ of the error in x and in y (m).
-    pub sigma_m: f64,
-    /// Its correlation time (s).
-    pub correlation_s: f64,
-    /// σ of one read's range from its phase (m): σ_φ·λ/4π.
-    pub range_sigma_m: f64,
-}
-
-impl PoseErrorModel {
-    /// An error of σ `sigma_m` in x and y with correlation time `correlation_s`, reads whose
-    /// range is good to 3 mm (σ_φ 0.1 rad at 866 MHz).
-    pub fn new(sigma_m: f64, correlation_s: f64) -> PoseErrorModel {
-        PoseErrorModel {
-            sigma_m,
-            correlation_s,
-            range_sigma_m: 0.003,
-        }
-    }
-}
 
 /// One read's range residual `r` ≈ `h`·δ(t), where δ is the pose's error correction.
 #[derive(Clone, Copy, Debug)]

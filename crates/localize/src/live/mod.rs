@@ -38,13 +38,13 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::estimate::{Estimator, Geometry};
+use crate::estimate::Estimator;
 use crate::ingest::Ingest;
 use crate::poses::{PoseSample, Poses};
-use crate::series::Ambiguity;
 use crate::shared::{AntennaView, Shared, TagView, RECENT_READS};
 use llrp_gateway_vocab::reads::Read;
 
+pub use crate::settings::Settings;
 pub use llrp_gateway_vocab::feed::{Input, Mirror, Tap};
 
 mod refinement;
@@ -73,66 +73,6 @@ const RATE_WINDOW_US: u64 = 2_000_000;
 
 /// A reader or tag that sent no read for this long (wall clock) shows a rate of 0.
 const RATE_SILENCE: Duration = Duration::from_secs(3);
-
-/// How the live localizer works.
-#[derive(Clone, Debug)]
-pub struct Settings {
-    /// The estimator run on every tag.
-    pub estimator: Estimator,
-    /// The per-reader settings the estimator is told.
-    pub geometry: Geometry,
-    /// Whether the readers report phase with Impinj's π ambiguity.
-    pub ambiguity: Ambiguity,
-    /// Longest gap between two reads of one series segment (µs).
-    pub max_gap_us: u64,
-    /// Reads weaker than this (dBm) are set aside ([`crate::ingest::Ingest::with_min_rssi`]).
-    pub min_rssi_dbm: Option<f64>,
-    /// Longest gap between two pose samples a read may be interpolated in (µs).
-    pub pose_reach_us: u64,
-    /// A tag is re-estimated at most this often.
-    pub min_interval: Duration,
-    /// Longest the worker computes estimates before it takes in input again.
-    pub compute_budget: Duration,
-    /// Inputs the tap holds before it drops.
-    pub tap_capacity: usize,
-    /// Phases kept per tag (see the module's documentation).
-    pub max_samples_per_tag: usize,
-    /// Derive the geometry from this settings file and the first pose of each reader as it
-    /// comes (as `localize` does offline from its pose file), for a localizer started before
-    /// any pose: a worker, or a proxy whose robot posts its poses.
-    pub derive_geometry: Option<crate::offline::SettingsFile>,
-    /// Called every few seconds to give the allocator's free memory back to the system (the
-    /// application passes glibc's `malloc_trim`); `None`: nothing is called.
-    pub release_memory: Option<fn()>,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            estimator: Estimator::Relock,
-            geometry: Geometry {
-                tag_height_m: 0.5,
-                phase_sign: 1.0,
-                facing: [0.0, 1.0],
-                reach_m: 4.0,
-                references: Vec::new(),
-                readers: BTreeMap::new(),
-                pose_error: None,
-                pose_corrections: None,
-            },
-            ambiguity: Ambiguity::None,
-            max_gap_us: crate::series::DEFAULT_MAX_GAP_US,
-            min_rssi_dbm: None,
-            pose_reach_us: crate::poses::DEFAULT_REACH_US,
-            min_interval: Duration::from_millis(50),
-            compute_budget: Duration::from_millis(50),
-            tap_capacity: 4096,
-            max_samples_per_tag: 4096,
-            derive_geometry: None,
-            release_memory: None,
-        }
-    }
-}
 
 /// A running live localizer.
 pub struct Live {
