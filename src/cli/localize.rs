@@ -45,13 +45,13 @@ pub struct LocalizeArgs {
     /// Run as a localizer worker on this MQTT broker's reads instead
     /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).
     #[command(flatten)]
-    pub worker: crate::fleet::worker_cli::WorkerArgs,
+    pub worker: crate::cli::worker::WorkerArgs,
 }
 
 /// Runs `localize`.
 pub fn run(args: LocalizeArgs) -> ExitCode {
     if args.worker.subscribe.is_some() {
-        return crate::fleet::worker_cli::run(&args);
+        return crate::cli::worker::run(&args);
     }
     match execute(&args) {
         Ok(()) => ExitCode::SUCCESS,

@@ -13,4 +13,3 @@ pub mod schema;
 pub mod seq;
 pub mod url;
 pub mod worker;
-pub mod worker_cli;

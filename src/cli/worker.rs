@@ -3,10 +3,10 @@
 
 use std::process::ExitCode;
 
-use super::schema::DEFAULT_SHARDS;
-use super::url::BrokerUrl;
-use super::worker::{parse_shards, Worker, WorkerOptions};
-use crate::cli::localize::LocalizeArgs;
+use super::localize::LocalizeArgs;
+use crate::fleet::schema::DEFAULT_SHARDS;
+use crate::fleet::url::BrokerUrl;
+use crate::fleet::worker::{parse_shards, Worker, WorkerOptions};
 use crate::localize::offline::SettingsFile;
 use crate::localize::poses::Poses;
 
@@ -43,7 +43,7 @@ pub struct WorkerArgs {
     #[arg(long, value_name = "S", default_value_t = 10.0, requires = "subscribe", value_parser = crate::options::parser::<f64>("presence-silence-s"))]
     pub presence_silence_s: f64,
     /// A `moved` presence event when the estimate moves more than this (m).
-    #[arg(long, value_name = "M", default_value_t = super::presence::DEFAULT_MOVE_M, requires = "subscribe", value_parser = crate::options::parser::<f64>("presence-move-m"))]
+    #[arg(long, value_name = "M", default_value_t = crate::fleet::presence::DEFAULT_MOVE_M, requires = "subscribe", value_parser = crate::options::parser::<f64>("presence-move-m"))]
     pub presence_move_m: f64,
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]
@@ -99,7 +99,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         client_id,
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
-        tls: super::args::tls_config(w.mqtt_ca.as_deref())?,
+        tls: crate::fleet::args::tls_config(w.mqtt_ca.as_deref())?,
         presence_silence: positive("--presence-silence-s", w.presence_silence_s)
             .map(std::time::Duration::from_secs_f64)?,
         presence_move_m: positive("--presence-move-m", w.presence_move_m)?,

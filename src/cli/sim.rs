@@ -1,0 +1,198 @@
+//! `llrp-gateway sim`: the simulated readers of a scenario, the localizer they feed with its
+//! HTTP API and live map, and the MQTT publisher, until Ctrl-C or SIGTERM.
+
+use std::path::PathBuf;
+
+use crate::scenario::Scenario;
+use crate::sim::{self, SimOptions};
+use crate::stop::StopSignal;
+
+/// Why `sim` could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SimCommandError {
+    /// The scenario could not be loaded (the message names the file, the field and why).
+    #[error("{0}")]
+    Scenario(String),
+    /// The async runtime could not be started.
+    #[error("cannot start the async runtime: {0}")]
+    Runtime(std::io::Error),
+    /// The localizer's thread could not be started.
+    #[error("cannot start the localizer: {0}")]
+    Localizer(std::io::Error),
+    /// The HTTP API could not be served where asked.
+    #[error("{0}")]
+    Http(crate::http::launch::LaunchError),
+    /// The MQTT publisher could not be started.
+    #[error("{0}")]
+    Publish(String),
+    /// A reader could not be served.
+    #[error("{0}")]
+    Start(crate::sim::SimError),
+}
+
+/// The localizer, HTTP and MQTT side of `sim`.
+pub struct SimLocalize {
+    /// Where the HTTP API and live map are served.
+    pub http: crate::http::launch::HttpArgs,
+    /// The antenna poses the localizer is given.
+    pub poses: crate::sim::PoseSource,
+    /// Time between two pose samples of an antenna (ms).
+    pub pose_interval_ms: u64,
+    /// Each read is stamped with its antenna's pose.
+    pub read_poses: bool,
+    /// The localizer's estimator.
+    pub estimator: crate::localize::estimate::Estimator,
+    /// Publishing to an MQTT broker.
+    pub publish: crate::fleet::args::PublishArgs,
+}
+
+/// The EPCs of `scenario`'s reference tags.
+fn scenario_references(scenario: &Scenario) -> std::collections::BTreeSet<String> {
+    let world = crate::physics::World::new(scenario);
+    let model = crate::physics::Model::in_world(&world, scenario, 0);
+    (0..model.tag_count())
+        .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
+        .map(|k| crate::reads::hex_upper(model.tag_epc(k).as_bytes()))
+        .collect()
+}
+
+/// Runs the simulated readers until Ctrl-C or SIGTERM.
+pub fn run(
+    scenario: Option<PathBuf>,
+    reader_model: Option<&str>,
+    localize: SimLocalize,
+    mut opts: SimOptions,
+) -> Result<(), SimCommandError> {
+    crate::stop::init_logging();
+    let loaded = match &scenario {
+        Some(path) => {
+            Scenario::load_with(path, reader_model).map_err(|e| format!("{}: {e}", path.display()))
+        }
+        None => Scenario::default_s1_with(reader_model).map_err(|e| format!("S1: {e}")),
+    };
+    let scenario = loaded.map_err(SimCommandError::Scenario)?;
+    for notice in &scenario.notices {
+        tracing::info!("scenario: {notice}");
+    }
+    // One async worker: it only moves bytes between the sockets and the readers (whose work
+    // runs on the readers' pool and whose look-ahead physics on the physics pool, one thread
+    // per core each), so the process has 2 × cores threads plus this one and main.
+    let workers = 1;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(workers)
+        .enable_all()
+        .build()
+        .map_err(SimCommandError::Runtime)?;
+    runtime.block_on(async move {
+        let stop = StopSignal::watch();
+        // The localizer and its HTTP API (the simulator only feeds a localizer someone can
+        // ask: with --no-http neither runs).
+        let mut live = None;
+        let mut http = None;
+        // One registry for what runs: the readers' links, the localizer, the publisher.
+        let metrics = crate::metrics::Metrics::new();
+        let links = crate::metrics::LinkMetrics::default();
+        metrics.register(|r| links.register(r));
+        opts.frames_in = links.frames_in.clone();
+        if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
+            let settings = crate::localize::live::Settings {
+                estimator: localize.estimator,
+                release_memory: Some(crate::alloc::release_free),
+                ..Default::default()
+            };
+            let mut settings = sim::feed::settings(&scenario, settings);
+            // The robot's own poses come with the error its scenario states: the estimates'
+            // covariance takes it in.
+            if localize.poses == sim::PoseSource::Estimated {
+                settings.geometry.pose_error = sim::feed::pose_error(&scenario);
+            }
+            let l = match crate::localize::live::Live::start(settings) {
+                Ok(l) => l,
+                Err(e) => return Err(SimCommandError::Localizer(e)),
+            };
+            metrics.register(|r| l.shared.metrics.register(r));
+            match crate::http::launch::launch(
+                &addr,
+                chosen,
+                &localize.http,
+                true,
+                l.shared.clone(),
+                l.tap.clone(),
+                metrics.clone(),
+            )
+            .await
+            {
+                Ok(Some(h)) => {
+                    eprintln!("llrp-gateway sim: HTTP API and live map on http://{}/", h.addr);
+                    opts.localize = Some(sim::LocalizeFeed {
+                        tap: l.tap.clone(),
+                        poses: localize.poses,
+                        pose_interval_us: localize.pose_interval_ms * 1000,
+                        read_poses: localize.read_poses,
+                    });
+                    http = Some(h);
+                    live = Some(l);
+                }
+                Ok(None) => eprintln!(
+                    "llrp-gateway sim: {addr} is taken: running without the HTTP API (choose one with --http ADDR)"
+                ),
+                Err(e) => return Err(SimCommandError::Http(e)),
+            }
+        }
+        // The MQTT publisher takes a copy of everything the localizer is offered (with
+        // --no-http, of what it would be offered).
+        let shared = live
+            .as_ref()
+            .map(|l: &crate::localize::live::Live| l.shared.clone())
+            .unwrap_or_default();
+        let references = scenario_references(&scenario);
+        let mqtt = crate::fleet::metrics::MqttMetrics::default();
+        metrics.register(|r| mqtt.register(r));
+        let publisher = localize
+            .publish
+            .start(mqtt, references)
+            .map_err(SimCommandError::Publish)?;
+        if let Some(p) = &publisher {
+            let tap = match &opts.localize {
+                Some(l) => l.tap.clone(),
+                None => crate::localize::live::Tap::detached(shared.links().clone()),
+            };
+            opts.localize = Some(sim::LocalizeFeed {
+                tap: tap.with_mirror(p.mirror()),
+                poses: localize.poses,
+                pose_interval_us: localize.pose_interval_ms * 1000,
+                read_poses: localize.read_poses,
+            });
+            eprintln!(
+                "llrp-gateway sim: publishing to {}",
+                localize.publish.shown()
+            );
+        }
+        let running = sim::start(&scenario, &opts)
+            .await
+            .map_err(SimCommandError::Start)?;
+        let tls = if opts.tls.is_some() { " (TLS)" } else { "" };
+        for (name, addr) in running.names.iter().zip(&running.addrs) {
+            eprintln!(
+                "llrp-gateway sim: scenario '{}': reader '{name}' listening on {addr}{tls}",
+                scenario.name
+            );
+        }
+        stop.wait().await;
+        // Each client gets its ConnectionCloseEvent and the ground truth is flushed, within
+        // a second: a client that does not take its last bytes does not hold the exit up.
+        running.shutdown().await;
+        drop(opts);
+        if let Some(p) = publisher {
+            p.stop();
+        }
+        if let Some(h) = http {
+            h.stop().await;
+        }
+        if let Some(l) = live {
+            l.stop();
+        }
+        eprintln!("llrp-gateway sim: stopped");
+        Ok(())
+    })
+}
