@@ -15,6 +15,7 @@ use crate::sim::SimOptions;
 
 pub mod decode;
 pub mod localize;
+pub mod root;
 pub mod sim;
 pub mod worker;
 

@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use super::root::{Consumers, ConsumersError, Plan};
+use crate::localize::live::Settings;
 use crate::scenario::Scenario;
 use crate::sim::{self, SimOptions};
 use crate::stop::StopSignal;
@@ -16,15 +18,9 @@ pub enum SimCommandError {
     /// The async runtime could not be started.
     #[error("cannot start the async runtime: {0}")]
     Runtime(std::io::Error),
-    /// The localizer's thread could not be started.
-    #[error("cannot start the localizer: {0}")]
-    Localizer(std::io::Error),
-    /// The HTTP API could not be served where asked.
+    /// The localizer, its API or the MQTT publisher could not be started.
     #[error("{0}")]
-    Http(crate::http::launch::LaunchError),
-    /// The MQTT publisher could not be started.
-    #[error("{0}")]
-    Publish(String),
+    Consumers(#[from] ConsumersError),
     /// A reader could not be served.
     #[error("{0}")]
     Start(crate::sim::SimError),
@@ -85,89 +81,39 @@ pub fn run(
         .map_err(SimCommandError::Runtime)?;
     runtime.block_on(async move {
         let stop = StopSignal::watch();
-        // The localizer and its HTTP API (the simulator only feeds a localizer someone can
-        // ask: with --no-http neither runs).
-        let mut live = None;
-        let mut http = None;
-        // One registry for what runs: the readers' links, the localizer, the publisher.
-        let metrics = crate::metrics::Metrics::new();
-        let links = crate::metrics::LinkMetrics::default();
-        metrics.register(|r| links.register(r));
-        opts.frames_in = links.frames_in.clone();
-        if let Some((addr, chosen)) = localize.http.address(Some("127.0.0.1:8080")) {
-            let settings = crate::localize::live::Settings {
+        // The robot's own poses come with the error its scenario states: the estimates'
+        // covariance takes it in.
+        let mut settings = sim::feed::settings(
+            &scenario,
+            Settings {
                 estimator: localize.estimator,
-                release_memory: Some(crate::alloc::release_free),
-                ..Default::default()
-            };
-            let mut settings = sim::feed::settings(&scenario, settings);
-            // The robot's own poses come with the error its scenario states: the estimates'
-            // covariance takes it in.
-            if localize.poses == sim::PoseSource::Estimated {
-                settings.geometry.pose_error = sim::feed::pose_error(&scenario);
-            }
-            let l = match crate::localize::live::Live::start(settings) {
-                Ok(l) => l,
-                Err(e) => return Err(SimCommandError::Localizer(e)),
-            };
-            metrics.register(|r| l.shared.metrics.register(r));
-            match crate::http::launch::launch(
-                &addr,
-                chosen,
-                &localize.http,
-                true,
-                l.shared.clone(),
-                l.tap.clone(),
-                metrics.clone(),
-            )
-            .await
-            {
-                Ok(Some(h)) => {
-                    eprintln!("llrp-gateway sim: HTTP API and live map on http://{}/", h.addr);
-                    opts.localize = Some(sim::LocalizeFeed {
-                        tap: l.tap.clone(),
-                        poses: localize.poses,
-                        pose_interval_us: localize.pose_interval_ms * 1000,
-                        read_poses: localize.read_poses,
-                    });
-                    http = Some(h);
-                    live = Some(l);
-                }
-                Ok(None) => eprintln!(
-                    "llrp-gateway sim: {addr} is taken: running without the HTTP API (choose one with --http ADDR)"
-                ),
-                Err(e) => return Err(SimCommandError::Http(e)),
-            }
+                ..Settings::default()
+            },
+        );
+        if localize.poses == sim::PoseSource::Estimated {
+            settings.geometry.pose_error = sim::feed::pose_error(&scenario);
         }
-        // The MQTT publisher takes a copy of everything the localizer is offered (with
-        // --no-http, of what it would be offered).
-        let shared = live
-            .as_ref()
-            .map(|l: &crate::localize::live::Live| l.shared.clone())
-            .unwrap_or_default();
-        let references = scenario_references(&scenario);
-        let mqtt = crate::fleet::metrics::MqttMetrics::default();
-        metrics.register(|r| mqtt.register(r));
-        let publisher = localize
-            .publish
-            .start(mqtt, references)
-            .map_err(SimCommandError::Publish)?;
-        if let Some(p) = &publisher {
-            let tap = match &opts.localize {
-                Some(l) => l.tap.clone(),
-                None => crate::localize::live::Tap::detached(shared.links().clone()),
-            };
-            opts.localize = Some(sim::LocalizeFeed {
-                tap: tap.with_mirror(p.mirror()),
-                poses: localize.poses,
-                pose_interval_us: localize.pose_interval_ms * 1000,
-                read_poses: localize.read_poses,
-            });
-            eprintln!(
-                "llrp-gateway sim: publishing to {}",
-                localize.publish.shown()
-            );
-        }
+        // The localizer and its HTTP API (the simulator only feeds a localizer someone can
+        // ask: with --no-http neither runs); the MQTT publisher takes a copy of everything
+        // the localizer is offered (with --no-http, of what it would be offered).
+        let consumers = Consumers::start(Plan {
+            command: "sim",
+            http: localize.http.address(Some("127.0.0.1:8080")),
+            http_args: &localize.http,
+            simulation: true,
+            settings,
+            prime: Vec::new(),
+            publish: &localize.publish,
+            references: scenario_references(&scenario),
+        })
+        .await?;
+        opts.frames_in = consumers.frames_in();
+        opts.localize = consumers.tap().map(|tap| sim::LocalizeFeed {
+            tap,
+            poses: localize.poses,
+            pose_interval_us: localize.pose_interval_ms * 1000,
+            read_poses: localize.read_poses,
+        });
         let running = sim::start(&scenario, &opts)
             .await
             .map_err(SimCommandError::Start)?;
@@ -183,15 +129,7 @@ pub fn run(
         // a second: a client that does not take its last bytes does not hold the exit up.
         running.shutdown().await;
         drop(opts);
-        if let Some(p) = publisher {
-            p.stop();
-        }
-        if let Some(h) = http {
-            h.stop().await;
-        }
-        if let Some(l) = live {
-            l.stop();
-        }
+        consumers.stop().await;
         eprintln!("llrp-gateway sim: stopped");
         Ok(())
     })

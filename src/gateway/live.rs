@@ -3,17 +3,15 @@
 //! per-reader settings from a settings file.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::fleet::metrics::MqttMetrics;
-use crate::http::launch::{launch, HttpArgs, Launched};
+use crate::cli::root::{Consumers, Plan};
+use crate::http::launch::HttpArgs;
 use crate::localize::estimate::Estimator;
-use crate::localize::live::{Input, Live, Settings, Tap};
+use crate::localize::live::{Input, Settings, Tap};
 use crate::localize::offline::{geometry, SettingsFile};
 use crate::localize::poses::Poses;
 use crate::localize::series::Ambiguity;
-use crate::metrics::{LinkMetrics, Metrics};
 use crate::net::proxy::keepalive::{self, Change, Links};
 use crate::net::proxy::Tapped;
 use llrp_gateway_vocab::feed::Inventory;
@@ -40,109 +38,58 @@ pub struct LiveArgs {
     pub publish: crate::fleet::args::PublishArgs,
 }
 
-/// What the reads go to beside the LLRP client: the localizer and its API, an MQTT
-/// publisher, both or neither.
-pub struct Sinks {
-    localizer: Option<Running>,
-    publisher: Option<crate::fleet::publish::Publisher>,
-    tap: Option<Tap>,
-    keepalive_losses: Counter,
-}
-
-impl Sinks {
-    /// Where to offer the reads, when anything takes them.
-    pub fn tap(&self) -> Option<Tap> {
-        self.tap.clone()
-    }
-
-    /// Where proxied readers' lost keepalive links are counted.
-    pub fn keepalive_losses(&self) -> Counter {
-        self.keepalive_losses.clone()
-    }
-
-    /// Stops the publisher (its readers' and gateway's `offline` published), then the API
-    /// and the localizer.
-    pub async fn stop(self) {
-        drop(self.tap);
-        if let Some(p) = self.publisher {
-            // Waits for the broker's acknowledgements, at most a few seconds.
-            let _ = tokio::task::spawn_blocking(move || p.stop()).await;
+/// Starts what the reads go to beside the LLRP client (the localizer and its API when
+/// `--http` was given, the publisher when `--publish` was; [`crate::cli::root`]), with the
+/// settings and pose files of `args`; `command` names the command in messages.
+pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, String> {
+    let http = args.http.address(None);
+    let file = match &args.localize_settings {
+        Some(p) if http.is_some() || args.publish.publish.is_some() => {
+            SettingsFile::load(p).map_err(|e| e.to_string())?
         }
-        if let Some(l) = self.localizer {
-            l.stop().await;
-        }
-    }
-}
-
-/// Starts the localizer and its API when `--http` was given and the publisher when
-/// `--publish` was; `command` names the command in messages.
-pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Sinks, String> {
-    // One registry for what runs: the links' counters, the localizer's, the publisher's.
-    let metrics = Metrics::new();
-    let links = LinkMetrics::default();
-    metrics.register(|r| links.register(r));
-    let localizer = start(args, command, &metrics).await?;
-    let shared = localizer
-        .as_ref()
-        .map(|l| l.live.shared.clone())
-        .unwrap_or_default();
-    let references = match (&args.publish.publish, &args.localize_settings) {
-        (Some(_), Some(p)) => SettingsFile::load(p)
-            .map_err(|e| e.to_string())?
-            .references
-            .iter()
-            .map(|r| r.epc.to_ascii_uppercase())
-            .collect(),
-        _ => Default::default(),
+        _ => SettingsFile::default(),
     };
-    let mqtt = MqttMetrics::default();
-    metrics.register(|r| mqtt.register(r));
-    let publisher = args.publish.start(mqtt, references)?;
-    let tap = match (&localizer, &publisher) {
-        (None, None) => None,
-        (l, p) => {
-            let tap = l
-                .as_ref()
-                .map_or_else(|| Tap::detached(shared.links().clone()), |l| l.tap());
-            Some(match p {
-                Some(p) => {
-                    eprintln!(
-                        "llrp-gateway {command}: publishing to {}",
-                        args.publish.shown()
-                    );
-                    tap.with_mirror(p.mirror())
-                }
-                None => tap,
-            })
+    let mut settings = Settings::default();
+    let mut prime = Vec::new();
+    if http.is_some() {
+        let poses = match &args.poses {
+            Some(p) => {
+                let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+                Poses::read(std::io::BufReader::new(f))
+                    .map_err(|e| format!("{}: {e}", p.display()))?
+            }
+            None => Poses::new(),
+        };
+        settings = settings_from(&file, &poses, args.estimator);
+        for (reader, offset) in &file.clock_offsets_us {
+            prime.push(Input::Reader {
+                name: reader.clone(),
+                hop_table: None,
+                antennas: Vec::new(),
+                clock_offset_us: *offset,
+                poses: None,
+            });
         }
-    };
-    Ok(Sinks {
-        localizer,
-        publisher,
-        tap,
-        keepalive_losses: links.keepalive_losses,
+        let samples = poses.samples();
+        prime.extend(samples.chunks(1024).map(|c| Input::Poses(c.to_vec())));
+    }
+    let references = file
+        .references
+        .iter()
+        .map(|r| r.epc.to_ascii_uppercase())
+        .collect();
+    Consumers::start(Plan {
+        command,
+        http,
+        http_args: &args.http,
+        simulation: false,
+        settings,
+        prime,
+        publish: &args.publish,
+        references,
     })
-}
-
-/// A running localizer and its API.
-pub struct Running {
-    /// The localizer.
-    pub live: Live,
-    /// Its HTTP API.
-    pub http: Launched,
-}
-
-impl Running {
-    /// The localizer's tap.
-    pub fn tap(&self) -> Tap {
-        self.live.tap.clone()
-    }
-
-    /// Stops the API, then the localizer.
-    pub async fn stop(self) {
-        self.http.stop().await;
-        self.live.stop();
-    }
+    .await
+    .map_err(|e| e.to_string())
 }
 
 /// The live localizer's settings from a settings file and the poses known at start (with
@@ -160,75 +107,6 @@ pub fn settings_from(file: &SettingsFile, poses: &Poses, estimator: Estimator) -
         min_rssi_dbm: file.min_rssi_dbm,
         ..Settings::default()
     }
-}
-
-/// Starts the localizer and its API when `--http` was given, its metrics registered in
-/// `metrics` (which the API serves); `command` names the command in messages.
-pub async fn start(
-    args: &LiveArgs,
-    command: &str,
-    metrics: &Arc<Metrics>,
-) -> Result<Option<Running>, String> {
-    let Some((addr, chosen)) = args.http.address(None) else {
-        return Ok(None);
-    };
-    let file = match &args.localize_settings {
-        Some(p) => SettingsFile::load(p).map_err(|e| e.to_string())?,
-        None => SettingsFile::default(),
-    };
-    let poses = match &args.poses {
-        Some(p) => {
-            let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            Poses::read(std::io::BufReader::new(f)).map_err(|e| format!("{}: {e}", p.display()))?
-        }
-        None => Poses::new(),
-    };
-    let settings = Settings {
-        release_memory: Some(crate::alloc::release_free),
-        ..settings_from(&file, &poses, args.estimator)
-    };
-    let live = Live::start(settings).map_err(|e| format!("cannot start the localizer: {e}"))?;
-    metrics.register(|r| live.shared.metrics.register(r));
-    for (reader, offset) in &file.clock_offsets_us {
-        live.tap.offer(Input::Reader {
-            name: reader.clone(),
-            hop_table: None,
-            antennas: Vec::new(),
-            clock_offset_us: *offset,
-            poses: None,
-        });
-    }
-    let samples = poses.samples();
-    for chunk in samples.chunks(1024) {
-        // A pose file larger than the tap holds goes in as the localizer takes it.
-        let mut input = Input::Poses(chunk.to_vec());
-        loop {
-            match live.tap.try_offer(input) {
-                Ok(()) => break,
-                Err(back) => {
-                    input = back;
-                    tokio::time::sleep(std::time::Duration::from_millis(1)).await;
-                }
-            }
-        }
-    }
-    let http = launch(
-        &addr,
-        chosen,
-        &args.http,
-        false,
-        live.shared.clone(),
-        live.tap.clone(),
-        metrics.clone(),
-    )
-    .await
-    .map_err(|e| e.to_string())?
-    .ok_or_else(|| format!("--http {addr}: cannot listen"))?;
-    eprintln!(
-        "llrp-gateway {command}: HTTP API and live map on http://{}/",
-        http.addr
-    );
-    Ok(Some(Running { live, http }))
 }
 
 /// How often the proxy's keepalive links are looked at.
