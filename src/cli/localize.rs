@@ -68,11 +68,7 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         None => SettingsFile::default(),
     };
     let poses = match &args.poses {
-        Some(p) => {
-            let file = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            Poses::read(std::io::BufReader::new(file))
-                .map_err(|e| format!("{}: {e}", p.display()))?
-        }
+        Some(p) => Poses::load(p).map_err(|e| e.to_string())?,
         None => Poses::new(),
     };
     // clap requires both without --subscribe.

@@ -53,11 +53,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, St
     let mut prime = Vec::new();
     if http.is_some() {
         let poses = match &args.poses {
-            Some(p) => {
-                let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
-                Poses::read(std::io::BufReader::new(f))
-                    .map_err(|e| format!("{}: {e}", p.display()))?
-            }
+            Some(p) => Poses::load(p).map_err(|e| e.to_string())?,
             None => Poses::new(),
         };
         settings = settings_from(&file, &poses, args.estimator);

@@ -37,6 +37,16 @@ pub enum PoseError {
     },
 }
 
+/// A pose file that could not be used: its path and why.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {}", .path.display(), .source)]
+pub struct PoseFileError {
+    /// The file.
+    pub path: std::path::PathBuf,
+    /// Why.
+    pub source: PoseError,
+}
+
 /// The CSV header the pose file's CSV form must start with.
 pub const CSV_HEADER: &str = "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg";
 
@@ -178,6 +188,16 @@ impl Poses {
     /// Whether no sample is held.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Reads the pose file at `path` (JSON Lines or CSV, as [`Poses::read`]).
+    pub fn load(path: &std::path::Path) -> Result<Poses, PoseFileError> {
+        let failed = |source| PoseFileError {
+            path: path.to_owned(),
+            source,
+        };
+        let file = std::fs::File::open(path).map_err(|e| failed(PoseError::Io(e)))?;
+        Poses::read(std::io::BufReader::new(file)).map_err(failed)
     }
 
     /// Reads a pose file, JSON Lines or CSV (told apart by its first line).

@@ -135,3 +135,33 @@ fn reads_jsonl_and_csv_alike_and_names_bad_fields() {
         "line 1: antenna: must be a port number from 1"
     );
 }
+
+#[test]
+fn a_pose_file_is_loaded_by_its_path_and_its_errors_name_the_file_and_the_line() {
+    let dir = std::env::temp_dir().join(format!("llrp-gateway-poses-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary folder");
+    let good = dir.join("good.csv");
+    std::fs::write(
+        &good,
+        "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\n0,r,1,0,2,0.5,0,0\n",
+    )
+    .expect("written");
+    assert_eq!(Poses::load(&good).expect("loads").len(), 1);
+    let bad = dir.join("bad.csv");
+    std::fs::write(
+        &bad,
+        "t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\n0,r,1,0,two,0.5,0,0\n",
+    )
+    .expect("written");
+    let e = Poses::load(&bad)
+        .expect_err("y is not a number")
+        .to_string();
+    assert_eq!(
+        e,
+        format!("{}: line 2: y: not a number: \"two\"", bad.display())
+    );
+    let missing = dir.join("missing.csv");
+    let e = Poses::load(&missing).expect_err("no such file").to_string();
+    assert!(e.starts_with(&format!("{}: ", missing.display())), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
