@@ -52,13 +52,13 @@ pub enum ConsumersError {
     Publish(String),
 }
 
-/// The localizer and its API, an MQTT publisher, both or neither, and the process's metrics.
+/// The localizer and its API, an MQTT publisher, both or neither (the process's metrics are
+/// in the API's state, which serves them).
 pub struct Consumers {
     localizer: Option<(Live, Launched)>,
     publisher: Option<Publisher>,
     tap: Option<Tap>,
     links: LinkMetrics,
-    metrics: Arc<Metrics>,
 }
 
 impl Consumers {
@@ -139,18 +139,12 @@ impl Consumers {
             publisher,
             tap,
             links,
-            metrics,
         })
     }
 
     /// Where the sources offer their reads, when anything takes them.
     pub fn tap(&self) -> Option<Tap> {
         self.tap.clone()
-    }
-
-    /// The running localizer, if any.
-    pub fn live(&self) -> Option<&Live> {
-        self.localizer.as_ref().map(|(live, _)| live)
     }
 
     /// Where the simulated readers count the frames their clients send.
@@ -161,11 +155,6 @@ impl Consumers {
     /// Where proxied readers' lost keepalive links are counted.
     pub fn keepalive_losses(&self) -> Counter {
         self.links.keepalive_losses.clone()
-    }
-
-    /// The process's metrics, which the API serves.
-    pub fn metrics(&self) -> &Arc<Metrics> {
-        &self.metrics
     }
 
     /// Stops the publisher (its readers' and gateway's `offline` published, the broker's
