@@ -1,11 +1,13 @@
 //! Sockets: one framed [`connection::Connection`] for every LLRP socket (plain TCP or TLS,
 //! [`stream::Stream`], [`tls`]), what every server shares ([`serve`]: the accept loop with its
-//! connection limit, back-off and shutdown), the simulated reader's server, the replay, an
-//! LLRP client, the proxy, and the simulated clock.
+//! connection limit, back-off and shutdown; [`drive`]: the loop that serves any sans-IO
+//! session), the simulated reader's server, the replay, an LLRP client, the proxy, and the
+//! simulated clock.
 
 pub mod client;
 pub mod clock;
 pub mod connection;
+pub mod drive;
 pub mod proxy;
 pub mod replay;
 pub mod report_buffer;

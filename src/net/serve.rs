@@ -1,10 +1,11 @@
 //! What every LLRP server here shares (the simulated reader's, the replay's, the proxy's): the
 //! shutdown check, the pause after a failed accept, the wait for an optional deadline, a
 //! refusal written within a bound, and one accept loop with a connection limit and tracked
-//! connection tasks (after mini-redis' `Listener`), which the replay and the proxy run.
+//! connection tasks (after mini-redis' `Listener`), which the proxy runs: each of its
+//! connections is a task of its own.
 //!
-//! The simulated reader accepts inside its own loop, as its one sans-IO session decides who
-//! is refused and owns every connection; it shares the pieces, not the loop.
+//! A server whose one sans-IO session owns every connection (the simulated reader, the
+//! replay) is served by [`drive`](super::drive) instead, which uses the same pieces.
 
 use std::future::Future;
 use std::io;

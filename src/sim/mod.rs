@@ -391,8 +391,8 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
             hook = Some(LiveHook {
                 name: spec.name.clone(),
                 tap: l.tap.clone(),
-                client,
-                frames_in: opts.frames_in.clone(),
+                client: Some(client),
+                frames_in: Some(opts.frames_in.clone()),
             });
             if opts.speed != Speed::Max {
                 let (model, profile) = (model.clone(), profile.clone());

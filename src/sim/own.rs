@@ -20,7 +20,7 @@ use crate::localize::live::{Input, Tap};
 use crate::net::client::InventorySpec;
 use crate::net::clock::Clock;
 use crate::physics::pool::Pool;
-use crate::reader::session::{Accepted, ClientId, Now, Session};
+use crate::reader::session::{Accepted, ClientId, Now, ServerSession, Session};
 use crate::reader::Reader;
 use llrp_gateway_vocab::feed::Inventory;
 

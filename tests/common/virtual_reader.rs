@@ -10,7 +10,7 @@ use llrp::message::MessageBody;
 use llrp::params::TagReportData;
 use llrp::{Deframer, Inbound, Message, StatusCode};
 use llrp_gateway::physics::Model;
-use llrp_gateway::reader::session::{Accepted, ClientId, Now, Session};
+use llrp_gateway::reader::session::{Accepted, ClientId, Now, ServerSession, Session};
 use llrp_gateway::reader::{Reader, ReaderProfile};
 use llrp_gateway::scenario::Scenario;
 

@@ -1,9 +1,11 @@
 //! The vocabulary every layer of llrp-gateway shares, below the localizer, the simulator and
 //! the application: tag reads in SI units decoded from LLRP ([`reads`]), antenna pose
-//! samples ([`pose`]), the feed that carries both from any source to any consumer ([`feed`])
-//! and the wall clock ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
+//! samples ([`pose`]), the feed that carries both from any source to any consumer ([`feed`]),
+//! the sans-IO server session every LLRP server here implements ([`session`]) and the wall
+//! clock ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
 
 pub mod feed;
 pub mod pose;
 pub mod reads;
+pub mod session;
 pub mod utc;

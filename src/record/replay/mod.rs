@@ -17,6 +17,7 @@
 //!   timestamps shifted by the stream's length each time.
 
 use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
 use bytes::{BufMut, Bytes, BytesMut};
 use llrp::message::{
@@ -246,8 +247,8 @@ pub struct Output {
 
 /// One client's replay.
 #[derive(Debug)]
-pub struct ReplaySession<'a> {
-    script: &'a Script,
+pub struct ReplaySession {
+    script: Arc<Script>,
     options: ReplayOptions,
     seen: HashMap<MessageKind, usize>,
     /// Frames due, by (due time µs, sequence) → frame.
@@ -261,9 +262,9 @@ pub struct ReplaySession<'a> {
     loop_started: Option<u64>,
 }
 
-impl<'a> ReplaySession<'a> {
+impl ReplaySession {
     /// A session for a client that connected at `now_us` (any monotonic µs clock).
-    pub fn new(script: &'a Script, options: ReplayOptions, now_us: u64) -> Self {
+    pub fn new(script: Arc<Script>, options: ReplayOptions, now_us: u64) -> Self {
         let mut s = ReplaySession {
             script,
             options,
@@ -275,7 +276,7 @@ impl<'a> ReplaySession<'a> {
             rounds: 0,
             loop_started: None,
         };
-        let greeting = script.greeting.clone();
+        let greeting = s.script.greeting.clone();
         s.schedule(now_us, &greeting, 0);
         s
     }
@@ -327,8 +328,8 @@ impl<'a> ReplaySession<'a> {
             *c += 1;
             *c - 1
         };
-        let recorded = self
-            .script
+        let script = Arc::clone(&self.script);
+        let recorded = script
             .responses
             .get(&kind)
             .and_then(|r| r.get(n).or(r.last()));
@@ -483,6 +484,8 @@ pub fn shift_timestamps(frame: &[u8], shift_us: u64) -> Bytes {
     }
     m.to_bytes().freeze()
 }
+
+pub mod server;
 
 #[cfg(test)]
 mod tests;

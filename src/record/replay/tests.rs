@@ -38,6 +38,11 @@ fn frame(t_us: u64, dir: Direction, m: Message) -> Entry {
     }
 }
 
+/// The script of [`recording`].
+pub(super) fn script_for_server() -> Script {
+    Script::new(&recording(), None).expect("script")
+}
+
 /// A recording: greeting keepalive at 5 ms; GET_READER_CONFIG (id 7) answered; ENABLE_ROSPEC
 /// (id 8) at 100 ms answered, then three reports 10, 20 and 30 ms after it.
 fn recording() -> Recording {
@@ -97,7 +102,7 @@ fn frames(bytes: &[u8]) -> Vec<Message> {
     out
 }
 
-fn take(s: &mut ReplaySession<'_>) -> Vec<Message> {
+fn take(s: &mut ReplaySession) -> Vec<Message> {
     let out = std::mem::take(&mut s.transmit().bytes);
     frames(&out)
 }
@@ -111,7 +116,7 @@ fn the_greeting_then_answers_with_the_clients_ids_then_reports_at_their_offsets(
     };
     // The client connects at t = 1 s of its own clock.
     let t0 = 1_000_000;
-    let mut s = ReplaySession::new(&script, opts, t0);
+    let mut s = ReplaySession::new(std::sync::Arc::new(script.clone()), opts, t0);
     s.advance(t0 + 4_999, usize::MAX);
     assert!(take(&mut s).is_empty(), "the greeting is due at 5 ms");
     s.advance(t0 + 5_000, usize::MAX);
@@ -156,7 +161,7 @@ fn speed_divides_the_recorded_offsets() {
         speed: Some(4.0),
         looped: false,
     };
-    let mut s = ReplaySession::new(&script, opts, 0);
+    let mut s = ReplaySession::new(std::sync::Arc::new(script.clone()), opts, 0);
     s.receive(&Message::new(1, EnableRospec::default()).to_bytes(), 1_000);
     take(&mut s);
     assert_eq!(s.deadline(), Some(1_250), "the greeting, 5 ms / 4");
@@ -176,7 +181,7 @@ fn speed_divides_the_recorded_offsets() {
 fn a_request_the_recording_never_answered_gets_the_readers_error_and_is_logged_once() {
     let script = Script::new(&recording(), None).expect("script");
     let mut s = ReplaySession::new(
-        &script,
+        std::sync::Arc::new(script.clone()),
         ReplayOptions {
             speed: None,
             looped: false,
@@ -210,7 +215,7 @@ fn a_request_the_recording_never_answered_gets_the_readers_error_and_is_logged_o
 fn close_connection_is_answered_and_ends_the_session() {
     let script = Script::new(&recording(), None).expect("script");
     let mut s = ReplaySession::new(
-        &script,
+        std::sync::Arc::new(script.clone()),
         ReplayOptions {
             speed: None,
             looped: false,
@@ -238,7 +243,7 @@ fn a_loop_repeats_the_reports_with_timestamps_shifted_by_the_streams_length() {
         speed: Some(1.0),
         looped: true,
     };
-    let mut s = ReplaySession::new(&script, opts, 0);
+    let mut s = ReplaySession::new(std::sync::Arc::new(script.clone()), opts, 0);
     s.receive(&Message::new(1, EnableRospec::default()).to_bytes(), 0);
     s.advance(30_000, usize::MAX);
     let first: Vec<_> = take(&mut s);

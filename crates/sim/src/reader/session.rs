@@ -1,7 +1,7 @@
 //! A simulated reader's session, sans IO: the connections that come and go, the frames they
 //! bring, and the time that passes, in; the bytes to send, whether to close, and when to be
 //! woken next, out. The socket layer (`net::server`) only moves bytes and sleeps until
-//! [`Session::deadline`]; tests drive a session with a virtual clock and no sockets.
+//! [`ServerSession::deadline`]; tests drive a session with a virtual clock and no sockets.
 //!
 //! Every LLRP decision is here or in [`Reader`]: a second client is refused with the
 //! ConnectionAttemptEvent a reader sends (and the connected one is told), a frame that does
@@ -16,6 +16,8 @@ use llrp::{FrameError, FrameHeader, Inbound, Message, StatusCode};
 use llrp::enums::ConnectionAttemptStatus;
 
 use super::{Output, Reader};
+
+pub use llrp_gateway_vocab::session::{Accepted, ClientId, ServerSession, Transmit};
 
 /// While an ROSpec runs, the longest a session lets simulated time pass without running the
 /// reader (reports of the reads in between leave at most this late), µs.
@@ -40,36 +42,11 @@ pub struct Deadline {
     pub wall_ms: Option<u64>,
 }
 
-/// A connection of a session.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct ClientId(u64);
-
-/// What became of a new connection.
-#[derive(Debug, PartialEq)]
-pub enum Accepted {
-    /// It is the reader's client now; its greeting is in [`Session::transmit`].
-    Client(ClientId),
-    /// Another client is connected: send these bytes (the refusal), then close. The
-    /// connected client has been told (in its transmit buffer).
-    Refused(BytesMut),
-}
-
-/// What to send to the connected client.
-#[derive(Debug)]
-pub struct Transmit<'a> {
-    /// The client.
-    pub to: ClientId,
-    /// Encoded messages, in order; the caller sends and clears them.
-    pub bytes: &'a mut BytesMut,
-    /// Close the connection once `bytes` are sent.
-    pub close: bool,
-}
-
 /// One simulated reader's LLRP session: the reader, and the client connected to it.
 pub struct Session {
     reader: Reader,
     client: Option<ClientId>,
-    next_client: u64,
+    next_client: ClientId,
     out: BytesMut,
     close: bool,
     /// Simulated time the reader last ran to while an ROSpec was active.
@@ -82,7 +59,7 @@ impl Session {
         Session {
             reader,
             client: None,
-            next_client: 0,
+            next_client: ClientId::FIRST,
             // Grows to what the client is sent between two flushes (a fleet of idle readers
             // holds next to nothing).
             out: BytesMut::new(),
@@ -104,54 +81,6 @@ impl Session {
     /// The connected client, if any.
     pub fn client(&self) -> Option<ClientId> {
         self.client
-    }
-
-    /// A connection arrived at `now`.
-    pub fn connect(&mut self, now: Now) -> Accepted {
-        if self.client.is_some() {
-            let refusal = self
-                .reader
-                .connection_event(ConnectionAttemptStatus::FailedClientInitiatedConnectionExists);
-            let notice = self
-                .reader
-                .connection_event(ConnectionAttemptStatus::AnotherConnectionAttempted);
-            notice.encode(&mut self.out);
-            return Accepted::Refused(refusal.to_bytes());
-        }
-        let id = ClientId(self.next_client);
-        self.next_client += 1;
-        self.client = Some(id);
-        self.out.clear();
-        self.close = false;
-        let greeting = self.reader.connect(now.sim_us, now.wall_ms);
-        self.ran_to_us = self.reader.now_us();
-        self.push(greeting);
-        Accepted::Client(id)
-    }
-
-    /// Connection `id` is gone (closed by the peer, or after the session asked to close it).
-    pub fn disconnect(&mut self, id: ClientId) {
-        if self.client == Some(id) {
-            self.client = None;
-            self.out.clear();
-            self.close = false;
-            self.reader.disconnect();
-        }
-    }
-
-    /// What connection `id` received, at `now`.
-    pub fn receive(&mut self, id: ClientId, inbound: Inbound, now: Now) {
-        if self.client != Some(id) || self.close {
-            return;
-        }
-        match inbound {
-            Inbound::Frame(frame) => self.frame(&frame, now),
-            Inbound::Unsynced(e) => {
-                tracing::info!("unrecoverable framing error: {e}");
-                bad_length(&e).encode(&mut self.out);
-                self.close = true;
-            }
-        }
     }
 
     fn frame(&mut self, frame: &[u8], now: Now) {
@@ -179,8 +108,73 @@ impl Session {
         self.push(outputs);
     }
 
+    fn push(&mut self, outputs: Vec<Output>) {
+        for o in outputs {
+            match o {
+                Output::Send(m) => m.encode(&mut self.out),
+                Output::Close => {
+                    self.close = true;
+                    return;
+                }
+            }
+        }
+    }
+}
+
+impl ServerSession for Session {
+    type Now = Now;
+    type Deadline = Deadline;
+
+    /// A connection arrived at `now`.
+    fn connect(&mut self, now: Now) -> Accepted {
+        if self.client.is_some() {
+            let refusal = self
+                .reader
+                .connection_event(ConnectionAttemptStatus::FailedClientInitiatedConnectionExists);
+            let notice = self
+                .reader
+                .connection_event(ConnectionAttemptStatus::AnotherConnectionAttempted);
+            notice.encode(&mut self.out);
+            return Accepted::Refused(refusal.to_bytes());
+        }
+        let id = self.next_client;
+        self.next_client = id.next();
+        self.client = Some(id);
+        self.out.clear();
+        self.close = false;
+        let greeting = self.reader.connect(now.sim_us, now.wall_ms);
+        self.ran_to_us = self.reader.now_us();
+        self.push(greeting);
+        Accepted::Client(id)
+    }
+
+    /// Connection `id` is gone (closed by the peer, or after the session asked to close it).
+    fn disconnect(&mut self, id: ClientId) {
+        if self.client == Some(id) {
+            self.client = None;
+            self.out.clear();
+            self.close = false;
+            self.reader.disconnect();
+        }
+    }
+
+    /// What connection `id` received, at `now`.
+    fn receive(&mut self, id: ClientId, inbound: Inbound, now: Now) {
+        if self.client != Some(id) || self.close {
+            return;
+        }
+        match inbound {
+            Inbound::Frame(frame) => self.frame(&frame, now),
+            Inbound::Unsynced(e) => {
+                tracing::info!("unrecoverable framing error: {e}");
+                bad_length(&e).encode(&mut self.out);
+                self.close = true;
+            }
+        }
+    }
+
     /// Runs the reader up to `now`: inventory, reports, events and keepalives that fall due.
-    pub fn advance(&mut self, now: Now) {
+    fn advance(&mut self, now: Now) {
         if self.client.is_none() || self.close {
             return;
         }
@@ -190,7 +184,7 @@ impl Session {
     }
 
     /// The reader is shutting down: the client is told (ConnectionCloseEvent) and closed.
-    pub fn shutdown(&mut self) {
+    fn shutdown(&mut self) {
         if self.client.is_some() && !self.close {
             self.reader.close_event().encode(&mut self.out);
             self.close = true;
@@ -198,7 +192,7 @@ impl Session {
     }
 
     /// What to send to the connected client now, if anything.
-    pub fn transmit(&mut self) -> Option<Transmit<'_>> {
+    fn transmit(&mut self) -> Option<Transmit<'_>> {
         let to = self.client?;
         if self.out.is_empty() && !self.close {
             return None;
@@ -211,14 +205,14 @@ impl Session {
     }
 
     /// Bytes waiting for the connected client.
-    pub fn pending(&self) -> usize {
+    fn pending(&self) -> usize {
         self.out.len()
     }
 
-    /// When the session next needs [`Session::advance`], if nothing arrives before: the next
+    /// When the session next needs [`ServerSession::advance`], if nothing arrives before: the next
     /// trigger or antenna slice while an ROSpec runs (at most [`REPORT_LATENCY_US`] ahead),
     /// the next keepalive, or never.
-    pub fn deadline(&self) -> Deadline {
+    fn deadline(&self) -> Deadline {
         if self.client.is_none() || self.close {
             return Deadline::default();
         }
@@ -232,18 +226,6 @@ impl Session {
             // nothing, over and over).
             sim_us: sim.map(|t| t.max(self.ran_to_us + 1)),
             wall_ms: self.reader.next_keepalive_ms(),
-        }
-    }
-
-    fn push(&mut self, outputs: Vec<Output>) {
-        for o in outputs {
-            match o {
-                Output::Send(m) => m.encode(&mut self.out),
-                Output::Close => {
-                    self.close = true;
-                    return;
-                }
-            }
         }
     }
 }
