@@ -20,7 +20,7 @@ use crate::physics::{AntennaPose, Model, World};
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
-use crate::scenario::Scenario;
+use crate::scenario::{ReaderSpec, Scenario};
 use prometheus_client::metrics::counter::Counter;
 
 pub mod feed;
@@ -284,6 +284,29 @@ async fn truth_by_clock(
     }
 }
 
+/// What every reader of one simulation shares while it is started.
+struct Start<'a> {
+    scenario: &'a Scenario,
+    opts: &'a SimOptions,
+    truth: Option<Arc<Truth>>,
+    /// The tags that move (their truth is written at each line).
+    moving: Vec<usize>,
+    tls: Option<crate::net::tls::Acceptor>,
+    world: World,
+    utc0: u64,
+    clock: Arc<Clock>,
+    shutdown: watch::Receiver<bool>,
+    references: Arc<Vec<bool>>,
+}
+
+/// One reader started: its serving task and what runs beside it.
+struct Started {
+    addr: SocketAddr,
+    task: JoinHandle<io::Result<()>>,
+    recording: Option<RecorderTask>,
+    own: Vec<JoinHandle<()>>,
+}
+
 /// Starts every reader of `scenario`; returns once all listen.
 pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim, SimError> {
     if scenario.readers.is_empty() {
@@ -297,157 +320,197 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         })),
         None => None,
     };
-    let moving: Vec<usize> = scenario
-        .tags
-        .iter()
-        .enumerate()
-        .filter(|(_, t)| t.path.is_some())
-        .map(|(i, _)| i)
-        .collect();
-    let tls = opts.tls.as_ref().map(ServerFiles::acceptor).transpose()?;
-    // The tags, reflectors and robot drives, once for every reader.
-    let world = World::new(scenario);
-    // Simulated time 0 is this instant: the readers' UTC timestamps then track the wall clock
-    // at real-time speed, however long the world took to build.
-    let utc0 = crate::utc::now_us();
-    let clock = Arc::new(Clock::new(opts.speed));
     let (shutdown, rx) = watch::channel(false);
-    let mut addrs = Vec::new();
-    let mut names = Vec::new();
-    let mut tasks = Vec::new();
-    let mut recordings = Vec::new();
-    let mut own_tasks = Vec::new();
-    let references: Arc<Vec<bool>> = Arc::new(scenario.tags.iter().map(|t| t.reference).collect());
+    let s = Start {
+        scenario,
+        opts,
+        truth,
+        moving: (scenario.tags.iter().enumerate())
+            .filter(|(_, t)| t.path.is_some())
+            .map(|(i, _)| i)
+            .collect(),
+        tls: opts.tls.as_ref().map(ServerFiles::acceptor).transpose()?,
+        // The tags, reflectors and robot drives, once for every reader.
+        world: World::new(scenario),
+        // Simulated time 0 is this instant: the readers' UTC timestamps then track the wall
+        // clock at real-time speed, however long the world took to build.
+        utc0: crate::utc::now_us(),
+        clock: Arc::new(Clock::new(opts.speed)),
+        shutdown: rx,
+        references: Arc::new(scenario.tags.iter().map(|t| t.reference).collect()),
+    };
+    let mut running = RunningSim {
+        addrs: Vec::new(),
+        names: Vec::new(),
+        shutdown,
+        tasks: Vec::new(),
+        truth: s.truth.clone(),
+        recordings: Vec::new(),
+        own: Vec::new(),
+    };
     for (i, spec) in scenario.readers.iter().enumerate() {
-        let addr = opts
-            .listen
-            .get(i)
-            .cloned()
-            .unwrap_or_else(|| spec.listen.clone());
-        let listener = TcpListener::bind(&addr)
-            .await
-            .map_err(|source| SimError::Listen {
-                reader: spec.name.clone(),
-                addr: addr.clone(),
-                source,
-            })?;
-        let bound = listener.local_addr().map_err(|source| SimError::Listen {
+        let started = s.reader(i, spec).await?;
+        running.addrs.push(started.addr);
+        running.names.push(spec.name.clone());
+        running.tasks.push(started.task);
+        running.recordings.extend(started.recording);
+        running.own.extend(started.own);
+    }
+    Ok(running)
+}
+
+impl Start<'_> {
+    /// Starts reader `i` (`spec`): binds its address and serves it.
+    async fn reader(&self, i: usize, spec: &ReaderSpec) -> Result<Started, SimError> {
+        let addr = (self.opts.listen.get(i).cloned()).unwrap_or_else(|| spec.listen.clone());
+        let listen_error = |source| SimError::Listen {
             reader: spec.name.clone(),
             addr: addr.clone(),
             source,
-        })?;
-        let model = Arc::new(Model::in_world(&world, scenario, i));
-        let profile = ReaderProfile::from_scenario(scenario, i, &model);
-        let reader = Reader::new(profile.clone(), model.clone(), utc0);
-        let mut observer: Option<Observer> = None;
-        if let Some(t) = &truth {
-            let mut write = truth_writer(
-                t.clone(),
-                spec.name.clone(),
-                moving.clone(),
-                utc0,
-                model.clone(),
-            );
-            if opts.speed == Speed::Max {
-                // Simulated time moves only as the served reader steps it.
-                observer = Some(Box::new(move |r: &Reader| write(r.now_us())));
-            } else {
-                own_tasks.push(tokio::spawn(truth_by_clock(
-                    write,
-                    clock.clone(),
-                    rx.clone(),
-                )));
-            }
-        }
+        };
+        let listener = TcpListener::bind(&addr).await.map_err(listen_error)?;
+        let bound = listener.local_addr().map_err(listen_error)?;
+        let model = Arc::new(Model::in_world(&self.world, self.scenario, i));
+        let profile = ReaderProfile::from_scenario(self.scenario, i, &model);
+        let reader = Reader::new(profile.clone(), model.clone(), self.utc0);
+        let mut own = Vec::new();
+        let mut observer = self.truth_observer(spec, &model, &mut own);
         let mut hook = None;
-        if let Some(l) = &opts.localize {
-            l.tap.offer(Input::Reader {
-                name: spec.name.clone(),
-                hop_table: Some(llrp::units::HopTable {
-                    id: 1,
-                    frequencies_khz: profile.frequencies_khz.clone(),
-                }),
-                antennas: (1..=model.antenna_count()).collect(),
-                clock_offset_us: i64::try_from(utc0).unwrap_or(i64::MAX),
-                poses: l
-                    .read_poses
-                    .then(|| feed::pose_at(model.clone(), l.poses, utc0)),
-            });
-            let feed = |now_us| {
-                own::feed_fn(
-                    feed::Feed::new(
-                        l.tap.clone(),
-                        spec.name.clone(),
-                        l.poses,
-                        references.clone(),
-                        l.pose_interval_us,
-                        now_us,
-                    )
-                    .with_utc0(utc0),
-                )
-            };
-            observer = Some(both(observer, feed(0)));
-            let (client, client_rx) = watch::channel(false);
-            hook = Some(LiveHook {
-                name: spec.name.clone(),
-                tap: l.tap.clone(),
-                client: Some(client),
-                frames_in: Some(opts.frames_in.clone()),
-            });
-            if opts.speed != Speed::Max {
-                let (model, profile) = (model.clone(), profile.clone());
-                let task = own::OwnTask {
-                    make_reader: Box::new(move || {
-                        Reader::new(profile.clone(), model.clone(), utc0)
-                    }),
-                    clock: clock.clone(),
-                    tap: l.tap.clone(),
-                    name: spec.name.clone(),
-                    feed: feed(0),
-                };
-                own_tasks.push(tokio::spawn(own::run(task, client_rx, rx.clone())));
-            }
+        if let Some(l) = &self.opts.localize {
+            let (h, feed_observer) = self.live(l, spec, &model, &profile, &mut own);
+            observer = Some(both(observer, feed_observer));
+            hook = Some(h);
         }
-        let mut sim = SimReader::new(Session::new(reader), clock.clone(), observer);
+        let mut sim = SimReader::new(Session::new(reader), self.clock.clone(), observer);
         if let Some(h) = hook {
             sim = sim.with_live(h);
         }
-        let recorder = match &opts.record {
-            Some(path) => {
-                let path = record_path(path, &spec.name, scenario.readers.len());
-                let mut header = Header::new(format!("sim:{}", spec.name), 0);
-                header.scenario = Some(scenario.name.clone());
-                let (r, task) = Recorder::create(&path, header, opts.record_options.clone())
-                    .map_err(|source| SimError::Record {
-                        reader: spec.name.clone(),
-                        path: path.clone(),
-                        source,
-                    })?;
-                recordings.push(task);
-                Some(r)
-            }
-            None => None,
-        };
-        tracing::info!(reader = %spec.name, %bound, tls = tls.is_some(), "simulated reader listening");
-        tasks.push(tokio::spawn(serve_tls(
+        let (recorder, recording) = self.recorder(spec)?;
+        tracing::info!(reader = %spec.name, %bound, tls = self.tls.is_some(), "simulated reader listening");
+        let task = tokio::spawn(serve_tls(
             listener,
-            tls.clone(),
+            self.tls.clone(),
             sim,
-            rx.clone(),
+            self.shutdown.clone(),
             recorder,
-        )));
-        addrs.push(bound);
-        names.push(spec.name.clone());
+        ));
+        Ok(Started {
+            addr: bound,
+            task,
+            recording,
+            own,
+        })
     }
-    Ok(RunningSim {
-        addrs,
-        names,
-        shutdown,
-        tasks,
-        truth,
-        recordings,
-        own: own_tasks,
-    })
+
+    /// The truth writer of reader `spec`: an observer of the served reader at `--speed max`
+    /// (simulated time moves only as it steps), else a task on the clock (pushed to `own`).
+    fn truth_observer(
+        &self,
+        spec: &ReaderSpec,
+        model: &Arc<Model>,
+        own: &mut Vec<JoinHandle<()>>,
+    ) -> Option<Observer> {
+        let t = self.truth.as_ref()?;
+        let mut write = truth_writer(
+            t.clone(),
+            spec.name.clone(),
+            self.moving.clone(),
+            self.utc0,
+            model.clone(),
+        );
+        if self.opts.speed == Speed::Max {
+            return Some(Box::new(move |r: &Reader| write(r.now_us())));
+        }
+        own.push(tokio::spawn(truth_by_clock(
+            write,
+            self.clock.clone(),
+            self.shutdown.clone(),
+        )));
+        None
+    }
+
+    /// Reader `spec` on the live localizer's feed: announced with its hop table, antennas and
+    /// poses; the served reader's hook and the observer that feeds its poses and truth; and,
+    /// at real-time speeds, its own inventory while no client is connected (pushed to `own`).
+    fn live(
+        &self,
+        l: &LocalizeFeed,
+        spec: &ReaderSpec,
+        model: &Arc<Model>,
+        profile: &ReaderProfile,
+        own: &mut Vec<JoinHandle<()>>,
+    ) -> (LiveHook, Observer) {
+        let utc0 = self.utc0;
+        l.tap.offer(Input::Reader {
+            name: spec.name.clone(),
+            hop_table: Some(llrp::units::HopTable {
+                id: 1,
+                frequencies_khz: profile.frequencies_khz.clone(),
+            }),
+            antennas: (1..=model.antenna_count()).collect(),
+            clock_offset_us: i64::try_from(utc0).unwrap_or(i64::MAX),
+            poses: l
+                .read_poses
+                .then(|| feed::pose_at(model.clone(), l.poses, utc0)),
+        });
+        let feed = |now_us| {
+            own::feed_fn(
+                feed::Feed::new(
+                    l.tap.clone(),
+                    spec.name.clone(),
+                    l.poses,
+                    self.references.clone(),
+                    l.pose_interval_us,
+                    now_us,
+                )
+                .with_utc0(utc0),
+            )
+        };
+        let (client, client_rx) = watch::channel(false);
+        let hook = LiveHook {
+            name: spec.name.clone(),
+            tap: l.tap.clone(),
+            client: Some(client),
+            frames_in: Some(self.opts.frames_in.clone()),
+        };
+        if self.opts.speed != Speed::Max {
+            let (model, profile) = (model.clone(), profile.clone());
+            let task = own::OwnTask {
+                make_reader: Box::new(move || Reader::new(profile.clone(), model.clone(), utc0)),
+                clock: self.clock.clone(),
+                tap: l.tap.clone(),
+                name: spec.name.clone(),
+                feed: feed(0),
+            };
+            own.push(tokio::spawn(own::run(
+                task,
+                client_rx,
+                self.shutdown.clone(),
+            )));
+        }
+        (hook, feed(0))
+    }
+
+    /// The recorder of reader `spec`'s sessions (`--record`), and its writing task.
+    fn recorder(
+        &self,
+        spec: &ReaderSpec,
+    ) -> Result<(Option<Recorder>, Option<RecorderTask>), SimError> {
+        let Some(path) = &self.opts.record else {
+            return Ok((None, None));
+        };
+        let path = record_path(path, &spec.name, self.scenario.readers.len());
+        let mut header = Header::new(format!("sim:{}", spec.name), 0);
+        header.scenario = Some(self.scenario.name.clone());
+        let (r, task) = Recorder::create(&path, header, self.opts.record_options.clone()).map_err(
+            |source| SimError::Record {
+                reader: spec.name.clone(),
+                path: path.clone(),
+                source,
+            },
+        )?;
+        Ok((Some(r), Some(task)))
+    }
 }
 
 /// One observer calling `first` (if any), then `second`.
