@@ -4,15 +4,14 @@
 use serde::Serialize;
 
 use crate::calibrate::Calibration;
+use crate::estimator::{Locate, Tag};
 pub use crate::geometry::{Geometry, ReaderGeometry};
 use crate::ingest::Ingest;
-use crate::mhekf::{self, PoseObs};
 pub use crate::observe::{
     calibrated_observations, observations, pose_observations, Observed, PoseTrack,
 };
-use crate::{fingerprint, hyperbolic, linear, loci3d, uncertainty, wls};
-use crate::{fix, relock};
-use std::collections::BTreeMap;
+use crate::{fingerprint, hyperbolic, linear, loci3d, mhekf, relock, wls};
+use crate::{fix, uncertainty};
 
 /// Position standard deviation (m) at or under which an estimate counts as converged.
 pub const CONVERGED_SIGMA_M: f64 = 0.01;
@@ -99,6 +98,19 @@ impl Estimator {
             Estimator::Wls => "wls",
         }
     }
+
+    /// The estimator's implementation.
+    pub fn locator(self) -> &'static dyn Locate {
+        match self {
+            Estimator::Relock => &relock::Relock,
+            Estimator::Linear => &linear::Linear,
+            Estimator::Hyperbolic => &hyperbolic::Hyperbolic,
+            Estimator::Loci3d => &loci3d::Loci3d,
+            Estimator::Fingerprint => &fingerprint::Fingerprint,
+            Estimator::Mhekf => &mhekf::Mhekf,
+            Estimator::Wls => &wls::Wls,
+        }
+    }
 }
 
 impl std::fmt::Display for Estimator {
@@ -128,86 +140,6 @@ fn near_the_path(p: &[f64; 3], obs: &[fix::Obs], reach_m: f64) -> bool {
         .any(|o| (p[0] - o.antenna[0]).hypot(p[1] - o.antenna[1]) <= 2.0 * reach_m)
 }
 
-/// Tag `epc`'s MHEKF fix: one filter bank per track, the fix with the least covariance trace.
-fn mhekf_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<fix::Fix, fix::NoFix> {
-    let s = mhekf::Settings {
-        max_range_m: g.reach_m,
-        ..mhekf::Settings::default()
-    };
-    pose_observations(ingest, epc, g)
-        .iter()
-        .filter_map(|t| {
-            let facing = g.facing_of(&t.reader);
-            mhekf::locate(&t.obs, g.tag_height_m, 1.0, Some(facing), &s).ok()
-        })
-        .min_by(|a, b| {
-            let tr = |f: &fix::Fix| f.covariance[0] + f.covariance[3];
-            tr(a).total_cmp(&tr(b))
-        })
-        .ok_or(fix::NoFix::InsufficientGeometry)
-}
-
-/// Tag `epc`'s distributed WLS fix: each reader a robot, its tracks its filters.
-fn wls_tag(ingest: &Ingest, epc: &str, g: &Geometry) -> Result<fix::Fix, fix::NoFix> {
-    let s = wls::Settings {
-        filter: mhekf::Settings {
-            max_range_m: g.reach_m,
-            ..mhekf::Settings::default()
-        },
-        ..wls::Settings::default()
-    };
-    let mut robots: BTreeMap<String, Vec<Vec<PoseObs>>> = BTreeMap::new();
-    for t in pose_observations(ingest, epc, g) {
-        robots.entry(t.reader).or_default().push(t.obs);
-    }
-    // One side for the consensus: the first robot's (a swarm's readers share a layout).
-    let facing = robots.keys().next().map_or(g.facing, |r| g.facing_of(r));
-    let robots: Vec<Vec<Vec<PoseObs>>> = robots.into_values().collect();
-    wls::locate(&robots, g.tag_height_m, 1.0, Some(facing), &s).map(|(fix, _)| fix)
-}
-
-/// Tag `epc`'s readings for fingerprinting, each series a track numbered in `tracks`.
-fn readings(
-    ingest: &Ingest,
-    epc: &str,
-    tracks: &mut BTreeMap<(String, u16, u64), usize>,
-) -> Vec<fingerprint::Reading> {
-    let mut out = Vec::new();
-    for (key, series) in ingest.tag_series(epc) {
-        let next = tracks.len();
-        let track = *tracks.entry((key.1.clone(), key.2, key.3)).or_insert(next);
-        for (segment, seg) in series.segments().enumerate() {
-            out.extend(seg.iter().map(|s| fingerprint::Reading {
-                track,
-                segment,
-                antenna: s.antenna,
-                value: s.phase_rad,
-            }));
-        }
-    }
-    out
-}
-
-/// Tag `epc`'s fingerprint fix against the references of `g` (other than itself).
-fn fingerprint_tag(
-    ingest: &Ingest,
-    epc: &str,
-    g: &Geometry,
-) -> Result<([f64; 3], [f64; 9]), fix::NoFix> {
-    let mut tracks = BTreeMap::new();
-    let target = readings(ingest, epc, &mut tracks);
-    let references: Vec<([f64; 3], Vec<fingerprint::Reading>)> = g
-        .references
-        .iter()
-        .filter(|(r, _)| !r.eq_ignore_ascii_case(epc))
-        .filter_map(|(r, p)| {
-            let seen = ingest.tags().find(|t| t.eq_ignore_ascii_case(r))?;
-            Some((*p, readings(ingest, seen, &mut tracks)))
-        })
-        .collect();
-    fingerprint::locate(&target, &references).map(|f| (f.position, f.covariance))
-}
-
 /// Tag `epc`'s estimate by `estimator` from the reads of `ingest`.
 pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geometry) -> Estimate {
     estimate_calibrated(
@@ -219,14 +151,10 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
     )
 }
 
-/// The calibration `estimator` uses: `relock`'s from the references of `g`, none for the
-/// others.
+/// The calibration `estimator` uses ([`Locate::calibration`]): `relock`'s from the
+/// references of `g`, none for the others.
 pub fn calibration(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Calibration {
-    if estimator == Estimator::Relock && !g.references.is_empty() {
-        Calibration::from_references(ingest, &g.references, &|r: &str| g.sign_of(r))
-    } else {
-        Calibration::default()
-    }
+    estimator.locator().calibration(ingest, g)
 }
 
 /// [`estimate_tag`] with the antenna calibration already measured.
@@ -241,7 +169,7 @@ pub fn estimate_calibrated(
 }
 
 /// [`estimate_calibrated`], with `relock` started from `hint` (the tag's last fix) instead of
-/// its grid; the other estimators ignore it.
+/// its grid; the other estimators ignore it ([`Locate::warm_starts`]).
 pub fn estimate_from(
     ingest: &Ingest,
     epc: &str,
@@ -250,96 +178,83 @@ pub fn estimate_from(
     calibration: &Calibration,
     hint: Option<[f64; 3]>,
 ) -> Estimate {
-    let Observed {
-        obs,
-        last_us: last,
-        facing,
-        reader_of_group,
-        ..
-    } = calibrated_observations(ingest, epc, g, calibration);
+    let locator = estimator.locator();
+    let observed = calibrated_observations(ingest, epc, g, calibration);
     let base = Estimate {
         epc: epc.to_string(),
         estimator: estimator.name(),
         estimate: None,
         covariance: None,
-        samples: obs.len(),
+        samples: observed.obs.len(),
         state: State::InsufficientGeometry,
-        last_update_us: last,
+        last_update_us: observed.last_us,
         pose_sigma_m: None,
     };
-    // The phases are times their readers' signs: the estimators see s = +1.
-    let sign = 1.0;
-    // A 2D fix's covariance as 3×3 with the z row and column 0.
-    let planar = |fix: fix::Fix| {
-        let [a, b, c, d] = fix.covariance;
-        (fix.position, [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0])
-    };
-    let (lo, hi) = obs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), o| {
-        (lo.min(o.antenna[2]), hi.max(o.antenna[2]))
-    });
-    let relock3d = hi - lo >= relock::MIN_HEIGHT_SPAN_M;
-    let fix = match estimator {
-        Estimator::Relock => {
-            if relock3d {
-                // Antennas at several heights: the height is estimated too.
-                relock::locate3d_from(&obs, sign, facing, g.reach_m, hint)
-                    .map(|f| (f.position, f.covariance))
-            } else {
-                relock::locate_from(&obs, g.tag_height_m, sign, facing, g.reach_m, hint).map(planar)
-            }
-        }
-        Estimator::Linear => linear::locate(&obs, g.tag_height_m, sign, facing).map(planar),
-        Estimator::Hyperbolic => hyperbolic::locate(&obs, g.tag_height_m, sign, facing).map(planar),
-        Estimator::Loci3d => loci3d::locate(&obs, sign, facing).map(|f| (f.position, f.covariance)),
-        Estimator::Fingerprint => fingerprint_tag(ingest, epc, g),
-        Estimator::Mhekf => mhekf_tag(ingest, epc, g).map(planar),
-        Estimator::Wls => wls_tag(ingest, epc, g).map(planar),
+    let tag = Tag {
+        observed: &observed,
+        ingest,
+        epc,
+        geometry: g,
+        hint,
     };
     // A fix farther than twice the reach from every antenna position that read the tag is
     // a solver gone astray (a degenerate geometry, bad poses), not an estimate.
-    let fix = fix.and_then(|(p, c)| {
-        if near_the_path(&p, &obs, g.reach_m) {
-            Ok((p, c))
+    let fix = locator.locate(&tag).and_then(|f| {
+        if near_the_path(&f.position, &observed.obs, g.reach_m) {
+            Ok(f)
         } else {
             Err(fix::NoFix::InsufficientGeometry)
         }
     });
-    // The poses' own error, where it is known, widens the covariance by its share.
-    let dims = match estimator {
-        Estimator::Relock if relock3d => 3,
-        Estimator::Loci3d => 3,
-        _ => 2,
-    };
-    let fix = fix.map(|(p, mut c)| {
-        let share = g.pose_error.as_ref().and_then(|m| {
-            uncertainty::pose_share(&obs, p, dims, m, &|group| {
-                reader_of_group.get(group).copied().unwrap_or(0)
-            })
-        });
-        if let Some(share) = share {
-            for (c, s) in c.iter_mut().zip(share) {
-                *c += s;
+    match fix {
+        Ok(f) => {
+            let dims = if locator.fits_height(&observed.obs) {
+                3
+            } else {
+                2
+            };
+            let (covariance, pose_sigma_m) =
+                with_pose_share(&observed, f.position, f.covariance, dims, g);
+            Estimate {
+                estimate: Some(f.position),
+                covariance: Some(covariance),
+                state: state_of(&covariance),
+                pose_sigma_m,
+                ..base
             }
         }
-        // Told as the poses' only where the geometry passes their error on no more than
-        // threefold: beyond, a weak geometry amplifies it, and more aperture is the remedy.
-        let pose_sigma = share
-            .map(|s| worse_sigma(&s))
-            .zip(g.pose_error.as_ref())
-            .filter(|(s, m)| *s <= 3.0 * m.sigma_m * std::f64::consts::SQRT_2)
-            .map(|(s, _)| s);
-        (p, c, pose_sigma)
-    });
-    match fix {
-        Ok((position, covariance, pose_sigma_m)) => Estimate {
-            estimate: Some(position),
-            covariance: Some(covariance),
-            state: state_of(&covariance),
-            pose_sigma_m,
-            ..base
-        },
         Err(fix::NoFix::InsufficientGeometry) => base,
     }
+}
+
+/// Covariance `c` of a fix at `p` from `observed` (its position axes `dims`) widened by the
+/// share the poses' own error brings, where `g` knows it, and that share's σ along the worse
+/// axis where the geometry passes the error on no more than threefold.
+fn with_pose_share(
+    observed: &Observed,
+    p: [f64; 3],
+    mut c: [f64; 9],
+    dims: usize,
+    g: &Geometry,
+) -> ([f64; 9], Option<f64>) {
+    let share = g.pose_error.as_ref().and_then(|m| {
+        uncertainty::pose_share(&observed.obs, p, dims, m, &|group| {
+            observed.reader_of_group.get(group).copied().unwrap_or(0)
+        })
+    });
+    if let Some(share) = share {
+        for (c, s) in c.iter_mut().zip(share) {
+            *c += s;
+        }
+    }
+    // Told as the poses' only where the geometry passes their error on no more than
+    // threefold: beyond, a weak geometry amplifies it, and more aperture is the remedy.
+    let pose_sigma = share
+        .map(|s| worse_sigma(&s))
+        .zip(g.pose_error.as_ref())
+        .filter(|(s, m)| *s <= 3.0 * m.sigma_m * std::f64::consts::SQRT_2)
+        .map(|(s, _)| s);
+    (c, pose_sigma)
 }
 
 /// The σ along the worse axis of a 3×3 covariance (m), bounded by its largest diagonal term.
@@ -373,6 +288,7 @@ pub fn estimate_all(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::BTreeMap;
 
     #[test]
     fn a_fix_far_beyond_reach_of_every_antenna_is_no_fix() {
@@ -428,6 +344,26 @@ mod tests {
         assert!("kalman"
             .parse::<Estimator>()
             .is_err_and(|m| m.contains("relock, linear")));
+    }
+
+    #[test]
+    fn every_estimators_implementation_goes_by_its_name() {
+        for &e in Estimator::ALL {
+            assert_eq!(e.locator().name(), e.name(), "{e:?}");
+        }
+        // Only relock starts from the last fix, and only the phase estimators read the
+        // antenna positions the phases were filed with.
+        let warm: Vec<_> = Estimator::ALL
+            .iter()
+            .filter(|e| e.locator().warm_starts())
+            .collect();
+        assert_eq!(warm, [&Estimator::Relock]);
+        let phases: Vec<_> = Estimator::ALL
+            .iter()
+            .filter(|e| e.locator().takes() == crate::estimator::Takes::Phases)
+            .map(|e| e.name())
+            .collect();
+        assert_eq!(phases, ["relock", "linear", "hyperbolic", "loci3d"]);
     }
 
     #[test]

@@ -14,8 +14,10 @@
 
 use std::collections::BTreeMap;
 
+use crate::estimator::{Locate, Tag, Takes};
 use crate::fix::Fix3;
 use crate::fix::NoFix;
+use crate::ingest::Ingest;
 
 /// References the estimate is the weighted mean of (LANDMARC's k).
 pub const K: usize = 4;
@@ -124,6 +126,60 @@ pub fn locate(target: &[Reading], references: &[([f64; 3], Vec<Reading>)]) -> Re
         covariance,
         rms_rad: scored[0].0,
     })
+}
+
+/// Fingerprinting as the localizer runs it: the tag against the reference tags of the
+/// geometry (other than itself), each series a track; 3D, its height the references' (not
+/// fitted to the phases: [`Locate::fits_height`] is false).
+#[derive(Clone, Copy, Debug)]
+pub struct Fingerprint;
+
+impl Locate for Fingerprint {
+    fn name(&self) -> &'static str {
+        "fingerprint"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::References
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let (ingest, epc, g) = (tag.ingest, tag.epc, tag.geometry);
+        let mut tracks = BTreeMap::new();
+        let target = readings(ingest, epc, &mut tracks);
+        let references: Vec<([f64; 3], Vec<Reading>)> = g
+            .references
+            .iter()
+            .filter(|(r, _)| !r.eq_ignore_ascii_case(epc))
+            .filter_map(|(r, p)| {
+                let seen = ingest.tags().find(|t| t.eq_ignore_ascii_case(r))?;
+                Some((*p, readings(ingest, seen, &mut tracks)))
+            })
+            .collect();
+        locate(&target, &references)
+    }
+}
+
+/// Tag `epc`'s readings for fingerprinting, each series a track numbered in `tracks`.
+fn readings(
+    ingest: &Ingest,
+    epc: &str,
+    tracks: &mut BTreeMap<(String, u16, u64), usize>,
+) -> Vec<Reading> {
+    let mut out = Vec::new();
+    for (key, series) in ingest.tag_series(epc) {
+        let next = tracks.len();
+        let track = *tracks.entry((key.1.clone(), key.2, key.3)).or_insert(next);
+        for (segment, seg) in series.segments().enumerate() {
+            out.extend(seg.iter().map(|s| Reading {
+                track,
+                segment,
+                antenna: s.antenna,
+                value: s.phase_rad,
+            }));
+        }
+    }
+    out
 }
 
 #[cfg(test)]

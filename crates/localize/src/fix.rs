@@ -42,6 +42,18 @@ pub struct Fix {
     pub rms_rad: f64,
 }
 
+impl Fix {
+    /// This fix as a [`Fix3`] whose covariance's z row and column are 0 (the height assumed).
+    pub fn planar(self) -> Fix3 {
+        let [a, b, c, d] = self.covariance;
+        Fix3 {
+            position: self.position,
+            covariance: [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 0.0],
+            rms_rad: self.rms_rad,
+        }
+    }
+}
+
 /// Why no estimate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NoFix {

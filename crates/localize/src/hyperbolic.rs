@@ -16,7 +16,8 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned, Vector2};
 
-use crate::fix::{Fix, NoFix, Obs};
+use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::fix::{Fix, Fix3, NoFix, Obs};
 use crate::linear::{line, MAX_PATH_RMS_M, MAX_SLOPE};
 use crate::robust;
 
@@ -366,6 +367,25 @@ fn with_smooth_error(
     match robust::smooth_error(&bread, &jc, r, &rows, true) {
         Some(smooth) => robust::at_least(&position, &smooth),
         None => position,
+    }
+}
+
+/// Hyperbolic intersection as the localizer runs it: in 2D at the tag height assumed.
+#[derive(Clone, Copy, Debug)]
+pub struct Hyperbolic;
+
+impl Locate for Hyperbolic {
+    fn name(&self) -> &'static str {
+        "hyperbolic"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Phases
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let o = tag.observed;
+        locate(&o.obs, tag.geometry.tag_height_m, SIGN, o.facing).map(Fix::planar)
     }
 }
 

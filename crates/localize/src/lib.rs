@@ -14,6 +14,7 @@
 
 pub mod calibrate;
 pub mod estimate;
+pub mod estimator;
 pub mod fingerprint;
 pub mod fix;
 pub mod geometry;

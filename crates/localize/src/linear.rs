@@ -10,7 +10,8 @@
 
 use nalgebra::{DMatrix, Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
 
-use crate::fix::{Fix, NoFix, Obs};
+use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::fix::{Fix, Fix3, NoFix, Obs};
 use crate::robust;
 
 /// Fewest phases a segment needs (ours).
@@ -359,6 +360,25 @@ fn at_least_shared(
     let dyn_of = |m: &Matrix2<f64>| DMatrix::from_column_slice(2, 2, m.as_slice());
     let r = robust::at_least(&dyn_of(&cov), &dyn_of(&total));
     Matrix2::from_column_slice(r.as_slice())
+}
+
+/// The min-distance linear model as the localizer runs it: in 2D at the tag height assumed.
+#[derive(Clone, Copy, Debug)]
+pub struct Linear;
+
+impl Locate for Linear {
+    fn name(&self) -> &'static str {
+        "linear"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Phases
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let o = tag.observed;
+        locate(&o.obs, tag.geometry.tag_height_m, SIGN, o.facing).map(Fix::planar)
+    }
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix3, Owned, Vector2};
 
+use crate::estimator::{Locate, Tag, Takes, SIGN};
 use crate::fix::{Fix3, NoFix, Obs};
 use crate::linear::{circle, Circle, MAX_SLOPE};
 
@@ -175,6 +176,28 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
         covariance,
         rms_rad: (sq / used.max(1) as f64).sqrt(),
     })
+}
+
+/// 3D by loci intersection as the localizer runs it.
+#[derive(Clone, Copy, Debug)]
+pub struct Loci3d;
+
+impl Locate for Loci3d {
+    fn name(&self) -> &'static str {
+        "loci3d"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Phases
+    }
+
+    fn fits_height(&self, _obs: &[Obs]) -> bool {
+        true
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        locate(&tag.observed.obs, SIGN, tag.observed.facing)
+    }
 }
 
 #[cfg(test)]

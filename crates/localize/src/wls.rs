@@ -8,8 +8,12 @@
 use nalgebra::{DMatrix, Matrix2, Vector2};
 use rand::{Rng, SeedableRng};
 
-use crate::fix::{Fix, NoFix};
+use std::collections::BTreeMap;
+
+use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::fix::{Fix, Fix3, NoFix};
 use crate::mhekf::{self, PoseObs};
+use crate::observe::pose_observations;
 use crate::robust;
 
 /// The exchange's settings.
@@ -270,6 +274,40 @@ pub fn locate(
         rms_rad: (sq / reads.max(1) as f64).sqrt(),
     };
     Ok((fix, report))
+}
+
+/// Distributed WLS as the localizer runs it: each reader a robot, its (reader, antenna)
+/// tracks its filters; in 2D at the tag height assumed.
+#[derive(Clone, Copy, Debug)]
+pub struct Wls;
+
+impl Locate for Wls {
+    fn name(&self) -> &'static str {
+        "wls"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Tracks
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let g = tag.geometry;
+        let s = Settings {
+            filter: mhekf::Settings {
+                max_range_m: g.reach_m,
+                ..mhekf::Settings::default()
+            },
+            ..Settings::default()
+        };
+        let mut robots: BTreeMap<String, Vec<Vec<PoseObs>>> = BTreeMap::new();
+        for t in pose_observations(tag.ingest, tag.epc, g) {
+            robots.entry(t.reader).or_default().push(t.obs);
+        }
+        // One side for the consensus: the first robot's (a swarm's readers share a layout).
+        let facing = robots.keys().next().map_or(g.facing, |r| g.facing_of(r));
+        let robots: Vec<Vec<Vec<PoseObs>>> = robots.into_values().collect();
+        locate(&robots, g.tag_height_m, SIGN, Some(facing), &s).map(|(fix, _)| fix.planar())
+    }
 }
 
 #[cfg(test)]

@@ -38,7 +38,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::estimate::Estimator;
+use crate::estimator::Takes;
 use crate::ingest::Ingest;
 use crate::poses::{PoseSample, Poses};
 use crate::shared::{AntennaView, Shared, TagView, RECENT_READS};
@@ -169,10 +169,11 @@ struct Worker {
 
 impl Worker {
     fn new(settings: Settings, shared: Arc<Shared>) -> Worker {
-        // A read keeps the pose it was filed with; only mhekf and wls walk the path driven.
-        let keep = match settings.estimator {
-            Estimator::Mhekf | Estimator::Wls => None,
-            _ => Some(POSE_KEEP_US),
+        // A read keeps the pose it was filed with; only the filters (mhekf, wls) walk the
+        // path driven.
+        let keep = match settings.estimator.locator().takes() {
+            Takes::Tracks => None,
+            Takes::Phases | Takes::References => Some(POSE_KEEP_US),
         };
         let poses = Poses::new()
             .with_reach(settings.pose_reach_us)

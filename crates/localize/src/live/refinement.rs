@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::Worker;
-use crate::estimate::Estimator;
+use crate::estimator::Takes;
 
 /// Reads' time between two refinements of the poses, at the least (µs); later in a long
 /// run, a tenth of the time read so far.
@@ -27,10 +27,7 @@ impl Worker {
         let Some(m) = self.settings.geometry.pose_error else {
             return;
         };
-        let phase = matches!(
-            self.settings.estimator,
-            Estimator::Relock | Estimator::Linear | Estimator::Hyperbolic | Estimator::Loci3d
-        );
+        let phase = self.settings.estimator.locator().takes() == Takes::Phases;
         let Some((first, newest)) = self.read_span_us.filter(|_| phase) else {
             return;
         };

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use super::{TagState, Worker};
 use crate::calibrate::Calibration;
-use crate::estimate::{self, Estimator, State};
+use crate::estimate::{self, State};
 
 /// A tag whose last estimate started from its previous fix is estimated again from the grid
 /// once it has had no new read for this long.
@@ -60,14 +60,14 @@ impl Worker {
                 &self.settings.geometry,
             )
         };
-        let relock = self.settings.estimator == Estimator::Relock;
+        let warm_starts = self.settings.estimator.locator().warm_starts();
         let mut refreshing = Duration::ZERO;
         for (settling, since, epc, cold) in due {
             if started.elapsed() >= budget {
                 break;
             }
             let (hint, refresh) = match self.tags.get(&epc) {
-                Some(t) if !cold && relock => start(t, Instant::now(), refreshing),
+                Some(t) if !cold && warm_starts => start(t, Instant::now(), refreshing),
                 _ => (None, false),
             };
             let t0 = Instant::now();
@@ -112,7 +112,9 @@ impl Worker {
                         if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
                 t.dirty_since = None;
                 t.last_estimate = Some(done);
-                t.warm = e.estimate.filter(|_| relock && e.state == State::Converged);
+                t.warm = e
+                    .estimate
+                    .filter(|_| warm_starts && e.state == State::Converged);
                 t.settle_due = warm;
                 t.warm_since = if warm {
                     t.warm_since.or(Some(t0))

@@ -14,7 +14,9 @@
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::{PI, TAU};
 
-use crate::fix::{Fix, NoFix};
+use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::fix::{Fix, Fix3, NoFix};
+use crate::observe::pose_observations;
 
 mod smooth;
 
@@ -208,6 +210,41 @@ pub fn locate(
     s: &Settings,
 ) -> Result<Fix, NoFix> {
     filtered(obs, z, sign, facing, s).map(|fix| honest(fix, obs, sign))
+}
+
+/// The multi-hypothesis EKF as the localizer runs it: one filter bank per (reader, antenna)
+/// track, the fix with the least covariance trace; in 2D at the tag height assumed.
+#[derive(Clone, Copy, Debug)]
+pub struct Mhekf;
+
+impl Locate for Mhekf {
+    fn name(&self) -> &'static str {
+        "mhekf"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Tracks
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let g = tag.geometry;
+        let s = Settings {
+            max_range_m: g.reach_m,
+            ..Settings::default()
+        };
+        pose_observations(tag.ingest, tag.epc, g)
+            .iter()
+            .filter_map(|t| {
+                let facing = g.facing_of(&t.reader);
+                locate(&t.obs, g.tag_height_m, SIGN, Some(facing), &s).ok()
+            })
+            .min_by(|a, b| {
+                let tr = |f: &Fix| f.covariance[0] + f.covariance[3];
+                tr(a).total_cmp(&tr(b))
+            })
+            .ok_or(NoFix::InsufficientGeometry)
+            .map(Fix::planar)
+    }
 }
 
 /// `fix` (of a tag from `obs`, phase sign `sign`) with its covariance made at least that of a

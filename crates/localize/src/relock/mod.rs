@@ -10,7 +10,11 @@ use std::borrow::Cow;
 
 use nalgebra::DVector;
 
+use crate::calibrate::Calibration;
+use crate::estimator::{Locate, Tag, Takes, SIGN};
 use crate::fix::{Fix, Fix3, NoFix, Obs};
+use crate::geometry::Geometry;
+use crate::ingest::Ingest;
 use crate::{distance, join, lanes};
 
 mod bins;
@@ -364,6 +368,51 @@ pub fn locate3d_from(
         covariance,
         rms_rad: rms,
     })
+}
+
+/// Phase ReLock as the localizer runs it: in 3D where the antennas' heights span
+/// [`MIN_HEIGHT_SPAN_M`], else in 2D at the tag height assumed; from the tag's last fix when
+/// given one; calibrated from the reference tags.
+#[derive(Clone, Copy, Debug)]
+pub struct Relock;
+
+impl Locate for Relock {
+    fn name(&self) -> &'static str {
+        "relock"
+    }
+
+    fn takes(&self) -> Takes {
+        Takes::Phases
+    }
+
+    fn fits_height(&self, obs: &[Obs]) -> bool {
+        let (lo, hi) = obs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), o| {
+            (lo.min(o.antenna[2]), hi.max(o.antenna[2]))
+        });
+        hi - lo >= MIN_HEIGHT_SPAN_M
+    }
+
+    fn warm_starts(&self) -> bool {
+        true
+    }
+
+    fn calibration(&self, ingest: &Ingest, g: &Geometry) -> Calibration {
+        if g.references.is_empty() {
+            Calibration::default()
+        } else {
+            Calibration::from_references(ingest, &g.references, &|r: &str| g.sign_of(r))
+        }
+    }
+
+    fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
+        let (obs, facing, g) = (&tag.observed.obs, tag.observed.facing, tag.geometry);
+        if self.fits_height(obs) {
+            // Antennas at several heights: the height is estimated too.
+            locate3d_from(obs, SIGN, facing, g.reach_m, tag.hint)
+        } else {
+            locate_from(obs, g.tag_height_m, SIGN, facing, g.reach_m, tag.hint).map(Fix::planar)
+        }
+    }
 }
 
 #[cfg(test)]
