@@ -6,6 +6,7 @@
 use std::time::Instant;
 
 use crate::localize::estimate::{estimate_all, Estimate, Estimator, Geometry};
+use crate::localize::estimator::Need;
 use crate::localize::ingest::Ingest;
 use crate::localize::live::Settings;
 use crate::localize::poses::{PoseSample, Poses};
@@ -383,7 +384,8 @@ pub fn applicable(run: &Run) -> Vec<Estimator> {
         .collect()
 }
 
-/// Why estimator `e` does not apply to `run`, if it does not.
+/// Why estimator `e` does not apply to `run`, if it does not: the first of its needs
+/// ([`Need`]) that `run` does not meet.
 pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
     let mut heights: Vec<f64> = run
         .true_poses
@@ -393,16 +395,13 @@ pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
         .collect();
     heights.sort_by(f64::total_cmp);
     heights.dedup();
-    match e {
-        Estimator::Loci3d if heights.len() < 2 => Some("its antennas are all at one height"),
-        Estimator::Fingerprint if !run.truth.iter().any(|t| t.2) => {
-            Some("it has no reference tags")
+    e.locator().needs().iter().find_map(|need| match need {
+        Need::Heights => (heights.len() < 2).then_some("its antennas are all at one height"),
+        Need::References => (!run.truth.iter().any(|t| t.2)).then_some("it has no reference tags"),
+        Need::CalibratedReader => {
+            (!run.calibrated).then_some("its reader is not calibrated (φ0 = 0 on every channel)")
         }
-        Estimator::Mhekf | Estimator::Wls if !run.calibrated => {
-            Some("its reader is not calibrated (φ0 = 0 on every channel)")
-        }
-        _ => None,
-    }
+    })
 }
 
 #[cfg(test)]

@@ -364,6 +364,22 @@ mod tests {
             .map(|e| e.name())
             .collect();
         assert_eq!(phases, ["relock", "linear", "hyperbolic", "loci3d"]);
+        // What each needs of a setting, as `bench localize` tells it.
+        use crate::estimator::Need;
+        let needs: Vec<_> = Estimator::ALL
+            .iter()
+            .map(|e| (e.name(), e.locator().needs()))
+            .filter(|(_, n)| !n.is_empty())
+            .collect();
+        assert_eq!(
+            needs,
+            [
+                ("loci3d", &[Need::Heights][..]),
+                ("fingerprint", &[Need::References][..]),
+                ("mhekf", &[Need::CalibratedReader][..]),
+                ("wls", &[Need::CalibratedReader][..]),
+            ]
+        );
     }
 
     #[test]

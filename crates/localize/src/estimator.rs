@@ -1,6 +1,6 @@
 //! The one trait every estimator implements ([`Locate`]): its name, the calibration it wants,
-//! what it reads of a tag ([`Takes`]), whether it fits the height, and one tag's fix from
-//! what [`Tag`] holds. [`crate::estimate::Estimator`] names the estimators; its
+//! what it reads of a tag ([`Takes`]) and needs of a setting ([`Need`]), whether it fits the
+//! height, and one tag's fix from what [`Tag`] holds. [`crate::estimate::Estimator`] names the estimators; its
 //! [`locator`](crate::estimate::Estimator::locator) gives each one's implementation.
 
 use crate::calibrate::Calibration;
@@ -42,6 +42,17 @@ pub enum Takes {
     Tracks,
 }
 
+/// What an estimator needs of a setting to locate anything at all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Need {
+    /// Antennas at two heights or more.
+    Heights,
+    /// Reference tags at known positions.
+    References,
+    /// Readers whose phase offset φ0 is 0 on every channel (the phases taken as reported).
+    CalibratedReader,
+}
+
 /// One estimator: locates a tag from its reads.
 pub trait Locate: Sync {
     /// Its name, as [`crate::estimate::Estimator::name`] gives it.
@@ -55,6 +66,11 @@ pub trait Locate: Sync {
     /// propagated in 3D when it does, in 2D otherwise ([`crate::uncertainty::pose_share`]).
     fn fits_height(&self, _obs: &[Obs]) -> bool {
         false
+    }
+
+    /// What it needs of a setting to locate anything: nothing by default.
+    fn needs(&self) -> &'static [Need] {
+        &[]
     }
 
     /// Whether it starts from [`Tag::hint`] when given one (else it ignores it).

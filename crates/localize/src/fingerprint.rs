@@ -14,7 +14,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::estimator::{Locate, Tag, Takes};
+use crate::estimator::{Locate, Need, Tag, Takes};
 use crate::fix::Fix3;
 use crate::fix::NoFix;
 use crate::ingest::Ingest;
@@ -141,6 +141,10 @@ impl Locate for Fingerprint {
 
     fn takes(&self) -> Takes {
         Takes::References
+    }
+
+    fn needs(&self) -> &'static [Need] {
+        &[Need::References]
     }
 
     fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {

@@ -1,16 +1,17 @@
 //! The localizer (issue 18): antenna poses from a pose file or a live feed, interpolated to
 //! each read's time ([`poses`]), per (reader, antenna, tag, channel) phase series unwrapped
 //! with the λ/4 motion check ([`series`]), reads filed into them or set aside by reason
-//! ([`ingest`]); the estimators: Phase ReLock in 2D and 3D ([`relock`], with the joining of
-//! split series, [`join`], and the antennas' calibration from reference tags,
-//! [`calibrate`]), the min-distance linear model ([`linear`]), hyperbolic intersection
-//! ([`hyperbolic`]), 3D by loci intersection ([`loci3d`]), fingerprinting ([`fingerprint`]),
-//! the multi-hypothesis EKF ([`mhekf`]) and distributed WLS by consensus ([`wls`]); estimates
-//! with covariance and state ([`estimate`]), the pose error's share of it ([`uncertainty`]);
-//! the live worker ([`live`], [`shared`]), offline localization ([`offline`]). The
-//! application's `localize` command and `bench localize` drive it from above. It sees only
-//! reads and poses (the vocabulary crate's), never simulator internals, so it works the same
-//! on a real reader's data; it depends on no async runtime, HTTP or MQTT crate.
+//! ([`ingest`]); the estimators, each implementing one trait ([`estimator::Locate`]): Phase
+//! ReLock in 2D and 3D ([`relock`], with the joining of split series, [`join`], and the
+//! antennas' calibration from reference tags, [`calibrate`]), the min-distance linear model
+//! ([`linear`]), hyperbolic intersection ([`hyperbolic`]), 3D by loci intersection
+//! ([`loci3d`]), fingerprinting ([`fingerprint`]), the multi-hypothesis EKF ([`mhekf`]) and
+//! distributed WLS by consensus ([`wls`]); estimates with covariance and state ([`estimate`]),
+//! the pose error's share of it ([`uncertainty`]); the live worker ([`live`], [`shared`]),
+//! offline localization ([`offline`]). The application's `localize` command and `bench
+//! localize` drive it from above. It sees only reads and poses (the vocabulary crate's), never
+//! simulator internals, so it works the same on a real reader's data; it depends on no async
+//! runtime, HTTP or MQTT crate.
 
 pub mod calibrate;
 pub mod estimate;

@@ -14,7 +14,7 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix3, Owned, Vector2};
 
-use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::estimator::{Locate, Need, Tag, Takes, SIGN};
 use crate::fix::{Fix3, NoFix, Obs};
 use crate::linear::{circle, Circle, MAX_SLOPE};
 
@@ -189,6 +189,10 @@ impl Locate for Loci3d {
 
     fn takes(&self) -> Takes {
         Takes::Phases
+    }
+
+    fn needs(&self) -> &'static [Need] {
+        &[Need::Heights]
     }
 
     fn fits_height(&self, _obs: &[Obs]) -> bool {

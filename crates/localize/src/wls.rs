@@ -10,7 +10,7 @@ use rand::{Rng, SeedableRng};
 
 use std::collections::BTreeMap;
 
-use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::estimator::{Locate, Need, Tag, Takes, SIGN};
 use crate::fix::{Fix, Fix3, NoFix};
 use crate::mhekf::{self, PoseObs};
 use crate::observe::pose_observations;
@@ -288,6 +288,10 @@ impl Locate for Wls {
 
     fn takes(&self) -> Takes {
         Takes::Tracks
+    }
+
+    fn needs(&self) -> &'static [Need] {
+        &[Need::CalibratedReader]
     }
 
     fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {

@@ -14,7 +14,7 @@
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::{PI, TAU};
 
-use crate::estimator::{Locate, Tag, Takes, SIGN};
+use crate::estimator::{Locate, Need, Tag, Takes, SIGN};
 use crate::fix::{Fix, Fix3, NoFix};
 use crate::observe::pose_observations;
 
@@ -224,6 +224,10 @@ impl Locate for Mhekf {
 
     fn takes(&self) -> Takes {
         Takes::Tracks
+    }
+
+    fn needs(&self) -> &'static [Need] {
+        &[Need::CalibratedReader]
     }
 
     fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
