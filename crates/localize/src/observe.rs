@@ -97,23 +97,7 @@ pub fn calibrated_observations(
             }
         }
     }
-    // Outliers out, with their entries in the parallel lists.
-    let outlier = outliers(&obs);
-    let left_out = outlier.iter().filter(|&&x| x).count();
-    if left_out > 0 {
-        fn keep<T>(v: &mut Vec<T>, outlier: &[bool]) {
-            let mut flags = outlier.iter();
-            v.retain(|_| !flags.next().copied().unwrap_or(false));
-        }
-        keep(&mut obs, &outlier);
-        keep(&mut track_of, &outlier);
-        keep(&mut reported, &outlier);
-    }
-    if let Some(m) = &g.pose_error {
-        let by_track = in_time(&obs, &track_of, tracks.len());
-        straighten(&mut obs, &by_track, m.sigma_m);
-        weigh_parked(&mut obs, &reported, &by_track, m.correlation_s);
-    }
+    let left_out = tidy(&mut obs, &mut track_of, &mut reported, tracks.len(), g);
     // The most-read reader, the first by name on a tie.
     let facing = per_reader
         .iter()
@@ -126,6 +110,36 @@ pub fn calibrated_observations(
         reader_of_group,
         outliers: left_out,
     }
+}
+
+/// Takes the outliers out of `obs` (with their entries in the parallel lists `track_of`, each
+/// phase's track of `tracks`, and `reported`, its antenna position as reported) and, with a
+/// stated pose error in `g`, straightens the tracks and weighs the phases read parked; how
+/// many phases were left out.
+fn tidy(
+    obs: &mut Vec<Obs>,
+    track_of: &mut Vec<usize>,
+    reported: &mut Vec<[f64; 3]>,
+    tracks: usize,
+    g: &Geometry,
+) -> usize {
+    let outlier = outliers(obs);
+    let left_out = outlier.iter().filter(|&&x| x).count();
+    if left_out > 0 {
+        fn keep<T>(v: &mut Vec<T>, outlier: &[bool]) {
+            let mut flags = outlier.iter();
+            v.retain(|_| !flags.next().copied().unwrap_or(false));
+        }
+        keep(obs, &outlier);
+        keep(track_of, &outlier);
+        keep(reported, &outlier);
+    }
+    if let Some(m) = &g.pose_error {
+        let by_track = in_time(obs, track_of, tracks);
+        straighten(obs, &by_track, m.sigma_m);
+        weigh_parked(obs, reported, &by_track, m.correlation_s);
+    }
+    left_out
 }
 
 /// Per track, the indices of its phases in `obs` in time order (`track_of`: each phase's

@@ -341,43 +341,47 @@ impl Worker {
                 self.reads(reads);
             }
             Input::Reads(reads) => self.reads(reads),
-            Input::Poses(poses) => {
-                self.shared.metrics.poses.inc_by(poses.len() as u64);
-                let new: Vec<String> = poses
-                    .iter()
-                    .filter(|p| !self.derived.contains(&p.reader))
-                    .map(|p| p.reader.clone())
-                    .collect();
-                let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
-                for p in poses {
-                    newest.insert((p.reader.clone(), p.antenna), p.clone());
-                    self.ingest.poses_mut().add(p);
-                }
-                for ((reader, antenna), mut p) in newest {
-                    // Shown on the reads' clock (UTC µs for LLRP readers), as every other time
-                    // of the API is: a pose comes on the robot's.
-                    let offset = self.ingest.poses_mut().offset(&reader);
-                    p.t_us = p.t_us.saturating_add_signed(offset);
-                    self.shared.update_reader(&reader, |v| {
-                        match v.antennas.iter_mut().find(|a| a.antenna == antenna) {
-                            Some(a) => a.pose = Some(p),
-                            None => {
-                                v.antennas.push(AntennaView {
-                                    antenna,
-                                    pose: Some(p),
-                                });
-                                v.antennas.sort_by_key(|a| a.antenna);
-                            }
-                        }
-                    });
-                }
-                self.derive(new, &[]);
-            }
+            Input::Poses(poses) => self.take_poses(poses),
             // A reader's link is written by its source (`Tap::links`); events and keepalives
             // are for mirrors.
             Input::Status { .. } | Input::Event { .. } | Input::Keepalive { .. } => {}
             Input::Truth(truth) => self.shared.set_truth(truth),
         }
+    }
+
+    /// Files pose samples `poses`, shows each antenna's newest in its reader's view, and
+    /// derives the geometry of readers with their first pose.
+    fn take_poses(&mut self, poses: Vec<PoseSample>) {
+        self.shared.metrics.poses.inc_by(poses.len() as u64);
+        let new: Vec<String> = poses
+            .iter()
+            .filter(|p| !self.derived.contains(&p.reader))
+            .map(|p| p.reader.clone())
+            .collect();
+        let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
+        for p in poses {
+            newest.insert((p.reader.clone(), p.antenna), p.clone());
+            self.ingest.poses_mut().add(p);
+        }
+        for ((reader, antenna), mut p) in newest {
+            // Shown on the reads' clock (UTC µs for LLRP readers), as every other time
+            // of the API is: a pose comes on the robot's.
+            let offset = self.ingest.poses_mut().offset(&reader);
+            p.t_us = p.t_us.saturating_add_signed(offset);
+            self.shared.update_reader(&reader, |v| {
+                match v.antennas.iter_mut().find(|a| a.antenna == antenna) {
+                    Some(a) => a.pose = Some(p),
+                    None => {
+                        v.antennas.push(AntennaView {
+                            antenna,
+                            pose: Some(p),
+                        });
+                        v.antennas.sort_by_key(|a| a.antenna);
+                    }
+                }
+            });
+        }
+        self.derive(new, &[]);
     }
 
     /// With [`Settings::derive_geometry`], the geometry again once readers `new` have their

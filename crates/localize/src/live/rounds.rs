@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use super::{TagState, Worker};
 use crate::calibrate::Calibration;
-use crate::estimate::{self, State};
+use crate::estimate::{self, Estimate, State};
 
 /// A tag whose last estimate started from its previous fix is estimated again from the grid
 /// once it has had no new read for this long.
@@ -27,29 +27,16 @@ pub const REFRESH_BUDGET: Duration = Duration::from_millis(5);
 /// both are the same minimum, to the solver's precision.
 pub const SETTLED_SAME_M: f64 = 1e-7;
 
+/// A tag due for an estimate: (settling, since, epc, from the grid); dirty tags (`false`)
+/// sort first, then the longest waiting.
+type Due = (bool, Instant, String, bool);
+
 impl Worker {
     /// Re-estimates dirty tags (longest waiting first), then settled ones whose last estimate
     /// was warm, for at most `budget`; `all`: every such tag, each from the grid.
     pub(super) fn estimate(&mut self, budget: Duration, all: bool) {
         let started = Instant::now();
-        let now = Instant::now();
-        // (dirty first, since, epc, from the grid)
-        let mut due: Vec<(bool, Instant, String, bool)> = self
-            .tags
-            .iter()
-            .filter_map(|(epc, t)| {
-                if let Some(since) = t.dirty_since {
-                    let rested = t.last_estimate.map_or(true, |l| {
-                        now.duration_since(l) >= self.settings.min_interval
-                    });
-                    return (all || rested).then(|| (false, since, epc.clone(), all));
-                }
-                let last = t.last_estimate?;
-                let settled = all || now.duration_since(last) >= SETTLE;
-                (t.settle_due && settled).then(|| (true, last, epc.clone(), true))
-            })
-            .collect();
-        due.sort();
+        let due = self.due(Instant::now(), all);
         // Measured once a round: the references move little between rounds.
         let calibration = if due.is_empty() {
             Calibration::default()
@@ -102,30 +89,68 @@ impl Worker {
                     .update_latency_seconds
                     .observe(done.duration_since(since).as_secs_f64());
             }
-            let mut unchanged = false;
-            if let Some(t) = self.tags.get_mut(&epc) {
-                // A settling estimate where the warm one already was (what the warm one
-                // converged to): nothing to tell anyone.
-                unchanged = settling
-                    && e.state == State::Converged
-                    && matches!((e.estimate, t.warm), (Some(p), Some(q))
-                        if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
-                t.dirty_since = None;
-                t.last_estimate = Some(done);
-                t.warm = e
-                    .estimate
-                    .filter(|_| warm_starts && e.state == State::Converged);
-                t.settle_due = warm;
-                t.warm_since = if warm {
-                    t.warm_since.or(Some(t0))
-                } else {
-                    None
-                };
-            }
+            let unchanged = self.record(&epc, &e, settling, warm, (t0, done));
             if !unchanged {
                 self.shared.publish(e);
             }
         }
+    }
+
+    /// The tags due for an estimate at `now`, in order: dirty ones rested for the minimum
+    /// interval, then settled ones owed an estimate from the grid; `all`: every such tag.
+    fn due(&self, now: Instant, all: bool) -> Vec<Due> {
+        let mut due: Vec<Due> = self
+            .tags
+            .iter()
+            .filter_map(|(epc, t)| {
+                if let Some(since) = t.dirty_since {
+                    let rested = t.last_estimate.map_or(true, |l| {
+                        now.duration_since(l) >= self.settings.min_interval
+                    });
+                    return (all || rested).then(|| (false, since, epc.clone(), all));
+                }
+                let last = t.last_estimate?;
+                let settled = all || now.duration_since(last) >= SETTLE;
+                (t.settle_due && settled).then(|| (true, last, epc.clone(), true))
+            })
+            .collect();
+        due.sort();
+        due
+    }
+
+    /// Records estimate `e` of tag `epc` (`settling`: from the grid after warm ones; `warm`:
+    /// from the last fix; run from `times.0` to `times.1`) in its state; whether it is
+    /// unchanged (a settling estimate where the warm one already was), so not published.
+    fn record(
+        &mut self,
+        epc: &str,
+        e: &Estimate,
+        settling: bool,
+        warm: bool,
+        (t0, done): (Instant, Instant),
+    ) -> bool {
+        let warm_starts = self.settings.estimator.locator().warm_starts();
+        let Some(t) = self.tags.get_mut(epc) else {
+            return false;
+        };
+        // A settling estimate where the warm one already was (what the warm one converged
+        // to): nothing to tell anyone.
+        let unchanged = settling
+            && e.state == State::Converged
+            && matches!((e.estimate, t.warm), (Some(p), Some(q))
+                if (0..3).all(|a| (p[a] - q[a]).abs() <= SETTLED_SAME_M));
+        t.dirty_since = None;
+        t.last_estimate = Some(done);
+        t.warm = e
+            .estimate
+            .filter(|_| warm_starts && e.state == State::Converged);
+        t.settle_due = warm;
+        t.warm_since = if warm {
+            t.warm_since.or(Some(t0))
+        } else {
+            None
+        };
+        unchanged
     }
 }
 
