@@ -13,6 +13,7 @@ use crate::decode::DecodeOptions;
 use crate::net::clock::Speed;
 use crate::sim::SimOptions;
 
+pub mod capture;
 pub mod decode;
 pub mod localize;
 pub mod root;
@@ -105,9 +106,9 @@ pub enum Command {
     /// Gateway: inventory an LLRP reader and write its tag reads (docs/client.md).
     Inventory(crate::inventory::InventoryArgs),
     /// Gateway: write a recording as a pcapng capture that Wireshark dissects as LLRP.
-    Export(crate::record::pcapng::ExportArgs),
+    Export(capture::ExportArgs),
     /// Gateway: turn the LLRP streams of a pcap or pcapng capture into a recording.
-    Import(crate::record::pcapng::ImportArgs),
+    Import(capture::ImportArgs),
     /// Localizer: locate every tag of a recording or a reads file (docs/localize.md).
     Localize(localize::LocalizeArgs),
     /// Tool: decode LLRP frames and print one JSON object per message (docs/codec.md).
@@ -157,8 +158,8 @@ pub fn main() -> ExitCode {
     crate::stop::set_log_format(cli.log_format);
     match cli.command {
         Command::Inventory(args) => crate::inventory::run(args),
-        Command::Export(args) => crate::record::pcapng::run_export(&args),
-        Command::Import(args) => crate::record::pcapng::run_import(&args),
+        Command::Export(args) => exit("export", capture::run_export(&args)),
+        Command::Import(args) => exit("import", capture::run_import(&args)),
         Command::Localize(args) => crate::cli::localize::run(args),
         Command::Bench(BenchCommand::Localize(args)) => crate::eval::cli::run(args),
         Command::Bench(BenchCommand::Realism(args)) => crate::realism::run(args),

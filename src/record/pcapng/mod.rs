@@ -1,16 +1,12 @@
-//! Recordings to and from packet captures: `llrp-gateway export FILE --pcapng OUT` writes a
-//! recording as a pcapng capture that Wireshark dissects as LLRP ([`export()`]), and
-//! `llrp-gateway import CAPTURE --output RECORDING` turns the LLRP streams of a pcap or
-//! pcapng capture into a recording that replays ([`import()`]). See `docs/recordings.md`.
+//! Recordings to and from packet captures: a recording as a pcapng capture that Wireshark
+//! dissects as LLRP ([`export()`], behind `llrp-gateway export`), and the LLRP streams of a
+//! pcap or pcapng capture as a recording that replays ([`import()`], behind `llrp-gateway
+//! import`; both commands' runners are in `cli::capture`). See `docs/recordings.md`.
 
 pub mod capture;
 pub mod export;
 pub mod packet;
 pub mod stream;
-
-use std::io::Write;
-use std::path::PathBuf;
-use std::process::ExitCode;
 
 use pcap_file::PcapError;
 
@@ -248,138 +244,6 @@ pub fn write_recording(
         encode_entry(e, &mut buf);
     }
     out.write_all(&buf)
-}
-
-/// `llrp-gateway export`: a recording as a pcapng capture.
-#[derive(Clone, Debug, clap::Args)]
-pub struct ExportArgs {
-    /// The recording (JSON Lines) to export.
-    pub file: PathBuf,
-    /// The pcapng capture to write.
-    #[arg(long, value_name = "OUT")]
-    pub pcapng: PathBuf,
-    /// Largest TCP payload of a packet; longer frames are split into several segments.
-    #[arg(long, default_value_t = DEFAULT_MSS,
-          value_parser = crate::options::parser::<u16>("mss"))]
-    pub mss: u16,
-    /// Replace an existing capture (without it, an existing file is refused).
-    #[arg(long)]
-    pub force: bool,
-}
-
-/// `llrp-gateway import`: the LLRP streams of a capture as a recording.
-#[derive(Clone, Debug, clap::Args)]
-pub struct ImportArgs {
-    /// The capture (pcap or pcapng) to read.
-    pub capture: PathBuf,
-    /// The recording to write.
-    #[arg(long, value_name = "RECORDING")]
-    pub output: PathBuf,
-    /// Replace an existing recording (without it, an existing file is refused).
-    #[arg(long)]
-    pub force: bool,
-}
-
-/// Runs `llrp-gateway export`; errors and a summary go to standard error.
-pub fn run_export(args: &ExportArgs) -> ExitCode {
-    let name = args.file.display();
-    // The output is checked (not the input, not an existing file) before anything is read.
-    let output = match crate::files::Output::create(&args.pcapng, &[&args.file], args.force) {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("llrp-gateway export: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let recording = match Recording::open(&args.file) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway export: {name}: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    for w in &recording.warnings {
-        eprintln!("llrp-gateway export: warning: {name}: {w}");
-    }
-    let out = args.pcapng.display();
-    let mut writer = output;
-    let options = ExportOptions { mss: args.mss };
-    let summary = match export(&recording, &options, &mut writer) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("llrp-gateway export: {out}: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    if let Err(e) = writer.flush() {
-        eprintln!("llrp-gateway export: writing {out}: {e}");
-        return ExitCode::FAILURE;
-    }
-    if let Err(e) = writer.commit() {
-        eprintln!("llrp-gateway export: {e}");
-        return ExitCode::FAILURE;
-    }
-    eprintln!(
-        "llrp-gateway export: {} TCP streams, {} frames, {} bytes entries: {} packets in {out}",
-        summary.streams, summary.frames, summary.bytes_entries, summary.packets
-    );
-    ExitCode::SUCCESS
-}
-
-/// Runs `llrp-gateway import`; warnings, errors and a summary go to standard error.
-pub fn run_import(args: &ImportArgs) -> ExitCode {
-    let name = args.capture.display();
-    let mut output = match crate::files::Output::create(&args.output, &[&args.capture], args.force)
-    {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("llrp-gateway import: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let data = match std::fs::read(&args.capture) {
-        Ok(d) => d,
-        Err(e) => {
-            eprintln!("llrp-gateway import: cannot read {name}: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let recording = match import(&data) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway import: {name}: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    for w in &recording.warnings {
-        eprintln!("llrp-gateway import: warning: {name}: {w}");
-    }
-    let out = args.output.display();
-    let frames = recording
-        .entries
-        .iter()
-        .filter(|e| matches!(e, Entry::Frame { .. }))
-        .count();
-    if frames == 0 {
-        eprintln!(
-            "llrp-gateway import: {name}: no LLRP frame could be read (see the warnings above); {out} not written"
-        );
-        return ExitCode::FAILURE;
-    }
-    if let Err(e) = write_recording(&recording, &mut output).and_then(|()| output.flush()) {
-        eprintln!("llrp-gateway import: cannot write {out}: {e}");
-        return ExitCode::FAILURE;
-    }
-    if let Err(e) = output.commit() {
-        eprintln!("llrp-gateway import: {e}");
-        return ExitCode::FAILURE;
-    }
-    eprintln!(
-        "llrp-gateway import: {} connections, {frames} frames, reader {}: {out}",
-        recording.connections().len(),
-        recording.header.upstream
-    );
-    ExitCode::SUCCESS
 }
 
 #[cfg(test)]
