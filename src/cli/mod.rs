@@ -15,7 +15,10 @@ use crate::sim::SimOptions;
 
 pub mod capture;
 pub mod decode;
+pub mod live;
 pub mod localize;
+pub mod proxy;
+pub mod replay;
 pub mod root;
 pub mod sim;
 pub mod worker;
@@ -100,9 +103,9 @@ pub enum Command {
         publish: crate::fleet::args::PublishArgs,
     },
     /// Gateway: forward clients to a real reader byte for byte, recording the sessions.
-    Proxy(crate::gateway::ProxyArgs),
+    Proxy(proxy::ProxyArgs),
     /// Gateway: serve a recording to a client as the reader did.
-    Replay(crate::gateway::ReplayArgs),
+    Replay(replay::ReplayArgs),
     /// Gateway: inventory an LLRP reader and write its tag reads (docs/client.md).
     Inventory(crate::inventory::InventoryArgs),
     /// Gateway: write a recording as a pcapng capture that Wireshark dissects as LLRP.
@@ -211,8 +214,8 @@ pub fn main() -> ExitCode {
                 },
             ),
         ),
-        Command::Proxy(args) => crate::gateway::run(args),
-        Command::Replay(args) => crate::gateway::run_replay(args),
+        Command::Proxy(args) => exit("proxy", proxy::run(args)),
+        Command::Replay(args) => exit("replay", replay::run(args)),
         Command::Decode {
             file,
             hex,

@@ -1,12 +1,10 @@
-//! The live localizer and its HTTP API beside `proxy` and `replay` (on with `--http ADDR`):
-//! the reads of the real or replayed reader, poses from a pose file or `POST /api/poses`, the
-//! per-reader settings from a settings file.
+//! The live localizer beside `proxy`, `replay` and `inventory`: its settings from a settings
+//! file and the poses known at start ([`settings_from`]), and the proxy's tapped reads, events
+//! and keepalive links handed to it ([`forward`]). The command-line side (the options, the
+//! localizer and publisher started through `cli::root`) is `cli::live`.
 
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use crate::cli::root::{Consumers, Plan};
-use crate::http::launch::HttpArgs;
 use crate::localize::estimate::Estimator;
 use crate::localize::live::{Input, Settings, Tap};
 use crate::localize::offline::{geometry, SettingsFile};
@@ -16,77 +14,6 @@ use crate::net::proxy::keepalive::{self, Change, Links};
 use crate::net::proxy::Tapped;
 use llrp_gateway_vocab::feed::Inventory;
 use prometheus_client::metrics::counter::Counter;
-
-/// The localizer options of `proxy` and `replay`.
-#[derive(clap::Args, Clone, Debug, PartialEq)]
-pub struct LiveArgs {
-    /// The HTTP API and live map (off unless `--http ADDR`; docs/http.md).
-    #[command(flatten)]
-    pub http: HttpArgs,
-    /// Antenna poses for the localizer: JSON Lines or CSV with `t_us, reader, antenna, x, y,
-    /// z, yaw_deg, pitch_deg` (robots may also POST them to /api/poses).
-    #[arg(long, value_name = "FILE")]
-    pub poses: Option<PathBuf>,
-    /// The localizer's per-reader settings (JSON; docs/localize.md).
-    #[arg(long, value_name = "FILE")]
-    pub localize_settings: Option<PathBuf>,
-    /// The localizer's estimator.
-    #[arg(long, default_value = "relock")]
-    pub estimator: Estimator,
-    /// Publishing to an MQTT broker (docs/fleet.md).
-    #[command(flatten)]
-    pub publish: crate::fleet::args::PublishArgs,
-}
-
-/// Starts what the reads go to beside the LLRP client (the localizer and its API when
-/// `--http` was given, the publisher when `--publish` was; [`crate::cli::root`]), with the
-/// settings and pose files of `args`; `command` names the command in messages.
-pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, String> {
-    let http = args.http.address(None);
-    let file = match &args.localize_settings {
-        Some(p) if http.is_some() || args.publish.publish.is_some() => {
-            SettingsFile::load(p).map_err(|e| e.to_string())?
-        }
-        _ => SettingsFile::default(),
-    };
-    let mut settings = Settings::default();
-    let mut prime = Vec::new();
-    if http.is_some() {
-        let poses = match &args.poses {
-            Some(p) => Poses::load(p).map_err(|e| e.to_string())?,
-            None => Poses::new(),
-        };
-        settings = settings_from(&file, &poses, args.estimator);
-        for (reader, offset) in &file.clock_offsets_us {
-            prime.push(Input::Reader {
-                name: reader.clone(),
-                hop_table: None,
-                antennas: Vec::new(),
-                clock_offset_us: *offset,
-                poses: None,
-            });
-        }
-        let samples = poses.samples();
-        prime.extend(samples.chunks(1024).map(|c| Input::Poses(c.to_vec())));
-    }
-    let references = file
-        .references
-        .iter()
-        .map(|r| r.epc.to_ascii_uppercase())
-        .collect();
-    Consumers::start(Plan {
-        command,
-        http,
-        http_args: &args.http,
-        simulation: false,
-        settings,
-        prime,
-        publish: &args.publish,
-        references,
-    })
-    .await
-    .map_err(|e| e.to_string())
-}
 
 /// The live localizer's settings from a settings file and the poses known at start (with
 /// none, derived from each reader's first pose as it comes).

@@ -1,97 +1,22 @@
-//! The gateway's commands: `llrp-gateway proxy` (one or more transparent proxies in front of
-//! real readers, each optionally recording its sessions) and `llrp-gateway replay` (a
-//! recording served as a reader), each until Ctrl-C or SIGTERM.
+//! The gateway's parts below its commands (`llrp-gateway proxy` and `replay`, whose arguments
+//! and runners are `cli::proxy` and `cli::replay`): the proxies of a `--config` file
+//! ([`GatewayConfig`], [`ProxyEntry`]), the regions' channel tables ([`Region`]), the proxy's
+//! statistics in the log ([`log_stats`]), and the live localizer's feed from a proxy
+//! ([`live`]).
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::Duration;
 
 use llrp::units::HopTable;
 use serde::Deserialize;
-use tokio::sync::watch;
 
-use crate::net::proxy::{Proxy, ProxyConfig, Stats};
+use crate::net::proxy::Stats;
 use crate::net::tls::{self, ServerFiles, Verify};
-use crate::record::{Header, RecordOptions, Recorder};
-use crate::stop::StopSignal;
 
 pub mod live;
-mod replay;
-
-pub use replay::{run_replay, ReplayArgs};
-
-/// Longest the proxy waits at a stop for its sessions to close.
-const STOP_WAIT: Duration = Duration::from_secs(10);
 
 pub use crate::net::LLRP_PORT;
-
-/// Arguments of `llrp-gateway proxy`.
-#[derive(clap::Args, Debug)]
-pub struct ProxyArgs {
-    /// The reader, `HOST[:PORT]` (port 5084 if none).
-    #[arg(long, required_unless_present = "config", conflicts_with = "config")]
-    pub upstream: Option<String>,
-    /// Where clients connect.
-    #[arg(long, default_value = "0.0.0.0:5084")]
-    pub listen: String,
-    /// Record every session to this file (JSON Lines, docs/recordings.md).
-    #[arg(long)]
-    pub record: Option<PathBuf>,
-    /// Start a numbered next recording file once a file would pass this many bytes.
-    #[arg(long, value_name = "BYTES", value_parser = crate::options::parser::<u64>("record-max-bytes"))]
-    pub record_max_bytes: Option<u64>,
-    /// Regulatory region of the reader (`fcc` or `etsi`), for channel frequencies of tapped
-    /// reads until the reader's capabilities are seen.
-    #[arg(long)]
-    pub region: Option<Region>,
-    /// Most clients served at once (each with its own connection to the reader); one more
-    /// gets a failed ConnectionAttemptEvent and is closed.
-    #[arg(long, value_name = "N", default_value_t = crate::net::proxy::MAX_CLIENTS as u64, value_parser = crate::options::parser::<u64>("max-clients"))]
-    pub max_clients: u64,
-    /// Longest wait for the reader to accept the connection, in milliseconds.
-    #[arg(long, default_value = "5000", value_parser = crate::options::parser::<u64>("connect-timeout-ms"))]
-    pub connect_timeout_ms: u64,
-    /// Clients connect with TLS: this certificate chain (PEM); see docs/tls.md.
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "tls_key",
-        conflicts_with = "config"
-    )]
-    pub tls_cert: Option<PathBuf>,
-    /// The private key (PEM) of --tls-cert.
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "tls_cert",
-        conflicts_with = "config"
-    )]
-    pub tls_key: Option<PathBuf>,
-    /// Reach the reader with TLS (LLRP over TLS, port 5085 on readers that offer it), with
-    /// --upstream-ca or --upstream-insecure.
-    #[arg(long, conflicts_with = "config")]
-    pub upstream_tls: bool,
-    /// With --upstream-tls: CA certificates (PEM) the reader's certificate must be issued by.
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "upstream_tls",
-        conflicts_with = "upstream_insecure"
-    )]
-    pub upstream_ca: Option<PathBuf>,
-    /// With --upstream-tls: accept any reader certificate (encrypted, not authenticated).
-    #[arg(long, requires = "upstream_tls")]
-    pub upstream_insecure: bool,
-    /// Several proxies from a JSON file: `{"proxies": [{"name", "upstream", "listen",
-    /// "record", "region", "tls_cert", "tls_key", "upstream_tls", "upstream_ca",
-    /// "upstream_insecure"}]}`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// The live localizer and its HTTP API (`--http ADDR`).
-    #[command(flatten)]
-    pub live: live::LiveArgs,
-}
 
 /// A regulatory region's channel table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Deserialize)]
@@ -302,191 +227,8 @@ pub fn with_default_port(addr: &str) -> String {
 
 pub use crate::net::with_port_or;
 
-/// Runs `llrp-gateway proxy`.
-pub fn run(args: ProxyArgs) -> ExitCode {
-    crate::stop::init_logging();
-    let entries = match (&args.config, &args.upstream) {
-        (Some(path), _) => match GatewayConfig::load(path) {
-            Ok(c) => c.proxies,
-            Err(e) => {
-                eprintln!("llrp-gateway proxy: {e}");
-                return ExitCode::FAILURE;
-            }
-        },
-        (None, Some(upstream)) => vec![ProxyEntry {
-            name: "reader".into(),
-            upstream: upstream.clone(),
-            listen: args.listen.clone(),
-            record: args.record.clone(),
-            region: args.region,
-            tls_cert: args.tls_cert.clone(),
-            tls_key: args.tls_key.clone(),
-            upstream_tls: args.upstream_tls,
-            upstream_ca: args.upstream_ca.clone(),
-            upstream_insecure: args.upstream_insecure,
-        }],
-        (None, None) => {
-            eprintln!("llrp-gateway proxy: give --upstream HOST[:PORT] or --config FILE");
-            return ExitCode::FAILURE;
-        }
-    };
-    if args.upstream_tls && args.upstream_ca.is_none() && !args.upstream_insecure {
-        eprintln!(
-            "llrp-gateway proxy: --upstream-tls needs --upstream-ca FILE (the CA, or the \
-             reader's own self-signed certificate) or --upstream-insecure (accept any certificate)"
-        );
-        return ExitCode::FAILURE;
-    }
-    let runtime = match tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway proxy: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let options = RecordOptions {
-        max_bytes: args.record_max_bytes,
-    };
-    let timeout = Duration::from_millis(args.connect_timeout_ms);
-    runtime.block_on(async move {
-        let stop = StopSignal::watch();
-        let sinks = match live::start_sinks(&args.live, "proxy").await {
-            Ok(l) => l,
-            Err(e) => {
-                eprintln!("llrp-gateway proxy: {e}");
-                return ExitCode::FAILURE;
-            }
-        };
-        let (stop_tx, stop_rx) = watch::channel(false);
-        let mut tasks = Vec::new();
-        let mut writers = Vec::new();
-        for e in entries {
-            // LLRP over TLS is on port 5085 by convention.
-            let port = if e.upstream_tls {
-                tls::LLRP_TLS_PORT
-            } else {
-                LLRP_PORT
-            };
-            let upstream = with_port_or(&e.upstream, port);
-            let recorder = match &e.record {
-                Some(path) => {
-                    match Recorder::create(path, Header::new(&upstream, 0), options.clone()) {
-                        Ok((r, task)) => {
-                            writers.push(task);
-                            Some(r)
-                        }
-                        Err(err) => {
-                            eprintln!(
-                                "llrp-gateway proxy: {}: cannot create the recording: {err}",
-                                path.display()
-                            );
-                            return ExitCode::FAILURE;
-                        }
-                    }
-                }
-                None => None,
-            };
-            let tls = match (e.acceptor(), e.connector()) {
-                (Ok(a), Ok(c)) => (a, c),
-                (Err(err), _) | (_, Err(err)) => {
-                    eprintln!("llrp-gateway proxy: '{}': TLS: {err}", e.name);
-                    return ExitCode::FAILURE;
-                }
-            };
-            let upstream_shown = upstream.clone();
-            let config = ProxyConfig {
-                name: e.name.clone(),
-                upstream,
-                listen: e.listen.clone(),
-                record: e.record.clone(),
-                region: e.region.map(Region::hop_table),
-                connect_timeout: timeout,
-                tls: tls.0,
-                upstream_tls: tls.1,
-            };
-            // A tap only for the localizer or the publisher: decoding every read for nobody
-            // costs a third of the throughput.
-            let tap = sinks.tap().map(|t| {
-                let (tap, rx) = crate::net::proxy::Tap::new(4096);
-                tokio::spawn(live::forward(rx, tap.links(), t, sinks.keepalive_losses()));
-                tap
-            });
-            let proxy = match Proxy::bind(config, recorder, tap).await {
-                Ok(p) => {
-                    p.with_max_clients(usize::try_from(args.max_clients).unwrap_or(usize::MAX))
-                }
-                Err(err) => {
-                    eprintln!(
-                        "llrp-gateway proxy: {}: cannot listen on {}: {err}",
-                        e.name, e.listen
-                    );
-                    return ExitCode::FAILURE;
-                }
-            };
-            match proxy.local_addr() {
-                Ok(addr) => eprintln!(
-                    "llrp-gateway proxy: '{}' listening on {addr}{}, forwarding to {}{}{}",
-                    e.name,
-                    if e.tls_cert.is_some() { " (TLS)" } else { "" },
-                    upstream_shown,
-                    if e.upstream_tls { " (TLS)" } else { "" },
-                    e.record
-                        .as_ref()
-                        .map(|p| format!(", recording to {}", p.display()))
-                        .unwrap_or_default()
-                ),
-                Err(err) => eprintln!("llrp-gateway proxy: '{}': {err}", e.name),
-            }
-            tokio::spawn(log_stats(e.name.clone(), proxy.stats()));
-            tasks.push(tokio::spawn(proxy.run(stop_rx.clone())));
-        }
-        stop.wait().await;
-        eprintln!("llrp-gateway proxy: stopping: closing every session");
-        let _ = stop_tx.send(true);
-        // Each session takes at most a few seconds to close (CLOSE_CONNECTION, then the
-        // reader's close); past STOP_WAIT the process exits all the same.
-        let deadline = tokio::time::Instant::now() + STOP_WAIT;
-        for t in tasks {
-            if tokio::time::timeout_at(deadline, t).await.is_err() {
-                eprintln!("llrp-gateway proxy: a session did not close within {STOP_WAIT:?}");
-                break;
-            }
-        }
-        // The recorders end once the sessions holding them are gone.
-        let mut failed = false;
-        for w in writers {
-            let Ok(w) = tokio::time::timeout_at(deadline + Duration::from_secs(1), w).await else {
-                eprintln!("llrp-gateway proxy: a recording was not finished in time");
-                failed = true;
-                continue;
-            };
-            match w {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => {
-                    eprintln!("llrp-gateway proxy: writing the recording failed: {e}");
-                    failed = true;
-                }
-                Err(e) => {
-                    eprintln!("llrp-gateway proxy: the recording's writer failed: {e}");
-                    failed = true;
-                }
-            }
-        }
-        sinks.stop().await;
-        eprintln!("llrp-gateway proxy: stopped");
-        if failed {
-            ExitCode::FAILURE
-        } else {
-            ExitCode::SUCCESS
-        }
-    })
-}
-
 /// Logs, every 10 s while frames flow, how many the proxy `name` has forwarded.
-async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
+pub async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
     use std::sync::atomic::Ordering::Relaxed;
     let mut last = 0u64;
     let mut tick = tokio::time::interval(Duration::from_secs(10));

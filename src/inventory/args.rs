@@ -79,7 +79,7 @@ pub struct InventoryArgs {
     /// The live localizer and its HTTP API (`--http ADDR`) and the MQTT publisher
     /// (`--publish URL`), fed with the reads.
     #[command(flatten)]
-    pub live: crate::gateway::live::LiveArgs,
+    pub live: crate::cli::live::LiveArgs,
 }
 
 /// How many times a failed connection is retried.

@@ -209,9 +209,9 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
         source,
     };
     let mut sink = Sink::open(&args.output, args.force).map_err(output_error)?;
-    let sinks = crate::gateway::live::start_sinks(&args.live, "inventory")
+    let sinks = crate::cli::live::start_sinks(&args.live, "inventory")
         .await
-        .map_err(InventoryError::Localizer)?;
+        .map_err(|e| InventoryError::Localizer(e.to_string()))?;
     let tap = sinks.tap();
     // The reads of a batch go to the localizer and the MQTT publisher too (if any), then to
     // the file.
