@@ -15,6 +15,7 @@ use crate::sim::SimOptions;
 
 pub mod capture;
 pub mod decode;
+pub mod inventory;
 pub mod live;
 pub mod localize;
 pub mod proxy;
@@ -107,7 +108,7 @@ pub enum Command {
     /// Gateway: serve a recording to a client as the reader did.
     Replay(replay::ReplayArgs),
     /// Gateway: inventory an LLRP reader and write its tag reads (docs/client.md).
-    Inventory(crate::inventory::InventoryArgs),
+    Inventory(inventory::InventoryArgs),
     /// Gateway: write a recording as a pcapng capture that Wireshark dissects as LLRP.
     Export(capture::ExportArgs),
     /// Gateway: turn the LLRP streams of a pcap or pcapng capture into a recording.
@@ -160,7 +161,7 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     crate::stop::set_log_format(cli.log_format);
     match cli.command {
-        Command::Inventory(args) => crate::inventory::run(args),
+        Command::Inventory(args) => exit("inventory", inventory::run(args)),
         Command::Export(args) => exit("export", capture::run_export(&args)),
         Command::Import(args) => exit("import", capture::run_import(&args)),
         Command::Localize(args) => crate::cli::localize::run(args),

@@ -10,26 +10,28 @@
 //! closed with CLOSE_CONNECTION. On a terminal it shows a live line per antenna; it always
 //! prints a summary. See `docs/client.md`.
 //!
-//! Here: the run itself; the command line ([`InventoryArgs`]), the statistics and the screen,
-//! and the reads' sink are in submodules.
+//! Here: the run itself ([`Inventory`]); its settings ([`InventoryOptions`]), the statistics
+//! and the screen, and the reads' sink are in submodules. The command line (its options, the
+//! localizer and publisher beside the run, the error said at the exit) is `cli::inventory`.
 
 use std::io::{self, Write};
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::net::client::{Backoff, Client, ClientError, InventorySpec, ReadStream};
-use crate::net::tls::{self, Connector, TlsError, Verify};
+use crate::localize::live::{Input, Tap};
+use crate::net::client::{Backoff, Client, ClientError, ReadStream};
+use crate::net::tls;
+use crate::reads::Read;
 
-mod args;
 mod display;
+mod options;
 mod sink;
 
-pub use args::{
-    reader_address, reader_address_on, Format, InventoryArgs, Output, Retries, LLRP_PORT,
-};
 use display::{Screen, Stats};
+pub use options::{
+    reader_address, reader_address_on, InventoryOptions, Output, Retries, LLRP_PORT,
+};
 use sink::Sink;
 
 /// How long one request (or the connection and greeting) may take.
@@ -41,28 +43,6 @@ const CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
 /// How often the live lines are redrawn and the output flushed; also the longest the loop
 /// waits before looking at the clock and the stop signal again.
 const TICK: Duration = Duration::from_millis(250);
-
-/// The TLS client of `--tls`, if asked for: `--tls-ca` or (logged) `--tls-insecure`.
-fn connector(args: &InventoryArgs) -> Result<Option<Connector>, InventoryError> {
-    if !args.tls {
-        return Ok(None);
-    }
-    let verify = match (&args.tls_ca, args.tls_insecure) {
-        (Some(ca), _) => Verify::Ca(ca.clone()),
-        (None, true) => {
-            eprintln!(
-                "llrp-gateway inventory: warning: --tls-insecure: the reader's certificate is \
-                 not checked (the connection is encrypted, not authenticated)"
-            );
-            Verify::Insecure
-        }
-        (None, false) => return Err(InventoryError::TlsTrust),
-    };
-    Ok(Some(Connector::new(
-        &verify,
-        args.tls_server_name.as_deref(),
-    )?))
-}
 
 /// Why an inventory ended in failure.
 #[derive(Debug, thiserror::Error)]
@@ -85,15 +65,6 @@ pub enum InventoryError {
         /// What the reader said.
         source: ClientError,
     },
-    /// The localizer or its HTTP API could not start.
-    #[error("{0}")]
-    Localizer(String),
-    /// The TLS settings cannot be used.
-    #[error("TLS: {0}")]
-    Tls(#[from] TlsError),
-    /// `--tls` without saying which certificates to trust.
-    #[error("--tls needs --tls-ca FILE (the CA, or the reader's own self-signed certificate) or --tls-insecure (accept any certificate)")]
-    TlsTrust,
     /// The run ended (time, or a stop signal) before any connection was made.
     #[error("no connection to {0} before the end of the run")]
     NeverConnected(String),
@@ -149,141 +120,213 @@ async fn pause(d: Duration, deadline: Option<Instant>, stop: &AtomicBool) -> boo
     }
 }
 
-/// Runs `llrp-gateway inventory` and reports the outcome as the process's exit code.
-pub fn run(mut args: InventoryArgs) -> ExitCode {
-    match args.resolved_output() {
-        Ok(out) => args.output = out,
-        Err(e) => {
-            eprintln!("llrp-gateway inventory: {e}");
-            return ExitCode::FAILURE;
-        }
+/// An inventory whose output is open, ready to run.
+pub struct Inventory {
+    opts: InventoryOptions,
+    sink: Sink,
+}
+
+/// An inventory that ran to its end: what its summary is made of.
+pub struct Ended {
+    addr: String,
+    stats: Stats,
+    screen: Screen,
+    to_stdout: bool,
+}
+
+/// What a connection attempt came to.
+enum Attempt {
+    /// Connected, the inventory started.
+    Connected(Box<ReadStream>),
+    /// Failed; the back-off is waited out: try again.
+    Retry,
+    /// The run ended first.
+    End,
+}
+
+/// How a connection's session ended.
+enum Session {
+    /// The run is over (time, or a stop signal); the connection was closed cleanly.
+    End,
+    /// The connection was lost; the back-off is waited out: reconnect.
+    Lost,
+}
+
+/// The state of a run: its settings, where the reads go, the back-off, the statistics.
+struct Run {
+    opts: InventoryOptions,
+    addr: String,
+    sink: Sink,
+    tap: Option<Tap>,
+    stop: Arc<AtomicBool>,
+    deadline: Option<Instant>,
+    backoff: Backoff,
+    /// Silence for this long means the reader is gone (only when keepalives are on: without
+    /// them an idle reader sends nothing).
+    dead_after: Option<Duration>,
+    stats: Stats,
+    screen: Screen,
+    batch: Vec<Read>,
+    last_flush: Instant,
+}
+
+impl Inventory {
+    /// Opens the output (an existing file is refused unless `force`).
+    pub fn open(opts: InventoryOptions) -> Result<Inventory, InventoryError> {
+        let sink =
+            Sink::open(&opts.output, opts.force).map_err(|source| output_error(&opts, source))?;
+        Ok(Inventory { opts, sink })
     }
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("llrp-gateway inventory: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
+
+    /// Connects (and reconnects) until the end of the run, writing the reads and offering
+    /// them to `tap` (the localizer, the MQTT publisher) when given.
+    pub async fn run(self, tap: Option<Tap>) -> Result<Ended, InventoryError> {
+        let mut run = Run::new(self, tap);
+        while !run.over() {
+            let stream = match run.connect().await? {
+                Attempt::Connected(s) => s,
+                Attempt::Retry => continue,
+                Attempt::End => break,
+            };
+            run.connected(&stream);
+            match run.session(stream).await? {
+                Session::End => break,
+                Session::Lost => continue,
+            }
         }
-    };
-    match runtime.block_on(inventory(&args)) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("llrp-gateway inventory: {e}");
-            ExitCode::FAILURE
-        }
+        run.sink.flush().map_err(|e| run.output_error(e))?;
+        Ok(Ended {
+            to_stdout: run.opts.output == Some(Output::Stdout),
+            addr: run.addr,
+            stats: run.stats,
+            screen: run.screen,
+        })
     }
 }
 
-/// The inventory itself: connects (and reconnects) until the end of the run, writes the reads,
-/// prints the summary.
-pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
-    let tls = connector(args)?;
-    let addr = if args.tls {
-        reader_address_on(&args.reader, tls::LLRP_TLS_PORT)
-    } else {
-        reader_address(&args.reader)
-    };
-    let spec = InventorySpec {
-        antennas: args.antennas.clone(),
-        impinj: args.impinj,
-        report_every: args.report_every,
-        session: args.session,
-        search_mode: args.search_mode,
-        mode: args.mode,
-        keepalive_ms: args.keepalive_ms,
-        ..InventorySpec::default()
-    };
-    let name = Some(args.name.clone().unwrap_or_else(|| args.reader.clone()));
-    let output_name = match &args.output {
-        None => String::new(),
-        Some(Output::Stdout) => "standard output".into(),
-        Some(Output::Jsonl(p)) | Some(Output::Csv(p)) | Some(Output::Unnamed(p)) => {
-            p.display().to_string()
+impl Ended {
+    /// Clears the live lines and prints the summary (on standard error when the reads went to
+    /// standard output); an error if no connection was ever made.
+    pub fn report(mut self) -> Result<(), InventoryError> {
+        self.screen.clear();
+        if self.stats.connections == 0 {
+            return Err(InventoryError::NeverConnected(self.addr));
         }
-    };
-    let output_error = |source| InventoryError::Output {
-        path: output_name.clone(),
-        source,
-    };
-    let mut sink = Sink::open(&args.output, args.force).map_err(output_error)?;
-    let sinks = crate::cli::live::start_sinks(&args.live, "inventory")
-        .await
-        .map_err(|e| InventoryError::Localizer(e.to_string()))?;
-    let tap = sinks.tap();
-    // The reads of a batch go to the localizer and the MQTT publisher too (if any), then to
-    // the file.
-    let share = |batch: &[crate::reads::Read]| {
-        if let (Some(t), false) = (&tap, batch.is_empty()) {
-            t.offer(crate::localize::live::Input::Reads(batch.to_vec()));
+        let summary = self.stats.summary(&self.addr, Instant::now());
+        if self.to_stdout {
+            eprint!("{summary}");
+        } else {
+            print!("{summary}");
+            let _ = io::stdout().flush();
         }
-    };
-    let stop = watch_stop_signals();
-    let deadline = args
-        .seconds
-        .map(|s| Instant::now() + Duration::from_secs_f64(s));
-    let retries = match args.retries {
-        Retries::Limit(n) => Some(n),
-        Retries::Forever => None,
-    };
-    let mut backoff = Backoff::new(
-        Duration::from_millis(args.backoff_ms),
-        Duration::from_millis(args.backoff_max_ms),
-        retries,
-    );
-    // Silence for this long means the reader is gone (only when keepalives are on: without
-    // them an idle reader sends nothing).
-    let dead_after = (args.keepalive_ms > 0)
-        .then(|| Duration::from_millis(u64::from(args.keepalive_ms) * 3) + Duration::from_secs(5));
-    let mut stats = Stats::new();
-    let mut screen = Screen::new();
-    let mut batch = Vec::new();
-    let mut last_flush = Instant::now();
-    let over = |stop: &AtomicBool| {
-        stop.load(Ordering::SeqCst) || deadline.is_some_and(|t| Instant::now() >= t)
-    };
+        Ok(())
+    }
+}
 
-    'connections: while !over(&stop) {
-        // Connect and set up, giving up early at the end of the run.
+/// The output's I/O error, naming the output.
+fn output_error(opts: &InventoryOptions, source: io::Error) -> InventoryError {
+    InventoryError::Output {
+        path: opts.output.as_ref().map(Output::shown).unwrap_or_default(),
+        source,
+    }
+}
+
+impl Run {
+    fn new(inventory: Inventory, tap: Option<Tap>) -> Run {
+        let Inventory { opts, sink } = inventory;
+        let addr = if opts.tls.is_some() {
+            reader_address_on(&opts.reader, tls::LLRP_TLS_PORT)
+        } else {
+            reader_address(&opts.reader)
+        };
+        let retries = match opts.retries {
+            Retries::Limit(n) => Some(n),
+            Retries::Forever => None,
+        };
+        let backoff = Backoff::new(
+            Duration::from_millis(opts.backoff_ms),
+            Duration::from_millis(opts.backoff_max_ms),
+            retries,
+        );
+        let keepalive_ms = opts.spec.keepalive_ms;
+        Run {
+            addr,
+            sink,
+            tap,
+            stop: watch_stop_signals(),
+            deadline: opts
+                .seconds
+                .map(|s| Instant::now() + Duration::from_secs_f64(s)),
+            backoff,
+            dead_after: (keepalive_ms > 0).then(|| {
+                Duration::from_millis(u64::from(keepalive_ms) * 3) + Duration::from_secs(5)
+            }),
+            stats: Stats::new(),
+            screen: Screen::new(),
+            batch: Vec::new(),
+            last_flush: Instant::now(),
+            opts,
+        }
+    }
+
+    /// The run's time is up, or a stop signal came.
+    fn over(&self) -> bool {
+        self.stop.load(Ordering::SeqCst) || self.deadline.is_some_and(|t| Instant::now() >= t)
+    }
+
+    fn output_error(&self, source: io::Error) -> InventoryError {
+        output_error(&self.opts, source)
+    }
+
+    /// Connects and sets up, giving up early at the end of the run; a transient failure waits
+    /// out the back-off.
+    async fn connect(&mut self) -> Result<Attempt, InventoryError> {
         let setup = async {
-            let client = Client::connect_reader_with(&addr, tls.as_ref(), REQUEST_TIMEOUT).await?;
-            ReadStream::start(client, &spec, name.clone(), REQUEST_TIMEOUT).await
+            let client =
+                Client::connect_reader_with(&self.addr, self.opts.tls.as_ref(), REQUEST_TIMEOUT)
+                    .await?;
+            let name = Some(self.opts.name.clone());
+            ReadStream::start(client, &self.opts.spec, name, REQUEST_TIMEOUT).await
         };
         let watch_end = async {
-            while !over(&stop) {
+            while !self.over() {
                 tokio::time::sleep(TICK).await;
             }
         };
         let result = tokio::select! {
             r = setup => r,
-            () = watch_end => break 'connections,
+            () = watch_end => return Ok(Attempt::End),
         };
-        let mut stream = match result {
-            Ok(s) => s,
-            Err(e) if e.is_transient() => match backoff.next_delay() {
+        let addr = &self.addr;
+        match result {
+            Ok(s) => Ok(Attempt::Connected(Box::new(s))),
+            Err(e) if e.is_transient() => match self.backoff.next_delay() {
                 Some(d) => {
-                    screen.log(&format!(
+                    self.screen.log(&format!(
                         "cannot connect to {addr}: {e}; retrying in {d:?} ({})",
-                        attempt_of(&backoff)
+                        attempt_of(&self.backoff)
                     ));
-                    pause(d, deadline, &stop).await;
-                    continue;
+                    pause(d, self.deadline, &self.stop).await;
+                    Ok(Attempt::Retry)
                 }
-                None => {
-                    return Err(InventoryError::GaveUp {
-                        addr,
-                        attempts: backoff.failures(),
-                        source: e,
-                    })
-                }
+                None => Err(InventoryError::GaveUp {
+                    addr: addr.clone(),
+                    attempts: self.backoff.failures(),
+                    source: e,
+                }),
             },
-            Err(e) => return Err(InventoryError::Rejected { addr, source: e }),
-        };
-        backoff.reset();
-        stats.connections += 1;
-        stats.started.get_or_insert_with(Instant::now);
+            Err(e) => Err(InventoryError::Rejected {
+                addr: addr.clone(),
+                source: e,
+            }),
+        }
+    }
+
+    /// Counts the new connection and says it on the screen.
+    fn connected(&mut self, stream: &ReadStream) {
+        self.backoff.reset();
+        self.stats.connections += 1;
+        self.stats.started.get_or_insert_with(Instant::now);
         let table = match stream.hop_table() {
             Some(t) => format!(
                 "hop table {} ({} channels) from the reader's capabilities",
@@ -292,92 +335,128 @@ pub async fn inventory(args: &InventoryArgs) -> Result<(), InventoryError> {
             ),
             None => "no hop table in the reader's capabilities: frequencies unknown".into(),
         };
-        let via = if tls.is_some() { " over TLS" } else { "" };
-        screen.log(&format!(
-            "connected to {addr}{via}, inventory started; {table}"
+        let via = if self.opts.tls.is_some() {
+            " over TLS"
+        } else {
+            ""
+        };
+        self.screen.log(&format!(
+            "connected to {}{via}, inventory started; {table}",
+            self.addr
         ));
+    }
+
+    /// Takes the reads of `stream` until the run is over (then closes it cleanly) or the
+    /// connection is lost (then waits out the back-off).
+    async fn session(&mut self, mut stream: Box<ReadStream>) -> Result<Session, InventoryError> {
         let mut last_heard = Instant::now();
         let mut keepalives = 0;
         loop {
             let now = Instant::now();
-            if over(&stop) {
-                stats.keepalives += stream.keepalives_answered();
-                stats.bad_reports += stream.bad_reports();
-                stats.foreign_reads += stream.foreign_reads();
-                let closed = stream.finish(CLOSE_TIMEOUT, &mut batch).await;
-                share(&batch);
-                for r in batch.drain(..) {
-                    sink.write(&r).map_err(output_error)?;
-                    stats.add(&r);
-                }
-                if let Err(e) = closed {
-                    screen.log(&format!("closing the connection: {e}"));
-                }
-                break 'connections;
+            if self.over() {
+                self.close(*stream).await?;
+                return Ok(Session::End);
             }
-            let wait = deadline.map_or(TICK, |t| t.saturating_duration_since(now).min(TICK));
-            match stream.next(wait, &mut batch).await {
+            let wait = self
+                .deadline
+                .map_or(TICK, |t| t.saturating_duration_since(now).min(TICK));
+            match stream.next(wait, &mut self.batch).await {
                 Ok(()) => last_heard = Instant::now(),
                 Err(ClientError::Timeout(_)) => {}
                 Err(e) => {
-                    stats.keepalives += stream.keepalives_answered();
-                    stats.bad_reports += stream.bad_reports();
-                    stats.foreign_reads += stream.foreign_reads();
+                    self.count(&stream);
                     let why = match e {
                         ClientError::Closed => "the reader closed the connection".to_string(),
                         e => format!("connection lost: {e}"),
                     };
-                    lost(&mut screen, &mut backoff, &why, deadline, &stop, &addr).await?;
-                    continue 'connections;
+                    self.lost(&why).await?;
+                    return Ok(Session::Lost);
                 }
             }
             if stream.keepalives_answered() != keepalives {
                 keepalives = stream.keepalives_answered();
                 last_heard = Instant::now();
             }
-            share(&batch);
-            for r in batch.drain(..) {
-                sink.write(&r).map_err(output_error)?;
-                stats.add(&r);
-            }
+            self.drain()?;
             let now = Instant::now();
-            if let Some(d) = dead_after {
-                if now.duration_since(last_heard) > d {
-                    stats.keepalives += stream.keepalives_answered();
-                    stats.bad_reports += stream.bad_reports();
-                    stats.foreign_reads += stream.foreign_reads();
-                    let why = format!(
-                        "nothing from the reader for {:.1} s (keepalives every {} ms)",
-                        d.as_secs_f64(),
-                        args.keepalive_ms
-                    );
-                    drop(stream);
-                    lost(&mut screen, &mut backoff, &why, deadline, &stop, &addr).await?;
-                    continue 'connections;
-                }
+            if let Some(why) = self.silent(now, last_heard) {
+                self.count(&stream);
+                drop(stream);
+                self.lost(&why).await?;
+                return Ok(Session::Lost);
             }
-            screen.tick(&mut stats, now);
-            if now.duration_since(last_flush) >= TICK {
-                sink.flush().map_err(output_error)?;
-                last_flush = now;
+            self.screen.tick(&mut self.stats, now);
+            if now.duration_since(self.last_flush) >= TICK {
+                self.sink.flush().map_err(|e| self.output_error(e))?;
+                self.last_flush = now;
             }
         }
     }
-    sink.flush().map_err(output_error)?;
-    drop(tap);
-    sinks.stop().await;
-    screen.clear();
-    if stats.connections == 0 {
-        return Err(InventoryError::NeverConnected(addr));
+
+    /// Why the reader is taken for gone, if it has been silent too long.
+    fn silent(&self, now: Instant, last_heard: Instant) -> Option<String> {
+        let d = self.dead_after?;
+        (now.duration_since(last_heard) > d).then(|| {
+            format!(
+                "nothing from the reader for {:.1} s (keepalives every {} ms)",
+                d.as_secs_f64(),
+                self.opts.spec.keepalive_ms
+            )
+        })
     }
-    let summary = stats.summary(&addr, Instant::now());
-    if args.output == Some(Output::Stdout) {
-        eprint!("{summary}");
-    } else {
-        print!("{summary}");
-        let _ = io::stdout().flush();
+
+    /// At the end of the run: stops the inventory and closes the connection, taking the last
+    /// reads.
+    async fn close(&mut self, stream: ReadStream) -> Result<(), InventoryError> {
+        self.count(&stream);
+        let closed = stream.finish(CLOSE_TIMEOUT, &mut self.batch).await;
+        self.drain()?;
+        if let Err(e) = closed {
+            self.screen.log(&format!("closing the connection: {e}"));
+        }
+        Ok(())
     }
-    Ok(())
+
+    /// Adds the counters of a connection that ends to the statistics.
+    fn count(&mut self, stream: &ReadStream) {
+        self.stats.keepalives += stream.keepalives_answered();
+        self.stats.bad_reports += stream.bad_reports();
+        self.stats.foreign_reads += stream.foreign_reads();
+    }
+
+    /// The batch's reads to the localizer and the MQTT publisher (if any), then to the
+    /// output and the statistics.
+    fn drain(&mut self) -> Result<(), InventoryError> {
+        if let (Some(t), false) = (&self.tap, self.batch.is_empty()) {
+            t.offer(Input::Reads(self.batch.to_vec()));
+        }
+        for r in self.batch.drain(..) {
+            if let Err(e) = self.sink.write(&r) {
+                return Err(output_error(&self.opts, e));
+            }
+            self.stats.add(&r);
+        }
+        Ok(())
+    }
+
+    /// After a lost connection: logs why and waits out the back-off before the next attempt.
+    async fn lost(&mut self, why: &str) -> Result<(), InventoryError> {
+        match self.backoff.next_delay() {
+            Some(d) => {
+                self.screen.log(&format!(
+                    "{why}; reconnecting in {d:?} ({})",
+                    attempt_of(&self.backoff)
+                ));
+                pause(d, self.deadline, &self.stop).await;
+                Ok(())
+            }
+            None => Err(InventoryError::GaveUp {
+                addr: self.addr.clone(),
+                attempts: self.backoff.failures(),
+                source: ClientError::Closed,
+            }),
+        }
+    }
 }
 
 /// "retry k of N" (or "retry k").
@@ -385,31 +464,5 @@ fn attempt_of(b: &Backoff) -> String {
     match b.retries() {
         Some(n) => format!("retry {} of {n}", b.failures()),
         None => format!("retry {}", b.failures()),
-    }
-}
-
-/// After a lost connection: logs why and waits out the back-off before the next attempt.
-async fn lost(
-    screen: &mut Screen,
-    backoff: &mut Backoff,
-    why: &str,
-    deadline: Option<Instant>,
-    stop: &AtomicBool,
-    addr: &str,
-) -> Result<(), InventoryError> {
-    match backoff.next_delay() {
-        Some(d) => {
-            screen.log(&format!(
-                "{why}; reconnecting in {d:?} ({})",
-                attempt_of(backoff)
-            ));
-            pause(d, deadline, stop).await;
-            Ok(())
-        }
-        None => Err(InventoryError::GaveUp {
-            addr: addr.to_string(),
-            attempts: backoff.failures(),
-            source: ClientError::Closed,
-        }),
     }
 }

@@ -1,9 +1,13 @@
-//! The command line of `llrp-gateway inventory`: [`InventoryArgs`], its value types and
-//! parsers, and the reader address with its default port ([`reader_address`]).
+//! `llrp-gateway inventory HOST[:PORT]`: its options ([`InventoryArgs`]), checked and turned
+//! into the run's settings, the localizer and publisher of [`super::live`] started beside the
+//! run, and the run's error said at the exit. The inventory itself: [`crate::inventory`].
 
 use std::path::PathBuf;
 
-pub use crate::net::LLRP_PORT;
+use super::live::{start_sinks, LiveArgs, SinksError};
+use crate::inventory::{Inventory, InventoryError, InventoryOptions, Output, Retries};
+use crate::net::client::InventorySpec;
+use crate::net::tls::{Connector, TlsError, Verify};
 
 /// Command-line options of `llrp-gateway inventory`.
 #[derive(Clone, Debug, PartialEq, clap::Args)]
@@ -79,29 +83,7 @@ pub struct InventoryArgs {
     /// The live localizer and its HTTP API (`--http ADDR`) and the MQTT publisher
     /// (`--publish URL`), fed with the reads.
     #[command(flatten)]
-    pub live: crate::cli::live::LiveArgs,
-}
-
-/// How many times a failed connection is retried.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Retries {
-    /// At most this many retries after failures in a row.
-    Limit(u32),
-    /// Retry until stopped.
-    Forever,
-}
-
-/// Where the reads go.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Output {
-    /// JSON Lines (the reads file) to this file.
-    Jsonl(PathBuf),
-    /// CSV with a header row to this file.
-    Csv(PathBuf),
-    /// JSON Lines to standard output.
-    Stdout,
-    /// A file whose name says no format: `--format` must.
-    Unnamed(PathBuf),
+    pub live: LiveArgs,
 }
 
 /// The format of the reads written (`--format`).
@@ -111,36 +93,6 @@ pub enum Format {
     Jsonl,
     /// CSV with a header row.
     Csv,
-}
-
-impl InventoryArgs {
-    /// The output with its format settled by `--format`; why not, when neither the name nor
-    /// the flag says it.
-    pub fn resolved_output(&self) -> Result<Option<Output>, String> {
-        let Some(out) = &self.output else {
-            return Ok(None);
-        };
-        Ok(Some(match (out, self.format) {
-            (Output::Unnamed(p), None) => {
-                return Err(format!(
-                    "--output {}: the name does not say the format: add --format jsonl or \
-                     --format csv (or name the file .jsonl or .csv)",
-                    p.display()
-                ))
-            }
-            (Output::Stdout, Some(Format::Csv)) => {
-                return Err("--output -: standard output takes JSON Lines only".into())
-            }
-            (Output::Stdout, _) => Output::Stdout,
-            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Jsonl)) => {
-                Output::Jsonl(p.clone())
-            }
-            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Csv)) => {
-                Output::Csv(p.clone())
-            }
-            (named, None) => named.clone(),
-        }))
-    }
 }
 
 fn parse_retries(s: &str) -> Result<Retries, String> {
@@ -164,14 +116,130 @@ fn parse_output(s: &str) -> Result<Output, String> {
     }
 }
 
-/// `HOST[:PORT]` as a socket address string: port 5084 when none is given.
-pub fn reader_address(reader: &str) -> String {
-    reader_address_on(reader, LLRP_PORT)
+/// Why `--output` and `--format` do not settle the reads' format.
+#[derive(Debug, PartialEq, Eq, thiserror::Error)]
+pub enum OutputFormatError {
+    /// The name says no format and `--format` is not given.
+    #[error(
+        "--output {}: the name does not say the format: add --format jsonl or --format csv \
+         (or name the file .jsonl or .csv)",
+        .0.display()
+    )]
+    Unsaid(PathBuf),
+    /// CSV asked for on standard output.
+    #[error("--output -: standard output takes JSON Lines only")]
+    StdoutCsv,
 }
 
-/// `HOST[:PORT]` as a socket address string: port `port` when none is given.
-pub fn reader_address_on(reader: &str, port: u16) -> String {
-    crate::net::with_port_or(reader, port)
+/// Why `inventory` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum InventoryCommandError {
+    /// `--output` and `--format` do not settle the format.
+    #[error("{0}")]
+    OutputFormat(#[from] OutputFormatError),
+    /// `--tls` without saying which certificates to trust.
+    #[error("--tls needs --tls-ca FILE (the CA, or the reader's own self-signed certificate) or --tls-insecure (accept any certificate)")]
+    TlsTrust,
+    /// The TLS settings cannot be used.
+    #[error("TLS: {0}")]
+    Tls(#[from] TlsError),
+    /// The async runtime could not be started.
+    #[error("cannot start the async runtime: {0}")]
+    Runtime(std::io::Error),
+    /// The localizer, its API or the publisher could not be started.
+    #[error("{0}")]
+    Sinks(#[from] SinksError),
+    /// The inventory failed (the reader, the connection, the output).
+    #[error("{0}")]
+    Inventory(#[from] InventoryError),
+}
+
+impl InventoryArgs {
+    /// The output with its format settled by `--format`; why not, when neither the name nor
+    /// the flag says it.
+    pub fn resolved_output(&self) -> Result<Option<Output>, OutputFormatError> {
+        let Some(out) = &self.output else {
+            return Ok(None);
+        };
+        Ok(Some(match (out, self.format) {
+            (Output::Unnamed(p), None) => return Err(OutputFormatError::Unsaid(p.clone())),
+            (Output::Stdout, Some(Format::Csv)) => return Err(OutputFormatError::StdoutCsv),
+            (Output::Stdout, _) => Output::Stdout,
+            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Jsonl)) => {
+                Output::Jsonl(p.clone())
+            }
+            (Output::Jsonl(p) | Output::Csv(p) | Output::Unnamed(p), Some(Format::Csv)) => {
+                Output::Csv(p.clone())
+            }
+            (named, None) => named.clone(),
+        }))
+    }
+
+    /// The TLS client of `--tls`, if asked for: `--tls-ca` or (with a warning)
+    /// `--tls-insecure`.
+    fn connector(&self) -> Result<Option<Connector>, InventoryCommandError> {
+        if !self.tls {
+            return Ok(None);
+        }
+        let verify = match (&self.tls_ca, self.tls_insecure) {
+            (Some(ca), _) => Verify::Ca(ca.clone()),
+            (None, true) => {
+                eprintln!(
+                    "llrp-gateway inventory: warning: --tls-insecure: the reader's certificate is \
+                     not checked (the connection is encrypted, not authenticated)"
+                );
+                Verify::Insecure
+            }
+            (None, false) => return Err(InventoryCommandError::TlsTrust),
+        };
+        Ok(Some(Connector::new(
+            &verify,
+            self.tls_server_name.as_deref(),
+        )?))
+    }
+
+    /// The run's settings.
+    fn options(&self) -> Result<InventoryOptions, InventoryCommandError> {
+        let output = self.resolved_output()?;
+        Ok(InventoryOptions {
+            reader: self.reader.clone(),
+            tls: self.connector()?,
+            spec: InventorySpec {
+                antennas: self.antennas.clone(),
+                impinj: self.impinj,
+                report_every: self.report_every,
+                session: self.session,
+                search_mode: self.search_mode,
+                mode: self.mode,
+                keepalive_ms: self.keepalive_ms,
+                ..InventorySpec::default()
+            },
+            name: self.name.clone().unwrap_or_else(|| self.reader.clone()),
+            seconds: self.seconds,
+            output,
+            force: self.force,
+            retries: self.retries,
+            backoff_ms: self.backoff_ms,
+            backoff_max_ms: self.backoff_max_ms,
+        })
+    }
+}
+
+/// Runs `llrp-gateway inventory`: the output is opened first, then the localizer and
+/// publisher start, then the run; at its end they stop and the summary is printed.
+pub fn run(args: InventoryArgs) -> Result<(), InventoryCommandError> {
+    let options = args.options()?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(InventoryCommandError::Runtime)?;
+    runtime.block_on(async move {
+        let inventory = Inventory::open(options)?;
+        let sinks = start_sinks(&args.live, "inventory").await?;
+        let ended = inventory.run(sinks.tap()).await?;
+        sinks.stop().await;
+        Ok(ended.report()?)
+    })
 }
 
 #[cfg(test)]
@@ -275,7 +343,7 @@ mod tests {
             Ok(Some(Output::Jsonl("reads.txt".into())))
         );
         let e = out(&["r", "--output", "/dev/null"]).expect_err("no format");
-        assert!(e.contains("--format jsonl"), "{e}");
+        assert!(e.to_string().contains("--format jsonl"), "{e}");
         assert!(out(&["r", "--output", "-", "--format", "csv"]).is_err());
         assert_eq!(
             out(&["r", "--output", "x.csv"]),
@@ -285,15 +353,5 @@ mod tests {
             parse(&["r", "--format", "csv"]).is_err(),
             "--format needs --output"
         );
-    }
-
-    #[test]
-    fn the_port_defaults_to_5084() {
-        assert_eq!(reader_address("reader.local"), "reader.local:5084");
-        assert_eq!(reader_address("reader.local:6000"), "reader.local:6000");
-        assert_eq!(reader_address("10.1.2.3"), "10.1.2.3:5084");
-        assert_eq!(reader_address("10.1.2.3:1"), "10.1.2.3:1");
-        assert_eq!(reader_address("::1"), "[::1]:5084");
-        assert_eq!(reader_address("[::1]:5000"), "[::1]:5000");
     }
 }
