@@ -13,6 +13,7 @@ use crate::decode::DecodeOptions;
 use crate::net::clock::Speed;
 use crate::sim::SimOptions;
 
+pub mod bench;
 pub mod capture;
 pub mod decode;
 pub mod inventory;
@@ -128,20 +129,7 @@ pub enum Command {
     },
     /// Benchmarks (docs/benchmarks.md).
     #[command(subcommand)]
-    Bench(BenchCommand),
-}
-
-#[derive(Subcommand)]
-pub enum BenchCommand {
-    /// Simulate a scenario faster than real time and localize it with every applicable
-    /// estimator: errors against the truth and compute times.
-    Localize(crate::eval::cli::BenchLocalizeArgs),
-    /// Run the parked-rail replica of a real Impinj measurement and print its reads'
-    /// statistics beside the real ones (docs/measurement.md "Validation").
-    Realism(crate::realism::BenchRealismArgs),
-    /// The simulated reader's read rate against the tags in the field, per RF mode, beside
-    /// published measurements (docs/measurement.md "Read rate against population").
-    Readrate(crate::eval::readrate::BenchReadRateArgs),
+    Bench(bench::BenchCommand),
 }
 
 /// Says `command`'s error, if any, as every command's is said, and gives the exit status.
@@ -165,9 +153,15 @@ pub fn main() -> ExitCode {
         Command::Export(args) => exit("export", capture::run_export(&args)),
         Command::Import(args) => exit("import", capture::run_import(&args)),
         Command::Localize(args) => crate::cli::localize::run(args),
-        Command::Bench(BenchCommand::Localize(args)) => crate::eval::cli::run(args),
-        Command::Bench(BenchCommand::Realism(args)) => crate::realism::run(args),
-        Command::Bench(BenchCommand::Readrate(args)) => crate::eval::readrate::run(args),
+        Command::Bench(bench::BenchCommand::Localize(args)) => {
+            exit("bench localize", bench::localize(args))
+        }
+        Command::Bench(bench::BenchCommand::Realism(args)) => {
+            exit("bench realism", bench::realism(args))
+        }
+        Command::Bench(bench::BenchCommand::Readrate(args)) => {
+            exit("bench readrate", bench::readrate(args))
+        }
         Command::Sim {
             scenario,
             reader_model,

@@ -404,6 +404,28 @@ pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
     })
 }
 
+/// The scenario `name` (a fixture's name or a file).
+pub fn scenario(name: &str) -> Result<Scenario, String> {
+    scenario_with(name, None)
+}
+
+/// The scenario `name` (a fixture's name or a file), run with the reader model `model` when
+/// given (docs/measurement.md "Reader models").
+pub fn scenario_with(name: &str, model: Option<&str>) -> Result<Scenario, String> {
+    let embedded = match name.to_ascii_uppercase().as_str() {
+        "S1" => return Scenario::default_s1_with(model).map_err(|e| format!("{name}: {e}")),
+        "S2" => include_str!("../../fixtures/scenarios/s2-side-by-side.json"),
+        "S2-BACK-TO-BACK" => include_str!("../../fixtures/scenarios/s2-back-to-back.json"),
+        "S3" => include_str!("../../fixtures/scenarios/s3.json"),
+        _ => {
+            return Scenario::load_with(std::path::Path::new(name), model)
+                .map_err(|e| format!("{name}: {e}"))
+        }
+    };
+    Scenario::from_json_with(embedded, std::path::Path::new("."), model)
+        .map_err(|e| format!("{name}: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::inside_95;

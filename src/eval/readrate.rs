@@ -2,27 +2,12 @@
 //! per RF mode, through its own LLRP output, printed beside the published measurements of
 //! Impinj readers (docs/measurement.md "Read rate against population") and drawn with them.
 
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
+use std::path::Path;
 
 use plotters::prelude::*;
 
 use super::bench::{simulate_with, Inventory};
 use crate::scenario::Scenario;
-
-/// Arguments of `bench readrate`.
-#[derive(clap::Args, Debug)]
-pub struct BenchReadRateArgs {
-    /// Simulated seconds per point.
-    #[arg(long, default_value_t = 10.0, value_parser = crate::options::parser::<f64>("seconds"))]
-    pub seconds: f64,
-    /// Reader model the field is read with (docs/measurement.md "Reader models").
-    #[arg(long, default_value = "impinj-r420")]
-    pub reader_model: String,
-    /// Also draw the curves and the published points to this PNG.
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
-}
 
 /// Tag counts the curve is measured at.
 pub const POPULATIONS: [usize; 11] = [1, 2, 3, 6, 11, 16, 21, 40, 64, 128, 300];
@@ -150,61 +135,8 @@ pub fn rate(n: usize, mode: u16, reader_model: &str, seconds: f64) -> Result<f64
     Ok(run.reads.len() as f64 / seconds)
 }
 
-/// Runs `bench readrate`.
-pub fn run(args: BenchReadRateArgs) -> ExitCode {
-    match run_inner(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("llrp-gateway bench readrate: {e}");
-            ExitCode::FAILURE
-        }
-    }
-}
-
-fn run_inner(args: &BenchReadRateArgs) -> Result<(), String> {
-    let mut curves = Vec::new();
-    for (mode, _) in MODES {
-        let mut points = Vec::new();
-        for n in POPULATIONS {
-            points.push((n, rate(n, mode, &args.reader_model, args.seconds)?));
-        }
-        curves.push(points);
-    }
-    println!(
-        "Reads/s of all tags together (and of each tag), one antenna, a continuous AISpec, \
-         reader model {}, {} s simulated a point:\n",
-        args.reader_model, args.seconds
-    );
-    let head: Vec<&str> = MODES.iter().map(|m| m.1).collect();
-    println!("| tags | {} |", head.join(" | "));
-    println!("|---:|{}", "---:|".repeat(MODES.len()));
-    for (k, n) in POPULATIONS.iter().enumerate() {
-        let cells: Vec<String> = curves
-            .iter()
-            .map(|c| format!("{:.0} ({:.1})", c[k].1, c[k].1 / *n as f64))
-            .collect();
-        println!("| {n} | {} |", cells.join(" | "));
-    }
-    println!("\nPublished (conditions differ; docs/measurement.md):\n");
-    println!("| tags | reads/s (a tag) | reader, conditions, source |\n|---:|---:|---|");
-    for p in &PUBLISHED {
-        println!(
-            "| {} | {:.0} ({:.1}) | {} |",
-            p.tags,
-            p.reads_per_s,
-            p.reads_per_s / p.tags as f64,
-            p.source
-        );
-    }
-    if let Some(path) = &args.plot {
-        plot(path, &curves)?;
-        println!("\nPlot: {}", path.display());
-    }
-    Ok(())
-}
-
 /// Draws the curves (one per mode of [`MODES`]) and the [`PUBLISHED`] points to `path`.
-fn plot(path: &Path, curves: &[Vec<(usize, f64)>]) -> Result<(), String> {
+pub fn plot(path: &Path, curves: &[Vec<(usize, f64)>]) -> Result<(), String> {
     let text = super::plot::font();
     let top = curves.iter().flatten().map(|p| p.1).fold(200.0, f64::max) * 1.1;
     let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
@@ -299,12 +231,7 @@ mod tests {
 
     #[test]
     fn an_unknown_reader_model_is_named_with_the_known_ones() {
-        let e = run_inner(&BenchReadRateArgs {
-            seconds: 1.0,
-            reader_model: "acme-9000".into(),
-            plot: None,
-        })
-        .expect_err("refused");
+        let e = rate(1, MODES[0].0, "acme-9000", 1.0).expect_err("refused");
         assert!(e.contains("acme-9000") && e.contains("impinj-r420"), "{e}");
     }
 }

@@ -1,45 +1,22 @@
 //! `llrp-gateway bench realism`: the parked-rail replica of a real Impinj measurement
 //! (`fixtures/scenarios/rail/`, written by `scripts/rail-scenario`) run through the simulated
 //! reader's own LLRP output, its reads' statistics printed beside the real ones
-//! (`../shared/research/real-reads.md`, docs/measurement.md "Validation").
+//! (`../shared/research/real-reads.md`, docs/measurement.md "Validation"); its command line
+//! and table printing are `cli::bench`.
 
 pub mod real;
 pub mod stats;
 
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
+use std::path::Path;
 
 use crate::eval::bench::{simulate_with, Inventory};
 use crate::scenario::{Mount, Scenario};
-use real::{short, DISTANCES, FIGURES};
+pub use real::DISTANCES;
+use real::{short, FIGURES};
 use stats::{Layout, Park, Stats};
 
 /// Nominal x of the three tags along the rail (m), as `scripts/rail-scenario` places them.
 pub const NOMINAL_X: [f64; 3] = [0.29, 0.49, 0.69];
-
-/// `llrp-gateway bench realism`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct BenchRealismArgs {
-    /// Directory of the rail scenarios (`rail-0.88.json`, `rail-0.68.json`, `rail-0.51.json`).
-    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/scenarios/rail"))]
-    pub dir: PathBuf,
-    /// Reader model the scenarios are run with (docs/measurement.md "Reader models"); default:
-    /// the scenario's own.
-    #[arg(long)]
-    pub reader_model: Option<String>,
-    /// Run this parked-aperture scenario instead of the three rail setups (its tags' own
-    /// positions taken as nominal).
-    #[arg(long, conflicts_with = "reads")]
-    pub scenario: Option<PathBuf>,
-    /// Score this reads file (JSON Lines, as `inventory` writes) instead of simulating: the
-    /// statistics of real reads of a parked aperture, with `--layout`.
-    #[arg(long, requires = "layout")]
-    pub reads: Option<PathBuf>,
-    /// The reads file's geometry: `{"parks": [{"from_us", "to_us", "at"}], "tags": [["EPC",
-    /// [x, y, z]]], "boresight": [x, y, z]}`.
-    #[arg(long, requires = "reads")]
-    pub layout: Option<PathBuf>,
-}
 
 /// The outcome of one setup: its statistics and how many figures fall outside their band.
 pub struct Outcome {
@@ -209,32 +186,6 @@ fn judge(distance: f64, stats: Stats) -> Outcome {
         distance,
         stats,
         outside,
-    }
-}
-
-/// `llrp-gateway bench realism`: the table of the reads file, the scenario, or every rail
-/// setup; exit 1 on an error.
-pub fn run(args: BenchRealismArgs) -> ExitCode {
-    let model = args.reader_model.as_deref();
-    let outcomes = if let (Some(reads), Some(layout)) = (&args.reads, &args.layout) {
-        score_file(reads, layout).map(|o| vec![o])
-    } else if let Some(path) = &args.scenario {
-        run_scenario(path, model).map(|o| vec![o])
-    } else {
-        DISTANCES
-            .iter()
-            .map(|&d| run_setup(&args.dir, d, model))
-            .collect()
-    };
-    match outcomes {
-        Ok(outcomes) => {
-            print!("{}", table(&outcomes));
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("bench realism: {e}");
-            ExitCode::FAILURE
-        }
     }
 }
 
