@@ -29,9 +29,9 @@ impl Sink {
             Some(Output::Csv(p)) => (Some(Box::new(create(p)?)), true),
             Some(Output::Unnamed(p)) => {
                 return Err(io::Error::other(format!(
-                    "{}: the format is not settled (InventoryArgs::resolved_output)",
-                    p.display()
-                )))
+                "{}: the format is not settled (cli::inventory::InventoryArgs::resolved_output)",
+                p.display()
+            )))
             }
         };
         let mut sink = Sink {
