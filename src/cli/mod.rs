@@ -1,13 +1,14 @@
 //! The command line: its arguments ([`Cli`]), the dispatch to each command, and the one place a
 //! command's error is said and the process exits ([`main`], [`exit`]: `llrp-gateway COMMAND:
 //! MESSAGE` on standard error, exit status 1). Every command's arguments and runner live here,
-//! and the subsystems below take options and library calls, no clap types: `sim` ([`sim`]),
-//! `proxy` ([`proxy`]), `replay` ([`replay`]), `inventory` ([`inventory`]), `export` and
-//! `import` ([`capture`]), `localize` and its MQTT worker ([`localize`], [`worker`]), `decode`
-//! ([`decode`]), `bench localize`, `realism` and `readrate` ([`mod@bench`]). Each runner returns a
-//! typed error (`SimCommandError`, `ProxyCommandError`, ...; `localize` still a message);
-//! what the reads of `sim`, `proxy`, `replay` and `inventory` go to is built in [`root`], with
-//! the localizer options of the last three in [`live`].
+//! and the subsystems below take options and library calls, not these commands' clap argument
+//! structs: `sim` ([`sim`]), `proxy` ([`proxy`]), `replay` ([`replay`]), `inventory`
+//! ([`inventory`]), `export` and `import` ([`capture`]), `localize` and its MQTT worker
+//! ([`localize`], [`worker`]), `decode` ([`decode`]), `bench localize`, `realism` and
+//! `readrate` ([`mod@bench`]). Each runner returns a typed error (`SimCommandError`,
+//! `ProxyCommandError`, ...; `localize` still a message, said in the same format); what the
+//! reads of `sim`, `proxy`, `replay` and `inventory` go to is built in [`root`], with the
+//! localizer options of the last three in [`live`].
 
 use std::path::PathBuf;
 use std::process::ExitCode;
