@@ -88,7 +88,7 @@ fn a_tag_read_from_one_place_says_why_it_has_no_position() {
     let mut reads = Vec::new();
     for k in 0..50u64 {
         let mut r = read(1_000 + k * 1_000);
-        r.epc = "BEEF".into();
+        r.epc = llrp_gateway::reads::Epc::parse("BEEF").expect("hex");
         // Every read from the same place.
         r.antenna_pose = Some(llrp_gateway::reads::AntennaPose {
             x: 0.5,

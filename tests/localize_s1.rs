@@ -88,7 +88,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
     let mut ingest = Ingest::new(poses, Ambiguity::None, 1_000_000);
     for t in &tags {
         let read = Read {
-            epc: t.epc_bytes().iter().map(|b| format!("{b:02X}")).collect(),
+            epc: llrp_gateway::reads::Epc::from_bytes(t.epc_bytes()),
             reader: Some("s1-reader".into()),
             antenna: t.antenna_id.map_or(0, |a| a.0),
             t_us: t.first_seen_timestamp_utc.map_or(0, |u| u.0),

@@ -233,7 +233,7 @@ fn the_inventory_client_reads_a_looped_replay_of_its_own_session() {
     );
     for read in &reads {
         assert!(
-            recorded.contains(&read.epc),
+            recorded.contains(read.epc.as_str()),
             "{} is not in the recording",
             read.epc
         );

@@ -78,11 +78,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, Si
         let samples = poses.samples();
         prime.extend(samples.chunks(1024).map(|c| Input::Poses(c.to_vec())));
     }
-    let references = file
-        .references
-        .iter()
-        .map(|r| r.epc.to_ascii_uppercase())
-        .collect();
+    let references = file.references.iter().map(|r| r.epc.to_string()).collect();
     Ok(Consumers::start(Plan {
         command,
         http,

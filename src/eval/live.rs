@@ -64,7 +64,7 @@ pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
             }
         }
         // (EPC, read time) -> when it was offered.
-        let offered: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
+        let offered: Arc<Mutex<HashMap<(crate::reads::Epc, u64), Instant>>> = Arc::default();
         let latencies: Arc<Mutex<Vec<f64>>> = Arc::default();
         let mut stream = tokio::net::TcpStream::connect(http.addr)
             .await
@@ -92,7 +92,7 @@ pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
                 let sent = o
                     .lock()
                     .ok()
-                    .and_then(|m| m.get(&(epc.to_string(), t)).copied());
+                    .and_then(|m| m.get(&(crate::reads::Epc::parse(epc).ok()?, t)).copied());
                 if let (Some(sent), Ok(mut l)) = (sent, l.lock()) {
                     l.push(at.duration_since(sent).as_secs_f64());
                 }

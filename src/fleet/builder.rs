@@ -294,7 +294,7 @@ impl Builder {
         });
         let mut touched: Vec<Slot> = Vec::new();
         for r in reads {
-            let reference = self.opts.references.contains(&r.epc);
+            let reference = self.opts.references.contains(r.epc.as_str());
             let shard = Slot::Shard(usize::from(schema::shard(&r.epc, self.opts.shard_count)));
             let t = TagRead::from_owned(r, &mut self.clock);
             for slot in [reference.then_some(Slot::Refs), Some(shard)]

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::reads::{AntennaPose, Read};
+use crate::reads::{AntennaPose, Epc, Read};
 
 /// The schema version in every message's `v` and in the topics (`v1`).
 pub const VERSION: u32 = 1;
@@ -82,13 +82,13 @@ impl TagRead {
     /// The broker's form of `r`.
     pub fn from_read(r: &Read) -> TagRead {
         let last_seen_time = rfc3339(r.last_seen_us.unwrap_or(r.t_us));
-        TagRead::with_epc(r, r.epc.clone(), last_seen_time)
+        TagRead::with_epc(r, r.epc.to_string(), last_seen_time)
     }
 
     /// The broker's form of `r`, its EPC moved rather than copied and its time written by
     /// `clock`.
     pub fn from_owned(mut r: Read, clock: &mut Rfc3339Clock) -> TagRead {
-        let epc = std::mem::take(&mut r.epc);
+        let epc = std::mem::take(&mut r.epc).into_string();
         let last_seen_time = clock.format(r.last_seen_us.unwrap_or(r.t_us));
         TagRead::with_epc(&r, epc, last_seen_time)
     }
@@ -116,10 +116,10 @@ impl TagRead {
         }
     }
 
-    /// The read of reader `reader` this stands for.
-    pub fn to_read(&self, reader: &str) -> Read {
-        Read {
-            epc: self.epc_hex.to_ascii_uppercase(),
+    /// The read of reader `reader` this stands for; `None` when its EPC is not hex bytes.
+    pub fn to_read(&self, reader: &str) -> Option<Read> {
+        Some(Read {
+            epc: Epc::parse(&self.epc_hex).ok()?,
             reader: Some(reader.to_owned()),
             antenna: self.antenna_port,
             t_us: self.first_seen_us,
@@ -130,7 +130,7 @@ impl TagRead {
             doppler_hz: self.doppler_hz,
             antenna_pose: self.antenna_pose,
             last_seen_us: None,
-        }
+        })
     }
 }
 
@@ -291,7 +291,7 @@ mod tests {
     #[test]
     fn a_read_goes_to_the_broker_and_back_unchanged() {
         let r = Read {
-            epc: "E2801160600002049ACB0065".into(),
+            epc: crate::reads::Epc::parse("E2801160600002049ACB0065").expect("hex"),
             reader: Some("r1".into()),
             antenna: 3,
             t_us: 1_764_633_600_123_456,
@@ -318,7 +318,7 @@ mod tests {
             assert!(json.get(key).is_some(), "{key} in {json}");
         }
         let back: TagRead = serde_json::from_value(json).expect("parses");
-        let again = back.to_read("r1");
+        let again = back.to_read("r1").expect("an EPC");
         assert!((again.phase_rad.expect("phase") - 1.25).abs() < 1e-12);
         assert_eq!(
             Read {
@@ -332,7 +332,7 @@ mod tests {
     #[test]
     fn an_antenna_pose_goes_to_the_broker_to_the_micrometre() {
         let r = Read {
-            epc: "AB".into(),
+            epc: crate::reads::Epc::parse("AB").expect("hex"),
             reader: None,
             antenna: 1,
             t_us: 1,

@@ -452,7 +452,8 @@ impl Run {
                         .shards
                         .contains(&schema::shard(&r.epc_hex, self.opts.shard_count))
             })
-            .map(|r| r.to_read(&b.reader))
+            // (A read whose EPC is not hex bytes names no tag: it is left out.)
+            .filter_map(|r| r.to_read(&b.reader))
             .collect();
         if !reads.is_empty() {
             self.offer(Input::Reads(reads));

@@ -117,13 +117,12 @@ pub(super) async fn tag(
     epc: Result<Path<String>, PathRejection>,
 ) -> Result<Response, ApiError> {
     let Path(epc) = epc.map_err(|r| ApiError::new(r.status(), r.body_text()))?;
-    crate::reads::check_epc(&epc).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e))?;
-    let view = state.shared.tag(&epc).ok_or_else(|| {
-        ApiError::new(
-            StatusCode::NOT_FOUND,
-            format!("no tag {} was read", epc.to_ascii_uppercase()),
-        )
-    })?;
+    let epc = crate::reads::Epc::parse(&epc)
+        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e.to_string()))?;
+    let view = state
+        .shared
+        .tag(&epc)
+        .ok_or_else(|| ApiError::new(StatusCode::NOT_FOUND, format!("no tag {epc} was read")))?;
     let detail = TagDetail {
         tag: TagJson::from(&view),
         recent_reads: view.recent.iter().cloned().collect(),

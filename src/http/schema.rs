@@ -277,7 +277,7 @@ mod tests {
             pitch_deg: 0.0,
         };
         let read = RealRead {
-            epc: "AA".into(),
+            epc: crate::reads::Epc::parse("AA").expect("hex"),
             reader: Some("r".into()),
             antenna: 1,
             t_us: 1,

@@ -50,8 +50,8 @@ impl Stats {
 
     pub(super) fn add(&mut self, r: &Read) {
         self.reads += 1;
-        if !self.epcs.contains(&r.epc) {
-            self.epcs.insert(r.epc.clone());
+        if !self.epcs.contains(r.epc.as_str()) {
+            self.epcs.insert(r.epc.to_string());
         }
         let a = self.antennas.entry(r.antenna).or_default();
         a.reads += 1;
@@ -189,7 +189,7 @@ mod tests {
     fn the_summary_has_totals_and_each_antennas_rssi_range() {
         let mut s = Stats::new();
         let read = |epc: &str, antenna, rssi| Read {
-            epc: epc.into(),
+            epc: crate::reads::Epc::parse(epc).expect("hex"),
             reader: None,
             antenna,
             t_us: 0,

@@ -3,7 +3,7 @@ use super::*;
 
 fn read(epc: &str, t_us: u64, phase: f64, rssi: f64, f_hz: u64) -> Read {
     Read {
-        epc: epc.to_string(),
+        epc: crate::reads::Epc::parse(epc).expect("hex"),
         reader: None,
         antenna: 1,
         t_us,

@@ -56,7 +56,7 @@ pub struct Feed {
     /// Simulated time between two samples (µs).
     interval_us: u64,
     /// The tags' EPCs (hex), made at the first truth.
-    epcs: Vec<String>,
+    epcs: Vec<crate::reads::Epc>,
     /// When the truth was last set.
     truth_at: Option<Instant>,
     /// The reads' clock at simulated time 0 (UTC µs): the truth's antenna poses are shown on
@@ -125,7 +125,7 @@ impl Feed {
             self.truth_at = Some(Instant::now());
             if self.epcs.len() != m.tag_count() {
                 self.epcs = (0..m.tag_count())
-                    .map(|k| crate::reads::hex_upper(m.tag_epc(k).as_bytes()))
+                    .map(|k| crate::reads::Epc::from_bytes(m.tag_epc(k).as_bytes()))
                     .collect();
             }
             let truth = Truth {
@@ -237,7 +237,7 @@ pub fn settings(scenario: &Scenario, base: Settings) -> Settings {
                 .filter(|&k| scenario.tags.get(k).is_some_and(|t| t.reference))
                 .map(|k| {
                     (
-                        crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
+                        crate::reads::Epc::from_bytes(model.tag_epc(k).as_bytes()),
                         model.tag_position(k, 0),
                     )
                 })

@@ -46,7 +46,7 @@ pub fn read(t_us: u64) -> Read {
     let lambda = llrp_gateway::localize::SPEED_OF_LIGHT / FREQUENCY_HZ as f64;
     let d = ((TAG[0] - p.x).powi(2) + (TAG[1] - p.y).powi(2) + (TAG[2] - p.z).powi(2)).sqrt();
     Read {
-        epc: EPC.into(),
+        epc: llrp_gateway::reads::Epc::parse(EPC).expect("hex"),
         reader: Some(READER.into()),
         antenna: 1,
         t_us,
@@ -64,7 +64,7 @@ pub fn read(t_us: u64) -> Read {
 pub fn truth() -> Truth {
     Truth {
         tags: vec![TruthTag {
-            epc: EPC.into(),
+            epc: llrp_gateway::reads::Epc::parse(EPC).expect("hex"),
             position: TAG,
             reference: false,
         }],

@@ -15,6 +15,7 @@
 //! [`MIN_AGREEMENT`]). A reference whose own reads scatter (multipath, a wrong position) is
 //! left out by the same test on its series.
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
@@ -56,11 +57,11 @@ fn circular_mean(angles: impl Iterator<Item = f64>, period: f64) -> (f64, f64) {
 }
 
 impl Calibration {
-    /// The offsets measured by `references` (EPC upper-case hex, true position) in `ingest`'s
+    /// The offsets measured by `references` (EPC, true position) in `ingest`'s
     /// series, each reader's phase sign `sign(reader)`.
     pub fn from_references(
         ingest: &Ingest,
-        references: &[(String, [f64; 3])],
+        references: &[(Epc, [f64; 3])],
         sign: &dyn Fn(&str) -> f64,
     ) -> Calibration {
         // (reader, channel) → reference → antenna → (offset, period).
@@ -176,8 +177,8 @@ mod tests {
     fn references_measure_the_offsets_between_antennas() {
         let mut ingest = Ingest::new(Poses::default(), Ambiguity::None, 10_000_000);
         let refs = [
-            ("AA".to_string(), [0.2, 1.0, 0.8]),
-            ("BB".to_string(), [-0.3, 1.4, 1.2]),
+            (Epc::parse("AA").expect("hex"), [0.2, 1.0, 0.8]),
+            (Epc::parse("BB").expect("hex"), [-0.3, 1.4, 1.2]),
         ];
         let mut all = reads("AA", refs[0].1, 0.3, 1.1);
         all.extend(reads("BB", refs[1].1, 2.9, 1.1));
@@ -216,7 +217,10 @@ mod tests {
         // One reference is not enough; a wrong position scatters and is left out.
         let one = Calibration::from_references(&ingest, &refs[..1], &|_| 1.0);
         assert!(one.is_empty());
-        let wrong = [refs[0].clone(), ("BB".to_string(), [0.9, 0.3, 0.1])];
+        let wrong = [
+            refs[0].clone(),
+            (Epc::parse("BB").expect("hex"), [0.9, 0.3, 0.1]),
+        ];
         assert!(Calibration::from_references(&ingest, &wrong, &|_| 1.0).is_empty());
     }
 }

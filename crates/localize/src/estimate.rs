@@ -449,7 +449,7 @@ mod tests {
                     .sum::<f64>()
                     .sqrt();
                 Read {
-                    epc: epc.into(),
+                    epc: llrp_gateway_vocab::epc::Epc::parse(epc).expect("hex"),
                     reader: Some(reader.into()),
                     antenna: 1,
                     t_us: o.t_us,
@@ -486,7 +486,8 @@ mod tests {
             ingest.push(r);
         }
         let mut bb = r1[..3].to_vec();
-        bb.iter_mut().for_each(|r| r.epc = "BB".into());
+        bb.iter_mut()
+            .for_each(|r| r.epc = llrp_gateway_vocab::epc::Epc::parse("BB").expect("hex"));
         bb.iter().for_each(|r| ingest.push(r));
         let g = Geometry {
             tag_height_m: 0.5,

@@ -154,9 +154,9 @@ impl Locate for Fingerprint {
         let references: Vec<([f64; 3], Vec<Reading>)> = g
             .references
             .iter()
-            .filter(|(r, _)| !r.eq_ignore_ascii_case(epc))
+            .filter(|(r, _)| r.as_str() != epc)
             .filter_map(|(r, p)| {
-                let seen = ingest.tags().find(|t| t.eq_ignore_ascii_case(r))?;
+                let seen = ingest.tags().find(|t| *t == r.as_str())?;
                 Some((*p, readings(ingest, seen, &mut tracks)))
             })
             .collect();

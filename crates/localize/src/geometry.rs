@@ -1,6 +1,7 @@
 //! What an estimator is told beside the reads: the per-reader settings (from the scenario in
 //! simulation, from a settings file for a real reader).
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::BTreeMap;
 
 /// The estimators' settings: defaults for every reader, and each reader's own where it has
@@ -18,7 +19,7 @@ pub struct Geometry {
     pub reach_m: f64,
     /// Reference tags at known positions, for fingerprinting and relock's calibration: (EPC
     /// upper-case hex, position in m). A reference tag is itself located from the others.
-    pub references: Vec<(String, [f64; 3])>,
+    pub references: Vec<(Epc, [f64; 3])>,
     /// Per reader name, its own phase sign and facing (the defaults above for the others).
     pub readers: BTreeMap<String, ReaderGeometry>,
     /// The antenna poses' own error, when it is known (a localization stack's, as the

@@ -6,6 +6,7 @@
 //! come from a settings file; without one, the tags are assumed at the first antenna pose's
 //! height and on the side its yaw faces, with the phase sign +1.
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -109,7 +110,7 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
         references: file
             .references
             .iter()
-            .map(|r| (r.epc.to_ascii_uppercase(), [r.x, r.y, r.z]))
+            .map(|r| (r.epc.clone(), [r.x, r.y, r.z]))
             .collect(),
         readers,
         pose_error: file
@@ -141,7 +142,7 @@ pub fn localize(
     // Series want their reads in time order (a recording of several connections, or a
     // merged reads file, may not be).
     reads.sort_by_key(|r| r.t_us);
-    let mut stats: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
+    let mut stats: BTreeMap<Epc, (u64, u64, u64)> = BTreeMap::new();
     let ingest_on = |poses: Poses| {
         Ingest::new(poses, ambiguity, crate::series::DEFAULT_MAX_GAP_US)
             .with_min_rssi(file.min_rssi_dbm)
@@ -176,8 +177,8 @@ pub fn localize(
         .map(|(epc, (first, last, n))| {
             let span = (last - first) as f64 / 1e6;
             let rate = if span > 0.0 { n as f64 / span } else { 0.0 };
-            let e = estimates.remove(&epc).unwrap_or_else(|| Estimate {
-                epc: epc.clone(),
+            let e = estimates.remove(epc.as_str()).unwrap_or_else(|| Estimate {
+                epc: epc.to_string(),
                 estimator: estimator.name(),
                 estimate: None,
                 covariance: None,

@@ -3,6 +3,7 @@
 //! the side the antennas face, the tags' height, reference tags, clock offsets, the robot's
 //! pose error) and the pose error model the pose refinement assumes ([`PoseErrorModel`]).
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -97,8 +98,8 @@ impl Default for Settings {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ReferenceTag {
-    /// EPC, hex.
-    pub epc: String,
+    /// EPC, hex in any case (`references[i].epc` names one that is not).
+    pub epc: Epc,
     /// x (m).
     pub x: f64,
     /// y (m).
@@ -222,12 +223,6 @@ impl SettingsFile {
                 return Err(bad(format!(
                     "pose_error.correlation_s: must be a positive number, got {v}"
                 )));
-            }
-        }
-        for (i, r) in s.references.iter().enumerate() {
-            let hex = r.epc.len() % 2 == 0 && r.epc.chars().all(|c| c.is_ascii_hexdigit());
-            if !hex || r.epc.is_empty() {
-                return Err(bad(format!("references[{i}].epc: not hex: {:?}", r.epc)));
             }
         }
         Ok(s)

@@ -4,6 +4,7 @@
 //!
 //! The localizer's worker writes it; readers take short read locks and copy what they need.
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -270,9 +271,9 @@ impl Shared {
         read(&self.tags).values().cloned().collect()
     }
 
-    /// The tag of EPC `epc` (hex, any case), if it was read.
-    pub fn tag(&self, epc: &str) -> Option<TagView> {
-        read(&self.tags).get(&epc.to_ascii_uppercase()).cloned()
+    /// The tag of EPC `epc`, if it was read.
+    pub fn tag(&self, epc: &Epc) -> Option<TagView> {
+        read(&self.tags).get(epc.as_str()).cloned()
     }
 
     /// Every reader, by name: those with a link and those read from.

@@ -53,7 +53,7 @@ pub fn passes(
 /// `Read { .., ..read(..) }`.
 pub fn read(epc: &str, t_us: u64, phase_rad: f64, at: [f64; 3]) -> Read {
     Read {
-        epc: epc.to_string(),
+        epc: llrp_gateway_vocab::epc::Epc::parse(epc).expect("hex"),
         reader: None,
         antenna: 1,
         t_us,

@@ -1,9 +1,11 @@
 //! The vocabulary every layer of llrp-gateway shares, below the localizer, the simulator and
-//! the application: tag reads in SI units decoded from LLRP ([`reads`]), antenna pose
+//! the application: a tag's EPC with its one case rule ([`epc`]), tag reads in SI units decoded
+//! from LLRP ([`reads`]), antenna pose
 //! samples ([`pose`]), the feed that carries both from any source to any consumer ([`feed`]),
 //! the sans-IO server session every LLRP server here implements ([`session`]) and the wall
 //! clock ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
 
+pub mod epc;
 pub mod feed;
 pub mod pose;
 pub mod reads;

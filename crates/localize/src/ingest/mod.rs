@@ -12,11 +12,11 @@ use rustc_hash::FxHashMap;
 use crate::poses::{Poses, Track};
 use crate::series::{Ambiguity, Sample, Series};
 use crate::SPEED_OF_LIGHT;
-use llrp_gateway_vocab::reads::Read;
+use llrp_gateway_vocab::reads::{Epc, Read};
 
 /// The series key: EPC (hex as the reads give it), reader, antenna port, channel frequency
 /// (Hz). The EPC comes first so that one tag's series are next to each other.
-pub type Key = (String, String, u16, u64);
+pub type Key = (Epc, String, u16, u64);
 
 /// Reads set aside, by reason.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -140,12 +140,12 @@ pub struct Ingest {
     series: Vec<(Key, Series)>,
     /// Each tag's series (where they are in `series`), in key order, by EPC: a read's series
     /// is found by one hash of its EPC and a scan of its tag's few series, with no key built.
-    by_tag: FxHashMap<String, Vec<Slot>>,
+    by_tag: FxHashMap<Epc, Vec<Slot>>,
     /// Every reader name met, a series' reader is its place here: a read's series is told
     /// from its tag's others by numbers, not names.
     readers: Vec<String>,
     /// The tags with series, in EPC order.
-    tags: BTreeSet<String>,
+    tags: BTreeSet<Epc>,
     set_aside: SetAside,
     taken: u64,
 }
@@ -298,7 +298,7 @@ impl Ingest {
 
     /// The tags with at least one series, in EPC order.
     pub fn tags(&self) -> impl Iterator<Item = &str> {
-        self.tags.iter().map(String::as_str)
+        self.tags.iter().map(Epc::as_str)
     }
 
     /// The pose tracks reads are joined with.

@@ -5,7 +5,7 @@ use llrp_gateway_vocab::reads::AntennaPose;
 
 fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
     Read {
-        epc: epc.into(),
+        epc: llrp_gateway_vocab::epc::Epc::parse(epc).expect("hex"),
         reader: Some("r".into()),
         antenna: 1,
         t_us,
@@ -64,7 +64,12 @@ fn reads_are_filed_by_series_or_set_aside_by_reason() {
     );
     // A1 on two channels: two series; B2 and C3 one each.
     assert_eq!(ingest.series().count(), 4);
-    let key = ("A1".to_string(), "r".to_string(), 1, 915_250_000);
+    let key = (
+        llrp_gateway_vocab::epc::Epc::parse("A1").expect("hex"),
+        "r".to_string(),
+        1,
+        915_250_000,
+    );
     let (_, a1) = ingest
         .series()
         .find(|(k, _)| **k == key)
@@ -178,7 +183,12 @@ fn readers_sharing_a_port_and_channel_keep_their_series_and_their_own_tracks() {
     assert_eq!(ingest.taken(), reads.len() as u64);
     assert_eq!(ingest.series().count(), antennas.len());
     for &(reader, antenna, x) in &antennas {
-        let key = ("A1".to_string(), reader.to_string(), antenna, 915_250_000);
+        let key = (
+            llrp_gateway_vocab::epc::Epc::parse("A1").expect("hex"),
+            reader.to_string(),
+            antenna,
+            915_250_000,
+        );
         let (_, series) = ingest
             .series()
             .find(|(k, _)| **k == key)

@@ -31,6 +31,7 @@
 //! each time the reads' clock has moved on by [`REFINE_EVERY_US`] or a tenth of the time read
 //! so far, and every tag is estimated again on them.
 
+use llrp_gateway_vocab::epc::Epc;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
@@ -155,7 +156,7 @@ struct Worker {
     reader_read_at: HashMap<String, Instant>,
     /// When the rates were last checked for silence.
     silence_checked: Instant,
-    tags: BTreeMap<String, TagState>,
+    tags: BTreeMap<Epc, TagState>,
     set_aside_seen: u64,
     /// Input came since the waiting reads were last looked at.
     taken_since_flush: bool,

@@ -1,6 +1,7 @@
 //! Rounds of estimates: dirty tags first, longest waiting first, each from its last fix where
 //! `relock` had converged, and settled tags once more from the grid (the module above).
 
+use llrp_gateway_vocab::epc::Epc;
 use std::time::{Duration, Instant};
 
 use super::{TagState, Worker};
@@ -29,7 +30,7 @@ pub const SETTLED_SAME_M: f64 = 1e-7;
 
 /// A tag due for an estimate: (settling, since, epc, from the grid); dirty tags (`false`)
 /// sort first, then the longest waiting.
-type Due = (bool, Instant, String, bool);
+type Due = (bool, Instant, Epc, bool);
 
 impl Worker {
     /// Re-estimates dirty tags (longest waiting first), then settled ones whose last estimate

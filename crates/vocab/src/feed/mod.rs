@@ -92,8 +92,8 @@ pub struct Truth {
 /// One tag's true position.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TruthTag {
-    /// EPC, upper-case hex.
-    pub epc: String,
+    /// EPC.
+    pub epc: crate::epc::Epc,
     /// Position (m).
     pub position: [f64; 3],
     /// A reference tag (its position is known to the localizer).

@@ -15,11 +15,13 @@ use llrp::units::{self, HopTable};
 use llrp::Message;
 use serde::{Deserialize, Serialize};
 
+pub use crate::epc::{Epc, EpcError};
+
 /// One tag read (one TagReportData), in SI units; a line of the reads file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Read {
-    /// EPC, upper-case hex.
-    pub epc: String,
+    /// EPC, upper-case hex (any case in a reads file).
+    pub epc: Epc,
     /// Name of the reader that reported it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reader: Option<String>,
@@ -267,7 +269,7 @@ impl ReadDecoder {
             .map(|khz| u64::from(khz) * 1000);
         let antenna = r.antenna_id.or(self.sole_antenna).unwrap_or(0);
         Read {
-            epc: hex_upper(r.epc),
+            epc: Epc::from_bytes(r.epc),
             reader: self.reader.clone(),
             antenna,
             t_us,
@@ -343,23 +345,9 @@ pub fn hex_upper(bytes: &[u8]) -> String {
     s
 }
 
-/// Why `epc` is no EPC in hex, if it is not.
+/// Why `epc` is no EPC in hex, if it is not ([`Epc::parse`]'s reason).
 pub fn check_epc(epc: &str) -> Result<(), String> {
-    if epc.is_empty() {
-        return Err("the EPC is empty".into());
-    }
-    if let Some((i, c)) = epc.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
-        return Err(format!(
-            "EPC {epc:?} is not hex: {c:?} at offset {i} is no hex digit"
-        ));
-    }
-    if epc.len() % 2 != 0 {
-        return Err(format!(
-            "EPC {epc:?} is not hex bytes: an odd number of digits ({})",
-            epc.len()
-        ));
-    }
-    Ok(())
+    Epc::parse(epc).map(drop).map_err(|e| e.to_string())
 }
 
 /// Writes one read as a reads-file line.
@@ -394,11 +382,8 @@ pub fn read_jsonl(input: impl BufRead) -> Result<Vec<Read>, ReadsFileError> {
             line: i + 1,
             message: format!("{}: {}", e.path(), e.inner()),
         })?;
-        // A read with no EPC, or one that is not hex, would make a tag of nothing.
-        check_epc(&read.epc).map_err(|reason| ReadsFileError {
-            line: i + 1,
-            message: format!("epc: {reason}"),
-        })?;
+        // (A read with no EPC, or one that is not hex, would make a tag of nothing: the
+        // `Epc` it deserializes into refuses it.)
         reads.push(read);
     }
     Ok(reads)

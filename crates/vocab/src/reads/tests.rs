@@ -56,7 +56,7 @@ fn a_reads_file_line_with_an_empty_or_non_hex_epc_is_refused_by_number() {
 #[test]
 fn a_read_round_trips_through_the_reads_file() {
     let read = Read {
-        epc: "3034F8".into(),
+        epc: Epc::parse("3034F8").expect("hex"),
         reader: Some("dock".into()),
         antenna: 2,
         t_us: 1_700_000_000_000_000,
