@@ -33,8 +33,8 @@ fn parks(n: u64, step: f64) -> Vec<Park> {
 #[test]
 fn an_ideal_aperture_has_no_residual_and_its_own_delay() {
     let tags = vec![
-        ("A".to_string(), [0.3, 0.8, 0.0]),
-        ("B".to_string(), [0.6, 0.8, 0.0]),
+        ("0A".to_string(), [0.3, 0.8, 0.0]),
+        ("0B".to_string(), [0.6, 0.8, 0.0]),
     ];
     let parks = parks(20, 0.05);
     let freqs: Vec<u64> = (0..8).map(|k| 920_625_000 + k * 500_000).collect();
@@ -86,7 +86,7 @@ fn a_misplaced_tag_is_found_by_the_fit() {
         let d = norm(sub(truth, park.at));
         for n in 0..5 {
             reads.push(read(
-                "A",
+                "0A",
                 park.from_us + n,
                 propagation(f as f64, d),
                 -50.0,
@@ -96,7 +96,7 @@ fn a_misplaced_tag_is_found_by_the_fit() {
     }
     let layout = Layout {
         parks,
-        tags: vec![("A".to_string(), nominal)],
+        tags: vec![("0A".to_string(), nominal)],
         boresight: [0.0, 1.0, 0.0],
     };
     let s = compute(&reads, &layout);
