@@ -3,6 +3,8 @@
 
 use super::schedule::next_start;
 use super::*;
+use crate::physics::gen2::Air;
+use crate::physics::hopping::HopSchedule;
 
 impl Specs {
     /// Runs the specs over simulated time [from, to).
@@ -52,69 +54,122 @@ impl Specs {
         out: &mut Vec<Produced>,
     ) -> u64 {
         let spec = Arc::clone(&self.specs[a].spec);
-        let ro_id = spec.ro_spec_id;
-        let config = ctx.config;
         let report_spec: &RoReportSpec = spec
             .ro_report_spec
             .as_ref()
-            .unwrap_or(&config.ro_report_spec);
-        let content = Content {
-            selector: report_spec.tag_report_content_selector.clone(),
-            impinj: if ctx.impinj {
-                ImpinjContent::from_report_spec(report_spec)
-            } else {
-                ImpinjContent::default()
-            },
-        };
+            .unwrap_or(&ctx.config.ro_report_spec);
+        let content = report_content(report_spec, ctx.impinj);
         // Taken out for the step (its `seen` set would be costly to clone) and put back below.
-        let Some(run) = self.specs[a].run.take() else {
+        let Some(mut run) = self.specs[a].run.take() else {
             return to;
         };
         let stop = &spec.ro_boundary_spec.ro_spec_stop_trigger;
-        let ro_end = match stop.ro_spec_stop_trigger_type {
-            RoSpecStopTriggerType::Duration => {
-                Some(run.started_us + u64::from(stop.duration_trigger_value) * 1000)
-            }
-            RoSpecStopTriggerType::GpiWithTimeout => stop
-                .gpi_trigger_value
-                .as_ref()
-                .filter(|g| g.timeout > 0)
-                .map(|g| run.started_us + u64::from(g.timeout) * 1000),
-            _ => None,
-        };
-        let ai = match spec.specs.get(run.spec_idx) {
-            Some(SpecParameter::AiSpec(ai)) => ai,
-            // Validation admits only AISpecs; anything else ends the ROSpec.
-            _ => {
-                self.specs[a].run = Some(run);
-                self.finish_ro(a, t, report_spec, out);
-                return t;
-            }
+        let ro_end = ro_stop_end(stop, run.started_us);
+        // Validation admits only AISpecs; anything else ends the ROSpec.
+        let Some(SpecParameter::AiSpec(ai)) = spec.specs.get(run.spec_idx) else {
+            self.specs[a].run = Some(run);
+            self.finish_ro(a, t, report_spec, out);
+            return t;
         };
         let trig = &ai.ai_spec_stop_trigger;
         let obs = trig.tag_observation_trigger.clone().unwrap_or_default();
-        let ai_end = match trig.ai_spec_stop_trigger_type {
-            AiSpecStopTriggerType::Duration => {
-                Some(run.spec_started_us + u64::from(trig.duration_trigger) * 1000)
-            }
-            AiSpecStopTriggerType::GpiWithTimeout => trig
-                .gpi_trigger_value
-                .as_ref()
-                .filter(|g| g.timeout > 0)
-                .map(|g| run.spec_started_us + u64::from(g.timeout) * 1000),
-            AiSpecStopTriggerType::TagObservation => {
-                let timeout =
-                    (obs.timeout > 0).then(|| run.spec_started_us + u64::from(obs.timeout) * 1000);
-                let quiet = (obs.trigger_type
-                    == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout)
-                    .then(|| run.last_new_us + u64::from(obs.t) * 1000);
-                match (timeout, quiet) {
-                    (Some(x), Some(y)) => Some(x.min(y)),
-                    (x, y) => x.or(y),
-                }
-            }
-            _ => None,
+        let ai_end = ai_stop_end(trig, &obs, &run);
+        let mut end = self.step_bound(t, to, &run, ro_end, ai_end);
+        // An Impinj-class reader does not hold the reads of an inventory that nothing ends
+        // (neither its AISpec nor its ROSpec has a stop condition that can fire) forever when
+        // ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
+        let interval = ctx.profile.report_interval_us;
+        let periodic = interval > 0 && never_ends(report_spec, trig, stop, ai_end, ro_end);
+        if periodic {
+            end = end.min(run.last_report_us + interval);
+        }
+        // Phase and Doppler are worked out only when reported.
+        let want = Want {
+            phase: content.impinj.phase,
+            doppler: content.impinj.doppler,
         };
+        let until = [ai_end, ro_end].into_iter().flatten().min();
+        let plan = Plan::new(ctx, &run, ai, want, t, end, until);
+        let end = plan.slice.t1_us;
+        let rep = Reporting::new(spec.ro_spec_id, plan.ips, &content, report_spec, trig, &obs);
+        self.buffer.expect(rep.every_n);
+
+        let mut ai_done = ai_end.is_some_and(|e| end >= e);
+        let ro_done = ro_end.is_some_and(|e| end >= e);
+        let (reached, seen_enough) = self.run_slice(ctx, &mut run, &plan, &rep, t, out);
+        ai_done |= seen_enough;
+        if periodic {
+            self.report_on_interval(&mut run, reached, interval, out);
+        }
+        run.rotate(reached, plan.antennas.len());
+        ai_done |= observation_done(trig, &obs, &run, reached);
+        self.specs[a].run = Some(run);
+        if ro_done {
+            self.end_ai(a, reached, report_spec, out);
+            self.finish_ro(a, reached, report_spec, out);
+        } else if ai_done {
+            self.next_ai(a, reached, report_spec, out);
+        }
+        reached
+    }
+
+    /// Runs the slice of `plan` from `t`: one empty round if its antenna faces no tag, else
+    /// its reads, reported until the AISpec has seen the tags it stops at; the time reached
+    /// and whether it has.
+    fn run_slice(
+        &mut self,
+        ctx: &mut RunContext<'_>,
+        run: &mut Run,
+        plan: &Plan<'_>,
+        rep: &Reporting<'_>,
+        t: u64,
+        out: &mut Vec<Produced>,
+    ) -> (u64, bool) {
+        let slice = &plan.slice;
+        let end = slice.t1_us;
+        if let Some(idle) = self.idle_round(ctx, run, slice, plan.channel, t) {
+            // The dwell ends after the empty round whatever the caller's steps are.
+            run.slice_end_us = t + idle;
+            run.slice_idle = true;
+            return ((t + idle).min(end), false);
+        }
+        // The rest of an empty round, or nothing to run before the AISpec's setup is over.
+        if run.slice_idle || end <= slice.t0_us {
+            return (end, false);
+        }
+        let reads = match plan.channel {
+            // A single-target inventory carries the reader's flags from epoch to epoch, so it
+            // runs here, in time order, an epoch at a time.
+            _ if slice.air.suppresses() => self.take_flagged(slice.antenna, end),
+            Some(_) => ctx.model.inventory_with(
+                slice.antenna,
+                slice.t0_us,
+                end,
+                slice.power_dbm,
+                plan.channel,
+                slice.want,
+                &slice.air,
+            ),
+            None => self.prefetched(ctx, slice, run, &plan.antennas, plan.ips, plan.until),
+        };
+        for r in &reads {
+            if self.report_read(ctx, r, run, rep, slice, out) {
+                return ((r.time_us + 1).clamp(t + 1, end), true);
+            }
+        }
+        (end, false)
+    }
+
+    /// The end of a step from `t`: the caller's `to`, the slice's end, the stop triggers and
+    /// the next spec due, whichever comes first.
+    fn step_bound(
+        &self,
+        t: u64,
+        to: u64,
+        run: &Run,
+        ro_end: Option<u64>,
+        ai_end: Option<u64>,
+    ) -> u64 {
         let mut end = to.min(run.slice_end_us);
         if let Some(e) = ro_end {
             end = end.min(e);
@@ -125,75 +180,27 @@ impl Specs {
         if let Some(n) = self.next_start_after(t) {
             end = end.min(n.max(t + 1));
         }
-        // An Impinj-class reader does not hold the reads of an inventory that nothing ends
-        // (neither its AISpec nor its ROSpec has a stop condition that can fire) forever when
-        // ROReportTrigger 1 has N = 0: it reports them at the profile's interval.
-        let interval = ctx.profile.report_interval_us;
-        let periodic = interval > 0
-            && report_spec.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
-            && report_spec.n == 0
-            && ai_end.is_none()
-            && ro_end.is_none()
-            && matches!(
-                trig.ai_spec_stop_trigger_type,
-                AiSpecStopTriggerType::Null | AiSpecStopTriggerType::GpiWithTimeout
-            )
-            && matches!(
-                stop.ro_spec_stop_trigger_type,
-                RoSpecStopTriggerType::Null | RoSpecStopTriggerType::GpiWithTimeout
-            );
-        if periodic {
-            end = end.min(run.last_report_us + interval);
-        }
-        let mut end = end.max(t);
+        end
+    }
 
-        let antennas: Vec<u16> = if ai.antenna_ids.contains(&0) {
-            (1..=ctx.profile.antennas).collect()
-        } else {
-            ai.antenna_ids.clone()
-        };
-        let antenna = antennas[run.antenna_pos % antennas.len().max(1)];
-        let ips = ai.inventory_parameter_specs.first();
-        let ips_id = ips.map_or(0, |p| p.inventory_parameter_spec_id);
-        let power = antenna_power(ips, ctx.config, antenna);
-        // ImpinjFixedFrequencyList (mode 2, channel list) in the ROSpec's or the reader's
-        // antenna configuration restricts the channels, which rotate at the region's dwell.
-        let channels = fixed_channel_list(ips, ctx.config, antenna);
-        let hop = ctx.model.hop_schedule();
-        let channel = (!channels.is_empty())
-            .then(|| channels[((t / hop.dwell_us) % channels.len() as u64) as usize]);
-        if channel.is_some() {
-            end = end.min(hop.dwell_start(t) + hop.dwell_us).max(t);
-        }
-        let reports_on_n = report_spec.ro_report_trigger != RoReportTriggerType::None;
-        let aggregate = !(reports_on_n && report_spec.n == 1);
-        let n_trigger = usize::from(report_spec.n);
-        self.buffer.expect(if reports_on_n { n_trigger } else { 0 });
-
-        let mut reached = end;
-        let mut ai_done = ai_end.is_some_and(|e| end >= e);
-        let ro_done = ro_end.is_some_and(|e| end >= e);
-        let mut run = run;
-        // The reader's setup at the AISpec's start: no round before it is over.
-        let ready = run
-            .spec_started_us
-            .saturating_add(ctx.profile.aispec_setup_us);
-        let air_t = t.max(ready);
-        let mut air = super::air::air_for(ips, ctx.config, antenna);
-        air.gap_us = ctx.profile.round_gap_us as f64;
-        // The reader never leaves an AISpec's only antenna: its rounds run on from the first.
-        air.anchor_us = (antennas.len() == 1).then_some(ready);
-        let want = Want {
-            phase: content.impinj.phase,
-            doppler: content.impinj.doppler,
-        };
-        // An antenna facing no tag (by the field's bounds, or in a single-target inventory
-        // with no tag left in A) gets one empty round, then the reader moves to the next.
+    /// Whether the antenna of `slice` faces no tag (by the field's bounds, or in a
+    /// single-target inventory with no tag left in A): then the length of the one empty
+    /// round it gets before the reader moves to the next.
+    fn idle_round(
+        &mut self,
+        ctx: &mut RunContext<'_>,
+        run: &mut Run,
+        slice: &Slice,
+        channel: Option<u16>,
+        t: u64,
+    ) -> Option<u64> {
+        let (antenna, power, air) = (slice.antenna, slice.power_dbm, &slice.air);
+        let (air_t, end) = (slice.t0_us, slice.t1_us);
         let fresh = !run.slice_checked && end > t;
         let mut idle = None;
         if fresh {
             run.slice_checked = true;
-            idle = ctx.model.idle_us(antenna, t, power, channel, &air);
+            idle = ctx.model.idle_us(antenna, t, power, channel, air);
             let port = usize::from(antenna);
             if self.idle_antennas.len() <= port {
                 self.idle_antennas.resize(port + 1, false);
@@ -201,140 +208,101 @@ impl Specs {
             self.idle_antennas[port] = idle.is_some();
         }
         if air.suppresses() && end > air_t && idle.is_none() && !run.slice_idle {
-            let none_in_a = self.flagged_epoch(ctx, antenna, air_t, power, channel, want, &air);
+            let none_in_a =
+                self.flagged_epoch(ctx, antenna, air_t, power, channel, slice.want, air);
             if fresh && none_in_a {
                 idle = Some(air.empty_round_us());
             }
         }
-        if let Some(idle) = idle {
-            // The dwell ends after the empty round whatever the caller's steps are.
-            run.slice_end_us = t + idle;
-            run.slice_idle = true;
-            reached = (t + idle).min(end);
-        } else if run.slice_idle {
-            // The rest of an empty round.
-        } else if end > air_t {
-            // Phase and Doppler are worked out only when reported.
-            let slice = Slice {
-                antenna,
-                power_dbm: power,
-                t0_us: air_t,
-                t1_us: end,
-                want,
-                air,
-            };
-            let reads = match channel {
-                // A single-target inventory carries the reader's flags from epoch to epoch,
-                // so it runs here, in time order, an epoch at a time.
-                _ if air.suppresses() => self.take_flagged(antenna, end),
-                Some(_) => ctx
-                    .model
-                    .inventory_with(antenna, air_t, end, power, channel, want, &air),
-                None => {
-                    let until = [ai_end, ro_end].into_iter().flatten().min();
-                    self.prefetched(ctx, &slice, &run, &antennas, ips, until)
-                }
-            };
-            for r in reads {
-                if air.suppresses() {
-                    // Reported, so in B now (a read the stop trigger cuts off stays A).
-                    ctx.flags.read(r.tag, air.session, r.time_us);
-                }
-                let (op_spec_results, access_spec_id) =
-                    ctx.access.apply(ctx.model, r.tag, antenna, ro_id);
-                let o = Observation {
-                    epc: ctx.model.tag_epc(r.tag),
-                    ro_spec_id: ro_id,
-                    spec_index: (run.spec_idx + 1) as u16,
-                    inventory_parameter_spec_id: ips_id,
-                    antenna_id: r.antenna,
-                    channel_index: r.channel_index,
-                    rssi_dbm: r.rssi_dbm,
-                    phase_rad: r.phase_rad,
-                    doppler_hz: r.doppler_hz,
-                    utc_us: ctx.utc_epoch_us + r.time_us,
-                    uptime_us: r.time_us,
-                    op_spec_results,
-                    access_spec_id,
-                    tid: if content.impinj.serialized_tid {
-                        ctx.model.tag_tid(r.tag)
-                    } else {
-                        Vec::new()
-                    },
-                };
-                self.buffer.add(&o, &content, aggregate);
-                if run.seen.insert(r.tag) {
-                    run.last_new_us = r.time_us;
-                }
-                if reports_on_n && n_trigger > 0 && self.buffer.len() >= n_trigger {
-                    out.push(Produced::Reports(self.buffer.take()));
-                }
-                if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
-                    && obs.trigger_type == TagObservationTriggerType::UponSeeingNTagsOrTimeout
-                    && obs.number_of_tags > 0
-                    && run.seen.len() >= usize::from(obs.number_of_tags)
-                {
-                    reached = (r.time_us + 1).clamp(t + 1, end);
-                    ai_done = true;
-                    break;
-                }
-            }
+        idle
+    }
+
+    /// Reports read `r` of `slice` (its flag, AccessSpecs, the buffer, the N trigger) and
+    /// notes its tag as seen; whether the AISpec has now seen the tags it stops at.
+    #[inline]
+    fn report_read(
+        &mut self,
+        ctx: &mut RunContext<'_>,
+        r: &Read,
+        run: &mut Run,
+        rep: &Reporting<'_>,
+        slice: &Slice,
+        out: &mut Vec<Produced>,
+    ) -> bool {
+        if slice.air.suppresses() {
+            // Reported, so in B now (a read the stop trigger cuts off stays A).
+            ctx.flags.read(r.tag, slice.air.session, r.time_us);
         }
-        if periodic && reached >= run.last_report_us + interval {
+        let (op_spec_results, access_spec_id) =
+            ctx.access.apply(ctx.model, r.tag, slice.antenna, rep.ro_id);
+        let o = Observation {
+            epc: ctx.model.tag_epc(r.tag),
+            ro_spec_id: rep.ro_id,
+            spec_index: (run.spec_idx + 1) as u16,
+            inventory_parameter_spec_id: rep.ips_id,
+            antenna_id: r.antenna,
+            channel_index: r.channel_index,
+            rssi_dbm: r.rssi_dbm,
+            phase_rad: r.phase_rad,
+            doppler_hz: r.doppler_hz,
+            utc_us: ctx.utc_epoch_us + r.time_us,
+            uptime_us: r.time_us,
+            op_spec_results,
+            access_spec_id,
+            tid: if rep.content.impinj.serialized_tid {
+                ctx.model.tag_tid(r.tag)
+            } else {
+                Vec::new()
+            },
+        };
+        self.buffer.add(&o, rep.content, rep.aggregate);
+        if run.seen.insert(r.tag) {
+            run.last_new_us = r.time_us;
+        }
+        if rep.every_n > 0 && self.buffer.len() >= rep.every_n {
+            out.push(Produced::Reports(self.buffer.take()));
+        }
+        rep.stop_at_tags.is_some_and(|n| run.seen.len() >= n)
+    }
+
+    /// Reports what is buffered if the step reached the end of the report interval.
+    fn report_on_interval(
+        &mut self,
+        run: &mut Run,
+        reached: u64,
+        interval: u64,
+        out: &mut Vec<Produced>,
+    ) {
+        if reached >= run.last_report_us + interval {
             run.last_report_us = reached;
             if !self.buffer.is_empty() {
                 out.push(Produced::Reports(self.buffer.take()));
             }
         }
-        // Antenna rotation.
-        if reached >= run.slice_end_us {
-            run.antenna_pos += 1;
-            if run.antenna_pos % antennas.len().max(1) == 0 {
-                run.rounds += 1;
-            }
-            run.slice_end_us = dwell_end(reached);
-            run.slice_checked = false;
-            run.slice_idle = false;
+    }
+
+    /// Ends the current AISpec of active spec `a` at `at` and moves to its next (ending the
+    /// ROSpec after its last).
+    fn next_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+        self.end_ai(a, at, report, out);
+        let s = &mut self.specs[a];
+        let run = s
+            .run
+            .as_mut()
+            .expect("an active spec has a run (set by begin)");
+        run.spec_idx += 1;
+        run.spec_started_us = at;
+        run.seen.clear();
+        run.last_new_us = at;
+        run.rounds = 0;
+        run.last_report_us = at;
+        run.antenna_pos = 0;
+        run.slice_end_us = dwell_end(at);
+        run.slice_checked = false;
+        run.slice_idle = false;
+        if run.spec_idx >= s.spec.specs.len() {
+            self.finish_ro(a, at, report, out);
         }
-        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
-            && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
-            && obs.number_of_attempts > 0
-            && run.rounds >= u32::from(obs.number_of_attempts)
-        {
-            ai_done = true;
-        }
-        if trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
-            && obs.trigger_type == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout
-            && reached >= run.last_new_us + u64::from(obs.t) * 1000
-        {
-            ai_done = true;
-        }
-        self.specs[a].run = Some(run);
-        if ro_done {
-            self.end_ai(a, reached, report_spec, out);
-            self.finish_ro(a, reached, report_spec, out);
-        } else if ai_done {
-            self.end_ai(a, reached, report_spec, out);
-            let s = &mut self.specs[a];
-            let run = s
-                .run
-                .as_mut()
-                .expect("an active spec has a run (set by begin)");
-            run.spec_idx += 1;
-            run.spec_started_us = reached;
-            run.seen.clear();
-            run.last_new_us = reached;
-            run.rounds = 0;
-            run.last_report_us = reached;
-            run.antenna_pos = 0;
-            run.slice_end_us = dwell_end(reached);
-            run.slice_checked = false;
-            run.slice_idle = false;
-            if run.spec_idx >= s.spec.specs.len() {
-                self.finish_ro(a, reached, report_spec, out);
-            }
-        }
-        reached
     }
 
     /// The reads of `slice`, from the physics computed ahead, with the look-ahead hint of
@@ -492,4 +460,255 @@ pub(super) fn fixed_channel_list(
             _ => None,
         })
         .unwrap_or_default()
+}
+
+impl Run {
+    /// Moves to the next antenna if the step reached the end of the current one's slice
+    /// (a round of the AISpec when back at the first).
+    fn rotate(&mut self, reached: u64, antennas: usize) {
+        if reached >= self.slice_end_us {
+            self.antenna_pos += 1;
+            if self.antenna_pos % antennas.max(1) == 0 {
+                self.rounds += 1;
+            }
+            self.slice_end_us = dwell_end(reached);
+            self.slice_checked = false;
+            self.slice_idle = false;
+        }
+    }
+}
+
+/// What a step runs: the slice of the current antenna and what its reads depend on.
+struct Plan<'s> {
+    /// The antenna, its power and air settings, from the end of the AISpec's setup to the
+    /// step's end.
+    slice: Slice,
+    /// The channel the antenna is pinned to, if its channel list is.
+    channel: Option<u16>,
+    /// The AISpec's antennas in turn.
+    antennas: Vec<u16>,
+    /// The AISpec's InventoryParameterSpec.
+    ips: Option<&'s InventoryParameterSpec>,
+    /// The AISpec's or ROSpec's end, when known.
+    until: Option<u64>,
+}
+
+impl<'s> Plan<'s> {
+    /// The plan of a step of `ai` from `t` to `end` (at most) on the run's current antenna.
+    fn new(
+        ctx: &RunContext<'_>,
+        run: &Run,
+        ai: &'s AiSpec,
+        want: Want,
+        t: u64,
+        end: u64,
+        until: Option<u64>,
+    ) -> Self {
+        let antennas = ai_antennas(ai, ctx.profile.antennas);
+        let antenna = antennas[run.antenna_pos % antennas.len().max(1)];
+        let ips = ai.inventory_parameter_specs.first();
+        let power = antenna_power(ips, ctx.config, antenna);
+        let hop = ctx.model.hop_schedule();
+        let channel = pinned_channel(ips, ctx.config, antenna, &hop, t);
+        let mut end = end.max(t);
+        if channel.is_some() {
+            end = end.min(hop.dwell_start(t) + hop.dwell_us).max(t);
+        }
+        // The reader's setup at the AISpec's start: no round before it is over.
+        let ready = run
+            .spec_started_us
+            .saturating_add(ctx.profile.aispec_setup_us);
+        // The reader never leaves an AISpec's only antenna: its rounds run on from the first.
+        let anchor_us = (antennas.len() == 1).then_some(ready);
+        let slice = Slice {
+            antenna,
+            power_dbm: power,
+            t0_us: t.max(ready),
+            t1_us: end,
+            want,
+            air: step_air(ctx, ips, antenna, anchor_us),
+        };
+        Plan {
+            slice,
+            channel,
+            antennas,
+            ips,
+            until,
+        }
+    }
+}
+
+/// How a step reports its reads: the IDs they carry, what they carry and the triggers that
+/// count them.
+struct Reporting<'c> {
+    ro_id: u32,
+    ips_id: u16,
+    content: &'c Content,
+    /// Whether reads of the same tag are aggregated into one TagReportData.
+    aggregate: bool,
+    /// Reports each time this many reads are buffered (0: not on a count).
+    every_n: usize,
+    /// Ends the AISpec once it has seen this many tags.
+    stop_at_tags: Option<usize>,
+}
+
+impl<'c> Reporting<'c> {
+    /// The reporting of the AISpec with these stop triggers under `report_spec`.
+    fn new(
+        ro_id: u32,
+        ips: Option<&InventoryParameterSpec>,
+        content: &'c Content,
+        report_spec: &RoReportSpec,
+        trig: &AiSpecStopTrigger,
+        obs: &TagObservationTrigger,
+    ) -> Self {
+        let reports_on_n = report_spec.ro_report_trigger != RoReportTriggerType::None;
+        Reporting {
+            ro_id,
+            ips_id: ips.map_or(0, |p| p.inventory_parameter_spec_id),
+            content,
+            aggregate: !(reports_on_n && report_spec.n == 1),
+            every_n: if reports_on_n {
+                usize::from(report_spec.n)
+            } else {
+                0
+            },
+            stop_at_tags: (trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation
+                && obs.trigger_type == TagObservationTriggerType::UponSeeingNTagsOrTimeout
+                && obs.number_of_tags > 0)
+                .then(|| usize::from(obs.number_of_tags)),
+        }
+    }
+}
+
+/// What the reads carry under `report_spec` (the Impinj part only with extensions enabled).
+fn report_content(report_spec: &RoReportSpec, impinj: bool) -> Content {
+    Content {
+        selector: report_spec.tag_report_content_selector.clone(),
+        impinj: if impinj {
+            ImpinjContent::from_report_spec(report_spec)
+        } else {
+            ImpinjContent::default()
+        },
+    }
+}
+
+/// When the ROSpec's stop trigger ends a run that started at `started_us`, if it can.
+fn ro_stop_end(stop: &RoSpecStopTrigger, started_us: u64) -> Option<u64> {
+    match stop.ro_spec_stop_trigger_type {
+        RoSpecStopTriggerType::Duration => {
+            Some(started_us + u64::from(stop.duration_trigger_value) * 1000)
+        }
+        RoSpecStopTriggerType::GpiWithTimeout => stop
+            .gpi_trigger_value
+            .as_ref()
+            .filter(|g| g.timeout > 0)
+            .map(|g| started_us + u64::from(g.timeout) * 1000),
+        _ => None,
+    }
+}
+
+/// When the AISpec's stop trigger ends its current run, if it can (as known so far).
+fn ai_stop_end(trig: &AiSpecStopTrigger, obs: &TagObservationTrigger, run: &Run) -> Option<u64> {
+    match trig.ai_spec_stop_trigger_type {
+        AiSpecStopTriggerType::Duration => {
+            Some(run.spec_started_us + u64::from(trig.duration_trigger) * 1000)
+        }
+        AiSpecStopTriggerType::GpiWithTimeout => trig
+            .gpi_trigger_value
+            .as_ref()
+            .filter(|g| g.timeout > 0)
+            .map(|g| run.spec_started_us + u64::from(g.timeout) * 1000),
+        AiSpecStopTriggerType::TagObservation => {
+            let timeout =
+                (obs.timeout > 0).then(|| run.spec_started_us + u64::from(obs.timeout) * 1000);
+            let quiet = (obs.trigger_type
+                == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout)
+                .then(|| run.last_new_us + u64::from(obs.t) * 1000);
+            match (timeout, quiet) {
+                (Some(x), Some(y)) => Some(x.min(y)),
+                (x, y) => x.or(y),
+            }
+        }
+        _ => None,
+    }
+}
+
+/// Whether an inventory reports on ROReportTrigger 1 with N = 0 and nothing ends it
+/// (neither its AISpec nor its ROSpec has a stop condition that can fire).
+fn never_ends(
+    report_spec: &RoReportSpec,
+    trig: &AiSpecStopTrigger,
+    stop: &RoSpecStopTrigger,
+    ai_end: Option<u64>,
+    ro_end: Option<u64>,
+) -> bool {
+    report_spec.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
+        && report_spec.n == 0
+        && ai_end.is_none()
+        && ro_end.is_none()
+        && matches!(
+            trig.ai_spec_stop_trigger_type,
+            AiSpecStopTriggerType::Null | AiSpecStopTriggerType::GpiWithTimeout
+        )
+        && matches!(
+            stop.ro_spec_stop_trigger_type,
+            RoSpecStopTriggerType::Null | RoSpecStopTriggerType::GpiWithTimeout
+        )
+}
+
+/// Whether the AISpec's tag observation trigger fires on its attempts or its quiet time
+/// once the step has reached `reached`.
+fn observation_done(
+    trig: &AiSpecStopTrigger,
+    obs: &TagObservationTrigger,
+    run: &Run,
+    reached: u64,
+) -> bool {
+    let observing = trig.ai_spec_stop_trigger_type == AiSpecStopTriggerType::TagObservation;
+    let attempts = observing
+        && obs.trigger_type == TagObservationTriggerType::NAttemptsToSeeAllTagsInFovOrTimeout
+        && obs.number_of_attempts > 0
+        && run.rounds >= u32::from(obs.number_of_attempts);
+    let quiet = observing
+        && obs.trigger_type == TagObservationTriggerType::UponSeeingNoMoreNewTagsForTmsOrTimeout
+        && reached >= run.last_new_us + u64::from(obs.t) * 1000;
+    attempts || quiet
+}
+
+/// The antenna ports of `ai` (0: all the reader's `count`).
+fn ai_antennas(ai: &AiSpec, count: u16) -> Vec<u16> {
+    if ai.antenna_ids.contains(&0) {
+        (1..=count).collect()
+    } else {
+        ai.antenna_ids.clone()
+    }
+}
+
+/// The channel `antenna` is pinned to at `t`, if an ImpinjFixedFrequencyList (mode 2,
+/// channel list) in the ROSpec's or the reader's antenna configuration restricts its
+/// channels: they rotate at the region's dwell.
+fn pinned_channel(
+    ips: Option<&InventoryParameterSpec>,
+    config: &ReaderConfig,
+    antenna: u16,
+    hop: &HopSchedule,
+    t: u64,
+) -> Option<u16> {
+    let channels = fixed_channel_list(ips, config, antenna);
+    (!channels.is_empty()).then(|| channels[((t / hop.dwell_us) % channels.len() as u64) as usize])
+}
+
+/// How the reader inventories on `antenna` in this step: the spec's air settings, the
+/// profile's pause between rounds and the anchor of an antenna it never leaves.
+fn step_air(
+    ctx: &RunContext<'_>,
+    ips: Option<&InventoryParameterSpec>,
+    antenna: u16,
+    anchor_us: Option<u64>,
+) -> Air {
+    let mut air = super::air::air_for(ips, ctx.config, antenna);
+    air.gap_us = ctx.profile.round_gap_us as f64;
+    air.anchor_us = anchor_us;
+    air
 }
