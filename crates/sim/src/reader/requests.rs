@@ -38,25 +38,44 @@ impl Reader {
             MessageBody::GetSupportedVersion(_) | MessageBody::SetProtocolVersion(_)
         );
         if msg.version != self.version && !negotiation {
-            // A message in another version than the session's: LLRP 1.1 says answer with
-            // M_UnsupportedVersion (and a 1.0.1 reader does not know 1.1 at all).
-            let status = LlrpStatus::new(
-                StatusCode::M_UnsupportedVersion,
-                format!("session uses LLRP version {}", self.version),
-            );
-            let body = msg
-                .body
-                .kind()
-                .error_response(status.clone())
-                .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)));
-            out.push(reply.to(body));
+            out.push(reply.to(self.wrong_version(&msg.body)));
             return out;
         }
         self.specs.default_trigger = self.config.ro_report_spec.ro_report_trigger;
+        let unhandled = self
+            .session_request(msg.body, reply, &mut out)
+            .and_then(|body| self.config_request(body, reply, wall_ms, &mut out))
+            .and_then(|body| self.rospec_request(body, reply, &mut out))
+            .and_then(|body| self.access_request(body, reply, &mut out));
+        if let Some(other) = unhandled {
+            out.push(reply.to(unsupported(&other, msg.version)));
+        }
+        out
+    }
+
+    /// The answer to a message in another version than the session's: LLRP 1.1 says answer
+    /// with M_UnsupportedVersion (and a 1.0.1 reader does not know 1.1 at all).
+    fn wrong_version(&self, body: &MessageBody) -> MessageBody {
+        let status = LlrpStatus::new(
+            StatusCode::M_UnsupportedVersion,
+            format!("session uses LLRP version {}", self.version),
+        );
+        body.kind()
+            .error_response(status.clone())
+            .unwrap_or_else(|| MessageBody::ErrorMessage(error_message(status)))
+    }
+
+    /// Answers a request about the session (versions, closing, keepalives, held events,
+    /// extensions); any other request is handed back.
+    fn session_request(
+        &mut self,
+        body: MessageBody,
+        reply: Reply,
+        out: &mut Vec<Output>,
+    ) -> Option<MessageBody> {
         let ok = LlrpStatus::success;
         use MessageBody as B;
-        match msg.body {
-            // The session.
+        match body {
             B::GetSupportedVersion(_) => out.push(reply.to(GetSupportedVersionResponse {
                 current_version: self.version,
                 supported_version: 2,
@@ -81,57 +100,96 @@ impl Reader {
                 self.impinj = true;
                 out.push(reply.to(ImpinjEnableExtensionsResponse::with_status(ok())));
             }
-            // Capabilities and configuration.
+            other => return Some(other),
+        }
+        None
+    }
+
+    /// Answers a request about the reader's capabilities or configuration; any other request
+    /// is handed back.
+    fn config_request(
+        &mut self,
+        body: MessageBody,
+        reply: Reply,
+        wall_ms: u64,
+        out: &mut Vec<Output>,
+    ) -> Option<MessageBody> {
+        use MessageBody as B;
+        match body {
             B::GetReaderCapabilities(m) => out.push(reply.to(self.capabilities(&m))),
             B::GetReaderConfig(m) => out.push(reply.to(self.configuration(&m))),
             B::SetReaderConfig(m) => {
                 let status = self.set_configuration(*m, wall_ms);
                 out.push(reply.to(SetReaderConfigResponse::with_status(status)));
             }
-            B::ImpinjSaveSettings(_) => {
-                out.push(reply.to(ImpinjSaveSettingsResponse::with_status(ok())))
-            }
-            // ROSpecs and their reports.
+            B::ImpinjSaveSettings(_) => out.push(reply.to(
+                ImpinjSaveSettingsResponse::with_status(LlrpStatus::success()),
+            )),
+            other => return Some(other),
+        }
+        None
+    }
+
+    /// Answers a request about ROSpecs or their reports; any other request is handed back.
+    fn rospec_request(
+        &mut self,
+        body: MessageBody,
+        reply: Reply,
+        out: &mut Vec<Output>,
+    ) -> Option<MessageBody> {
+        use MessageBody as B;
+        match body {
             B::AddRospec(m) => {
                 let status = self.specs.add(&self.profile, m.ro_spec, self.version);
                 out.push(reply.to(AddRospecResponse::with_status(status)));
             }
             B::DeleteRospec(m) => {
-                self.change_rospecs::<DeleteRospecResponse>(reply, &mut out, |s, now| {
+                self.change_rospecs::<DeleteRospecResponse>(reply, out, |s, now| {
                     s.delete(m.ro_spec_id, now)
                 })
             }
             B::StartRospec(m) => {
-                self.change_rospecs::<StartRospecResponse>(reply, &mut out, |s, now| {
+                self.change_rospecs::<StartRospecResponse>(reply, out, |s, now| {
                     s.start(m.ro_spec_id, now)
                 })
             }
-            B::StopRospec(m) => {
-                self.change_rospecs::<StopRospecResponse>(reply, &mut out, |s, now| {
-                    s.stop(m.ro_spec_id, now)
-                })
-            }
+            B::StopRospec(m) => self.change_rospecs::<StopRospecResponse>(reply, out, |s, now| {
+                s.stop(m.ro_spec_id, now)
+            }),
             B::EnableRospec(m) => {
-                self.change_rospecs::<EnableRospecResponse>(reply, &mut out, |s, now| {
+                self.change_rospecs::<EnableRospecResponse>(reply, out, |s, now| {
                     s.enable(m.ro_spec_id, now)
                 })
             }
             B::DisableRospec(m) => {
-                self.change_rospecs::<DisableRospecResponse>(reply, &mut out, |s, now| {
+                self.change_rospecs::<DisableRospecResponse>(reply, out, |s, now| {
                     s.disable(m.ro_spec_id, now)
                 })
             }
             B::GetRospecs(_) => out.push(reply.to(GetRospecsResponse {
-                llrp_status: ok(),
+                llrp_status: LlrpStatus::success(),
                 ro_specs: self.specs.list(),
                 ..Default::default()
             })),
             B::GetReport(_) => {
                 // No response message: the buffered reports are the answer.
                 let reports = self.specs.take_reports();
-                self.send_reports(reports, &mut out, true);
+                self.send_reports(reports, out, true);
             }
-            // AccessSpecs.
+            other => return Some(other),
+        }
+        None
+    }
+
+    /// Answers a request about AccessSpecs; any other request is handed back.
+    fn access_request(
+        &mut self,
+        body: MessageBody,
+        reply: Reply,
+        out: &mut Vec<Output>,
+    ) -> Option<MessageBody> {
+        use MessageBody as B;
+        match body {
             B::AddAccessspec(m) => {
                 let status = self.access.add(&self.profile, m.access_spec);
                 out.push(reply.to(AddAccessspecResponse::with_status(status)));
@@ -149,26 +207,13 @@ impl Reader {
                 out.push(reply.to(DisableAccessspecResponse::with_status(status)));
             }
             B::GetAccessspecs(_) => out.push(reply.to(GetAccessspecsResponse {
-                llrp_status: ok(),
+                llrp_status: LlrpStatus::success(),
                 access_specs: self.access.list(),
                 ..Default::default()
             })),
-            other => {
-                // Reader-to-client messages, CLIENT_REQUEST_OP answers without a request, other
-                // vendors' CUSTOM_MESSAGEs and unknown types.
-                let code = if msg.version >= 2 && other.kind().is_from_reader() {
-                    StatusCode::M_UnexpectedMessage
-                } else {
-                    StatusCode::M_UnsupportedMessage
-                };
-                let status = LlrpStatus::new(
-                    code,
-                    format!("message {} is not supported here", other.name()),
-                );
-                out.push(reply.to(MessageBody::ErrorMessage(error_message(status))));
-            }
+            other => return Some(other),
         }
-        out
+        None
     }
 
     /// SET_PROTOCOL_VERSION: the response goes out in the request's version, later messages
@@ -237,4 +282,20 @@ impl Reader {
         self.emit(events, out);
         out.push(reply.to(R::with_status(status)));
     }
+}
+
+/// The ERROR_MESSAGE for a request the reader does not take: reader-to-client messages,
+/// CLIENT_REQUEST_OP answers without a request, other vendors' CUSTOM_MESSAGEs and unknown
+/// types.
+fn unsupported(body: &MessageBody, version: u8) -> MessageBody {
+    let code = if version >= 2 && body.kind().is_from_reader() {
+        StatusCode::M_UnexpectedMessage
+    } else {
+        StatusCode::M_UnsupportedMessage
+    };
+    let status = LlrpStatus::new(
+        code,
+        format!("message {} is not supported here", body.name()),
+    );
+    MessageBody::ErrorMessage(error_message(status))
 }
