@@ -134,18 +134,8 @@ impl ReaderConfig {
         };
         let want =
             |k: ConfigRequest| m.requested_data == ConfigRequest::All || m.requested_data == k;
-        if !m.requested_data.is_known() {
-            r.llrp_status = field_error(1, StatusCode::A_OutOfRange, "RequestedData");
-            return r;
-        }
-        if m.antenna_id > p.antennas {
-            r.llrp_status = field_error(0, StatusCode::A_OutOfRange, "AntennaID");
-            return r;
-        }
-        if (m.gpi_port_num > 4 || m.gpo_port_num > 4)
-            && (want(ConfigRequest::GpiPortCurrentState) || want(ConfigRequest::GpoWriteData))
-        {
-            r.llrp_status = field_error(2, StatusCode::A_OutOfRange, "GPI/GPO port");
+        if let Some(status) = get_error(p, m) {
+            r.llrp_status = status;
             return r;
         }
         let antenna_ok = |id: u16| m.antenna_id == 0 || m.antenna_id == id;
@@ -157,19 +147,7 @@ impl ReaderConfig {
             });
         }
         if want(ConfigRequest::AntennaProperties) {
-            r.antenna_properties = (1..=p.antennas)
-                .filter(|&a| antenna_ok(a))
-                .map(|a| AntennaProperties {
-                    antenna_connected: true,
-                    antenna_id: a,
-                    antenna_gain: p
-                        .antenna_gain_dbi
-                        .get(usize::from(a - 1))
-                        .map(|g| (g * 100.0).round() as i16)
-                        .unwrap_or(0),
-                    ..Default::default()
-                })
-                .collect();
+            r.antenna_properties = antenna_properties(p, antenna_ok);
         }
         if want(ConfigRequest::AntennaConfiguration) {
             r.antenna_configuration = self
@@ -183,17 +161,7 @@ impl ReaderConfig {
             r.ro_report_spec = Some(self.ro_report_spec.clone());
         }
         if want(ConfigRequest::ReaderEventNotificationSpec) {
-            r.reader_event_notification_spec = Some(ReaderEventNotificationSpec {
-                event_notification_state: EVENT_TYPES[..9]
-                    .iter()
-                    .map(|&t| EventNotificationState {
-                        event_type: t,
-                        notification_state: self.event_enabled(t),
-                        ..Default::default()
-                    })
-                    .collect(),
-                ..Default::default()
-            });
+            r.reader_event_notification_spec = Some(self.event_notification_spec());
         }
         if want(ConfigRequest::AccessReportSpec) {
             r.access_report_spec = Some(self.access_report_spec.clone());
@@ -208,31 +176,31 @@ impl ReaderConfig {
             r.keepalive_spec = Some(self.keepalive.clone());
         }
         if want(ConfigRequest::GpiPortCurrentState) {
-            r.gpi_port_current_state = (1..=4)
-                .filter(|&g| m.gpi_port_num == 0 || m.gpi_port_num == g)
-                .map(|g| GpiPortCurrentState {
-                    gpi_port_num: g,
-                    config: true,
-                    state: 0,
-                    ..Default::default()
-                })
-                .collect();
+            r.gpi_port_current_state = gpi_port_states(m.gpi_port_num);
         }
         if want(ConfigRequest::GpoWriteData) {
-            r.gpo_write_data = (1..=4)
-                .filter(|&g| m.gpo_port_num == 0 || m.gpo_port_num == g)
-                .map(|g| GpoWriteData {
-                    gpo_port_number: g,
-                    gpo_data: false,
-                    ..Default::default()
-                })
-                .collect();
+            r.gpo_write_data = gpo_write_data(m.gpo_port_num);
         }
         if want(ConfigRequest::EventsAndReports) {
             r.events_and_reports = Some(self.events_and_reports.clone());
         }
         let _ = now_us;
         r
+    }
+
+    /// The notification state of the event types GET_READER_CONFIG reports.
+    fn event_notification_spec(&self) -> ReaderEventNotificationSpec {
+        ReaderEventNotificationSpec {
+            event_notification_state: EVENT_TYPES[..9]
+                .iter()
+                .map(|&t| EventNotificationState {
+                    event_type: t,
+                    notification_state: self.event_enabled(t),
+                    ..Default::default()
+                })
+                .collect(),
+            ..Default::default()
+        }
     }
 
     /// Applies SET_READER_CONFIG; nothing changes unless the whole request is valid.
@@ -242,35 +210,21 @@ impl ReaderConfig {
         } else {
             self.clone()
         };
+        if let Err(status) = next.apply(p, &m) {
+            return status;
+        }
+        next.state_value = next.state_value.wrapping_add(1);
+        *self = next;
+        LlrpStatus::success()
+    }
+
+    /// Applies the parts of SET_READER_CONFIG in turn; the error of the first invalid one.
+    fn apply(&mut self, p: &ReaderProfile, m: &SetReaderConfig) -> Result<(), LlrpStatus> {
         if let Some(spec) = &m.reader_event_notification_spec {
-            for s in &spec.event_notification_state {
-                if !s.event_type.is_known() {
-                    return param_field_error(244, 245, 0, StatusCode::A_OutOfRange);
-                }
-                next.events[usize::from(s.event_type.value())] = s.notification_state;
-            }
+            self.set_events(spec)?;
         }
         for c in &m.antenna_configuration {
-            if let Err(s) = validate_antenna_config(p, c) {
-                return s;
-            }
-            let targets: Vec<u16> = if c.antenna_id == 0 {
-                (1..=p.antennas).collect()
-            } else {
-                vec![c.antenna_id]
-            };
-            for a in targets {
-                let slot = &mut next.antennas[usize::from(a - 1)];
-                if let Some(rx) = &c.rf_receiver {
-                    slot.rf_receiver = Some(rx.clone());
-                }
-                if let Some(tx) = &c.rf_transmitter {
-                    slot.rf_transmitter = Some(tx.clone());
-                }
-                if !c.c1g2_inventory_command.is_empty() {
-                    slot.c1g2_inventory_command = c.c1g2_inventory_command.clone();
-                }
-            }
+            self.set_antenna(p, c)?;
         }
         if !m.antenna_properties.is_empty() {
             // CanSetAntennaProperties is 0, as on Impinj readers.
@@ -279,45 +233,148 @@ impl ReaderConfig {
                 "antenna properties cannot be set",
             );
             s.parameter_error = Some(ParameterError::new(221, StatusCode::P_UnsupportedParameter));
-            return s;
+            return Err(s);
         }
         if let Some(r) = &m.ro_report_spec {
             if r.ro_report_trigger.value() > 2 {
-                return param_field_error(237, 0, 0, StatusCode::A_OutOfRange);
+                return Err(param_field_error(237, 0, 0, StatusCode::A_OutOfRange));
             }
-            next.ro_report_spec = r.clone();
+            self.ro_report_spec = r.clone();
         }
         if let Some(a) = &m.access_report_spec {
             if !a.access_report_trigger.is_known() {
-                return param_field_error(239, 0, 0, StatusCode::A_OutOfRange);
+                return Err(param_field_error(239, 0, 0, StatusCode::A_OutOfRange));
             }
-            next.access_report_spec = a.clone();
+            self.access_report_spec = a.clone();
         }
         if let Some(k) = &m.keepalive_spec {
             if !k.keepalive_trigger_type.is_known() {
-                return param_field_error(220, 0, 0, StatusCode::A_OutOfRange);
+                return Err(param_field_error(220, 0, 0, StatusCode::A_OutOfRange));
             }
-            next.keepalive = k.clone();
+            self.keepalive = k.clone();
         }
-        if !m.gpo_write_data.is_empty() || !m.gpi_port_current_state.is_empty() {
-            for g in &m.gpo_write_data {
-                if g.gpo_port_number == 0 || g.gpo_port_number > 4 {
-                    return param_field_error(219, 0, 0, StatusCode::A_OutOfRange);
-                }
-            }
-            for g in &m.gpi_port_current_state {
-                if g.gpi_port_num == 0 || g.gpi_port_num > 4 {
-                    return param_field_error(225, 0, 0, StatusCode::A_OutOfRange);
-                }
-            }
-        }
+        check_gpio(m)?;
         if let Some(e) = &m.events_and_reports {
-            next.events_and_reports = e.clone();
+            self.events_and_reports = e.clone();
         }
-        next.state_value = next.state_value.wrapping_add(1);
-        *self = next;
-        LlrpStatus::success()
+        Ok(())
     }
+
+    /// Turns the event notifications of `spec` on or off.
+    fn set_events(&mut self, spec: &ReaderEventNotificationSpec) -> Result<(), LlrpStatus> {
+        for s in &spec.event_notification_state {
+            if !s.event_type.is_known() {
+                return Err(param_field_error(244, 245, 0, StatusCode::A_OutOfRange));
+            }
+            self.events[usize::from(s.event_type.value())] = s.notification_state;
+        }
+        Ok(())
+    }
+
+    /// Sets the antennas `c` is for (0: all) to the parts of `c` it carries.
+    fn set_antenna(
+        &mut self,
+        p: &ReaderProfile,
+        c: &AntennaConfiguration,
+    ) -> Result<(), LlrpStatus> {
+        validate_antenna_config(p, c)?;
+        let targets: Vec<u16> = if c.antenna_id == 0 {
+            (1..=p.antennas).collect()
+        } else {
+            vec![c.antenna_id]
+        };
+        for a in targets {
+            let slot = &mut self.antennas[usize::from(a - 1)];
+            if let Some(rx) = &c.rf_receiver {
+                slot.rf_receiver = Some(rx.clone());
+            }
+            if let Some(tx) = &c.rf_transmitter {
+                slot.rf_transmitter = Some(tx.clone());
+            }
+            if !c.c1g2_inventory_command.is_empty() {
+                slot.c1g2_inventory_command = c.c1g2_inventory_command.clone();
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What makes a GET_READER_CONFIG invalid: an unknown RequestedData, an antenna the reader
+/// lacks, or a GPI/GPO port it lacks when ports are asked for.
+fn get_error(p: &ReaderProfile, m: &GetReaderConfig) -> Option<LlrpStatus> {
+    let want = |k: ConfigRequest| m.requested_data == ConfigRequest::All || m.requested_data == k;
+    if !m.requested_data.is_known() {
+        return Some(field_error(1, StatusCode::A_OutOfRange, "RequestedData"));
+    }
+    if m.antenna_id > p.antennas {
+        return Some(field_error(0, StatusCode::A_OutOfRange, "AntennaID"));
+    }
+    if (m.gpi_port_num > 4 || m.gpo_port_num > 4)
+        && (want(ConfigRequest::GpiPortCurrentState) || want(ConfigRequest::GpoWriteData))
+    {
+        return Some(field_error(2, StatusCode::A_OutOfRange, "GPI/GPO port"));
+    }
+    None
+}
+
+/// The AntennaProperties of the reader's antennas that `antenna_ok` selects.
+fn antenna_properties(
+    p: &ReaderProfile,
+    antenna_ok: impl Fn(u16) -> bool,
+) -> Vec<AntennaProperties> {
+    (1..=p.antennas)
+        .filter(|&a| antenna_ok(a))
+        .map(|a| AntennaProperties {
+            antenna_connected: true,
+            antenna_id: a,
+            antenna_gain: p
+                .antenna_gain_dbi
+                .get(usize::from(a - 1))
+                .map(|g| (g * 100.0).round() as i16)
+                .unwrap_or(0),
+            ..Default::default()
+        })
+        .collect()
+}
+
+/// The state of GPI port `port` (0: of all four).
+fn gpi_port_states(port: u16) -> Vec<GpiPortCurrentState> {
+    (1..=4)
+        .filter(|&g| port == 0 || port == g)
+        .map(|g| GpiPortCurrentState {
+            gpi_port_num: g,
+            config: true,
+            state: 0,
+            ..Default::default()
+        })
+        .collect()
+}
+
+/// The data written to GPO port `port` (0: to all four).
+fn gpo_write_data(port: u16) -> Vec<GpoWriteData> {
+    (1..=4)
+        .filter(|&g| port == 0 || port == g)
+        .map(|g| GpoWriteData {
+            gpo_port_number: g,
+            gpo_data: false,
+            ..Default::default()
+        })
+        .collect()
+}
+
+/// Checks the GPO data and GPI states of a SET_READER_CONFIG name ports 1–4.
+fn check_gpio(m: &SetReaderConfig) -> Result<(), LlrpStatus> {
+    for g in &m.gpo_write_data {
+        if g.gpo_port_number == 0 || g.gpo_port_number > 4 {
+            return Err(param_field_error(219, 0, 0, StatusCode::A_OutOfRange));
+        }
+    }
+    for g in &m.gpi_port_current_state {
+        if g.gpi_port_num == 0 || g.gpi_port_num > 4 {
+            return Err(param_field_error(225, 0, 0, StatusCode::A_OutOfRange));
+        }
+    }
+    Ok(())
 }
 
 /// Checks an AntennaConfiguration against the reader (antenna, power index, hop table).
