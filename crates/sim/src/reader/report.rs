@@ -332,52 +332,62 @@ pub fn build(o: &Observation, c: &Content) -> TagReportData {
     if s.enable_tag_seen_count {
         t.tag_seen_count = Some(TagSeenCount(1));
     }
-    for m in &s.air_protocol_epc_memory_selector {
-        if m.enable_pc_bits {
-            t.air_protocol_tag_data
-                .push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.epc.pc())));
-        }
-        if m.enable_crc {
-            t.air_protocol_tag_data
-                .push(AirProtocolTagData::C1g2Crc(C1g2Crc(gen2_crc(
-                    o.epc.pc(),
-                    o.epc.as_bytes(),
-                ))));
-        }
-    }
+    add_air_protocol_data(&mut t.air_protocol_tag_data, o, s);
     if s.enable_access_spec_id && o.access_spec_id != 0 {
         t.access_spec_id = Some(AccessSpecId(o.access_spec_id));
     }
     t.op_spec_results = o.op_spec_results.clone();
-    let i = &c.impinj;
+    add_impinj_fields(&mut t.custom, o, &c.impinj);
+    t
+}
+
+/// Adds the PC bits and CRC of the read's EPC that the air protocol selectors enable.
+#[inline]
+fn add_air_protocol_data(
+    data: &mut Vec<AirProtocolTagData>,
+    o: &Observation,
+    s: &TagReportContentSelector,
+) {
+    for m in &s.air_protocol_epc_memory_selector {
+        if m.enable_pc_bits {
+            data.push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.epc.pc())));
+        }
+        if m.enable_crc {
+            data.push(AirProtocolTagData::C1g2Crc(C1g2Crc(gen2_crc(
+                o.epc.pc(),
+                o.epc.as_bytes(),
+            ))));
+        }
+    }
+}
+
+/// Adds the Impinj fields `i` enables, in the order Impinj readers send them.
+#[inline]
+fn add_impinj_fields(custom: &mut Vec<Custom>, o: &Observation, i: &ImpinjContent) {
     if i.serialized_tid {
-        t.custom
-            .push(Custom::ImpinjSerializedTid(ImpinjSerializedTid {
-                tid: o.tid.clone(),
-                ..Default::default()
-            }));
+        custom.push(Custom::ImpinjSerializedTid(ImpinjSerializedTid {
+            tid: o.tid.clone(),
+            ..Default::default()
+        }));
     }
     if i.phase {
-        t.custom
-            .push(Custom::ImpinjRfPhaseAngle(ImpinjRfPhaseAngle {
-                phase_angle: units::radians_to_phase(o.phase_rad),
-                ..Default::default()
-            }));
+        custom.push(Custom::ImpinjRfPhaseAngle(ImpinjRfPhaseAngle {
+            phase_angle: units::radians_to_phase(o.phase_rad),
+            ..Default::default()
+        }));
     }
     if i.peak_rssi {
-        t.custom.push(Custom::ImpinjPeakRssi(ImpinjPeakRssi {
+        custom.push(Custom::ImpinjPeakRssi(ImpinjPeakRssi {
             rssi: units::dbm_to_centi_dbm(o.rssi_dbm),
             ..Default::default()
         }));
     }
     if i.doppler {
-        t.custom
-            .push(Custom::ImpinjRfDopplerFrequency(ImpinjRfDopplerFrequency {
-                doppler_frequency: units::hz_to_doppler(o.doppler_hz),
-                ..Default::default()
-            }));
+        custom.push(Custom::ImpinjRfDopplerFrequency(ImpinjRfDopplerFrequency {
+            doppler_frequency: units::hz_to_doppler(o.doppler_hz),
+            ..Default::default()
+        }));
     }
-    t
 }
 
 /// Folds a later read of the same tag into its TagReportData: peak RSSI is the maximum, the
