@@ -232,25 +232,7 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
         ));
     }
     if let Region::Custom { hop_table_khz } = &r.region {
-        let rp = format!("{p}.region.hop_table_khz");
-        if hop_table_khz.is_empty() || hop_table_khz.len() > usize::from(u16::MAX) {
-            return Err(invalid(rp, "must list between 1 and 65535 channels"));
-        }
-        let mut seen = HashSet::new();
-        for (k, &f) in hop_table_khz.iter().enumerate() {
-            if !(840_000..=960_000).contains(&f) {
-                return Err(invalid(
-                    format!("{rp}[{k}]"),
-                    format!("must be a UHF RFID frequency in [840000, 960000] kHz, got {f}"),
-                ));
-            }
-            if !seen.insert(f) {
-                return Err(invalid(
-                    format!("{rp}[{k}]"),
-                    format!("duplicate channel {f} kHz"),
-                ));
-            }
-        }
+        validate_hop_table(&format!("{p}.region.hop_table_khz"), hop_table_khz)?;
     }
     positive(&format!("{p}.hop_dwell_ms"), r.hop_dwell_ms, 3_600_000.0)?;
     let channels = r.region.frequencies_khz().len();
@@ -262,6 +244,53 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
             ));
         }
     }
+    validate_reader_timing(p, r)?;
+    if r.antennas.is_empty() {
+        return Err(invalid(
+            format!("{p}.antennas"),
+            "must list at least one antenna",
+        ));
+    }
+    if r.antennas.len() > MAX_ANTENNAS {
+        return Err(invalid(
+            format!("{p}.antennas"),
+            format!(
+                "at most {MAX_ANTENNAS} antennas per reader, got {}",
+                r.antennas.len()
+            ),
+        ));
+    }
+    for (a, antenna) in r.antennas.iter().enumerate() {
+        validate_antenna(s, &format!("{p}.antennas[{a}]"), antenna, channels)?;
+    }
+    Ok(())
+}
+
+/// Checks a custom region's hop table: 1 to 65535 distinct UHF RFID channels.
+fn validate_hop_table(rp: &str, hop_table_khz: &[u32]) -> Check {
+    if hop_table_khz.is_empty() || hop_table_khz.len() > usize::from(u16::MAX) {
+        return Err(invalid(rp, "must list between 1 and 65535 channels"));
+    }
+    let mut seen = HashSet::new();
+    for (k, &f) in hop_table_khz.iter().enumerate() {
+        if !(840_000..=960_000).contains(&f) {
+            return Err(invalid(
+                format!("{rp}[{k}]"),
+                format!("must be a UHF RFID frequency in [840000, 960000] kHz, got {f}"),
+            ));
+        }
+        if !seen.insert(f) {
+            return Err(invalid(
+                format!("{rp}[{k}]"),
+                format!("duplicate channel {f} kHz"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks a reader's read rate, AISpec setup, pause between rounds and report interval.
+fn validate_reader_timing(p: &str, r: &ReaderSpec) -> Check {
     if let Some(rate) = r.reads_per_second {
         positive(&format!("{p}.reads_per_second"), rate, MAX_READS_PER_SECOND)?;
     }
@@ -286,40 +315,11 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
             ),
         ));
     }
-    if r.antennas.is_empty() {
-        return Err(invalid(
-            format!("{p}.antennas"),
-            "must list at least one antenna",
-        ));
-    }
-    if r.antennas.len() > MAX_ANTENNAS {
-        return Err(invalid(
-            format!("{p}.antennas"),
-            format!(
-                "at most {MAX_ANTENNAS} antennas per reader, got {}",
-                r.antennas.len()
-            ),
-        ));
-    }
-    for (a, antenna) in r.antennas.iter().enumerate() {
-        validate_antenna(s, &format!("{p}.antennas[{a}]"), antenna, channels)?;
-    }
     Ok(())
 }
 
 fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> Check {
-    match &a.mount {
-        Mount::Fixed { pose } => validate_pose(s, &format!("{p}.mount.pose"), pose, true)?,
-        Mount::Robot { robot, offset } => {
-            validate_robot(s, &format!("{p}.mount.robot"), robot)?;
-            validate_pose(s, &format!("{p}.mount.offset"), offset, false)?;
-        }
-        Mount::Recorded { file, .. } => {
-            if file.trim().is_empty() {
-                return Err(invalid(format!("{p}.mount.file"), "must name a file"));
-            }
-        }
-    }
+    validate_mount(s, p, &a.mount)?;
     in_range(&format!("{p}.gain_dbi"), a.gain_dbi, -20.0, 30.0)?;
     if !(a.beamwidth_deg.is_finite() && a.beamwidth_deg > 0.0 && a.beamwidth_deg <= 360.0) {
         return Err(invalid(
@@ -335,6 +335,32 @@ fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> 
         -40.0,
         0.0,
     )?;
+    validate_antenna_noise(p, a, channels)?;
+    positive(&format!("{p}.range_m"), a.range_m, 1000.0)?;
+    in_range(&format!("{p}.range_sigma"), a.range_sigma, 0.0, 1.0)?;
+    super::hardware_checks::antenna(p, a)
+}
+
+/// Checks where an antenna is mounted: a pose in the world, a robot and an offset, or a
+/// recording.
+fn validate_mount(s: &Scenario, p: &str, mount: &Mount) -> Check {
+    match mount {
+        Mount::Fixed { pose } => validate_pose(s, &format!("{p}.mount.pose"), pose, true)?,
+        Mount::Robot { robot, offset } => {
+            validate_robot(s, &format!("{p}.mount.robot"), robot)?;
+            validate_pose(s, &format!("{p}.mount.offset"), offset, false)?;
+        }
+        Mount::Recorded { file, .. } => {
+            if file.trim().is_empty() {
+                return Err(invalid(format!("{p}.mount.file"), "must name a file"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks an antenna's phase offsets and sign and its phase, RSSI and Doppler noise.
+fn validate_antenna_noise(p: &str, a: &AntennaSpec, channels: usize) -> Check {
     if a.phase_offset_rad.len() > channels {
         return Err(invalid(
             format!("{p}.phase_offset_rad"),
@@ -388,9 +414,7 @@ fn validate_antenna(s: &Scenario, p: &str, a: &AntennaSpec, channels: usize) -> 
     if let Some(d) = &a.extra_phase_noise {
         check_noise(d).map_err(|e| invalid(format!("{p}.extra_phase_noise"), e))?;
     }
-    positive(&format!("{p}.range_m"), a.range_m, 1000.0)?;
-    in_range(&format!("{p}.range_sigma"), a.range_sigma, 0.0, 1.0)?;
-    super::hardware_checks::antenna(p, a)
+    Ok(())
 }
 
 fn validate_pose(s: &Scenario, p: &str, pose: &Pose, in_world: bool) -> Check {
