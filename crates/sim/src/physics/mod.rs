@@ -207,6 +207,141 @@ fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
     robots
 }
 
+/// How antenna mount `mount` moves: fixed, replayed from a recording, or on one of
+/// `all_robots` (the scenario's, by [`distinct_robots`]).
+fn mover_of(mount: &Mount, all_robots: &[&RobotSpec]) -> Mover {
+    match mount {
+        Mount::Fixed { pose } => Mover::Fixed(pose_from(pose)),
+        Mount::Recorded { poses, .. } => Mover::Recorded(poses.clone()),
+        Mount::Robot { robot, offset } => {
+            // `robot` was collected from this very scenario, so it is in the list.
+            let global = all_robots.iter().position(|r| *r == robot).unwrap_or(0);
+            Mover::Robot {
+                robot: global,
+                offset: offset.clone(),
+                vertical: robot.vertical.clone(),
+            }
+        }
+    }
+}
+
+/// When an antenna moved by `mover` comes to rest for good (s), if it does.
+fn still_after_s(mover: &Mover, robots: &[RobotTrajectory]) -> Option<f64> {
+    match mover {
+        Mover::Fixed(_) => Some(0.0),
+        Mover::Recorded(poses) => Some(poses.last().map_or(0.0, |p| p.t_s + REST_MARGIN_S)),
+        Mover::Robot {
+            robot, vertical, ..
+        } => match vertical {
+            Some(v) if v.speed > 0.0 && v.max_z > v.min_z => None,
+            // A moment after the last stored sample, the pose is that sample's.
+            _ => robots
+                .get(*robot)
+                .map(|r: &RobotTrajectory| r.duration_s() + REST_MARGIN_S),
+        },
+    }
+}
+
+/// The constant part of the boresight of an antenna on a robot (`None` for other mounts).
+fn mount_aim(mount: &Mount) -> Option<MountAim> {
+    match mount {
+        Mount::Robot { offset, .. } => {
+            let pitch = offset.pitch_deg.to_radians();
+            let (yaw_sin, yaw_cos) = offset.yaw_deg.to_radians().sin_cos();
+            Some(MountAim {
+                yaw_cos,
+                yaw_sin,
+                pitch_cos: pitch.cos(),
+                pitch_sin: pitch.sin(),
+            })
+        }
+        _ => None,
+    }
+}
+
+/// The antenna's fastest motion and turn, for the field bounds (`None`: not bounded).
+fn max_rates(mover: &Mover, robots: &[RobotTrajectory]) -> Option<field::Rates> {
+    match mover {
+        Mover::Fixed(_) => Some(field::Rates::default()),
+        Mover::Recorded(_) => None,
+        Mover::Robot {
+            robot,
+            offset,
+            vertical,
+        } => robots.get(*robot).map(|r: &RobotTrajectory| {
+            let [v, w] = r.max_rates();
+            let arm = offset.position[0].hypot(offset.position[1]);
+            let lift = vertical
+                .as_ref()
+                .filter(|v| v.speed.is_finite() && v.speed > 0.0)
+                .map_or(0.0, |v| v.speed);
+            // The antenna moves with the robot, swings on its arm as the robot turns
+            // and rides the lift; a relative margin covers rounding.
+            field::Rates {
+                speed: (v + arm * w + lift) * (1.0 + 1e-9),
+                turn: w * (1.0 + 1e-9),
+            }
+        }),
+    }
+}
+
+/// The antenna's phase offset per channel of `table`: the scenario's where given, else
+/// its random offset plus the cable's phase.
+fn phase_base(
+    scenario: &Scenario,
+    reader: usize,
+    port: u64,
+    table: &[u32],
+    a: &AntennaSpec,
+) -> Vec<f64> {
+    let antenna_phase = std::f64::consts::TAU
+        * seed::unit(seed::mix(&[
+            scenario.seed,
+            seed::domain::ANTENNA_PHASE,
+            reader as u64,
+            port,
+        ]));
+    table
+        .iter()
+        .enumerate()
+        .map(|(k, &f)| match a.phase_offset_rad.get(k) {
+            Some(&given) => given,
+            None => geometry::wrap_2pi(
+                antenna_phase
+                    + a.phase_sign
+                        * phase::cable_phase(f64::from(f) * 1e3, a.cable_delay_ns * 1e-9),
+            ),
+        })
+        .collect()
+}
+
+/// The hardware imperfections of antenna `port` of reader `reader`.
+fn antenna_hardware(
+    scenario: &Scenario,
+    reader: usize,
+    port: u64,
+    table: &[u32],
+    a: &AntennaSpec,
+) -> hardware::AntennaHardware {
+    hardware::AntennaHardware {
+        phase_field: hardware::SmoothField::new(
+            &[scenario.seed, seed::domain::HARDWARE, reader as u64, port],
+            a.phase_pattern_rad,
+            a.phase_pattern_deg.to_radians(),
+        ),
+        band_db: hardware::band_offsets(table, a.rssi_tilt_db_per_mhz),
+        prefix: seed::mix(&[
+            scenario.seed,
+            seed::domain::HARDWARE,
+            reader as u64,
+            port,
+            0,
+        ]),
+        channel_phase_sigma: scenario.tag_variation.channel_phase_sigma_rad,
+        channel_rssi_sigma: scenario.tag_variation.channel_rssi_sigma_db,
+    }
+}
+
 impl Model {
     /// Builds the model of reader `reader` (index into `scenario.readers`); seeds derive from
     /// `scenario.seed`. An index past the last reader gives a model with no antennas. (Models
@@ -230,111 +365,17 @@ impl Model {
         let mut tables = Vec::new();
         let mut patterns = Vec::new();
         for a in spec.map_or(&[][..], |r| &r.antennas) {
-            let mover = match &a.mount {
-                Mount::Fixed { pose } => Mover::Fixed(pose_from(pose)),
-                Mount::Recorded { poses, .. } => Mover::Recorded(poses.clone()),
-                Mount::Robot { robot, offset } => {
-                    // `robot` was collected from this very scenario, so it is in the list.
-                    let global = all_robots.iter().position(|r| *r == robot).unwrap_or(0);
-                    Mover::Robot {
-                        robot: global,
-                        offset: offset.clone(),
-                        vertical: robot.vertical.clone(),
-                    }
-                }
-            };
-            let lobe = Lobe::new(a.gain_dbi, a.beamwidth_deg);
-            let still_s = match &mover {
-                Mover::Fixed(_) => Some(0.0),
-                Mover::Recorded(poses) => Some(poses.last().map_or(0.0, |p| p.t_s + REST_MARGIN_S)),
-                Mover::Robot {
-                    robot, vertical, ..
-                } => match vertical {
-                    Some(v) if v.speed > 0.0 && v.max_z > v.min_z => None,
-                    // A moment after the last stored sample, the pose is that sample's.
-                    _ => robots
-                        .get(*robot)
-                        .map(|r: &RobotTrajectory| r.duration_s() + REST_MARGIN_S),
-                },
-            };
-            let mount_aim = match &a.mount {
-                Mount::Robot { offset, .. } => {
-                    let pitch = offset.pitch_deg.to_radians();
-                    let (yaw_sin, yaw_cos) = offset.yaw_deg.to_radians().sin_cos();
-                    Some(MountAim {
-                        yaw_cos,
-                        yaw_sin,
-                        pitch_cos: pitch.cos(),
-                        pitch_sin: pitch.sin(),
-                    })
-                }
-                _ => None,
-            };
-            let rates = match &mover {
-                Mover::Fixed(_) => Some(field::Rates::default()),
-                Mover::Recorded(_) => None,
-                Mover::Robot {
-                    robot,
-                    offset,
-                    vertical,
-                } => robots.get(*robot).map(|r: &RobotTrajectory| {
-                    let [v, w] = r.max_rates();
-                    let arm = offset.position[0].hypot(offset.position[1]);
-                    let lift = vertical
-                        .as_ref()
-                        .filter(|v| v.speed.is_finite() && v.speed > 0.0)
-                        .map_or(0.0, |v| v.speed);
-                    // The antenna moves with the robot, swings on its arm as the robot turns
-                    // and rides the lift; a relative margin covers rounding.
-                    field::Rates {
-                        speed: (v + arm * w + lift) * (1.0 + 1e-9),
-                        turn: w * (1.0 + 1e-9),
-                    }
-                }),
-            };
-            let antenna_phase = std::f64::consts::TAU
-                * seed::unit(seed::mix(&[
-                    scenario.seed,
-                    seed::domain::ANTENNA_PHASE,
-                    reader as u64,
-                    antennas.len() as u64 + 1,
-                ]));
-            let phase_base = table
-                .iter()
-                .enumerate()
-                .map(|(k, &f)| match a.phase_offset_rad.get(k) {
-                    Some(&given) => given,
-                    None => geometry::wrap_2pi(
-                        antenna_phase
-                            + a.phase_sign
-                                * phase::cable_phase(f64::from(f) * 1e3, a.cable_delay_ns * 1e-9),
-                    ),
-                })
-                .collect();
             let port = antennas.len() as u64 + 1;
-            let hardware = hardware::AntennaHardware {
-                phase_field: hardware::SmoothField::new(
-                    &[scenario.seed, seed::domain::HARDWARE, reader as u64, port],
-                    a.phase_pattern_rad,
-                    a.phase_pattern_deg.to_radians(),
-                ),
-                band_db: hardware::band_offsets(&table, a.rssi_tilt_db_per_mhz),
-                prefix: seed::mix(&[
-                    scenario.seed,
-                    seed::domain::HARDWARE,
-                    reader as u64,
-                    port,
-                    0,
-                ]),
-                channel_phase_sigma: scenario.tag_variation.channel_phase_sigma_rad,
-                channel_rssi_sigma: scenario.tag_variation.channel_rssi_sigma_db,
-            };
+            let mover = mover_of(&a.mount, &all_robots);
+            let lobe = Lobe::new(a.gain_dbi, a.beamwidth_deg);
+            let still_s = still_after_s(&mover, robots);
+            let rates = max_rates(&mover, robots);
             antennas.push(AntennaModel {
-                hardware,
-                phase_base,
+                hardware: antenna_hardware(scenario, reader, port, &table, a),
+                phase_base: phase_base(scenario, reader, port, &table, a),
                 spec: a.clone(),
                 rates,
-                mount_aim,
+                mount_aim: mount_aim(&a.mount),
                 mover,
                 pattern: shared_pattern(&mut patterns, &lobe),
                 gains: shared_table(&mut tables, &lobe),
