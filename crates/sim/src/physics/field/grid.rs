@@ -248,44 +248,11 @@ impl Model {
 
     /// Classifies every tag for `antenna` over the grid interval holding bucket start `t_us`.
     pub(super) fn classify(&self, antenna: u16, tx_power_dbm: f64, t_us: u64) -> Classified {
-        let bucket = crate::physics::inventory::FIELD_BUCKET_US;
         let a = &self.antennas[usize::from(antenna) - 1];
-        let rest = a.rest_us;
-        let (t0_us, t1_us, motion) = if t_us >= rest {
-            // Nothing moves any more: one interval for ever.
-            (rest, u64::MAX, Motion::default())
-        } else {
-            let (mut t0_us, mut span) = (t_us / MAX_SPAN_US * MAX_SPAN_US, MAX_SPAN_US);
-            let motion = loop {
-                let m = self.excursion(antenna, t0_us, t0_us.saturating_add(span));
-                if (m.total() <= MAX_EXCURSION_M && m.turn <= MAX_TURN_RAD) || span <= bucket {
-                    break m;
-                }
-                span /= 2;
-                if t_us >= t0_us + span {
-                    t0_us += span;
-                }
-            };
-            (t0_us, t0_us.saturating_add(span), motion)
-        };
+        let (t0_us, t1_us, motion) = self.grid_interval(antenna, t_us, a.rest_us);
         let spec = &a.spec;
         let aim = self.aim(antenna, t0_us);
-        let mirrors = self
-            .planes
-            .iter()
-            .map(|plane| {
-                let da = dot(sub(aim.position, plane.point), plane.unit);
-                let da_moves = motion.along(plane.unit) + SLACK_M;
-                let image = add_scaled(aim.position, -2.0 * da, plane.unit);
-                Mirror {
-                    plane: *plane,
-                    da,
-                    da_moves,
-                    image,
-                    beta: dot(aim.boresight, plane.unit),
-                }
-            })
-            .collect();
+        let mirrors = self.mirrors_of(&aim, &motion);
         let base = amplitude_threshold(spec, tx_power_dbm);
         let fallback = [self.wavelength_m(1)];
         let lambdas = if self.wavelengths.is_empty() {
@@ -335,6 +302,49 @@ impl Model {
                 .collect();
         }
         c
+    }
+
+    /// The grid interval holding bucket start `t_us` for `antenna` (at rest from `rest`):
+    /// its start, its end and the antenna's excursion over it, halved until small enough.
+    fn grid_interval(&self, antenna: u16, t_us: u64, rest: u64) -> (u64, u64, Motion) {
+        let bucket = crate::physics::inventory::FIELD_BUCKET_US;
+        if t_us >= rest {
+            // Nothing moves any more: one interval for ever.
+            (rest, u64::MAX, Motion::default())
+        } else {
+            let (mut t0_us, mut span) = (t_us / MAX_SPAN_US * MAX_SPAN_US, MAX_SPAN_US);
+            let motion = loop {
+                let m = self.excursion(antenna, t0_us, t0_us.saturating_add(span));
+                if (m.total() <= MAX_EXCURSION_M && m.turn <= MAX_TURN_RAD) || span <= bucket {
+                    break m;
+                }
+                span /= 2;
+                if t_us >= t0_us + span {
+                    t0_us += span;
+                }
+            };
+            (t0_us, t0_us.saturating_add(span), motion)
+        }
+    }
+
+    /// The image of the antenna at `aim` in each reflector, with how far its distance to the
+    /// plane may move by `motion`.
+    fn mirrors_of(&self, aim: &Aim, motion: &Motion) -> Vec<Mirror> {
+        self.planes
+            .iter()
+            .map(|plane| {
+                let da = dot(sub(aim.position, plane.point), plane.unit);
+                let da_moves = motion.along(plane.unit) + SLACK_M;
+                let image = add_scaled(aim.position, -2.0 * da, plane.unit);
+                Mirror {
+                    plane: *plane,
+                    da,
+                    da_moves,
+                    image,
+                    beta: dot(aim.boresight, plane.unit),
+                }
+            })
+            .collect()
     }
 
     /// The field on every channel at `t_us` and for ever after, when nothing moves: `c`'s in

@@ -134,20 +134,8 @@ impl Near {
         let mut err = (hi - lo) * 0.5 * inv_d;
         let mut mag = hi * inv_d;
         let seen = &mut self.seen;
-        seen.count = 0;
-        seen.side = f64::INFINITY;
         let keep = self.mirrors.len() <= MAX_KEPT_MIRRORS;
-        if keep {
-            seen.paths[0] = Path {
-                gamma: 1.0,
-                cos: c0,
-                length: dist,
-                inv_l: inv_d,
-                mag: hi * inv_d,
-                chord: 0.0,
-            };
-            seen.count = 1;
-        }
+        seen.restart(keep, c0, dist, inv_d, hi);
         for m in &self.mirrors {
             let dt = dot(sub(q, m.plane.point), m.plane.unit);
             seen.side = seen.side.min(m.da.abs()).min(dt.abs());
@@ -167,24 +155,7 @@ impl Near {
             // cos between boresight and reflection point: (f·(da + dt) + b̂·u)/l.
             let ci = (m.f * (m.da + dt) + dot(self.b, u)) * inv_l;
             if keep {
-                // The tag's image seen from the antenna: v − 2·dt·n̂, of length l.
-                let image_dir = add_scaled(v, -2.0 * dt, m.plane.unit);
-                let chord = norm(sub(
-                    [v[0] * inv_d, v[1] * inv_d, v[2] * inv_d],
-                    [
-                        image_dir[0] * inv_l,
-                        image_dir[1] * inv_l,
-                        image_dir[2] * inv_l,
-                    ],
-                ));
-                seen.paths[seen.count] = Path {
-                    gamma: m.plane.coefficient.abs(),
-                    cos: ci,
-                    length: l,
-                    inv_l,
-                    mag: 0.0,
-                    chord,
-                };
+                seen.paths[seen.count] = m.path(v, inv_d, dt, l, inv_l, ci);
             }
             let eta = 1e-12 + rel * w_inv * inv_l * 4.0;
             let (glo, ghi) = (gains.below(ci - eta), gains.above(ci + eta));
@@ -206,21 +177,7 @@ impl Near {
         }
         err += mag * 1e-12;
         let amplitude = (re * re + im * im).sqrt();
-        // What a later exact evaluation rounds differently, far above its rounding.
-        let slack = threshold * SLACK_REL + mag * 1e-12;
-        if amplitude + err < threshold * (1.0 - SLACK_REL) {
-            Some((
-                false,
-                threshold * (1.0 - SLACK_REL) - amplitude - err - slack,
-            ))
-        } else if amplitude - err > threshold * (1.0 + SLACK_REL) {
-            Some((
-                true,
-                amplitude - err - threshold * (1.0 + SLACK_REL) - slack,
-            ))
-        } else {
-            None
-        }
+        verdict(amplitude, err, threshold, mag)
     }
 
     /// The longest of [`HOLD_US`] during which the amplitude at the tag of the last
@@ -243,11 +200,12 @@ impl Near {
         &self,
         gains: &GainTable,
         margin: f64,
-        (antenna, tag, turn): (f64, f64, f64),
+        speeds: (f64, f64, f64),
         room: Option<f64>,
         exhaustive: bool,
         at_least: u64,
     ) -> u64 {
+        let (antenna, tag, turn) = speeds;
         let seen = &self.seen;
         let finite = antenna.is_finite() && tag.is_finite() && turn.is_finite();
         if !(margin > 0.0 && finite && seen.count > 0) {
@@ -255,49 +213,8 @@ impl Near {
         }
         let paths = &seen.paths[..seen.count];
         let side = seen.side.min(room.unwrap_or(f64::INFINITY));
-        let inv_d0 = paths[0].inv_l;
-        // The largest change over `hold_us`, or infinity when unbounded. With x = δ/l ≤ ½,
-        // 1/(l − δ) ≤ (1 + 2x)/l and 1/(l + δ) ≥ (1 − x)/l.
-        let change = |hold_us: u64| {
-            let s = hold_us as f64 * 1e-6;
-            let delta = (antenna + tag) * s + SLACK_M;
-            let tau = turn * s + SLACK_COS;
-            if delta >= side {
-                return f64::INFINITY;
-            }
-            let mut v = 0.0;
-            for (i, p) in paths.iter().enumerate() {
-                let x = delta * p.inv_l;
-                if !(x <= 0.5 && p.length >= 2.0 * MIN_DISTANCE_M) {
-                    return f64::INFINITY;
-                }
-                // asin is convex: asin(x) ≤ 2·asin(½)·x for x ≤ ½. Rounding of the cosine
-                // itself is below 1e-9 (see `decide`'s eta).
-                let dc = x * ASIN_SLOPE + tau + 1e-9;
-                let hi = gains.above(p.cos + dc) * p.inv_l * (1.0 + 2.0 * x);
-                let lo = gains.below(p.cos - dc) * p.inv_l * (1.0 - x);
-                v += p.gamma * (hi - lo);
-                if i > 0 {
-                    let chord = p.chord + 1e-9 + ASIN_SLOPE * (delta * inv_d0 + x);
-                    let moved = (antenna * s * chord + 2.0 * tag * s).min(2.0 * delta);
-                    v += p.gamma * hi * self.k * (moved + SLACK_M);
-                }
-            }
-            v * (1.0 + SLACK_REL)
-        };
-        // The relative phases dominate the change: guess from them the longest hold worth
-        // proving (the change only grows with the hold), then prove it, or the one before.
-        let rate: f64 = paths[1..]
-            .iter()
-            .map(|p| p.mag * (antenna * p.chord + 2.0 * tag))
-            .sum::<f64>()
-            * self.k;
-        // So does the direct path's gain off the boresight: its change per second of the
-        // view turning (a guess only: `change` proves the hold).
-        let p0 = &paths[0];
-        let swing = (antenna + tag) * p0.inv_l * ASIN_SLOPE + turn;
-        let slope = (gains.above(p0.cos + swing) - gains.below(p0.cos - swing)) * p0.inv_l;
-        let guess = 0.9e6 * margin / (rate + slope + f64::MIN_POSITIVE);
+        let change = |hold_us: u64| self.change_over(gains, paths, speeds, side, hold_us);
+        let guess = self.hold_guess(gains, paths, margin, speeds);
         let (mut j, tries) = if exhaustive {
             (HOLD_US.len() - 1, HOLD_US.len())
         } else {
@@ -321,6 +238,139 @@ impl Near {
             j -= 1;
         }
         0
+    }
+
+    /// The largest change of the amplitude over `hold_us` at the given `speeds` (antenna,
+    /// tag m/s; boresight turn rad/s) of a tag kept `side` m from every plane, or infinity
+    /// when unbounded.
+    fn change_over(
+        &self,
+        gains: &GainTable,
+        paths: &[Path],
+        (antenna, tag, turn): (f64, f64, f64),
+        side: f64,
+        hold_us: u64,
+    ) -> f64 {
+        let inv_d0 = paths[0].inv_l;
+        let s = hold_us as f64 * 1e-6;
+        let delta = (antenna + tag) * s + SLACK_M;
+        let tau = turn * s + SLACK_COS;
+        if delta >= side {
+            return f64::INFINITY;
+        }
+        // With x = δ/l ≤ ½, 1/(l − δ) ≤ (1 + 2x)/l and 1/(l + δ) ≥ (1 − x)/l.
+        let mut v = 0.0;
+        for (i, p) in paths.iter().enumerate() {
+            let x = delta * p.inv_l;
+            if !(x <= 0.5 && p.length >= 2.0 * MIN_DISTANCE_M) {
+                return f64::INFINITY;
+            }
+            // asin is convex: asin(x) ≤ 2·asin(½)·x for x ≤ ½. Rounding of the cosine
+            // itself is below 1e-9 (see `decide`'s eta).
+            let dc = x * ASIN_SLOPE + tau + 1e-9;
+            let hi = gains.above(p.cos + dc) * p.inv_l * (1.0 + 2.0 * x);
+            let lo = gains.below(p.cos - dc) * p.inv_l * (1.0 - x);
+            v += p.gamma * (hi - lo);
+            if i > 0 {
+                let chord = p.chord + 1e-9 + ASIN_SLOPE * (delta * inv_d0 + x);
+                let moved = (antenna * s * chord + 2.0 * tag * s).min(2.0 * delta);
+                v += p.gamma * hi * self.k * (moved + SLACK_M);
+            }
+        }
+        v * (1.0 + SLACK_REL)
+    }
+
+    /// A guess at the longest hold worth proving at the given `speeds` (antenna, tag m/s;
+    /// boresight turn rad/s), µs.
+    fn hold_guess(
+        &self,
+        gains: &GainTable,
+        paths: &[Path],
+        margin: f64,
+        (antenna, tag, turn): (f64, f64, f64),
+    ) -> f64 {
+        // The relative phases dominate the change: guess from them the longest hold worth
+        // proving (the change only grows with the hold), then prove it, or the one before.
+        let rate: f64 = paths[1..]
+            .iter()
+            .map(|p| p.mag * (antenna * p.chord + 2.0 * tag))
+            .sum::<f64>()
+            * self.k;
+        // So does the direct path's gain off the boresight: its change per second of the
+        // view turning (a guess only: `change` proves the hold).
+        let p0 = &paths[0];
+        let swing = (antenna + tag) * p0.inv_l * ASIN_SLOPE + turn;
+        let slope = (gains.above(p0.cos + swing) - gains.below(p0.cos - swing)) * p0.inv_l;
+        0.9e6 * margin / (rate + slope + f64::MIN_POSITIVE)
+    }
+}
+
+impl Seen {
+    /// Forgets the last decision's paths; with `keep`, records the direct one (cosine `c0`,
+    /// length `dist`, its inverse `inv_d`, gain bound `hi`).
+    #[inline]
+    fn restart(&mut self, keep: bool, c0: f64, dist: f64, inv_d: f64, hi: f64) {
+        self.count = 0;
+        self.side = f64::INFINITY;
+        if keep {
+            self.paths[0] = Path {
+                gamma: 1.0,
+                cos: c0,
+                length: dist,
+                inv_l: inv_d,
+                mag: hi * inv_d,
+                chord: 0.0,
+            };
+            self.count = 1;
+        }
+    }
+}
+
+impl NearMirror {
+    /// The path through this reflector to a tag at `v` from the antenna (`inv_d`: 1/|v|),
+    /// `dt` from the plane, of length `l` (`inv_l`: 1/l) and boresight cosine `ci` (its
+    /// magnitude set later).
+    #[inline]
+    fn path(&self, v: Vec3, inv_d: f64, dt: f64, l: f64, inv_l: f64, ci: f64) -> Path {
+        // The tag's image seen from the antenna: v − 2·dt·n̂, of length l.
+        let image_dir = add_scaled(v, -2.0 * dt, self.plane.unit);
+        let chord = norm(sub(
+            [v[0] * inv_d, v[1] * inv_d, v[2] * inv_d],
+            [
+                image_dir[0] * inv_l,
+                image_dir[1] * inv_l,
+                image_dir[2] * inv_l,
+            ],
+        ));
+        Path {
+            gamma: self.plane.coefficient.abs(),
+            cos: ci,
+            length: l,
+            inv_l,
+            mag: 0.0,
+            chord,
+        }
+    }
+}
+
+/// The decision on an amplitude within `err` of `amplitude` against `threshold` (`mag`: the
+/// sum of the paths' magnitude bounds), with its margin; `None` when too close to call.
+#[inline]
+fn verdict(amplitude: f64, err: f64, threshold: f64, mag: f64) -> Option<(bool, f64)> {
+    // What a later exact evaluation rounds differently, far above its rounding.
+    let slack = threshold * SLACK_REL + mag * 1e-12;
+    if amplitude + err < threshold * (1.0 - SLACK_REL) {
+        Some((
+            false,
+            threshold * (1.0 - SLACK_REL) - amplitude - err - slack,
+        ))
+    } else if amplitude - err > threshold * (1.0 + SLACK_REL) {
+        Some((
+            true,
+            amplitude - err - threshold * (1.0 + SLACK_REL) - slack,
+        ))
+    } else {
+        None
     }
 }
 
