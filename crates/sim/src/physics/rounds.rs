@@ -76,18 +76,32 @@ impl ChannelClock {
     }
 }
 
-/// What one epoch's rounds need of the channel: the [`Radio`] of an antenna from an instant.
-struct EpochRadio<'a> {
+/// What every round of one call shares: the antenna, its power, the air and its slot
+/// times, what the reads carry, the seed prefix of the replies and the window whose reads
+/// are kept.
+#[derive(Clone, Copy)]
+struct Scope<'a> {
     model: &'a Model,
     antenna: u16,
     tx_power_dbm: f64,
+    air: &'a Air,
+    times: gen2::SlotTimes,
     want: Want,
+    /// Seed prefix of the rounds' and replies' streams.
+    prefix: u64,
+    /// Reads inside [from, until) are kept.
+    from_us: u64,
+    until_us: u64,
+}
+
+/// What one epoch's rounds need of the channel: the [`Radio`] of an antenna from an instant.
+struct EpochRadio<'a> {
+    scope: Scope<'a>,
     /// Absolute start of the current round (µs, fractional).
     round_start_us: f64,
     bucket: &'a mut Bucket,
     clock: &'a mut ChannelClock,
-    /// Seed prefix of the replies' streams, and the epoch.
-    prefix: u64,
+    /// The epoch (names the replies' streams with the scope's prefix).
     epoch: u64,
     /// Where in the epoch its rounds began (µs; the epoch's start unless a single-target
     /// window began later).
@@ -103,10 +117,39 @@ struct EpochRadio<'a> {
     /// The tags read so far in a single-target inventory (they sit out later rounds; the
     /// caller sends them to B as it reports them).
     read_here: Option<&'a mut Vec<usize>>,
-    /// Reads of the epoch inside [from, until).
-    from_us: u64,
-    until_us: u64,
+    /// Reads of the epoch inside the scope's window.
     out: &'a mut Vec<Read>,
+}
+
+impl<'a> EpochRadio<'a> {
+    /// A radio on `epoch`, which starts at `start_us` with the tags of `field` (their levels
+    /// unknown in `levels`), its rounds from the epoch's start.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scope: Scope<'a>,
+        epoch: u64,
+        start_us: u64,
+        field: &'a [usize],
+        levels: &'a mut [f64],
+        bucket: &'a mut Bucket,
+        clock: &'a mut ChannelClock,
+        out: &'a mut Vec<Read>,
+    ) -> Self {
+        EpochRadio {
+            scope,
+            round_start_us: start_us as f64,
+            bucket,
+            clock,
+            epoch,
+            from_epoch_us: 0,
+            replies: 0,
+            field,
+            levels,
+            epoch_start_us: start_us,
+            read_here: None,
+            out,
+        }
+    }
 }
 
 impl EpochRadio<'_> {
@@ -133,33 +176,36 @@ impl Radio for EpochRadio<'_> {
             return f64::NEG_INFINITY;
         };
         if slot.is_nan() {
-            let t = self.epoch_start_us;
-            let here = self.model.antenna_position(self.antenna, t);
-            let d = distance(here, self.model.tag_position(tag, t)).max(0.01);
-            *slot = -40.0 * d.log10() + self.model.tags[tag].radio.backscatter_db;
+            let (t, model) = (self.epoch_start_us, self.scope.model);
+            let here = model.antenna_position(self.scope.antenna, t);
+            let d = distance(here, model.tag_position(tag, t)).max(0.01);
+            *slot = -40.0 * d.log10() + model.tags[tag].radio.backscatter_db;
         }
         *slot
     }
 
     fn reply(&mut self, tag: usize, t_us: f64) -> bool {
         let t = self.instant(t_us);
-        let mut rng: Stream =
-            seed::stream_on(self.prefix, &[self.epoch, self.from_epoch_us, self.replies]);
+        let scope = &self.scope;
+        let mut rng: Stream = seed::stream_on(
+            scope.prefix,
+            &[self.epoch, self.from_epoch_us, self.replies],
+        );
         self.replies += 1;
-        let channel = self.clock.at(self.model, t);
-        let read = self.model.reply_at(
-            self.antenna,
-            self.tx_power_dbm,
+        let channel = self.clock.at(scope.model, t);
+        let read = scope.model.reply_at(
+            scope.antenna,
+            scope.tx_power_dbm,
             channel,
             tag,
             t,
             &mut rng,
             self.bucket,
-            self.want,
+            scope.want,
         );
         match read {
             Some(r) => {
-                if (self.from_us..self.until_us).contains(&r.time_us) {
+                if (scope.from_us..scope.until_us).contains(&r.time_us) {
                     self.out.push(r);
                 }
                 if let Some(read) = self.read_here.as_mut() {
@@ -192,12 +238,9 @@ impl Model {
         bucket: &mut Bucket,
         mut flags: Option<&mut Flags>,
     ) -> (Vec<Read>, bool) {
-        let mut reads = Vec::new();
-        let mut none_in_a = flags.is_some();
-        let mut first_round = true;
-        let mut read_here = Vec::new();
+        let mut carry = Carry::new(pinned, flags.is_some());
         if t1_us <= t0_us {
-            return (reads, none_in_a);
+            return (carry.reads, carry.none_in_a);
         }
         if let Some(anchor) = air
             .anchor_us
@@ -208,110 +251,91 @@ impl Model {
                 false,
             );
         }
-        let times = air.mode.slot_times(EPC_BITS);
-        let prefix = self.gen2_prefix(antenna);
-        let mut clock = ChannelClock::new(pinned);
-        let mut classified: Option<Arc<Classified>> = None;
+        let scope = self.scope(antenna, tx, air, want, (t0_us, t1_us));
         let first = t0_us / FIELD_BUCKET_US;
         let last = ((t1_us - 1) / FIELD_BUCKET_US).min(first.saturating_add(MAX_EPOCHS));
-        let mut field = Vec::new();
-        let mut levels = Vec::new();
-        let mut scratch = gen2::Scratch::default();
         for epoch in first..=last {
-            let start = epoch * FIELD_BUCKET_US;
-            let ch = clock.at(self, start);
-            self.open_bucket(antenna, tx, start, ch, &mut classified, bucket);
-            self.field_of(bucket, &mut field);
-            if field.is_empty() {
-                first_round = false;
-                continue;
-            }
-            levels.clear();
-            levels.resize(field.len(), f64::NAN);
-            let session = air.session;
-            let mut taking_part = Vec::new();
-            if let Some(f) = flags.as_deref_mut() {
-                for &tag in &field {
-                    f.settle(tag, session, start);
-                    f.energise(tag, start);
-                }
-            }
-            let mut radio = EpochRadio {
-                model: self,
-                antenna,
-                tx_power_dbm: tx,
-                want,
-                round_start_us: start as f64,
-                bucket: &mut *bucket,
-                clock: &mut clock,
-                prefix,
-                epoch,
-                from_epoch_us: 0,
-                replies: 0,
-                field: &field,
-                levels: &mut levels,
-                epoch_start_us: start,
-                read_here: flags.is_some().then_some(&mut read_here),
-                from_us: t0_us,
-                until_us: t1_us,
-                out: &mut reads,
-            };
-            let mut qfp = gen2::settled_qfp(field.len());
-            // Pure epochs run whole (their reads are filtered to the window); a single-target
-            // inventory, which carries flags from call to call, runs only inside the window,
-            // so that no read outside it changes a flag.
-            let flagged = flags.as_deref();
-            let (from, to) = if flagged.is_some() {
-                (start.max(t0_us), (start + FIELD_BUCKET_US).min(t1_us))
-            } else {
-                (start, start + FIELD_BUCKET_US)
-            };
-            let length = to.saturating_sub(from) as f64;
-            radio.from_epoch_us = from - start;
-            let mut rng = seed::stream_on(prefix, &[epoch, from - start]);
-            let mut spent = 0.0;
-            while spent < length {
-                radio.round_start_us = from as f64 + spent;
-                // Single target: only the tags still in A at the round's start answer.
-                let part: &[usize] = match (flagged, radio.read_here.as_deref()) {
-                    (Some(f), Some(done)) => {
-                        let now = radio.instant(0.0);
-                        taking_part.clear();
-                        taking_part.extend(
-                            field
-                                .iter()
-                                .copied()
-                                .filter(|&t| f.is_a(t, session, now) && !done.contains(&t)),
-                        );
-                        if first_round {
-                            none_in_a = taking_part.is_empty();
-                            qfp = gen2::settled_qfp(taking_part.len());
-                        }
-                        first_round = false;
-                        if taking_part.is_empty() {
-                            break;
-                        }
-                        &taking_part
-                    }
-                    _ => &field,
-                };
-                let r = gen2::round_in(
-                    &mut rng,
-                    &times,
-                    part,
-                    qfp,
-                    length - spent,
-                    &mut radio,
-                    &mut scratch,
-                );
-                if r.duration_us <= 0.0 {
-                    break;
-                }
-                spent += r.duration_us + air.gap_us.max(0.0);
-                qfp = r.qfp;
-            }
+            self.epoch_rounds(&scope, epoch, &mut carry, bucket, flags.as_deref_mut());
         }
-        (reads, none_in_a)
+        (carry.reads, carry.none_in_a)
+    }
+
+    /// Runs the rounds of `epoch` for [`Model::rounds`]: back to back over the whole epoch,
+    /// or with `flags` only inside the window and among the tags still in A.
+    fn epoch_rounds(
+        &self,
+        scope: &Scope<'_>,
+        epoch: u64,
+        carry: &mut Carry,
+        bucket: &mut Bucket,
+        mut flags: Option<&mut Flags>,
+    ) {
+        let start = epoch * FIELD_BUCKET_US;
+        self.open_epoch(scope, start, carry, bucket);
+        if carry.field.is_empty() {
+            carry.first_round = false;
+            return;
+        }
+        let (air, times) = (scope.air, &scope.times);
+        let session = air.session;
+        let mut taking_part = Vec::new();
+        if let Some(f) = flags.as_deref_mut() {
+            settle_field(f, &carry.field, session, start);
+        }
+        let Carry {
+            reads,
+            clock,
+            field,
+            levels,
+            scratch,
+            read_here,
+            first_round,
+            none_in_a,
+            ..
+        } = carry;
+        let mut radio = EpochRadio::new(*scope, epoch, start, field, levels, bucket, clock, reads);
+        radio.read_here = flags.is_some().then_some(read_here);
+        let mut qfp = gen2::settled_qfp(field.len());
+        let flagged = flags.as_deref();
+        let (from, to) = epoch_span(scope, start, flagged.is_some());
+        let length = to.saturating_sub(from) as f64;
+        radio.from_epoch_us = from - start;
+        let mut rng = seed::stream_on(scope.prefix, &[epoch, from - start]);
+        let mut spent = 0.0;
+        while spent < length {
+            radio.round_start_us = from as f64 + spent;
+            // Single target: only the tags still in A at the round's start answer.
+            let part: &[usize] = match (flagged, radio.read_here.as_deref()) {
+                (Some(f), Some(done)) => {
+                    let now = radio.instant(0.0);
+                    still_in_a(&mut taking_part, field, f, session, now, done);
+                    if *first_round {
+                        *none_in_a = taking_part.is_empty();
+                        qfp = gen2::settled_qfp(taking_part.len());
+                    }
+                    *first_round = false;
+                    if taking_part.is_empty() {
+                        break;
+                    }
+                    &taking_part
+                }
+                _ => field,
+            };
+            let r = gen2::round_in(
+                &mut rng,
+                times,
+                part,
+                qfp,
+                length - spent,
+                &mut radio,
+                scratch,
+            );
+            if r.duration_us <= 0.0 {
+                break;
+            }
+            spent += r.duration_us + air.gap_us.max(0.0);
+            qfp = r.qfp;
+        }
     }
 
     /// The reads in `[t0_us, t1_us)` of an antenna the reader never leaves, whose rounds began
@@ -330,18 +354,12 @@ impl Model {
         air: &Air,
         bucket: &mut Bucket,
     ) -> Vec<Read> {
-        let mut reads = Vec::new();
         let t0_us = t0_us.max(anchor_us);
         if t1_us <= t0_us {
-            return reads;
+            return Vec::new();
         }
-        let times = air.mode.slot_times(EPC_BITS);
-        let prefix = self.gen2_prefix(antenna);
-        let mut clock = ChannelClock::new(None);
-        let mut classified: Option<Arc<Classified>> = None;
-        let mut field = Vec::new();
-        let mut levels = Vec::new();
-        let mut scratch = gen2::Scratch::default();
+        let scope = self.scope(antenna, tx, air, want, (t0_us, t1_us));
+        let mut carry = Carry::new(None, false);
         let mut block_start = block_end(anchor_us, t0_us) - BLOCK_US;
         // Bounded as the epochs are (about seven hours).
         let last = t1_us.min(block_start.saturating_add(MAX_EPOCHS * FIELD_BUCKET_US));
@@ -356,54 +374,37 @@ impl Model {
                 let start = epoch * FIELD_BUCKET_US;
                 if open != Some(epoch) {
                     open = Some(epoch);
-                    self.open_bucket(
-                        antenna,
-                        tx,
-                        start,
-                        clock.at(self, start),
-                        &mut classified,
-                        bucket,
-                    );
-                    self.field_of(bucket, &mut field);
-                    levels.clear();
-                    levels.resize(field.len(), f64::NAN);
-                    qfp = gen2::settled_qfp(field.len());
+                    self.open_epoch(&scope, start, &mut carry, bucket);
+                    qfp = gen2::settled_qfp(carry.field.len());
                 }
-                if field.is_empty() {
+                if carry.field.is_empty() {
                     now = (start + FIELD_BUCKET_US).min(end) as f64;
                     continue;
                 }
                 // Each round's draws are named by the epoch and where in it the round began.
                 let offset = t - start;
-                let mut rng = seed::stream_on(prefix, &[epoch, offset, 1]);
-                let mut radio = EpochRadio {
-                    model: self,
-                    antenna,
-                    tx_power_dbm: tx,
-                    want,
-                    round_start_us: now,
-                    bucket: &mut *bucket,
-                    clock: &mut clock,
-                    prefix,
+                let mut rng = seed::stream_on(scope.prefix, &[epoch, offset, 1]);
+                let c = &mut carry;
+                let mut radio = EpochRadio::new(
+                    scope,
                     epoch,
-                    from_epoch_us: offset,
-                    replies: 0,
-                    field: &field,
-                    levels: &mut levels,
-                    epoch_start_us: start,
-                    read_here: None,
-                    from_us: t0_us,
-                    until_us: t1_us,
-                    out: &mut reads,
-                };
+                    start,
+                    &c.field,
+                    &mut c.levels,
+                    &mut *bucket,
+                    &mut c.clock,
+                    &mut c.reads,
+                );
+                radio.round_start_us = now;
+                radio.from_epoch_us = offset;
                 let r = gen2::round_in(
                     &mut rng,
-                    &times,
-                    &field,
+                    &scope.times,
+                    &c.field,
                     qfp,
                     end as f64 - now,
                     &mut radio,
-                    &mut scratch,
+                    &mut c.scratch,
                 );
                 if r.duration_us <= 0.0 {
                     break;
@@ -413,7 +414,41 @@ impl Model {
             }
             block_start = end;
         }
-        reads
+        carry.reads
+    }
+
+    /// Opens `antenna`'s field for the epoch starting at `start_us`: its tags into
+    /// `carry.field`, their levels not known yet.
+    fn open_epoch(&self, scope: &Scope<'_>, start_us: u64, carry: &mut Carry, bucket: &mut Bucket) {
+        let ch = carry.clock.at(self, start_us);
+        let (antenna, tx) = (scope.antenna, scope.tx_power_dbm);
+        self.open_bucket(antenna, tx, start_us, ch, &mut carry.classified, bucket);
+        self.field_of(bucket, &mut carry.field);
+        carry.levels.clear();
+        carry.levels.resize(carry.field.len(), f64::NAN);
+    }
+
+    /// What the rounds of a call on `antenna` at `tx` dBm under `air` share, keeping the
+    /// reads in `window` [from, until).
+    fn scope<'a>(
+        &'a self,
+        antenna: u16,
+        tx: f64,
+        air: &'a Air,
+        want: Want,
+        window: (u64, u64),
+    ) -> Scope<'a> {
+        Scope {
+            model: self,
+            antenna,
+            tx_power_dbm: tx,
+            air,
+            times: air.mode.slot_times(EPC_BITS),
+            want,
+            prefix: self.gen2_prefix(antenna),
+            from_us: window.0,
+            until_us: window.1,
+        }
     }
 
     /// How long `antenna` spends on the epoch holding `t_us` when no tag can be in its field at
@@ -465,6 +500,81 @@ impl Model {
             }
         }
     }
+}
+
+/// What [`Model::rounds`] carries from epoch to epoch: the window's reads, the buffers the
+/// epochs reuse and, in a single-target inventory, the tags read and whether no tag was in
+/// A when the first round began.
+struct Carry {
+    reads: Vec<Read>,
+    clock: ChannelClock,
+    classified: Option<Arc<Classified>>,
+    field: Vec<usize>,
+    levels: Vec<f64>,
+    scratch: gen2::Scratch,
+    read_here: Vec<usize>,
+    first_round: bool,
+    none_in_a: bool,
+}
+
+impl Carry {
+    /// Nothing read yet, on the `pinned` channel if any; `flagged`: a single-target
+    /// inventory (no tag in A until a round finds one).
+    fn new(pinned: Option<u16>, flagged: bool) -> Carry {
+        Carry {
+            reads: Vec::new(),
+            clock: ChannelClock::new(pinned),
+            classified: None,
+            field: Vec::new(),
+            levels: Vec::new(),
+            scratch: gen2::Scratch::default(),
+            read_here: Vec::new(),
+            first_round: true,
+            none_in_a: flagged,
+        }
+    }
+}
+
+/// The span of the epoch starting at `start` its rounds run over: all of it (its reads are
+/// filtered to the window), or, in a single-target inventory (`flagged`), which carries
+/// flags from call to call, only its part inside the window, so that no read outside it
+/// changes a flag.
+fn epoch_span(scope: &Scope<'_>, start: u64, flagged: bool) -> (u64, u64) {
+    if flagged {
+        (
+            start.max(scope.from_us),
+            (start + FIELD_BUCKET_US).min(scope.until_us),
+        )
+    } else {
+        (start, start + FIELD_BUCKET_US)
+    }
+}
+
+/// Brings the flags of the tags of `field` in `session` up to `start_us` and energises them.
+fn settle_field(flags: &mut Flags, field: &[usize], session: u8, start_us: u64) {
+    for &tag in field {
+        flags.settle(tag, session, start_us);
+        flags.energise(tag, start_us);
+    }
+}
+
+/// The tags of `field` in A in `session` at `now_us` and not in `done`, into `taking_part`.
+#[inline]
+fn still_in_a(
+    taking_part: &mut Vec<usize>,
+    field: &[usize],
+    flags: &Flags,
+    session: u8,
+    now_us: u64,
+    done: &[usize],
+) {
+    taking_part.clear();
+    taking_part.extend(
+        field
+            .iter()
+            .copied()
+            .filter(|&t| flags.is_a(t, session, now_us) && !done.contains(&t)),
+    );
 }
 
 #[cfg(test)]
