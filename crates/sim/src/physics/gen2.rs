@@ -338,18 +338,7 @@ pub fn round_in<R: RngCore + ?Sized>(
         let mut progressed = false;
         let mut collided = false;
         for slot in 0..frame {
-            answering.clear();
-            let k = if free == 0 {
-                0
-            } else {
-                in_next_slot(rng, free, frame - slot)
-            };
-            for _ in 0..k {
-                let i = below(rng, free);
-                free -= 1;
-                waiting.swap(i, free);
-                answering.push(free);
-            }
+            draw_slot(rng, waiting, answering, &mut free, frame - slot);
             // The reply the reader may decode: a lone one, or a captured one.
             let (candidate, collision) = match answering.as_slice() {
                 [] => (None, false),
@@ -359,12 +348,7 @@ pub fn round_in<R: RngCore + ?Sized>(
             let decoded = candidate
                 .filter(|_| t + times.success_us <= budget_us)
                 .filter(|&i| radio.reply(waiting[i], t + times.success_us));
-            // Outcome index: 0 nothing heard, 1 collided, 2 read.
-            let (dt, outcome) = match (decoded, collision) {
-                (Some(_), _) => (times.success_us, 2),
-                (None, true) => (times.collided_us, 1),
-                (None, false) => (times.empty_us, 0),
-            };
+            let (dt, outcome) = slot_outcome(times, decoded.is_some(), collision);
             if t + dt > budget_us {
                 break 'frames;
             }
@@ -376,11 +360,7 @@ pub fn round_in<R: RngCore + ?Sized>(
                 progressed = true;
                 out.reads.push((t, waiting[i]));
             }
-            match outcome {
-                0 => out.qfp = (out.qfp - Q_STEP).max(0.0),
-                1 if decoded.is_none() => out.qfp = (out.qfp + Q_STEP).min(f64::from(MAX_Q)),
-                _ => {}
-            }
+            out.qfp = adjusted_qfp(out.qfp, outcome, decoded.is_some());
             if out.qfp.round() as u32 != q && slot + 1 < frame {
                 // QueryAdjust: the tags not yet read draw again among 2^Q' slots.
                 t += times.adjust_extra_us;
@@ -400,6 +380,52 @@ pub fn round_in<R: RngCore + ?Sized>(
     }
     out.duration_us = t.min(budget_us.max(0.0));
     out
+}
+
+/// Draws which of the `free` tags of `waiting` without a slot answer in the next of the
+/// frame's `left` slots: they leave the free ones (`waiting[..free]`), their indices go to
+/// `answering`.
+#[inline]
+fn draw_slot<R: RngCore + ?Sized>(
+    rng: &mut R,
+    waiting: &mut [usize],
+    answering: &mut Vec<usize>,
+    free: &mut usize,
+    left: u64,
+) {
+    answering.clear();
+    let k = if *free == 0 {
+        0
+    } else {
+        in_next_slot(rng, *free, left)
+    };
+    for _ in 0..k {
+        let i = below(rng, *free);
+        *free -= 1;
+        waiting.swap(i, *free);
+        answering.push(*free);
+    }
+}
+
+/// What a slot costs (µs) and its outcome index: 0 nothing heard, 1 collided, 2 read.
+#[inline]
+fn slot_outcome(times: &SlotTimes, decoded: bool, collision: bool) -> (f64, usize) {
+    match (decoded, collision) {
+        (true, _) => (times.success_us, 2),
+        (false, true) => (times.collided_us, 1),
+        (false, false) => (times.empty_us, 0),
+    }
+}
+
+/// The Q algorithm's Qfp after a slot with `outcome` (see [`slot_outcome`]): down after an
+/// empty slot, up after a collision nothing was decoded from.
+#[inline]
+fn adjusted_qfp(qfp: f64, outcome: usize, decoded: bool) -> f64 {
+    match outcome {
+        0 => (qfp - Q_STEP).max(0.0),
+        1 if !decoded => (qfp + Q_STEP).min(f64::from(MAX_Q)),
+        _ => qfp,
+    }
 }
 
 /// Drops the tags read in this frame from `waiting` (indices into it).
