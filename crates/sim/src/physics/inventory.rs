@@ -23,7 +23,7 @@ use super::multipath::{self, Aim, Channel};
 use super::schedule;
 use super::seed::Stream;
 use super::{hardware, noise, phase, rssi, Model, Read, Want};
-use crate::scenario::RssiModel;
+use crate::scenario::{AntennaSpec, RssiModel};
 
 /// Half-interval (µs) of the central difference giving the radial velocity.
 const DOPPLER_STEP_US: u64 = 10_000;
@@ -255,45 +255,9 @@ impl Model {
                 spec.backscatter_compression,
             )
             + hw.rssi_db(tag, channel_index);
-        let rx = |noise| {
-            rssi::full_model(
-                tx_power_dbm,
-                spec.cable_loss_db,
-                ch.gain_linear,
-                self.tag_gain_linear,
-                lambda,
-                ch.distance_m,
-                ch.multipath_factor,
-                noise,
-            )
-            .map(|dbm| dbm + backscatter_db)
-        };
         // The noise-free level sets the phase and Doppler noise in both models.
-        let (clean_dbm, rssi_dbm) = match spec.rssi_model {
-            RssiModel::Reader => {
-                let clean = rx(0.0)?;
-                let scale = if spec.rssi_sigma_grows {
-                    noise::weak_signal_scale_with(
-                        clean,
-                        spec.phase_noise_ref_dbm,
-                        spec.noise_exponent,
-                    )
-                } else {
-                    1.0
-                };
-                let n_db = noise::gaussian(rng, spec.rssi_sigma_db * scale)
-                    + hardware::rssi_outlier(rng, spec.rssi_outlier_rate);
-                (
-                    clean,
-                    rssi::reader_dbm(clean, n_db, spec.rssi_resolution_db),
-                )
-            }
-            RssiModel::GazeboEq5 => {
-                let n_rssi = noise::gaussian(rng, spec.eq5_noise());
-                let noisy = rx(n_rssi)?;
-                (rx(0.0).unwrap_or(noisy), noisy)
-            }
-        };
+        let (clean_dbm, rssi_dbm) =
+            self.reply_levels(spec, &ch, tx_power_dbm, lambda, backscatter_db, rng)?;
         if rssi_dbm < rssi::READER_SENSITIVITY_DBM {
             return None;
         }
@@ -302,21 +266,7 @@ impl Model {
         // asking for one gives it the same value as asking for both.
         let (mut phase_rad, mut doppler_hz) = (0.0, 0.0);
         if want.phase || want.doppler {
-            let scale = noise::weak_signal_scale_with(
-                clean_dbm,
-                spec.phase_noise_ref_dbm,
-                spec.noise_exponent,
-            );
-            let sigma = spec.phase_noise_rad * scale;
-            let mut n_phi = hardware::heavy(rng, sigma, spec.phase_noise_dof);
-            if let Some(dist) = &spec.extra_phase_noise {
-                n_phi += noise::extra(rng, dist);
-            }
-            if spec.phase_pi_ambiguity && rng.gen::<bool>() {
-                n_phi += std::f64::consts::PI;
-            }
-            n_phi += hardware::phase_outlier(rng, spec.phase_outlier_rate, sigma);
-            let n_doppler = noise::gaussian(rng, spec.doppler_sigma_hz * scale);
+            let (n_phi, n_doppler) = phase_doppler_noise(spec, clean_dbm, rng);
             if want.phase {
                 let phi0 = self.phase_offset(antenna, tag, channel_index)
                     + self.pattern_phase(antenna, tag, time_us);
@@ -339,6 +289,59 @@ impl Model {
             phase_rad,
             doppler_hz,
         })
+    }
+
+    /// The noise-free and the reported level (dBm) of a reply over channel `ch` at
+    /// `tx_power_dbm` and `lambda` (m), the hardware adding `backscatter_db`, with the RSSI
+    /// model's draws from `rng`; `None` when the link model gives no level.
+    #[inline]
+    fn reply_levels(
+        &self,
+        spec: &AntennaSpec,
+        ch: &Channel,
+        tx_power_dbm: f64,
+        lambda: f64,
+        backscatter_db: f64,
+        rng: &mut Stream,
+    ) -> Option<(f64, f64)> {
+        let rx = |noise| {
+            rssi::full_model(
+                tx_power_dbm,
+                spec.cable_loss_db,
+                ch.gain_linear,
+                self.tag_gain_linear,
+                lambda,
+                ch.distance_m,
+                ch.multipath_factor,
+                noise,
+            )
+            .map(|dbm| dbm + backscatter_db)
+        };
+        match spec.rssi_model {
+            RssiModel::Reader => {
+                let clean = rx(0.0)?;
+                let scale = if spec.rssi_sigma_grows {
+                    noise::weak_signal_scale_with(
+                        clean,
+                        spec.phase_noise_ref_dbm,
+                        spec.noise_exponent,
+                    )
+                } else {
+                    1.0
+                };
+                let n_db = noise::gaussian(rng, spec.rssi_sigma_db * scale)
+                    + hardware::rssi_outlier(rng, spec.rssi_outlier_rate);
+                Some((
+                    clean,
+                    rssi::reader_dbm(clean, n_db, spec.rssi_resolution_db),
+                ))
+            }
+            RssiModel::GazeboEq5 => {
+                let n_rssi = noise::gaussian(rng, spec.eq5_noise());
+                let noisy = rx(n_rssi)?;
+                Some((rx(0.0).unwrap_or(noisy), noisy))
+            }
+        }
     }
 
     /// The smooth angle-dependent phase error (rad) of `tag` read by `antenna` at `t_us`:
@@ -390,4 +393,23 @@ impl Model {
             0.0
         }
     }
+}
+
+/// The phase noise (rad) and Doppler noise (Hz) of a reply whose noise-free level is
+/// `clean_dbm`, drawn from `rng` in this order.
+#[inline]
+fn phase_doppler_noise(spec: &AntennaSpec, clean_dbm: f64, rng: &mut Stream) -> (f64, f64) {
+    let scale =
+        noise::weak_signal_scale_with(clean_dbm, spec.phase_noise_ref_dbm, spec.noise_exponent);
+    let sigma = spec.phase_noise_rad * scale;
+    let mut n_phi = hardware::heavy(rng, sigma, spec.phase_noise_dof);
+    if let Some(dist) = &spec.extra_phase_noise {
+        n_phi += noise::extra(rng, dist);
+    }
+    if spec.phase_pi_ambiguity && rng.gen::<bool>() {
+        n_phi += std::f64::consts::PI;
+    }
+    n_phi += hardware::phase_outlier(rng, spec.phase_outlier_rate, sigma);
+    let n_doppler = noise::gaussian(rng, spec.doppler_sigma_hz * scale);
+    (n_phi, n_doppler)
 }
