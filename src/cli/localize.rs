@@ -3,7 +3,6 @@
 
 use std::io::BufRead;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use crate::localize::estimate::Estimator;
 use crate::localize::offline::{self, Progress, SettingsFile};
@@ -48,32 +47,76 @@ pub struct LocalizeArgs {
     pub worker: crate::cli::worker::WorkerArgs,
 }
 
-/// Runs `localize`.
-pub fn run(args: LocalizeArgs) -> ExitCode {
-    if args.worker.subscribe.is_some() {
-        return crate::cli::worker::run(&args);
-    }
-    match execute(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("llrp-gateway localize: {e}");
-            ExitCode::FAILURE
-        }
-    }
+/// Why `localize` could not localize its input.
+#[derive(Debug, thiserror::Error)]
+pub enum LocalizeCommandError {
+    /// The settings file could not be loaded (the message names the file and why).
+    #[error("{source}")]
+    Settings {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::localize::offline::SettingsError,
+    },
+    /// The pose file could not be loaded (the message names the file and why).
+    #[error("{source}")]
+    Poses {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::localize::poses::PoseFileError,
+    },
+    /// INPUT or `--output` is missing (clap requires both without `--subscribe`).
+    #[error("INPUT and --output are needed (or --subscribe)")]
+    Missing,
+    /// The output file could not be created, or not put in place.
+    #[error("{source}")]
+    Output {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::files::OutputError,
+    },
+    /// The input's reads could not be had.
+    #[error("{0}")]
+    Reads(#[from] ReadsError),
+    /// The estimates could not be written as JSON.
+    #[error("{0}")]
+    Json(serde_json::Error),
+    /// The estimates could not be written to the output file.
+    #[error("{}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
 }
 
-fn execute(args: &LocalizeArgs) -> Result<(), String> {
+/// Runs `localize` on a file (the worker, with `--subscribe`, is [`crate::cli::worker::run`]).
+pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
+    type E = LocalizeCommandError;
     let settings = match &args.settings {
-        Some(p) => SettingsFile::load(p).map_err(|e| e.to_string())?,
+        Some(p) => SettingsFile::load(p).map_err(|source| E::Settings {
+            path: p.clone(),
+            source,
+        })?,
         None => SettingsFile::default(),
     };
     let poses = match &args.poses {
-        Some(p) => Poses::load(p).map_err(|e| e.to_string())?,
+        Some(p) => Poses::load(p).map_err(|source| E::Poses {
+            path: p.clone(),
+            source,
+        })?,
         None => Poses::new(),
     };
     // clap requires both without --subscribe.
     let (Some(input), Some(output)) = (&args.input, &args.output) else {
-        return Err("INPUT and --output are needed (or --subscribe)".into());
+        return Err(E::Missing);
+    };
+    let output_error = |source| E::Output {
+        path: output.clone(),
+        source,
     };
     // The output is checked before the work: not an input, not an existing file.
     let mut out = if output.as_os_str() == "-" {
@@ -82,9 +125,9 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         let mut inputs: Vec<&std::path::Path> = vec![input];
         inputs.extend(args.poses.as_deref());
         inputs.extend(args.settings.as_deref());
-        Some(crate::files::Output::create(output, &inputs, args.force).map_err(|e| e.to_string())?)
+        Some(crate::files::Output::create(output, &inputs, args.force).map_err(output_error)?)
     };
-    let reads = load_reads(input).map_err(|e| e.to_string())?;
+    let reads = load_reads(input)?;
     let bar = if reads.len() >= PROGRESS_FROM {
         indicatif::ProgressBar::new(reads.len() as u64)
     } else {
@@ -110,15 +153,18 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         }
     });
     bar.finish_and_clear();
-    let json = serde_json::to_string_pretty(&outcome.tags).map_err(|e| e.to_string())?;
+    let json = serde_json::to_string_pretty(&outcome.tags).map_err(E::Json)?;
     match out.take() {
         None => println!("{json}"),
         Some(mut file) => {
             use std::io::Write;
             file.write_all((json + "\n").as_bytes())
                 .and_then(|()| file.flush())
-                .map_err(|e| format!("{}: {e}", output.display()))?;
-            file.commit().map_err(|e| e.to_string())?;
+                .map_err(|source| E::Write {
+                    path: output.clone(),
+                    source,
+                })?;
+            file.commit().map_err(output_error)?;
         }
     }
     let a = outcome.set_aside;

@@ -6,7 +6,7 @@
 //! ([`inventory`]), `export` and `import` ([`capture`]), `localize` and its MQTT worker
 //! ([`localize`], [`worker`]), `decode` ([`decode`]), `bench localize`, `realism` and
 //! `readrate` ([`mod@bench`]). Each runner returns a typed error (`SimCommandError`,
-//! `ProxyCommandError`, ...; `localize` still a message, said in the same format); what the
+//! `ProxyCommandError`, `LocalizeCommandError`, `WorkerCommandError`, ...); what the
 //! reads of `sim`, `proxy`, `replay` and `inventory` go to is built in [`root`], with the
 //! localizer options of the last three in [`live`].
 
@@ -158,7 +158,11 @@ pub fn main() -> ExitCode {
         Command::Inventory(args) => exit("inventory", inventory::run(args)),
         Command::Export(args) => exit("export", capture::run_export(&args)),
         Command::Import(args) => exit("import", capture::run_import(&args)),
-        Command::Localize(args) => crate::cli::localize::run(args),
+        // The worker's errors are said as `localize`'s.
+        Command::Localize(args) if args.worker.subscribe.is_some() => {
+            exit("localize", worker::run(&args))
+        }
+        Command::Localize(args) => exit("localize", localize::run(&args)),
         Command::Bench(bench::BenchCommand::Localize(args)) => {
             exit("bench localize", bench::localize(args))
         }

@@ -1,7 +1,7 @@
 //! `llrp-gateway localize --subscribe URL --shards LIST`: a localizer worker until Ctrl-C or
 //! SIGTERM, with the HTTP API for its shards when given `--http ADDR`.
 
-use std::process::ExitCode;
+use std::path::PathBuf;
 
 use super::localize::LocalizeArgs;
 use crate::fleet::schema::DEFAULT_SHARDS;
@@ -50,34 +50,93 @@ pub struct WorkerArgs {
     pub http: crate::http::launch::HttpArgs,
 }
 
-/// Runs the worker of `args` (which has `--subscribe`).
-pub fn run(args: &LocalizeArgs) -> ExitCode {
-    crate::stop::init_logging();
-    match execute(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("llrp-gateway localize: {e}");
-            ExitCode::FAILURE
-        }
-    }
+/// Why the worker of `localize --subscribe` could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum WorkerCommandError {
+    /// `--subscribe` is not a broker address.
+    #[error("--subscribe {0}")]
+    Subscribe(crate::fleet::url::UrlError),
+    /// `--shards` is not a list of shards below `--shard-count` (the message says why).
+    #[error("{0}")]
+    Shards(String),
+    /// The settings file could not be loaded (the message names the file and why).
+    #[error("{source}")]
+    Settings {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::localize::offline::SettingsError,
+    },
+    /// The `--scenario` file could not be loaded.
+    #[error("{}: {source}", path.display())]
+    Scenario {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::scenario::ScenarioError,
+    },
+    /// The `--mqtt-ca` certificate could not be loaded (the message names the file and why).
+    #[error("{0}")]
+    MqttCa(String),
+    /// A presence option is not a positive number.
+    #[error("{option} {value}: must be a positive number")]
+    NotPositive {
+        /// The option, `--presence-silence-s` or `--presence-move-m`.
+        option: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The async runtime could not be started.
+    #[error("cannot start the async runtime: {0}")]
+    Runtime(std::io::Error),
+    /// The worker could not connect to the broker.
+    #[error("{0}")]
+    Start(crate::fleet::publish::PublishError),
+    /// The HTTP API could not be started.
+    #[error("{0}")]
+    Http(#[from] crate::http::launch::LaunchError),
+    /// The HTTP API's address could not be listened on.
+    #[error("--http {addr}: cannot listen")]
+    HttpListen {
+        /// The address.
+        addr: String,
+    },
 }
 
-fn execute(args: &LocalizeArgs) -> Result<(), String> {
+/// Runs the worker of `args` (which has `--subscribe`) until Ctrl-C or SIGTERM.
+pub fn run(args: &LocalizeArgs) -> Result<(), WorkerCommandError> {
+    crate::stop::init_logging();
+    let opts = options(args)?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(WorkerCommandError::Runtime)?;
+    runtime.block_on(serve(opts, &args.worker))
+}
+
+/// The worker's options from `args`.
+fn options(args: &LocalizeArgs) -> Result<WorkerOptions, WorkerCommandError> {
+    type E = WorkerCommandError;
     let w = &args.worker;
     let url = w.subscribe.as_deref().unwrap_or_default();
-    let url = BrokerUrl::parse(url).map_err(|e| format!("--subscribe {e}"))?;
+    let url = BrokerUrl::parse(url).map_err(E::Subscribe)?;
     let shards = match &w.shards {
-        Some(list) => parse_shards(list, w.shard_count)?,
+        Some(list) => parse_shards(list, w.shard_count).map_err(E::Shards)?,
         None => (0..w.shard_count).collect(),
     };
     let file = match &args.settings {
-        Some(p) => SettingsFile::load(p).map_err(|e| e.to_string())?,
+        Some(p) => SettingsFile::load(p).map_err(|source| E::Settings {
+            path: p.clone(),
+            source,
+        })?,
         None => SettingsFile::default(),
     };
     let settings = match &w.scenario {
         Some(p) => {
-            let s =
-                crate::scenario::Scenario::load(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            let s = crate::scenario::Scenario::load(p).map_err(|source| E::Scenario {
+                path: p.clone(),
+                source,
+            })?;
             let base = crate::localize::live::Settings {
                 estimator: args.estimator,
                 ..Default::default()
@@ -92,71 +151,69 @@ fn execute(args: &LocalizeArgs) -> Result<(), String> {
         .client_id
         .clone()
         .unwrap_or_else(|| format!("llrp-gateway-worker-{first}-{last}-of-{}", w.shard_count));
-    let opts = WorkerOptions {
-        url: url.clone(),
-        shards: shards.clone(),
+    Ok(WorkerOptions {
+        url,
+        shards,
         shard_count: w.shard_count,
         client_id,
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
-        tls: crate::fleet::args::tls_config(w.mqtt_ca.as_deref())?,
+        tls: crate::fleet::args::tls_config(w.mqtt_ca.as_deref()).map_err(E::MqttCa)?,
         presence_silence: positive("--presence-silence-s", w.presence_silence_s)
             .map(std::time::Duration::from_secs_f64)?,
         presence_move_m: positive("--presence-move-m", w.presence_move_m)?,
-    };
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| format!("cannot start the async runtime: {e}"))?;
-    runtime.block_on(async move {
-        let stop = crate::stop::StopSignal::watch();
-        let worker = Worker::start(opts).map_err(|e| e.to_string())?;
-        let http = match w.http.address(None) {
-            Some((addr, chosen)) => {
-                // The localizer's metrics and the worker's MQTT counters.
-                let metrics = crate::metrics::Metrics::of_localizer(&worker.live.shared);
-                metrics.register(|r| worker.metrics.register(r));
-                let h = crate::http::launch::launch(
-                    &addr,
-                    chosen,
-                    &w.http,
-                    false,
-                    worker.live.shared.clone(),
-                    worker.live.tap.clone(),
-                    metrics,
-                )
-                .await
-                .map_err(|e| e.to_string())?
-                .ok_or_else(|| format!("--http {addr}: cannot listen"))?;
-                eprintln!(
-                    "llrp-gateway localize: HTTP API and live map on http://{}/",
-                    h.addr
-                );
-                Some(h)
-            }
-            None => None,
-        };
-        eprintln!(
-            "llrp-gateway localize: worker on {url}, shards {} of {}, subscribed",
-            list(&shards),
-            w.shard_count
-        );
-        stop.wait().await;
-        if let Some(h) = http {
-            h.stop().await;
-        }
-        worker.stop();
-        eprintln!("llrp-gateway localize: stopped");
-        Ok(())
     })
 }
 
+/// Runs the worker of `opts`, with the HTTP API of `w` if asked for, until Ctrl-C or SIGTERM.
+async fn serve(opts: WorkerOptions, w: &WorkerArgs) -> Result<(), WorkerCommandError> {
+    let stop = crate::stop::StopSignal::watch();
+    let (url, shards) = (opts.url.clone(), opts.shards.clone());
+    let worker = Worker::start(opts).map_err(WorkerCommandError::Start)?;
+    let http = match w.http.address(None) {
+        Some((addr, chosen)) => {
+            // The localizer's metrics and the worker's MQTT counters.
+            let metrics = crate::metrics::Metrics::of_localizer(&worker.live.shared);
+            metrics.register(|r| worker.metrics.register(r));
+            let h = crate::http::launch::launch(
+                &addr,
+                chosen,
+                &w.http,
+                false,
+                worker.live.shared.clone(),
+                worker.live.tap.clone(),
+                metrics,
+            )
+            .await?
+            .ok_or(WorkerCommandError::HttpListen { addr })?;
+            eprintln!(
+                "llrp-gateway localize: HTTP API and live map on http://{}/",
+                h.addr
+            );
+            Some(h)
+        }
+        None => None,
+    };
+    eprintln!(
+        "llrp-gateway localize: worker on {url}, shards {} of {}, subscribed",
+        list(&shards),
+        w.shard_count
+    );
+    stop.wait().await;
+    if let Some(h) = http {
+        h.stop().await;
+    }
+    worker.stop();
+    eprintln!("llrp-gateway localize: stopped");
+    Ok(())
+}
+
 /// `v` when it is a positive finite number, else why not, naming the option.
-fn positive(option: &str, v: f64) -> Result<f64, String> {
+fn positive(option: &'static str, v: f64) -> Result<f64, WorkerCommandError> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(format!("{option} {v}: must be a positive number"))
+        Err(WorkerCommandError::NotPositive { option, value: v })
     }
 }
 
