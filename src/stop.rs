@@ -51,7 +51,7 @@ impl StopSignal {
 }
 
 /// How log lines are written (`--log-format`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum LogFormat {
     /// One line of text an event; coloured on a terminal unless `NO_COLOR` is set.
     #[default]

@@ -5,9 +5,10 @@
 
 use std::path::PathBuf;
 
+use super::args::HttpArgs;
 use super::root::{Consumers, ConsumersError, Plan};
 use crate::gateway::live::settings_from;
-use crate::http::launch::HttpArgs;
+use crate::http::launch::LaunchOptions;
 use crate::localize::estimate::Estimator;
 use crate::localize::live::{Input, Settings};
 use crate::localize::offline::SettingsFile;
@@ -32,7 +33,7 @@ pub struct LiveArgs {
     pub estimator: Estimator,
     /// Publishing to an MQTT broker (docs/fleet.md).
     #[command(flatten)]
-    pub publish: crate::fleet::args::PublishArgs,
+    pub publish: super::args::PublishArgs,
 }
 
 /// Why the localizer, its API or the publisher could not be started.
@@ -53,7 +54,9 @@ pub enum SinksError {
 /// `--http` was given, the publisher when `--publish` was; [`super::root`]), with the
 /// settings and pose files of `args`; `command` names the command in messages.
 pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, SinksError> {
-    let http = args.http.address(None);
+    let http_options = LaunchOptions::from(args.http.clone());
+    let publish = crate::fleet::args::PublishConfig::from(args.publish.clone());
+    let http = http_options.address(None);
     let file = match &args.localize_settings {
         Some(p) if http.is_some() || args.publish.publish.is_some() => SettingsFile::load(p)?,
         _ => SettingsFile::default(),
@@ -82,11 +85,11 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, Si
     Ok(Consumers::start(Plan {
         command,
         http,
-        http_args: &args.http,
+        http_args: &http_options,
         simulation: false,
         settings,
         prime,
-        publish: &args.publish,
+        publish: &publish,
         references,
     })
     .await?)

@@ -19,6 +19,7 @@ use crate::decode::DecodeOptions;
 use crate::net::clock::Speed;
 use crate::sim::SimOptions;
 
+pub mod args;
 pub mod bench;
 pub mod capture;
 pub mod decode;
@@ -42,8 +43,8 @@ pub mod worker;
 )]
 pub struct Cli {
     /// Log lines as text (coloured on a terminal unless NO_COLOR is set) or as JSON objects.
-    #[arg(long, global = true, value_enum, default_value_t = crate::stop::LogFormat::Text)]
-    log_format: crate::stop::LogFormat,
+    #[arg(long, global = true, value_enum, default_value_t = args::LogFormatArg::Text)]
+    log_format: args::LogFormatArg,
     /// The command.
     #[command(subcommand)]
     command: Command,
@@ -90,11 +91,11 @@ pub enum Command {
         tls_key: Option<PathBuf>,
         /// The HTTP API and live map (default 127.0.0.1:8080; docs/http.md).
         #[command(flatten)]
-        http: crate::http::launch::HttpArgs,
+        http: args::HttpArgs,
         /// Antenna poses the localizer is given: `truth`, or `estimated` (what the robot
         /// itself would report).
-        #[arg(long, value_enum, default_value_t = crate::sim::PoseSource::Estimated)]
-        poses: crate::sim::PoseSource,
+        #[arg(long, value_enum, default_value_t = args::PoseSourceArg::Estimated)]
+        poses: args::PoseSourceArg,
         /// Time between two pose samples of each antenna, as a robot publishes its pose
         /// (ms; 100 is 10 Hz).
         #[arg(long, value_name = "MS", default_value_t = 100, value_parser = crate::options::parser::<u64>("pose-interval-ms"))]
@@ -108,7 +109,7 @@ pub enum Command {
         estimator: crate::localize::estimate::Estimator,
         /// Publishing to an MQTT broker (docs/fleet.md).
         #[command(flatten)]
-        publish: crate::fleet::args::PublishArgs,
+        publish: args::PublishArgs,
     },
     /// Gateway: forward clients to a real reader byte for byte, recording the sessions.
     Proxy(proxy::ProxyArgs),
@@ -153,7 +154,7 @@ pub fn exit<E: std::fmt::Display>(command: &str, result: Result<(), E>) -> ExitC
 /// said (`llrp-gateway COMMAND: MESSAGE` on standard error, exit status 1).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
-    crate::stop::set_log_format(cli.log_format);
+    crate::stop::set_log_format(cli.log_format.into());
     match cli.command {
         Command::Inventory(args) => exit("inventory", inventory::run(args)),
         Command::Export(args) => exit("export", capture::run_export(&args)),
@@ -195,12 +196,12 @@ pub fn main() -> ExitCode {
                 scenario,
                 reader_model.as_deref(),
                 sim::SimLocalize {
-                    http,
-                    poses,
+                    http: http.into(),
+                    poses: poses.into(),
                     pose_interval_ms,
                     read_poses: !no_read_poses,
                     estimator,
-                    publish,
+                    publish: publish.into(),
                 },
                 SimOptions {
                     listen,

@@ -39,7 +39,7 @@ pub struct ProxyArgs {
     /// Regulatory region of the reader (`fcc` or `etsi`), for channel frequencies of tapped
     /// reads until the reader's capabilities are seen.
     #[arg(long)]
-    pub region: Option<Region>,
+    pub region: Option<super::args::RegionArg>,
     /// Most clients served at once (each with its own connection to the reader); one more
     /// gets a failed ConnectionAttemptEvent and is closed.
     #[arg(long, value_name = "N", default_value_t = crate::net::proxy::MAX_CLIENTS as u64, value_parser = crate::options::parser::<u64>("max-clients"))]
@@ -184,7 +184,7 @@ fn entries(args: &ProxyArgs) -> Result<Vec<ProxyEntry>, ProxyCommandError> {
             upstream: upstream.clone(),
             listen: args.listen.clone(),
             record: args.record.clone(),
-            region: args.region,
+            region: args.region.map(Region::from),
             tls_cert: args.tls_cert.clone(),
             tls_key: args.tls_key.clone(),
             upstream_tls: args.upstream_tls,

@@ -9,10 +9,10 @@ use std::sync::Arc;
 
 use prometheus_client::metrics::counter::Counter;
 
-use crate::fleet::args::PublishArgs;
+use crate::fleet::args::PublishConfig;
 use crate::fleet::metrics::MqttMetrics;
 use crate::fleet::publish::Publisher;
-use crate::http::launch::{launch, HttpArgs, LaunchError, Launched};
+use crate::http::launch::{launch, LaunchError, LaunchOptions, Launched};
 use crate::localize::live::{Input, Live, Settings, Tap};
 use crate::metrics::{LinkMetrics, Metrics};
 
@@ -24,7 +24,7 @@ pub struct Plan<'a> {
     /// is taken is skipped, and no localizer runs); `None`: no localizer.
     pub http: Option<(String, bool)>,
     /// The API's token and browser rules.
-    pub http_args: &'a HttpArgs,
+    pub http_args: &'a LaunchOptions,
     /// A simulation: `GET /api/truth` is served.
     pub simulation: bool,
     /// The localizer's settings.
@@ -33,7 +33,7 @@ pub struct Plan<'a> {
     /// file), in order; waited for where the tap is full.
     pub prime: Vec<Input>,
     /// Publishing to an MQTT broker.
-    pub publish: &'a PublishArgs,
+    pub publish: &'a PublishConfig,
     /// The reference tags' EPCs, for the publisher.
     pub references: BTreeSet<String>,
 }

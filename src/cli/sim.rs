@@ -29,7 +29,7 @@ pub enum SimCommandError {
 /// The localizer, HTTP and MQTT side of `sim`.
 pub struct SimLocalize {
     /// Where the HTTP API and live map are served.
-    pub http: crate::http::launch::HttpArgs,
+    pub http: crate::http::launch::LaunchOptions,
     /// The antenna poses the localizer is given.
     pub poses: crate::sim::PoseSource,
     /// Time between two pose samples of an antenna (ms).
@@ -39,7 +39,7 @@ pub struct SimLocalize {
     /// The localizer's estimator.
     pub estimator: crate::localize::estimate::Estimator,
     /// Publishing to an MQTT broker.
-    pub publish: crate::fleet::args::PublishArgs,
+    pub publish: crate::fleet::args::PublishConfig,
 }
 
 /// The EPCs of `scenario`'s reference tags.

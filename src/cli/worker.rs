@@ -47,7 +47,7 @@ pub struct WorkerArgs {
     pub presence_move_m: f64,
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]
-    pub http: crate::http::launch::HttpArgs,
+    pub http: super::args::HttpArgs,
 }
 
 /// Why the worker of `localize --subscribe` could not run.
@@ -170,7 +170,8 @@ async fn serve(opts: WorkerOptions, w: &WorkerArgs) -> Result<(), WorkerCommandE
     let stop = crate::stop::StopSignal::watch();
     let (url, shards) = (opts.url.clone(), opts.shards.clone());
     let worker = Worker::start(opts).map_err(WorkerCommandError::Start)?;
-    let http = match w.http.address(None) {
+    let http_options = crate::http::launch::LaunchOptions::from(w.http.clone());
+    let http = match http_options.address(None) {
         Some((addr, chosen)) => {
             // The localizer's metrics and the worker's MQTT counters.
             let metrics = crate::metrics::Metrics::of_localizer(&worker.live.shared);
@@ -178,7 +179,7 @@ async fn serve(opts: WorkerOptions, w: &WorkerArgs) -> Result<(), WorkerCommandE
             let h = crate::http::launch::launch(
                 &addr,
                 chosen,
-                &w.http,
+                &http_options,
                 false,
                 worker.live.shared.clone(),
                 worker.live.tap.clone(),

@@ -46,7 +46,7 @@ pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
         let http = crate::http::launch::launch(
             "127.0.0.1:0",
             true,
-            &crate::http::launch::HttpArgs::default(),
+            &crate::http::launch::LaunchOptions::default(),
             false,
             live.shared.clone(),
             live.tap.clone(),

@@ -6,30 +6,23 @@ use std::time::Duration;
 
 use super::metrics::MqttMetrics;
 use super::publish::{PublishOptions, Publisher};
-use super::schema::DEFAULT_SHARDS;
 use super::url::BrokerUrl;
 
-/// Publishing to an MQTT broker (docs/fleet.md).
-#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
-pub struct PublishArgs {
+/// Publishing to an MQTT broker (docs/fleet.md; the command line's `--publish` options).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PublishConfig {
     /// Publish reads, poses, reader events and statuses to this MQTT broker:
     /// `mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`.
-    #[arg(long, value_name = "URL")]
     pub publish: Option<String>,
     /// Read shards: a tag's reads go to `PREFIX/v1/reads/{FNV-1a(EPC) % N}`.
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_SHARDS, value_parser = crate::options::parser::<u16>("shard-count"))]
     pub shard_count: u16,
     /// Messages held while the broker is away; beyond it they are dropped and counted.
-    #[arg(long, value_name = "N", default_value_t = 10_000, value_parser = crate::options::parser::<usize>("publish-queue"))]
     pub publish_queue: usize,
     /// Batch each topic's reads over this window (ms); 0: a message per RO_ACCESS_REPORT.
-    #[arg(long, value_name = "MS", default_value_t = 0, value_parser = crate::options::parser::<u64>("publish-window-ms"))]
     pub publish_window_ms: u64,
     /// This gateway's name on the broker (its status topic and MQTT client id).
-    #[arg(long, value_name = "NAME", default_value = "llrp-gateway")]
     pub gateway_name: String,
     /// For `mqtts://`: the CA certificate (PEM) that signed the broker's.
-    #[arg(long, value_name = "FILE")]
     pub mqtt_ca: Option<std::path::PathBuf>,
 }
 
@@ -44,7 +37,7 @@ pub fn tls_config(
     .transpose()
 }
 
-impl PublishArgs {
+impl PublishConfig {
     /// The broker address as shown: its password hidden.
     pub fn shown(&self) -> String {
         self.publish

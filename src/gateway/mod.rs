@@ -19,7 +19,7 @@ pub mod live;
 pub use crate::net::LLRP_PORT;
 
 /// A regulatory region's channel table.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Region {
     /// FCC Part 15, 50 channels (902.75..927.25 MHz).

@@ -16,30 +16,25 @@ use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 use crate::metrics::Metrics;
 
-/// The `--http` options of a command.
-#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
-pub struct HttpArgs {
+/// How the HTTP API beside a command is served (the command line's `--http` options).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LaunchOptions {
     /// Serve the HTTP API and live map here (`127.0.0.1:0` picks a free port; the bound
     /// address is printed). Beyond loopback it needs `--http-token`.
-    #[arg(long, value_name = "ADDR")]
     pub http: Option<String>,
     /// No HTTP API.
-    #[arg(long, conflicts_with = "http")]
     pub no_http: bool,
     /// Bearer token the write routes need (every route when bound beyond loopback).
-    #[arg(long, value_name = "TOKEN")]
     pub http_token: Option<String>,
     /// A host name the loopback HTTP API also answers to (beside localhost, 127.0.0.1 and
     /// `[::1]`); `.example.lan` takes a domain and its subdomains. Repeatable.
-    #[arg(long, value_name = "HOST")]
     pub http_allowed_host: Vec<String>,
     /// An origin whose pages may call the HTTP API, writes included (CORS), e.g.
     /// `http://dashboard.lan:3000`. Repeatable.
-    #[arg(long, value_name = "ORIGIN")]
     pub http_allowed_origin: Vec<String>,
 }
 
-impl HttpArgs {
+impl LaunchOptions {
     /// The browser rules these flags give a listener on `bound`.
     pub fn browser(&self, bound: &SocketAddr) -> BrowserRules {
         BrowserRules {
@@ -119,7 +114,7 @@ impl Launched {
 pub async fn launch(
     addr: &str,
     chosen: bool,
-    args: &HttpArgs,
+    args: &LaunchOptions,
     simulation: bool,
     shared: Arc<Shared>,
     tap: Tap,
@@ -172,11 +167,11 @@ mod tests {
 
     #[test]
     fn the_default_applies_only_without_http_and_no_http_turns_it_off() {
-        let args = |http: Option<&str>, no_http| HttpArgs {
+        let args = |http: Option<&str>, no_http| LaunchOptions {
             http: http.map(String::from),
             no_http,
             http_token: None,
-            ..HttpArgs::default()
+            ..LaunchOptions::default()
         };
         let d = Some("127.0.0.1:8080");
         assert_eq!(
@@ -199,7 +194,7 @@ mod tests {
         let skipped = launch(
             &addr,
             false,
-            &HttpArgs::default(),
+            &LaunchOptions::default(),
             false,
             live.shared.clone(),
             live.tap.clone(),
@@ -211,7 +206,7 @@ mod tests {
         let err = launch(
             &addr,
             true,
-            &HttpArgs::default(),
+            &LaunchOptions::default(),
             false,
             live.shared.clone(),
             live.tap.clone(),

@@ -25,7 +25,7 @@ pub const POSE_INTERVAL_US: u64 = 100_000;
 pub const TRUTH_EVERY: Duration = Duration::from_millis(50);
 
 /// Which poses the simulator gives the localizer (`sim --poses`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PoseSource {
     /// The true antenna poses.
     Truth,
