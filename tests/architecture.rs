@@ -91,6 +91,7 @@ const LAYERS: &[Layer] = &[
             "rumqttc",
             "llrp_gateway_sim",
             "llrp_gateway_localize",
+            "clap",
         ],
     },
     // Sockets serve the sans-IO sessions (the reader's, the replay's), record what passes and
@@ -116,6 +117,7 @@ const LAYERS: &[Layer] = &[
             "hyper_util",
             "rumqttc",
             "llrp_gateway_localize",
+            "clap",
         ],
     },
     // The HTTP API serves the localizer's state and takes poses into its feed: it knows no
@@ -135,7 +137,7 @@ const LAYERS: &[Layer] = &[
                 "realism",
             ],
         ],
-        crates: &["rumqttc", "llrp_gateway_sim"],
+        crates: &["rumqttc", "llrp_gateway_sim", "clap"],
     },
     // The running simulator (its readers on their sockets, its own inventory, its truth) is
     // one source of the feed: it knows no HTTP, MQTT or other command, which the composition
@@ -151,7 +153,7 @@ const LAYERS: &[Layer] = &[
             "eval",
             "realism",
         ]],
-        crates: &["axum", "hyper", "hyper_util", "rumqttc"],
+        crates: &["axum", "hyper", "hyper_util", "rumqttc", "clap"],
     },
     // MQTT publishing and workers take the localizer's feed and state; they do not reach into
     // the simulator, the HTTP server or the other commands.
@@ -161,7 +163,41 @@ const LAYERS: &[Layer] = &[
             SIMULATOR,
             &["http", "gateway", "inventory", "cli", "eval", "realism"],
         ],
-        crates: &["axum", "hyper", "hyper_util", "llrp_gateway_sim"],
+        crates: &["axum", "hyper", "hyper_util", "llrp_gateway_sim", "clap"],
+    },
+    // The proxy's own folder (its `--config` file, its tap of the sessions) knows sockets,
+    // recordings and the localizer's feed; the command line, the HTTP API, MQTT, the
+    // simulator and the other commands are above it.
+    Layer {
+        dir: "gateway",
+        modules: &[
+            SIMULATOR,
+            &["cli", "http", "fleet", "inventory", "eval", "realism"],
+        ],
+        crates: &[
+            "axum",
+            "hyper",
+            "hyper_util",
+            "rumqttc",
+            "llrp_gateway_sim",
+            "clap",
+        ],
+    },
+    // The inventory client knows sockets, reads, files and recordings, as the proxy does.
+    Layer {
+        dir: "inventory",
+        modules: &[
+            SIMULATOR,
+            &["cli", "http", "fleet", "gateway", "eval", "realism"],
+        ],
+        crates: &[
+            "axum",
+            "hyper",
+            "hyper_util",
+            "rumqttc",
+            "llrp_gateway_sim",
+            "clap",
+        ],
     },
 ];
 
@@ -273,10 +309,23 @@ fn crate_modules(code: &str) -> BTreeSet<String> {
 /// Whether `code` names the external crate `name` (`name::…` as a path, not a field).
 fn names_crate(code: &str, name: &str) -> bool {
     let pattern = format!("{name}::");
-    code.match_indices(&pattern).any(|(at, _)| {
+    let path = code.match_indices(&pattern).any(|(at, _)| {
         let before = code[..at].chars().next_back();
         !before.is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':' || c == '.')
-    })
+    });
+    // `use name;` and `use name as x;` name it without a path.
+    let word = |rest: &str| !rest.starts_with(|c: char| c.is_alphanumeric() || c == '_');
+    let used = code.match_indices("use ").any(|(at, _)| {
+        let before = code[..at].chars().next_back();
+        let rest = code[at + "use ".len()..].trim_start();
+        !before.is_some_and(|c| c.is_alphanumeric() || c == '_')
+            && (rest.strip_prefix(name).is_some_and(word)
+                || rest
+                    .strip_prefix("::")
+                    .and_then(|r| r.strip_prefix(name))
+                    .is_some_and(word))
+    });
+    path || used
 }
 
 #[test]
@@ -335,6 +384,24 @@ fn the_checker_sees_grouped_uses_and_skips_comments_and_strings() {
     assert_eq!(modules, ["physics", "reads"]);
     assert!(names_crate(&text, "tokio"));
     assert!(!names_crate(&code("let u = my_tokio::x;"), "tokio"));
+    // A clap type, derive or import, in a subsystem.
+    for text in [
+        "use clap::ValueEnum;",
+        "use clap::{Args, Parser};",
+        "#[derive(Clone, clap::ValueEnum)]",
+        "use clap;",
+        "use ::clap as c;",
+    ] {
+        assert!(names_crate(&code(text), "clap"), "{text}");
+    }
+    for text in [
+        "let clapper = 1;",
+        "use clapper::x;",
+        "self.clap::x",
+        "// use clap;",
+    ] {
+        assert!(!names_crate(&code(text), "clap"), "{text}");
+    }
 }
 
 #[test]

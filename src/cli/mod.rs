@@ -1,8 +1,9 @@
 //! The command line: its arguments ([`Cli`]), the dispatch to each command, and the one place a
 //! command's error is said and the process exits ([`main`], [`exit`]: `llrp-gateway COMMAND:
 //! MESSAGE` on standard error, exit status 1). Every command's arguments and runner live here,
-//! and the subsystems below take options and library calls, not these commands' clap argument
-//! structs: `sim` ([`sim`]), `proxy` ([`proxy`]), `replay` ([`replay`]), `inventory`
+//! and the subsystems below take options and library calls and name no clap type (the HTTP
+//! and MQTT option groups and the value enums are [`args`], converted to the subsystems' plain
+//! types; `tests/architecture.rs` checks it): `sim` ([`sim`]), `proxy` ([`proxy`]), `replay` ([`replay`]), `inventory`
 //! ([`inventory`]), `export` and `import` ([`capture`]), `localize` and its MQTT worker
 //! ([`localize`], [`worker`]), `decode` ([`decode`]), `bench localize`, `realism` and
 //! `readrate` ([`mod@bench`]). Each runner returns a typed error (`SimCommandError`,
