@@ -128,31 +128,7 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         Some(crate::files::Output::create(output, &inputs, args.force).map_err(output_error)?)
     };
     let reads = load_reads(input)?;
-    let bar = if reads.len() >= PROGRESS_FROM {
-        indicatif::ProgressBar::new(reads.len() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>9} [{bar:40}] {pos}/{len} ({eta})")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar.set_message("reads");
-    let mut tags_started = false;
-    let outcome = offline::localize(reads, poses, &settings, args.estimator, &mut |p| match p {
-        Progress::Read => bar.inc(1),
-        Progress::Tag => {
-            if !tags_started {
-                tags_started = true;
-                bar.set_message("tags");
-                bar.set_position(0);
-                bar.set_length(0);
-            }
-            bar.inc_length(1);
-            bar.inc(1);
-        }
-    });
-    bar.finish_and_clear();
+    let outcome = localize_with_progress(reads, poses, &settings, args.estimator);
     let json = serde_json::to_string_pretty(&outcome.tags).map_err(E::Json)?;
     match out.take() {
         None => println!("{json}"),
@@ -182,6 +158,41 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         eprintln!("llrp-gateway localize: {hint}");
     }
     Ok(())
+}
+
+/// Localizes `reads` as `localize` does, with a progress bar on long inputs.
+fn localize_with_progress(
+    reads: Vec<Read>,
+    poses: Poses,
+    settings: &SettingsFile,
+    estimator: Estimator,
+) -> offline::Outcome {
+    let bar = if reads.len() >= PROGRESS_FROM {
+        indicatif::ProgressBar::new(reads.len() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>9} [{bar:40}] {pos}/{len} ({eta})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_message("reads");
+    let mut tags_started = false;
+    let outcome = offline::localize(reads, poses, settings, estimator, &mut |p| match p {
+        Progress::Read => bar.inc(1),
+        Progress::Tag => {
+            if !tags_started {
+                tags_started = true;
+                bar.set_message("tags");
+                bar.set_position(0);
+                bar.set_length(0);
+            }
+            bar.inc_length(1);
+            bar.inc(1);
+        }
+    });
+    bar.finish_and_clear();
+    outcome
 }
 
 /// What to do about the reads set aside, one sentence per cause that set some aside.
