@@ -237,6 +237,41 @@ pub fn locate_with_report(
 ) -> Result<Report, NoFix> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
     let all = anchors(obs, sign);
+    let (points, inconsistent) = all_intersections(&all, segments, z, facing);
+    if points.is_empty() || all.len() < segments + 3 {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let problem = started(&all, segments, z, &points)?;
+    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
+    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
+    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
+    let cov = reported_covariance(&j, &r, &all, segments)?;
+    let (x, y) = (solved.p[0], solved.p[1]);
+    let cov = with_smooth_error(&cov, &j, &r, &all, [x, y, z]);
+    let sq = phase_sq(obs, [x, y, z], sign, &solved.p);
+    let c = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
+    if !(x.is_finite() && y.is_finite() && c.iter().all(|v| v.is_finite())) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    Ok(Report {
+        fix: Fix {
+            position: [x, y, z],
+            covariance: c,
+            rms_rad: (sq / obs.len() as f64).sqrt(),
+        },
+        points: points.len(),
+        inconsistent,
+    })
+}
+
+/// The intersection points of every segment with three anchors or more, and the count of
+/// inconsistent pairs.
+fn all_intersections(
+    all: &[Anchor],
+    segments: usize,
+    z: f64,
+    facing: [f64; 2],
+) -> (Vec<[f64; 3]>, usize) {
     let (mut points, mut inconsistent) = (Vec::new(), 0);
     for s in 0..segments {
         let seg: Vec<Anchor> = all.iter().filter(|a| a.segment == s).copied().collect();
@@ -246,9 +281,17 @@ pub fn locate_with_report(
             inconsistent += bad;
         }
     }
-    if points.is_empty() || all.len() < segments + 3 {
-        return Err(NoFix::InsufficientGeometry);
-    }
+    (points, inconsistent)
+}
+
+/// The fit's problem started at the points' weighted median, each offset at its best for
+/// that start.
+fn started<'a>(
+    all: &'a [Anchor],
+    segments: usize,
+    z: f64,
+    points: &[[f64; 3]],
+) -> Result<Problem<'a>, NoFix> {
     let start =
         [0, 1].map(|k| weighted_median(points.iter().map(|p| (p[k], 1.0 / p[2])).collect()));
     let (Some(x0), Some(y0)) = (start[0], start[1]) else {
@@ -258,7 +301,7 @@ pub fn locate_with_report(
     p[0] = x0;
     p[1] = y0;
     let mut problem = Problem {
-        anchors: &all,
+        anchors: all,
         segments,
         z,
         p,
@@ -273,11 +316,19 @@ pub fn locate_with_report(
             });
         problem.p[2 + s] = sum / n.max(1) as f64;
     }
-    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
-    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
-    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
+    Ok(problem)
+}
+
+/// The fit's covariance from its Jacobian `j` and residuals `r`: the classic one made at
+/// least the cluster-robust one.
+fn reported_covariance(
+    j: &DMatrix<f64>,
+    r: &DVector<f64>,
+    all: &[Anchor],
+    segments: usize,
+) -> Result<DMatrix<f64>, NoFix> {
     let dof = all.len().saturating_sub(2 + segments).max(1) as f64;
-    let bread = (j.transpose() * &j)
+    let bread = (j.transpose() * j)
         .try_inverse()
         .ok_or(NoFix::InsufficientGeometry)?;
     let classic = &bread * (r.norm_squared() / dof);
@@ -286,39 +337,28 @@ pub fn locate_with_report(
     let scores = DMatrix::from_fn(r.len(), j.ncols(), |i, a| j[(i, a)] * r[i]);
     let segment_of: Vec<usize> = all.iter().map(|a| a.segment).collect();
     let weight: Vec<f64> = all.iter().map(|a| a.n as f64).collect();
-    let cov = robust::at_least_sandwich(
+    Ok(robust::at_least_sandwich(
         &classic,
         &bread,
         &scores,
         &robust::clusters(&segment_of, &weight),
-    );
-    let (x, y) = (solved.p[0], solved.p[1]);
-    let cov = with_smooth_error(&cov, &j, &r, &all, [x, y, z]);
-    // Every phase's own residual against the fit, as phase.
-    let sq: f64 = obs
-        .iter()
+    ))
+}
+
+/// Σ of every phase's own squared residual against the fit (tag at `tag`, the segments'
+/// offsets after the position in `p`), as phase.
+fn phase_sq(obs: &[Obs], tag: [f64; 3], sign: f64, p: &DVector<f64>) -> f64 {
+    let [x, y, z] = tag;
+    obs.iter()
         .map(|o| {
             let d = ((x - o.antenna[0]).powi(2)
                 + (y - o.antenna[1]).powi(2)
                 + (z - o.antenna[2]).powi(2))
             .sqrt();
             let k = 4.0 * std::f64::consts::PI / o.wavelength_m;
-            (sign * o.phase_rad - k * (d + solved.p[2 + o.segment])).powi(2)
+            (sign * o.phase_rad - k * (d + p[2 + o.segment])).powi(2)
         })
-        .sum();
-    let c = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
-    if !(x.is_finite() && y.is_finite() && c.iter().all(|v| v.is_finite())) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    Ok(Report {
-        fix: Fix {
-            position: [x, y, z],
-            covariance: c,
-            rms_rad: (sq / obs.len() as f64).sqrt(),
-        },
-        points: points.len(),
-        inconsistent,
-    })
+        .sum()
 }
 
 /// `cov`'s position block made at least the covariance of a smooth angle-dependent error

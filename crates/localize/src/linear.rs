@@ -83,12 +83,104 @@ pub fn min_distance_d0(along: &[f64], dd: &[f64]) -> Option<f64> {
     (aa > 0.0 && d0.is_finite() && d0 > 0.0).then_some(d0)
 }
 
+/// One straight segment set up for the fit: its line and each sample's place along it and
+/// range beyond the reference sample's.
+struct Setup {
+    /// A point of the path's line (m).
+    origin: [f64; 3],
+    /// The path's unit direction.
+    u: [f64; 3],
+    /// The segment's wavelength (m).
+    lambda: f64,
+    /// Each sample's position along the path from `origin` (m).
+    t: Vec<f64>,
+    /// The reference sample: the nearest (least range).
+    r: usize,
+    /// Each sample's distance along the path from the reference (m).
+    l: Vec<f64>,
+    /// Each sample's range beyond the reference's (m).
+    dd: Vec<f64>,
+    /// The paper's closed-form perpendicular distance (m).
+    d0_paper: f64,
+}
+
 /// The circle of one straight segment's phases (`sign` the phase sign, ±1).
 pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
     let n = seg.len();
     if n < MIN_SAMPLES {
         return Err(NoFix::InsufficientGeometry);
     }
+    let Setup {
+        origin,
+        u,
+        lambda,
+        t,
+        r,
+        l,
+        dd,
+        d0_paper,
+    } = setup(seg, sign)?;
+    let (p, inv) = solve(seg, &l, &dd, d0_paper)?;
+    let sse: f64 = (0..n)
+        .map(|i| {
+            let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
+            let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
+            seg[i].weight * (w * (l[i] * l[i] - dd[i] * dd[i] - fit)).powi(2)
+        })
+        .sum();
+    // The reads the phases stand for ([`Obs::weight`]; a resting antenna's weigh less).
+    let reads: f64 = seg.iter().map(|o| o.weight).sum();
+    let cov_p = inv * (sse / (reads - 3.0).max(1.0));
+    let reported_p = at_least_robust(&cov_p, &inv, n, |i| {
+        let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
+        let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
+        let r = l[i] * l[i] - dd[i] * dd[i] - fit;
+        Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0) * (w * w * seg[i].weight * r)
+    });
+    let (c, tau, k) = (p[0], p[1], p[2]);
+    let d0_sq = c * c - tau * tau - k;
+    if !(d0_sq > 0.0 && d0_sq.is_finite()) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let d0 = d0_sq.sqrt();
+    let jac = weighted_jacobian_and_residuals(seg, &l, &dd, p);
+    let (evidence, reported_p) = with_smooth_error(seg, &l, tau, d0, &inv, &jac, reported_p);
+    let jac = jac.0;
+    // (t*, d0) from p, to first order.
+    let g_t = Vector3::new(0.0, 1.0, 0.0);
+    let g_d = Vector3::new(c / d0, -tau / d0, -0.5 / d0);
+    let project = |c: &Matrix3<f64>| {
+        let (tt, td, dd) = (
+            (g_t.transpose() * c * g_t)[0],
+            (g_t.transpose() * c * g_d)[0],
+            (g_d.transpose() * c * g_d)[0],
+        );
+        [tt, td, td, dd]
+    };
+    let along = t[r] + tau;
+    let influence = (0..n)
+        .map(|i| {
+            let g = inv * jac.row(i).transpose().fixed_rows::<3>(0) * seg[i].weight.sqrt();
+            [g_t.dot(&g), g_d.dot(&g)]
+        })
+        .collect();
+    Ok(Circle {
+        centre: [0, 1, 2].map(|j| origin[j] + along * u[j]),
+        direction: u,
+        radius_m: d0,
+        covariance: project(&cov_p),
+        reported: project(&reported_p),
+        rms_rad: (sse / reads.max(f64::MIN_POSITIVE)).sqrt() * 4.0 * std::f64::consts::PI / lambda,
+        samples: n,
+        influence,
+        evidence,
+    })
+}
+
+/// The segment's line, reference sample and range differences, if its geometry allows a
+/// fit (straight, long enough, the nearest point inside the aperture).
+fn setup(seg: &[Obs], sign: f64) -> Result<Setup, NoFix> {
+    let n = seg.len();
     let points: Vec<[f64; 3]> = seg.iter().map(|o| o.antenna).collect();
     let (origin, u, perp) = line(&points).ok_or(NoFix::InsufficientGeometry)?;
     let lambda = seg[0].wavelength_m;
@@ -119,8 +211,28 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
     let l: Vec<f64> = t.iter().map(|x| x - t[r]).collect();
     let dd: Vec<f64> = q.iter().map(|x| x - q[r]).collect();
     let d0_paper = min_distance_d0(&l, &dd).ok_or(NoFix::InsufficientGeometry)?;
-    // Ours: p = (C, τ, K) in 2CΔ_i + 2τL_i + K = L_i² − Δ_i², C the range at the reference
-    // sample, τ the nearest point's offset from it along the path, K = C² − d0² − τ².
+    Ok(Setup {
+        origin,
+        u,
+        lambda,
+        t,
+        r,
+        l,
+        dd,
+        d0_paper,
+    })
+}
+
+/// Ours: p = (C, τ, K) in 2CΔ_i + 2τL_i + K = L_i² − Δ_i², C the range at the reference
+/// sample, τ the nearest point's offset from it along the path, K = C² − d0² − τ²; returns p
+/// and the inverse of the normal matrix, after two reweighted solves from `d0_paper`.
+fn solve(
+    seg: &[Obs],
+    l: &[f64],
+    dd: &[f64],
+    d0_paper: f64,
+) -> Result<(Vector3<f64>, Matrix3<f64>), NoFix> {
+    let n = seg.len();
     let mut p = Vector3::new(d0_paper, 0.0, 0.0);
     let mut solved = None;
     for _ in 0..2 {
@@ -137,41 +249,18 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         solved = Some(inv);
     }
     let inv = solved.ok_or(NoFix::InsufficientGeometry)?;
-    let sse: f64 = (0..n)
-        .map(|i| {
-            let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
-            let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
-            seg[i].weight * (w * (l[i] * l[i] - dd[i] * dd[i] - fit)).powi(2)
-        })
-        .sum();
-    // The reads the phases stand for ([`Obs::weight`]; a resting antenna's weigh less).
-    let reads: f64 = seg.iter().map(|o| o.weight).sum();
-    let cov_p = inv * (sse / (reads - 3.0).max(1.0));
-    let reported_p = at_least_robust(&cov_p, &inv, n, |i| {
-        let w = 1.0 / (2.0 * (dd[i] + p[0]).max(1e-6));
-        let fit = 2.0 * dd[i] * p[0] + 2.0 * l[i] * p[1] + p[2];
-        let r = l[i] * l[i] - dd[i] * dd[i] - fit;
-        Vector3::new(2.0 * dd[i], 2.0 * l[i], 1.0) * (w * w * seg[i].weight * r)
-    });
+    Ok((p, inv))
+}
+
+/// The weighted Jacobian (n×3) and residuals of the fit at `p` = (C, τ, K).
+fn weighted_jacobian_and_residuals(
+    seg: &[Obs],
+    l: &[f64],
+    dd: &[f64],
+    p: Vector3<f64>,
+) -> (DMatrix<f64>, nalgebra::DVector<f64>) {
+    let n = seg.len();
     let (c, tau, k) = (p[0], p[1], p[2]);
-    let d0_sq = c * c - tau * tau - k;
-    if !(d0_sq > 0.0 && d0_sq.is_finite()) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    let d0 = d0_sq.sqrt();
-    // At least the covariance of an error smooth in the direction the tag is read from: each
-    // row's residual moves by that error (as range) one for one.
-    let rows: Vec<robust::Row> = (0..n)
-        .map(|i| {
-            let (a, b) = (l[i] - tau, d0);
-            let norm = a.hypot(b).max(1e-9);
-            robust::Row {
-                direction: [a / norm, b / norm, 0.0],
-                weight: seg[i].weight,
-                segment: 0,
-            }
-        })
-        .collect();
     let (jac, res): (Vec<Vector3<f64>>, Vec<f64>) = (0..n)
         .map(|i| {
             let w = 1.0 / (2.0 * (dd[i] + c).max(1e-6));
@@ -184,9 +273,36 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         })
         .unzip();
     let jac = DMatrix::from_fn(n, 3, |i, a| jac[i][a]);
-    let dyn_inv = DMatrix::from_column_slice(3, 3, inv.as_slice());
     let res = nalgebra::DVector::from_vec(res);
-    let found = robust::smooth_error_and_evidence(&dyn_inv, &jac, &res, &rows, false);
+    (jac, res)
+}
+
+/// The evidence of a smooth error, and `reported_p` made at least the covariance of an
+/// error smooth in the direction the tag is read from (each row's residual moves by that
+/// error, as range, one for one).
+fn with_smooth_error(
+    seg: &[Obs],
+    l: &[f64],
+    tau: f64,
+    d0: f64,
+    inv: &Matrix3<f64>,
+    (jac, res): &(DMatrix<f64>, nalgebra::DVector<f64>),
+    reported_p: Matrix3<f64>,
+) -> (Option<robust::Evidence>, Matrix3<f64>) {
+    let n = seg.len();
+    let rows: Vec<robust::Row> = (0..n)
+        .map(|i| {
+            let (a, b) = (l[i] - tau, d0);
+            let norm = a.hypot(b).max(1e-9);
+            robust::Row {
+                direction: [a / norm, b / norm, 0.0],
+                weight: seg[i].weight,
+                segment: 0,
+            }
+        })
+        .collect();
+    let dyn_inv = DMatrix::from_column_slice(3, 3, inv.as_slice());
+    let found = robust::smooth_error_and_evidence(&dyn_inv, jac, res, &rows, false);
     let evidence = found.as_ref().map(|f| f.0);
     let reported_p = match found.and_then(|f| f.1) {
         Some(smooth) => {
@@ -195,35 +311,7 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
         }
         None => reported_p,
     };
-    // (t*, d0) from p, to first order.
-    let g_t = Vector3::new(0.0, 1.0, 0.0);
-    let g_d = Vector3::new(c / d0, -tau / d0, -0.5 / d0);
-    let project = |c: &Matrix3<f64>| {
-        let (tt, td, dd) = (
-            (g_t.transpose() * c * g_t)[0],
-            (g_t.transpose() * c * g_d)[0],
-            (g_d.transpose() * c * g_d)[0],
-        );
-        [tt, td, td, dd]
-    };
-    let along = t[r] + tau;
-    let influence = (0..n)
-        .map(|i| {
-            let g = inv * jac.row(i).transpose().fixed_rows::<3>(0) * seg[i].weight.sqrt();
-            [g_t.dot(&g), g_d.dot(&g)]
-        })
-        .collect();
-    Ok(Circle {
-        centre: [0, 1, 2].map(|j| origin[j] + along * u[j]),
-        direction: u,
-        radius_m: d0,
-        covariance: project(&cov_p),
-        reported: project(&reported_p),
-        rms_rad: (sse / reads.max(f64::MIN_POSITIVE)).sqrt() * 4.0 * std::f64::consts::PI / lambda,
-        samples: n,
-        influence,
-        evidence,
-    })
+    (evidence, reported_p)
 }
 
 /// `classic` made at least the cluster-robust covariance in every direction

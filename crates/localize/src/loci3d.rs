@@ -74,31 +74,8 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 /// The tag's 3D position from `obs` (phase sign `sign`; one straight segment per antenna pass,
 /// at least two heights), on the side of the path that `facing` points to.
 pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
-    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
-    let mut by_segment: Vec<Vec<Obs>> = vec![Vec::new(); segments];
-    for o in obs {
-        by_segment[o.segment].push(*o);
-    }
-    let circles: Vec<Circle> = by_segment
-        .iter()
-        .filter_map(|s| circle(s, sign).ok())
-        .filter(|c| c.covariance[0] > 0.0 && c.covariance[3] > 0.0)
-        .collect();
-    // The frame: the best-sampled circle's path, made horizontal; n across it, facing.
-    let reference = circles
-        .iter()
-        .max_by_key(|c| c.samples)
-        .ok_or(NoFix::InsufficientGeometry)?;
-    let [ux, uy, uz] = reference.direction;
-    let horizontal = ux.hypot(uy);
-    if uz.abs() > MAX_SLOPE || horizontal < 1e-9 {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    let u = [ux / horizontal, uy / horizontal];
-    let mut n = [-u[1], u[0]];
-    if n[0] * facing[0] + n[1] * facing[1] < 0.0 {
-        n = [-n[0], -n[1]];
-    }
+    let circles = segment_circles(obs, sign);
+    let (reference, u, n) = frame(&circles, facing)?;
     let o = reference.centre;
     let parallel: Vec<&Circle> = circles
         .iter()
@@ -107,20 +84,7 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
             (d[0] * u[0] + d[1] * u[1]).abs() >= MAX_PATH_ANGLE_RAD.cos()
         })
         .collect();
-    let (mut sx, mut wx) = (0.0, 0.0);
-    let mut loci = Vec::new();
-    for c in &parallel {
-        let (dx, dy) = (c.centre[0] - o[0], c.centre[1] - o[1]);
-        let w = 1.0 / c.covariance[0];
-        sx += w * (dx * u[0] + dy * u[1]);
-        wx += w;
-        loci.push(Locus {
-            y: dx * n[0] + dy * n[1],
-            z: c.centre[2],
-            r: c.radius_m,
-            sigma_r: c.covariance[3].sqrt(),
-        });
-    }
+    let (sx, wx, loci) = loci_of(&parallel, o, u, n);
     let (z_lo, z_hi) = loci.iter().fold((f64::MAX, f64::MIN), |(lo, hi), l| {
         (lo.min(l.z), hi.max(l.z))
     });
@@ -128,32 +92,7 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
         return Err(NoFix::InsufficientGeometry);
     }
     let x = sx / wx;
-    let count = loci.len() as f64;
-    let y_mean = loci.iter().map(|l| l.y).sum::<f64>() / count;
-    let z_mean = loci.iter().map(|l| l.z).sum::<f64>() / count;
-    let r_mean = loci.iter().map(|l| l.r).sum::<f64>() / count;
-    // Started on the facing side, at the mean radius out from the centres.
-    let problem = Problem {
-        loci: &loci,
-        p: DVector::from_vec(vec![y_mean + r_mean, z_mean]),
-    };
-    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
-    let (y, z) = (solved.p[0], solved.p[1]);
-    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
-    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let dof = loci.len().saturating_sub(2);
-    let chi2 = if dof > 0 {
-        (r.norm_squared() / dof as f64).max(1.0)
-    } else {
-        1.0
-    };
-    let cov_yz = (j.transpose() * &j)
-        .try_inverse()
-        .ok_or(NoFix::InsufficientGeometry)?
-        * chi2;
-    if !(y > y_mean && y.is_finite() && z.is_finite()) {
-        return Err(NoFix::InsufficientGeometry);
-    }
+    let (y, z, cov_yz) = intersect(&loci)?;
     let rot = Matrix3::new(u[0], n[0], 0.0, u[1], n[1], 0.0, 0.0, 0.0, 1.0);
     let mut path = Matrix3::zeros();
     path[(0, 0)] = 1.0 / wx;
@@ -176,6 +115,93 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
         covariance,
         rms_rad: (sq / used.max(1) as f64).sqrt(),
     })
+}
+
+/// The circle of each segment of `obs` that gives one with a positive covariance.
+fn segment_circles(obs: &[Obs], sign: f64) -> Vec<Circle> {
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let mut by_segment: Vec<Vec<Obs>> = vec![Vec::new(); segments];
+    for o in obs {
+        by_segment[o.segment].push(*o);
+    }
+    by_segment
+        .iter()
+        .filter_map(|s| circle(s, sign).ok())
+        .filter(|c| c.covariance[0] > 0.0 && c.covariance[3] > 0.0)
+        .collect()
+}
+
+/// The frame: the best-sampled circle's path, made horizontal (its unit direction u); n across
+/// it, facing.
+fn frame(circles: &[Circle], facing: [f64; 2]) -> Result<(&Circle, [f64; 2], [f64; 2]), NoFix> {
+    let reference = circles
+        .iter()
+        .max_by_key(|c| c.samples)
+        .ok_or(NoFix::InsufficientGeometry)?;
+    let [ux, uy, uz] = reference.direction;
+    let horizontal = ux.hypot(uy);
+    if uz.abs() > MAX_SLOPE || horizontal < 1e-9 {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let u = [ux / horizontal, uy / horizontal];
+    let mut n = [-u[1], u[0]];
+    if n[0] * facing[0] + n[1] * facing[1] < 0.0 {
+        n = [-n[0], -n[1]];
+    }
+    Ok((reference, u, n))
+}
+
+/// The `parallel` circles in the frame at `o` (u along, n across): the weighted sum of their
+/// centres along the path, its weight, and their loci.
+fn loci_of(parallel: &[&Circle], o: [f64; 3], u: [f64; 2], n: [f64; 2]) -> (f64, f64, Vec<Locus>) {
+    let (mut sx, mut wx) = (0.0, 0.0);
+    let mut loci = Vec::new();
+    for c in parallel {
+        let (dx, dy) = (c.centre[0] - o[0], c.centre[1] - o[1]);
+        let w = 1.0 / c.covariance[0];
+        sx += w * (dx * u[0] + dy * u[1]);
+        wx += w;
+        loci.push(Locus {
+            y: dx * n[0] + dy * n[1],
+            z: c.centre[2],
+            r: c.radius_m,
+            sigma_r: c.covariance[3].sqrt(),
+        });
+    }
+    (sx, wx, loci)
+}
+
+/// Where the loci meet in the cross-section (across, height), on the facing side, and the
+/// covariance of that point.
+fn intersect(loci: &[Locus]) -> Result<(f64, f64, nalgebra::Matrix2<f64>), NoFix> {
+    let count = loci.len() as f64;
+    let y_mean = loci.iter().map(|l| l.y).sum::<f64>() / count;
+    let z_mean = loci.iter().map(|l| l.z).sum::<f64>() / count;
+    let r_mean = loci.iter().map(|l| l.r).sum::<f64>() / count;
+    // Started on the facing side, at the mean radius out from the centres.
+    let problem = Problem {
+        loci,
+        p: DVector::from_vec(vec![y_mean + r_mean, z_mean]),
+    };
+    let (solved, _report) = LevenbergMarquardt::new().minimize(problem);
+    let (y, z) = (solved.p[0], solved.p[1]);
+    let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
+    let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
+    let dof = loci.len().saturating_sub(2);
+    let chi2 = if dof > 0 {
+        (r.norm_squared() / dof as f64).max(1.0)
+    } else {
+        1.0
+    };
+    let cov_yz = (j.transpose() * &j)
+        .try_inverse()
+        .ok_or(NoFix::InsufficientGeometry)?
+        * chi2;
+    if !(y > y_mean && y.is_finite() && z.is_finite()) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let cov_yz = nalgebra::Matrix2::from_column_slice(cov_yz.as_slice());
+    Ok((y, z, cov_yz))
 }
 
 /// 3D by loci intersection as the localizer runs it.

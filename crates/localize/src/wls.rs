@@ -170,6 +170,87 @@ pub fn locate(
     facing: Option<[f64; 2]>,
     s: &Settings,
 ) -> Result<(Fix, ConsensusReport), NoFix> {
+    let robot_fixes = robot_fixes(robots, z, sign, facing, s);
+    let own = robot_fixes.nodes;
+    let honest = robot_fixes.honest;
+    let (sq, reads) = (robot_fixes.sq, robot_fixes.reads);
+    if own.is_empty() {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let Agreed {
+        active,
+        nodes,
+        edges,
+        messages,
+    } = withdraw_and_agree(&own, s);
+    let n = nodes.len();
+    let (f_sum, a_sum) = active
+        .iter()
+        .fold((Matrix2::zeros(), Vector2::zeros()), |(f, a), &i| {
+            (f + own[i].information, a + own[i].state)
+        });
+    let central = f_sum
+        .try_inverse()
+        .map(|inv| inv * a_sum)
+        .ok_or(NoFix::InsufficientGeometry)?;
+    let mut disagreement: f64 = 0.0;
+    for nd in &nodes {
+        let e = nd.estimate().ok_or(NoFix::InsufficientGeometry)?;
+        disagreement = disagreement.max((e - central).norm());
+    }
+    let first = nodes.first().ok_or(NoFix::InsufficientGeometry)?;
+    let x = first.estimate().ok_or(NoFix::InsufficientGeometry)?;
+    let cov = (first.information * n as f64)
+        .try_inverse()
+        .ok_or(NoFix::InsufficientGeometry)?;
+    // x ≈ Σ F⁻¹C_f⁻¹ z_f over the fixes f of the robots still in: its covariance with each
+    // fix's honest one.
+    let weights = f_sum.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
+    let spread = honest_spread(&active, &honest, &weights);
+    let cov = robust::at_least(
+        &DMatrix::from_column_slice(2, 2, cov.as_slice()),
+        &DMatrix::from_column_slice(2, 2, spread.as_slice()),
+    );
+    let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
+    if !(x.iter().chain(&covariance).all(|v| v.is_finite()) && disagreement.is_finite()) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    let report = ConsensusReport {
+        robots: n,
+        withdrawn: own.len() - n,
+        edges: edges.len(),
+        rounds: s.rounds,
+        messages,
+        disagreement,
+    };
+    let fix = Fix {
+        position: [x[0], x[1], z],
+        covariance,
+        rms_rad: (sq / reads.max(1) as f64).sqrt(),
+    };
+    Ok((fix, report))
+}
+
+/// Each robot's filter fixes and the node they make.
+struct RobotFixes {
+    /// One node per robot with a fix.
+    nodes: Vec<Node>,
+    /// Per node: its tracks' fixes and their [`mhekf::honest`] widenings.
+    honest: Vec<(Vec<Fix>, Vec<Fix>)>,
+    /// Σ rms² · phases over the fixes.
+    sq: f64,
+    /// Phases behind the fixes.
+    reads: usize,
+}
+
+/// Runs each robot's tracks through the filter; a robot with a fix becomes a node.
+fn robot_fixes(
+    robots: &[Vec<Vec<PoseObs>>],
+    z: f64,
+    sign: f64,
+    facing: Option<[f64; 2]>,
+    s: &Settings,
+) -> RobotFixes {
     let (mut nodes, mut honest) = (Vec::new(), Vec::new());
     let (mut sq, mut reads) = (0.0, 0usize);
     for tracks in robots {
@@ -187,12 +268,29 @@ pub fn locate(
             honest.push((fixes, wide));
         }
     }
-    if nodes.is_empty() {
-        return Err(NoFix::InsufficientGeometry);
+    RobotFixes {
+        nodes,
+        honest,
+        sq,
+        reads,
     }
-    // Consensus over the robots still in; while three or more are, the one whose own fix
-    // disagrees most with the others' (and beyond the gate) withdraws and the rest start over.
-    let own = nodes;
+}
+
+/// The outcome of the consensus rounds.
+struct Agreed {
+    /// The robots still in (indices into the nodes).
+    active: Vec<usize>,
+    /// Their nodes after consensus.
+    nodes: Vec<Node>,
+    /// The last graph's edges.
+    edges: Vec<(usize, usize)>,
+    /// Messages sent.
+    messages: u64,
+}
+
+/// Consensus over the robots still in; while three or more are, the one whose own fix
+/// disagrees most with the others' (and beyond the gate) withdraws and the rest start over.
+fn withdraw_and_agree(own: &[Node], s: &Settings) -> Agreed {
     let mut active: Vec<usize> = (0..own.len()).collect();
     let mut messages = 0u64;
     let (nodes, edges) = loop {
@@ -218,31 +316,23 @@ pub fn locate(
             _ => break (work, edges),
         }
     };
-    let n = nodes.len();
-    let (f_sum, a_sum) = active
-        .iter()
-        .fold((Matrix2::zeros(), Vector2::zeros()), |(f, a), &i| {
-            (f + own[i].information, a + own[i].state)
-        });
-    let central = f_sum
-        .try_inverse()
-        .map(|inv| inv * a_sum)
-        .ok_or(NoFix::InsufficientGeometry)?;
-    let mut disagreement: f64 = 0.0;
-    for nd in &nodes {
-        let e = nd.estimate().ok_or(NoFix::InsufficientGeometry)?;
-        disagreement = disagreement.max((e - central).norm());
+    Agreed {
+        active,
+        nodes,
+        edges,
+        messages,
     }
-    let first = nodes.first().ok_or(NoFix::InsufficientGeometry)?;
-    let x = first.estimate().ok_or(NoFix::InsufficientGeometry)?;
-    let cov = (first.information * n as f64)
-        .try_inverse()
-        .ok_or(NoFix::InsufficientGeometry)?;
-    // x ≈ Σ F⁻¹C_f⁻¹ z_f over the fixes f of the robots still in: its covariance with each
-    // fix's honest one.
-    let weights = f_sum.try_inverse().ok_or(NoFix::InsufficientGeometry)?;
+}
+
+/// What the combination's `weights` give the honest covariances of the fixes of the robots
+/// still in (`active`).
+fn honest_spread(
+    active: &[usize],
+    honest: &[(Vec<Fix>, Vec<Fix>)],
+    weights: &Matrix2<f64>,
+) -> Matrix2<f64> {
     let mut spread = Matrix2::zeros();
-    for &i in &active {
+    for &i in active {
         for (own, wide) in honest[i].0.iter().zip(&honest[i].1) {
             let [a, b, c, d] = own.covariance;
             let [e, f, g, h] = wide.covariance;
@@ -252,28 +342,7 @@ pub fn locate(
             }
         }
     }
-    let cov = robust::at_least(
-        &DMatrix::from_column_slice(2, 2, cov.as_slice()),
-        &DMatrix::from_column_slice(2, 2, spread.as_slice()),
-    );
-    let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
-    if !(x.iter().chain(&covariance).all(|v| v.is_finite()) && disagreement.is_finite()) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    let report = ConsensusReport {
-        robots: n,
-        withdrawn: own.len() - n,
-        edges: edges.len(),
-        rounds: s.rounds,
-        messages,
-        disagreement,
-    };
-    let fix = Fix {
-        position: [x[0], x[1], z],
-        covariance,
-        rms_rad: (sq / reads.max(1) as f64).sqrt(),
-    };
-    Ok((fix, report))
+    spread
 }
 
 /// Distributed WLS as the localizer runs it: each reader a robot, its (reader, antenna)

@@ -273,6 +273,54 @@ pub fn filtered(
     // The reads; the pose samples before the first read give its pose covariance (\[M\]
     // eq. 26), those between reads the path the odometry noise is charged on.
     let reads: Vec<&PoseObs> = obs.iter().filter(|o| o.read).collect();
+    let (start, last) = check(obs, &reads, s)?;
+    let track = Track {
+        obs,
+        heading: headings(obs),
+        to_wheels: SMatrix::<f64, 2, 2>::new(0.5, 0.5, 1.0 / s.wheelbase_m, -1.0 / s.wheelbase_m),
+        z,
+        sign,
+        s,
+    };
+    let pose = track.pose_before(start);
+    let mut hyps = track.initial(start, &pose);
+    let r2 = s.sigma_phi_rad.powi(2).max(1e-12);
+    for (k, o) in obs.iter().enumerate().skip(start + 1) {
+        track.advance(&mut hyps, k, o, r2);
+        if !o.read {
+            continue;
+        }
+        prune(&mut hyps, s)?;
+    }
+    let chosen = choose(&hyps, facing, last)?;
+    let (t, cov) = chosen.tag();
+    let rms = (reads
+        .iter()
+        .map(|o| {
+            let rho = (t[0] - o.antenna[0]).hypot(t[1] - o.antenna[1]);
+            wrap(o.phase_rad - track.model(o, rho).0, o.period_rad).powi(2)
+        })
+        .sum::<f64>()
+        / reads.len() as f64)
+        .sqrt();
+    let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
+    if !(t.iter().chain(&covariance).all(|v| v.is_finite())) {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    Ok(Fix {
+        position: [t[0], t[1], z],
+        covariance,
+        rms_rad: rms,
+    })
+}
+
+/// The index of the first read and the last read, if the track's values are finite and
+/// its reads enough and spread over half a wavelength or more.
+fn check<'a>(
+    obs: &[PoseObs],
+    reads: &[&'a PoseObs],
+    s: &Settings,
+) -> Result<(usize, &'a PoseObs), NoFix> {
     let ok = obs.iter().all(|o| o.antenna.iter().all(|v| v.is_finite()))
         && reads
             .iter()
@@ -295,7 +343,11 @@ pub fn filtered(
     if !ok || reads.len() < s.min_reads.max(2) || aperture < first.wavelength_m / 2.0 {
         return Err(NoFix::InsufficientGeometry);
     }
-    // Heading: the direction of travel to the next vertex, the last one's held.
+    Ok((start, last))
+}
+
+/// Heading at each vertex: the direction of travel to the next vertex, the last one's held.
+fn headings(obs: &[PoseObs]) -> Vec<f64> {
     let mut chord: Vec<Option<f64>> = obs
         .windows(2)
         .map(|w| {
@@ -313,9 +365,29 @@ pub fn filtered(
         held = c.unwrap_or(held);
         *h = held;
     }
-    // The step from vertex k − 1 to k: its (u, ω) and the wheels' noise mapped through W.
-    let to_wheels = SMatrix::<f64, 2, 2>::new(0.5, 0.5, 1.0 / s.wheelbase_m, -1.0 / s.wheelbase_m);
-    let step = |k: usize| {
+    heading
+}
+
+/// One track as the filter runs it: its vertices with their headings, and the settings.
+struct Track<'a> {
+    /// The pose samples and reads, in time order.
+    obs: &'a [PoseObs],
+    /// Each vertex's heading ([`headings`]).
+    heading: Vec<f64>,
+    /// W: the wheels' displacements to (u, ω).
+    to_wheels: SMatrix<f64, 2, 2>,
+    /// The tag height assumed (m).
+    z: f64,
+    /// The phase sign.
+    sign: f64,
+    /// The filter's settings.
+    s: &'a Settings,
+}
+
+impl Track<'_> {
+    /// The step from vertex k − 1 to k: its (u, ω) and the wheels' noise mapped through W.
+    fn step(&self, k: usize) -> (f64, f64, SMatrix<f64, 2, 2>) {
+        let (obs, heading, s) = (self.obs, &self.heading, self.s);
         let (prev, o) = (&obs[k - 1], &obs[k]);
         let u = (o.antenna[0] - prev.antenna[0]).hypot(o.antenna[1] - prev.antenna[1]);
         let omega = wrap(heading[k] - heading[k - 1], TAU);
@@ -326,123 +398,166 @@ pub fn filtered(
         );
         let q = SMatrix::<f64, 2, 2>::new(s.k_r * u_r.abs(), 0.0, 0.0, s.k_l * u_l.abs());
         (u, omega, q)
-    };
-    // The pose covariance at the first read: the odometry's over the path driven to it.
-    let mut pose = M5::zeros();
-    for k in 1..=start {
-        let (u, omega, q) = step(k);
-        let dummy = V5::new(
-            1.0,
-            0.0,
-            obs[k - 1].antenna[0],
-            obs[k - 1].antenna[1],
-            heading[k - 1],
-        );
-        let (_, f, g) = predict(&dummy, u, omega);
-        let w = g * to_wheels;
-        pose = f * pose * f.transpose() + w * q * w.transpose();
     }
-    let model = |o: &PoseObs, rho: f64| {
-        let dz = z - o.antenna[2];
+
+    /// The phase `o` would have at horizontal range `rho`, and its derivative in `rho`.
+    fn model(&self, o: &PoseObs, rho: f64) -> (f64, f64) {
+        let dz = self.z - o.antenna[2];
         let d = rho.hypot(dz);
-        let k = sign * 4.0 * PI / o.wavelength_m;
-        (k * d + s.phase_offset_rad, k * rho / d.max(1e-12))
-    };
-    // Initialisation at the first read (\[M\] eqs. 21–26).
-    let spacing = first.wavelength_m * first.period_rad / (4.0 * PI);
-    let dz = z - first.antenna[2];
-    let base = (sign * first.wavelength_m * (first.phase_rad - s.phase_offset_rad) / (4.0 * PI))
-        .rem_euclid(spacing);
-    let n_max = hypotheses(
-        s.max_range_m.hypot(dz),
-        first.wavelength_m,
-        first.period_rad,
-    );
-    let sigma_d = s.sigma_phi_rad * first.wavelength_m / (4.0 * PI);
-    let mut hyps: Vec<Hypothesis> = Vec::new();
-    for n in 0..n_max {
-        let d = base + n as f64 * spacing;
-        if d <= dz.abs() + 1e-3 {
-            continue;
-        }
-        let rho = (d * d - dz * dz).sqrt();
-        for b in 0..s.bearings.max(1) {
-            let beta = wrap(b as f64 * TAU / s.bearings.max(1) as f64, TAU);
-            // The pose block only: the dummy's range and bearing rows are not the tag's.
-            let mut p = M5::zeros();
-            p.fixed_view_mut::<3, 3>(2, 2)
-                .copy_from(&pose.fixed_view::<3, 3>(2, 2));
-            p[(0, 0)] = (sigma_d * d / rho).powi(2);
-            p[(1, 1)] = s.sigma_bearing_rad.powi(2);
-            hyps.push(Hypothesis {
-                xi: V5::new(
-                    rho,
-                    beta,
-                    first.antenna[0],
-                    first.antenna[1],
-                    heading[start],
-                ),
-                p,
-                log_w: 0.0,
-            });
-        }
+        let k = self.sign * 4.0 * PI / o.wavelength_m;
+        (k * d + self.s.phase_offset_rad, k * rho / d.max(1e-12))
     }
-    let r2 = s.sigma_phi_rad.powi(2).max(1e-12);
-    for (k, o) in obs.iter().enumerate().skip(start + 1) {
-        let (u, omega, q) = step(k);
-        let mut split: Vec<Hypothesis> = Vec::new();
-        for h in &mut hyps {
-            let (xi, f, g) = predict(&h.xi, u, omega);
+
+    /// The pose covariance at the first read (vertex `start`): the odometry's over the path
+    /// driven to it.
+    fn pose_before(&self, start: usize) -> M5 {
+        let (obs, heading, to_wheels) = (self.obs, &self.heading, self.to_wheels);
+        let mut pose = M5::zeros();
+        for k in 1..=start {
+            let (u, omega, q) = self.step(k);
+            let dummy = V5::new(
+                1.0,
+                0.0,
+                obs[k - 1].antenna[0],
+                obs[k - 1].antenna[1],
+                heading[k - 1],
+            );
+            let (_, f, g) = predict(&dummy, u, omega);
             let w = g * to_wheels;
+            pose = f * pose * f.transpose() + w * q * w.transpose();
+        }
+        pose
+    }
+
+    /// Initialisation at the first read, vertex `start` (\[M\] eqs. 21–26): a hypothesis per
+    /// range the phase allows and per bearing.
+    fn initial(&self, start: usize, pose: &M5) -> Vec<Hypothesis> {
+        let (s, z, sign) = (self.s, self.z, self.sign);
+        let first = &self.obs[start];
+        let spacing = first.wavelength_m * first.period_rad / (4.0 * PI);
+        let dz = z - first.antenna[2];
+        let base = (sign * first.wavelength_m * (first.phase_rad - s.phase_offset_rad)
+            / (4.0 * PI))
+            .rem_euclid(spacing);
+        let n_max = hypotheses(
+            s.max_range_m.hypot(dz),
+            first.wavelength_m,
+            first.period_rad,
+        );
+        let sigma_d = s.sigma_phi_rad * first.wavelength_m / (4.0 * PI);
+        let mut hyps: Vec<Hypothesis> = Vec::new();
+        for n in 0..n_max {
+            let d = base + n as f64 * spacing;
+            if d <= dz.abs() + 1e-3 {
+                continue;
+            }
+            let rho = (d * d - dz * dz).sqrt();
+            for b in 0..s.bearings.max(1) {
+                let beta = wrap(b as f64 * TAU / s.bearings.max(1) as f64, TAU);
+                // The pose block only: the dummy's range and bearing rows are not the tag's.
+                let mut p = M5::zeros();
+                p.fixed_view_mut::<3, 3>(2, 2)
+                    .copy_from(&pose.fixed_view::<3, 3>(2, 2));
+                p[(0, 0)] = (sigma_d * d / rho).powi(2);
+                p[(1, 1)] = s.sigma_bearing_rad.powi(2);
+                hyps.push(Hypothesis {
+                    xi: V5::new(
+                        rho,
+                        beta,
+                        first.antenna[0],
+                        first.antenna[1],
+                        self.heading[start],
+                    ),
+                    p,
+                    log_w: 0.0,
+                });
+            }
+        }
+        hyps
+    }
+
+    /// Moves every hypothesis to vertex `k` (`o`); at a read, updates each with the phase,
+    /// splitting off a hypothesis per other cycle the innovation allows.
+    fn advance(&self, hyps: &mut Vec<Hypothesis>, k: usize, o: &PoseObs, r2: f64) {
+        let (u, omega, q) = self.step(k);
+        let mut split: Vec<Hypothesis> = Vec::new();
+        for h in hyps.iter_mut() {
+            let (xi, f, g) = predict(&h.xi, u, omega);
+            let w = g * self.to_wheels;
             let p = f * h.p * f.transpose() + w * q * w.transpose();
             if !o.read {
                 h.xi = xi;
                 h.p = p;
                 continue;
             }
-            let (phi_hat, dh) = model(o, xi[0]);
-            let hrow = SMatrix::<f64, 1, 5>::new(dh, 0.0, 0.0, 0.0, 0.0);
-            let nu = wrap(o.phase_rad - phi_hat, o.period_rad);
-            let sv = (hrow * p * hrow.transpose())[(0, 0)] + r2;
-            let gain = p * hrow.transpose() / sv;
-            let ikh = M5::identity() - gain * hrow;
-            let p = ikh * p * ikh.transpose() + gain * gain.transpose() * r2;
-            let p = (p + p.transpose()) / 2.0;
-            let updated = |nu: f64| {
-                let mut xi = xi + gain * nu;
-                xi[1] = wrap(xi[1], TAU);
-                xi[4] = wrap(xi[4], TAU);
-                let log_w = h.log_w - 0.5 * nu * nu / sv;
-                let ok = xi[0] > 1e-3 && log_w.is_finite() && p.iter().all(|v| v.is_finite());
-                Hypothesis {
-                    xi,
-                    p,
-                    log_w: if ok { log_w } else { f64::NEG_INFINITY },
-                }
-            };
-            let mut innovations = cycles(nu, sv, o.period_rad, s.sigma_phi_rad).into_iter();
-            let own = innovations.next().unwrap_or(nu);
-            split.extend(innovations.map(updated).filter(|b| b.log_w.is_finite()));
-            *h = updated(own);
+            self.update(h, xi, p, o, r2, &mut split);
         }
         hyps.append(&mut split);
-        if !o.read {
-            continue;
-        }
-        let best = hyps
-            .iter()
-            .map(|h| h.log_w)
-            .fold(f64::NEG_INFINITY, f64::max);
-        hyps.retain(|h| h.log_w >= best - s.prune_log_weight);
-        if hyps.len() > s.max_hypotheses.max(1) {
-            hyps.sort_by(|a, b| b.log_w.total_cmp(&a.log_w));
-            hyps.truncate(s.max_hypotheses.max(1));
-        }
-        if hyps.is_empty() {
-            return Err(NoFix::InsufficientGeometry);
-        }
     }
-    // The heaviest, or among those within a factor 100 of it, the heaviest on the facing side.
+
+    /// Updates hypothesis `h`, predicted to `xi` with covariance `p`, with read `o`; the
+    /// other cycles' branches go to `split`.
+    fn update(
+        &self,
+        h: &mut Hypothesis,
+        xi: V5,
+        p: M5,
+        o: &PoseObs,
+        r2: f64,
+        split: &mut Vec<Hypothesis>,
+    ) {
+        let (phi_hat, dh) = self.model(o, xi[0]);
+        let hrow = SMatrix::<f64, 1, 5>::new(dh, 0.0, 0.0, 0.0, 0.0);
+        let nu = wrap(o.phase_rad - phi_hat, o.period_rad);
+        let sv = (hrow * p * hrow.transpose())[(0, 0)] + r2;
+        let gain = p * hrow.transpose() / sv;
+        let ikh = M5::identity() - gain * hrow;
+        let p = ikh * p * ikh.transpose() + gain * gain.transpose() * r2;
+        let p = (p + p.transpose()) / 2.0;
+        let updated = |nu: f64| {
+            let mut xi = xi + gain * nu;
+            xi[1] = wrap(xi[1], TAU);
+            xi[4] = wrap(xi[4], TAU);
+            let log_w = h.log_w - 0.5 * nu * nu / sv;
+            let ok = xi[0] > 1e-3 && log_w.is_finite() && p.iter().all(|v| v.is_finite());
+            Hypothesis {
+                xi,
+                p,
+                log_w: if ok { log_w } else { f64::NEG_INFINITY },
+            }
+        };
+        let mut innovations = cycles(nu, sv, o.period_rad, self.s.sigma_phi_rad).into_iter();
+        let own = innovations.next().unwrap_or(nu);
+        split.extend(innovations.map(updated).filter(|b| b.log_w.is_finite()));
+        *h = updated(own);
+    }
+}
+
+/// Drops the hypotheses far lighter than the heaviest and keeps at most the heaviest
+/// `s.max_hypotheses`; an error when none is left.
+fn prune(hyps: &mut Vec<Hypothesis>, s: &Settings) -> Result<(), NoFix> {
+    let best = hyps
+        .iter()
+        .map(|h| h.log_w)
+        .fold(f64::NEG_INFINITY, f64::max);
+    hyps.retain(|h| h.log_w >= best - s.prune_log_weight);
+    if hyps.len() > s.max_hypotheses.max(1) {
+        hyps.sort_by(|a, b| b.log_w.total_cmp(&a.log_w));
+        hyps.truncate(s.max_hypotheses.max(1));
+    }
+    if hyps.is_empty() {
+        return Err(NoFix::InsufficientGeometry);
+    }
+    Ok(())
+}
+
+/// The heaviest, or among those within a factor 100 of it, the heaviest on the side
+/// `facing` points to from the `last` read.
+fn choose<'h>(
+    hyps: &'h [Hypothesis],
+    facing: Option<[f64; 2]>,
+    last: &PoseObs,
+) -> Result<&'h Hypothesis, NoFix> {
     let best = hyps
         .iter()
         .map(|h| h.log_w)
@@ -454,32 +569,12 @@ pub fn filtered(
         })
     };
     let heaviest = |a: &&Hypothesis, b: &&Hypothesis| a.log_w.total_cmp(&b.log_w);
-    let chosen = hyps
-        .iter()
+    hyps.iter()
         .filter(|h| h.log_w >= best - 100f64.ln())
         .filter(faces)
         .max_by(heaviest)
         .or_else(|| hyps.iter().max_by(heaviest))
-        .ok_or(NoFix::InsufficientGeometry)?;
-    let (t, cov) = chosen.tag();
-    let rms = (reads
-        .iter()
-        .map(|o| {
-            let rho = (t[0] - o.antenna[0]).hypot(t[1] - o.antenna[1]);
-            wrap(o.phase_rad - model(o, rho).0, o.period_rad).powi(2)
-        })
-        .sum::<f64>()
-        / reads.len() as f64)
-        .sqrt();
-    let covariance = [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]];
-    if !(t.iter().chain(&covariance).all(|v| v.is_finite())) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    Ok(Fix {
-        position: [t[0], t[1], z],
-        covariance,
-        rms_rad: rms,
-    })
+        .ok_or(NoFix::InsufficientGeometry)
 }
 
 /// Synthetic robot runs after \[M\]'s S3, for the tests here and in `wls`.
