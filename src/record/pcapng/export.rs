@@ -3,6 +3,7 @@
 //! of at most the MSS, an ACK from the receiver after each frame, and its FIN exchange.
 
 use std::borrow::Cow;
+use std::collections::HashMap;
 use std::io::Write;
 use std::net::Ipv4Addr;
 use std::time::Duration;
@@ -300,108 +301,33 @@ pub fn export(
     if !(MIN_MSS..=MAX_MSS).contains(&options.mss) {
         return Err(ExportError::Mss(options.mss));
     }
-    let h = &recording.header;
-    let mut about = format!(
-        "llrp-gateway export of a recording of {}, started {}",
-        h.upstream,
-        iso8601(h.start_utc_us)
-    );
-    if let Some(s) = &h.scenario {
-        about.push_str(&format!(" (scenario {s})"));
-    }
-    let section = SectionHeaderBlock {
-        endianness: Endianness::native(),
-        options: vec![
-            SectionHeaderOption::UserApplication(Cow::Owned(format!(
-                "llrp-gateway {}",
-                env!("CARGO_PKG_VERSION")
-            ))),
-            SectionHeaderOption::Comment(Cow::Owned(about)),
-        ],
-        ..SectionHeaderBlock::default()
-    };
-    let mut writer = PcapNgWriter::with_section_header(out, section)?;
-    writer.write_pcapng_block(InterfaceDescriptionBlock {
-        linktype: DataLink::ETHERNET,
-        snaplen: 0,
-        options: vec![
-            InterfaceDescriptionOption::IfName(Cow::Borrowed("lo")),
-            InterfaceDescriptionOption::IfDescription(Cow::Borrowed(
-                "loopback, as exported by llrp-gateway: reader 127.0.0.1:5084",
-            )),
-            // pcap-file writes the timestamps as nanoseconds.
-            InterfaceDescriptionOption::IfTsResol(9),
-        ],
-    })?;
+    let mut writer = PcapNgWriter::with_section_header(out, section_header(recording))?;
+    writer.write_pcapng_block(interface())?;
     let mut out = Out {
         writer,
         packets: 0,
         mss: options.mss,
     };
     // Where each connection's last entry is: its stream closes there if no marker does.
-    let mut last = std::collections::HashMap::new();
+    let mut last = HashMap::new();
     for (i, e) in recording.entries.iter().enumerate() {
         last.insert(e.conn(), i);
     }
-    let mut open: std::collections::HashMap<u32, Stream> = std::collections::HashMap::new();
-    let mut generation: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+    let mut open: HashMap<u32, Stream> = HashMap::new();
+    let mut generation: HashMap<u32, u32> = HashMap::new();
     let mut summary = ExportSummary::default();
     for (i, e) in recording.entries.iter().enumerate() {
         let (conn, utc_us) = (e.conn(), e.at().utc_us);
         if let Entry::Reader { .. } = e {
             summary.reader_lines += 1;
         }
-        let starts = !open.contains_key(&conn)
-            && !matches!(e, Entry::Reader { .. })
-            && !matches!(
-                e,
-                Entry::Marker {
-                    event: Event::Disconnect,
-                    ..
-                }
-            );
-        if starts {
-            let why = match e {
-                Entry::Marker { reason, .. } => format!("connect: {reason}"),
-                _ => "connect (no connect marker in the recording)".to_string(),
-            };
+        if starts_stream(e, &open) {
             let g = generation.entry(conn).or_insert(0);
             *g += 1;
-            open.insert(conn, out.open(conn, *g, utc_us, &why)?);
+            open.insert(conn, out.open(conn, *g, utc_us, &connect_reason(e))?);
             summary.streams += 1;
         }
-        match e {
-            Entry::Frame { dir, frame, .. } => {
-                let what = match (
-                    llrp::FrameHeader::peek(frame),
-                    llrp::MessageKind::of_frame(frame),
-                ) {
-                    (Some(h), Some(k)) => format!("{} id {}", k.name(), h.id),
-                    _ => "frame".to_string(),
-                };
-                if let Some(s) = open.get_mut(&conn) {
-                    out.data(s, end_of(*dir), frame, utc_us, &what)?;
-                }
-                summary.frames += 1;
-            }
-            Entry::Bytes { dir, bytes, .. } => {
-                if let Some(s) = open.get_mut(&conn) {
-                    let what = format!("{} bytes that are not LLRP", bytes.len());
-                    out.data(s, end_of(*dir), bytes, utc_us, &what)?;
-                }
-                summary.bytes_entries += 1;
-            }
-            Entry::Marker {
-                event: Event::Disconnect,
-                reason,
-                ..
-            } => {
-                if let Some(s) = open.remove(&conn) {
-                    out.close(s, utc_us, &format!("disconnect: {reason}"))?;
-                }
-            }
-            Entry::Marker { .. } | Entry::Reader { .. } => {}
-        }
+        out.entry(e, &mut open, &mut summary)?;
         if last.get(&conn) == Some(&i) {
             if let Some(s) = open.remove(&conn) {
                 out.close(
@@ -414,6 +340,113 @@ pub fn export(
     }
     summary.packets = out.packets;
     Ok(summary)
+}
+
+/// The capture's section header: the exporting program and what was recorded.
+fn section_header(recording: &Recording) -> SectionHeaderBlock<'static> {
+    let h = &recording.header;
+    let mut about = format!(
+        "llrp-gateway export of a recording of {}, started {}",
+        h.upstream,
+        iso8601(h.start_utc_us)
+    );
+    if let Some(s) = &h.scenario {
+        about.push_str(&format!(" (scenario {s})"));
+    }
+    SectionHeaderBlock {
+        endianness: Endianness::native(),
+        options: vec![
+            SectionHeaderOption::UserApplication(Cow::Owned(format!(
+                "llrp-gateway {}",
+                env!("CARGO_PKG_VERSION")
+            ))),
+            SectionHeaderOption::Comment(Cow::Owned(about)),
+        ],
+        ..SectionHeaderBlock::default()
+    }
+}
+
+/// The capture's one interface: Ethernet on loopback, nanosecond timestamps.
+fn interface() -> InterfaceDescriptionBlock<'static> {
+    InterfaceDescriptionBlock {
+        linktype: DataLink::ETHERNET,
+        snaplen: 0,
+        options: vec![
+            InterfaceDescriptionOption::IfName(Cow::Borrowed("lo")),
+            InterfaceDescriptionOption::IfDescription(Cow::Borrowed(
+                "loopback, as exported by llrp-gateway: reader 127.0.0.1:5084",
+            )),
+            // pcap-file writes the timestamps as nanoseconds.
+            InterfaceDescriptionOption::IfTsResol(9),
+        ],
+    }
+}
+
+/// Whether entry `e` opens a stream: its connection has none open, and it is neither a
+/// reader line nor a disconnect marker.
+fn starts_stream(e: &Entry, open: &HashMap<u32, Stream>) -> bool {
+    !open.contains_key(&e.conn())
+        && !matches!(e, Entry::Reader { .. })
+        && !matches!(
+            e,
+            Entry::Marker {
+                event: Event::Disconnect,
+                ..
+            }
+        )
+}
+
+/// The comment on the SYN of a stream that entry `e` opens.
+fn connect_reason(e: &Entry) -> String {
+    match e {
+        Entry::Marker { reason, .. } => format!("connect: {reason}"),
+        _ => "connect (no connect marker in the recording)".to_string(),
+    }
+}
+
+impl<W: Write> Out<W> {
+    /// Writes the packets of entry `e` (payload or closing handshake) and counts it.
+    fn entry(
+        &mut self,
+        e: &Entry,
+        open: &mut HashMap<u32, Stream>,
+        summary: &mut ExportSummary,
+    ) -> Result<(), PcapError> {
+        let (conn, utc_us) = (e.conn(), e.at().utc_us);
+        match e {
+            Entry::Frame { dir, frame, .. } => {
+                let what = match (
+                    llrp::FrameHeader::peek(frame),
+                    llrp::MessageKind::of_frame(frame),
+                ) {
+                    (Some(h), Some(k)) => format!("{} id {}", k.name(), h.id),
+                    _ => "frame".to_string(),
+                };
+                if let Some(s) = open.get_mut(&conn) {
+                    self.data(s, end_of(*dir), frame, utc_us, &what)?;
+                }
+                summary.frames += 1;
+            }
+            Entry::Bytes { dir, bytes, .. } => {
+                if let Some(s) = open.get_mut(&conn) {
+                    let what = format!("{} bytes that are not LLRP", bytes.len());
+                    self.data(s, end_of(*dir), bytes, utc_us, &what)?;
+                }
+                summary.bytes_entries += 1;
+            }
+            Entry::Marker {
+                event: Event::Disconnect,
+                reason,
+                ..
+            } => {
+                if let Some(s) = open.remove(&conn) {
+                    self.close(s, utc_us, &format!("disconnect: {reason}"))?;
+                }
+            }
+            Entry::Marker { .. } | Entry::Reader { .. } => {}
+        }
+        Ok(())
+    }
 }
 
 fn end_of(dir: Direction) -> usize {

@@ -65,16 +65,50 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
     let mut warnings = read.warnings;
     let packets = read.packets;
     let Some(first) = packets.first() else {
-        let why = if warnings.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", warnings.join("; "))
-        };
-        return Err(ImportError::NoLlrp(format!(
-            "the capture holds no whole packet{why}"
-        )));
+        return Err(no_packet(&warnings));
     };
     let start_us = first.utc_us;
+    let streams = reassemble(&packets, &mut warnings)?;
+    let llrp = llrp_entries(&streams, start_us, &mut warnings);
+    let Some(upstream) = llrp.upstream else {
+        let n = streams.streams.len();
+        return Err(ImportError::NoLlrp(format!(
+            "{n} TCP streams, none on port 5084 or 5085 nor starting with an LLRP message"
+        )));
+    };
+    if llrp.readers.len() > 1 {
+        let all: Vec<String> = llrp.readers.iter().map(|a| a.to_string()).collect();
+        warnings.push(format!(
+            "the capture has {} readers ({}): the recording's header names the first",
+            llrp.readers.len(),
+            all.join(", ")
+        ));
+    }
+    let mut entries = llrp.entries;
+    // Capture order: by packet, then by order within the packet (stable).
+    entries.sort_by_key(|(at, _)| *at);
+    Ok(Recording {
+        header: Header::new(upstream.to_string(), start_us),
+        entries: entries.into_iter().map(|(_, e)| e).collect(),
+        warnings,
+    })
+}
+
+/// The error for a capture without a whole packet, with the capture's warnings.
+fn no_packet(warnings: &[String]) -> ImportError {
+    let why = if warnings.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", warnings.join("; "))
+    };
+    ImportError::NoLlrp(format!("the capture holds no whole packet{why}"))
+}
+
+/// The TCP streams of the (non-empty) `packets`, with warnings for what was skipped.
+fn reassemble(
+    packets: &[capture::Packet<'_>],
+    warnings: &mut Vec<String>,
+) -> Result<Streams, ImportError> {
     let mut unsupported: Vec<u32> = Vec::new();
     let (mut not_tcp, mut fragments, mut truncated) = (0, 0, 0);
     let mut streams = Streams::default();
@@ -121,7 +155,23 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
     let _ = not_tcp; // other protocols are of no interest, and not worth a warning
     let last = packets.len().saturating_sub(1);
     streams.finish(last, packets[last].utc_us);
+    Ok(streams)
+}
 
+/// What the LLRP streams of a capture give: entries keyed by capture position, the first
+/// reader's address and every reader's address.
+struct LlrpStreams {
+    /// Each entry with its (packet, order within the packet).
+    entries: Vec<((usize, usize), Entry)>,
+    /// The first LLRP stream's reader.
+    upstream: Option<std::net::SocketAddr>,
+    /// Every reader, in order of first appearance.
+    readers: Vec<std::net::SocketAddr>,
+}
+
+/// The entries of every LLRP stream, one connection each, with warnings for the streams
+/// skipped and what each stream tolerated.
+fn llrp_entries(streams: &Streams, start_us: u64, warnings: &mut Vec<String>) -> LlrpStreams {
     let mut entries: Vec<((usize, usize), Entry)> = Vec::new();
     let mut upstream: Option<std::net::SocketAddr> = None;
     let (mut conn, mut silent, mut readers) = (0u32, 0usize, Vec::new());
@@ -147,90 +197,85 @@ pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
                 s.duplicate_bytes()
             ));
         }
-        let reader = s.reader_end();
-        let (reader_addr, client_addr) = (s.ends[reader], s.ends[1 - reader]);
+        let reader_addr = s.ends[s.reader_end()];
         upstream.get_or_insert(reader_addr);
         if !readers.contains(&reader_addr) {
             readers.push(reader_addr);
         }
-        let role = |end: usize| if end == reader { "reader" } else { "client" };
-        for e in &s.events {
-            let at = Stamp {
-                t_us: e.utc_us.saturating_sub(start_us),
-                utc_us: e.utc_us,
-            };
-            let dir = |end: usize| {
-                if end == reader {
-                    Direction::FromReader
-                } else {
-                    Direction::ToReader
-                }
-            };
-            let entry = match &e.what {
-                Happening::Open { syn } => Entry::Marker {
-                    at,
-                    conn,
-                    event: Event::Connect,
-                    reason: if *syn {
-                        format!("client {client_addr}")
-                    } else {
-                        format!("client {client_addr} (the capture starts after the handshake)")
-                    },
-                },
-                Happening::Data { end, piece } => match piece {
-                    Piece::Frame(frame) => Entry::Frame {
-                        at,
-                        conn,
-                        dir: dir(*end),
-                        frame: frame.clone(),
-                        undecodable: None,
-                    },
-                    Piece::Bytes(bytes) => Entry::Bytes {
-                        at,
-                        conn,
-                        dir: dir(*end),
-                        bytes: bytes.clone(),
-                    },
-                },
-                Happening::Close(ending) => Entry::Marker {
-                    at,
-                    conn,
-                    event: Event::Disconnect,
-                    reason: match ending {
-                        Ending::Fin(end) => format!("{} closed", role(*end)),
-                        Ending::Reset(end) => format!("reset by the {}", role(*end)),
-                    },
-                },
-            };
-            entries.push((e.at, entry));
-        }
+        stream_entries(s, conn, start_us, &mut entries);
     }
     if silent > 0 {
         warnings.push(format!(
             "{silent} TCP streams without payload, not on an LLRP port, skipped"
         ));
     }
-    let Some(upstream) = upstream else {
-        let n = streams.streams.len();
-        return Err(ImportError::NoLlrp(format!(
-            "{n} TCP streams, none on port 5084 or 5085 nor starting with an LLRP message"
-        )));
-    };
-    if readers.len() > 1 {
-        let all: Vec<String> = readers.iter().map(|a| a.to_string()).collect();
-        warnings.push(format!(
-            "the capture has {} readers ({}): the recording's header names the first",
-            readers.len(),
-            all.join(", ")
-        ));
+    LlrpStreams {
+        entries,
+        upstream,
+        readers,
     }
-    // Capture order: by packet, then by order within the packet (stable).
-    entries.sort_by_key(|(at, _)| *at);
-    Ok(Recording {
-        header: Header::new(upstream.to_string(), start_us),
-        entries: entries.into_iter().map(|(_, e)| e).collect(),
-        warnings,
-    })
+}
+
+/// Appends the entries of LLRP stream `s` as connection `conn` to `entries`.
+fn stream_entries(
+    s: &stream::Stream,
+    conn: u32,
+    start_us: u64,
+    entries: &mut Vec<((usize, usize), Entry)>,
+) {
+    let reader = s.reader_end();
+    let client_addr = s.ends[1 - reader];
+    let role = |end: usize| if end == reader { "reader" } else { "client" };
+    for e in &s.events {
+        let at = Stamp {
+            t_us: e.utc_us.saturating_sub(start_us),
+            utc_us: e.utc_us,
+        };
+        let dir = |end: usize| {
+            if end == reader {
+                Direction::FromReader
+            } else {
+                Direction::ToReader
+            }
+        };
+        let entry = match &e.what {
+            Happening::Open { syn } => Entry::Marker {
+                at,
+                conn,
+                event: Event::Connect,
+                reason: if *syn {
+                    format!("client {client_addr}")
+                } else {
+                    format!("client {client_addr} (the capture starts after the handshake)")
+                },
+            },
+            Happening::Data { end, piece } => match piece {
+                Piece::Frame(frame) => Entry::Frame {
+                    at,
+                    conn,
+                    dir: dir(*end),
+                    frame: frame.clone(),
+                    undecodable: None,
+                },
+                Piece::Bytes(bytes) => Entry::Bytes {
+                    at,
+                    conn,
+                    dir: dir(*end),
+                    bytes: bytes.clone(),
+                },
+            },
+            Happening::Close(ending) => Entry::Marker {
+                at,
+                conn,
+                event: Event::Disconnect,
+                reason: match ending {
+                    Ending::Fin(end) => format!("{} closed", role(*end)),
+                    Ending::Reset(end) => format!("reset by the {}", role(*end)),
+                },
+            },
+        };
+        entries.push((e.at, entry));
+    }
 }
 
 /// Writes `recording` (header and entries) to `out`.

@@ -81,19 +81,7 @@ impl Script {
     /// carries an LLRP session (the client sent a frame and the reader answered), else its
     /// first connection whose reader sent a frame.
     pub fn new(recording: &Recording, conn: Option<u32>) -> Result<Script, ScriptError> {
-        let conns = recording.connections();
-        let conn = match conn {
-            Some(c) if conns.contains(&c) => c,
-            Some(c) => return Err(ScriptError::NoSuchConnection(c, conns)),
-            None => {
-                let all = recording.summaries();
-                all.iter()
-                    .find(|s| s.has_session())
-                    .or_else(|| all.iter().find(|s| s.from_reader > 0))
-                    .ok_or(ScriptError::Empty)?
-                    .conn
-            }
-        };
+        let conn = Script::pick_conn(recording, conn)?;
         let start = recording
             .entries
             .iter()
@@ -107,6 +95,36 @@ impl Script {
             streams: HashMap::new(),
             looped: None,
         };
+        script.file_frames(recording, start);
+        // Captures' timestamps can go backwards: each list in time order.
+        script.greeting.sort_by_key(|t| t.offset_us);
+        for frames in script.streams.values_mut() {
+            frames.sort_by_key(|t| t.offset_us);
+        }
+        script.looped = script.loop_stream(recording);
+        Ok(script)
+    }
+
+    /// The connection to replay: `conn` if the recording has it, else the default one.
+    fn pick_conn(recording: &Recording, conn: Option<u32>) -> Result<u32, ScriptError> {
+        let conns = recording.connections();
+        Ok(match conn {
+            Some(c) if conns.contains(&c) => c,
+            Some(c) => return Err(ScriptError::NoSuchConnection(c, conns)),
+            None => {
+                let all = recording.summaries();
+                all.iter()
+                    .find(|s| s.has_session())
+                    .or_else(|| all.iter().find(|s| s.from_reader > 0))
+                    .ok_or(ScriptError::Empty)?
+                    .conn
+            }
+        })
+    }
+
+    /// Files each frame of this script's connection as greeting, response or stream frame;
+    /// `start` is the connection's first time.
+    fn file_frames(&mut self, recording: &Recording, start: u64) {
         let mut seen: HashMap<MessageKind, usize> = HashMap::new();
         // Requests waiting for their answer: message ID → kind.
         let mut open: HashMap<u32, MessageKind> = HashMap::new();
@@ -122,7 +140,7 @@ impl Script {
             else {
                 continue;
             };
-            if *c != conn {
+            if *c != self.conn {
                 continue;
             }
             let (Some(kind), Some(h)) = (MessageKind::of_frame(frame), FrameHeader::peek(frame))
@@ -142,16 +160,16 @@ impl Script {
                 Direction::FromReader => {
                     if !unsolicited(kind) {
                         if let Some(req) = open.remove(&h.id) {
-                            script.responses.entry(req).or_default().push(frame.clone());
+                            self.responses.entry(req).or_default().push(frame.clone());
                             continue;
                         }
                     }
                     match anchor {
-                        None => script.greeting.push(Timed {
+                        None => self.greeting.push(Timed {
                             offset_us: at.t_us.saturating_sub(start),
                             frame: frame.clone(),
                         }),
-                        Some((key, t0)) => script.streams.entry(key).or_default().push(Timed {
+                        Some((key, t0)) => self.streams.entry(key).or_default().push(Timed {
                             offset_us: at.t_us.saturating_sub(t0),
                             frame: frame.clone(),
                         }),
@@ -159,15 +177,14 @@ impl Script {
                 }
             }
         }
-        // Captures' timestamps can go backwards: each list in time order.
-        script.greeting.sort_by_key(|t| t.offset_us);
-        for frames in script.streams.values_mut() {
-            frames.sort_by_key(|t| t.offset_us);
-        }
-        // The stream to loop: the last one (in recorded order of its anchor) with reports.
+    }
+
+    /// The stream to loop and its period: the last one (in recorded order of its anchor)
+    /// with reports.
+    fn loop_stream(&self, recording: &Recording) -> Option<((MessageKind, usize), u64)> {
         let mut best: Option<((MessageKind, usize), u64)> = None;
         let mut best_first = 0;
-        for (key, frames) in &script.streams {
+        for (key, frames) in &self.streams {
             let reports: Vec<&Timed> = frames
                 .iter()
                 .filter(|t| MessageKind::of_frame(&t.frame) == Some(RoAccessReport::KIND))
@@ -176,7 +193,7 @@ impl Script {
                 continue;
             };
             // Order by the anchor's place: the stream whose first report is latest.
-            let first_abs = first.offset_us + anchor_time(recording, conn, key);
+            let first_abs = first.offset_us + anchor_time(recording, self.conn, key);
             if best.is_none() || first_abs > best_first {
                 let gap = if reports.len() > 1 {
                     last.offset_us.saturating_sub(first.offset_us) / (reports.len() as u64 - 1)
@@ -192,8 +209,7 @@ impl Script {
                 best_first = first_abs;
             }
         }
-        script.looped = best;
-        Ok(script)
+        best
     }
 
     /// The recorded connection this script replays.
