@@ -196,6 +196,63 @@ fn propagation(f_hz: f64, d: f64) -> f64 {
 
 /// Computes every statistic of the reads of `layout`.
 pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
+    let mut r = gather(reads, layout);
+    let mut s = Stats {
+        reads: r.counted,
+        ..Stats::default()
+    };
+    let t = summarise(&r.groups);
+    let summaries = &t.summaries;
+    s.groups = summaries.len();
+    if summaries.is_empty() {
+        return s;
+    }
+    phase_noise_stats(&mut s, summaries);
+    let total = t.total;
+    s.pi_flips = Some(t.flips as f64 / total as f64);
+    s.phase_outliers = Some(t.outliers as f64 / total as f64);
+    s.rssi_outliers = Some(t.rssi_out as f64 / total as f64);
+    s.rssi_sigma_median = quantile(&t.rssi_sigmas, 0.5);
+    s.rssi_sigma_p90 = quantile(&t.rssi_sigmas, 0.9);
+    s.phase_kurtosis = kurtosis(&t.pooled);
+    r.rssi_values.sort_by(f64::total_cmp);
+    s.rssi_step = r
+        .rssi_values
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&d| d > 1e-9)
+        .min_by(f64::total_cmp);
+    s.phase_quantum = (r.codes_gcd > 0).then_some(r.codes_gcd as f64);
+    let (most, least) = (r.per_tag.iter().max(), r.per_tag.iter().min());
+    if let (Some(&m), Some(&l)) = (most, least) {
+        s.reads_ratio = (l > 0).then(|| m as f64 / l as f64);
+    }
+    s.long_gaps = long_gaps(&mut r.sequence, layout.tags.len());
+
+    geometry_stats(&mut s, summaries, layout, &r.freqs);
+    s
+}
+
+/// The reads that count (known tag, at a park, with phase, RSSI and channel), grouped.
+struct Gathered {
+    /// The channels' frequencies (Hz), ascending; a channel is its index.
+    freqs: Vec<u64>,
+    /// Phases and RSSI by (park, tag, channel).
+    groups: HashMap<(usize, usize, usize), Group>,
+    /// Reads per tag.
+    per_tag: Vec<usize>,
+    /// (park, time, tag) of each read.
+    sequence: Vec<(usize, u64, usize)>,
+    /// The GCD of the phase codes (of 4096 per turn).
+    codes_gcd: u64,
+    /// Every read's RSSI.
+    rssi_values: Vec<f64>,
+    /// Reads that count.
+    counted: usize,
+}
+
+/// Sorts the reads of `layout` into groups and tallies, skipping those that do not count.
+fn gather(reads: &[Read], layout: &Layout) -> Gathered {
     let epcs: HashMap<&str, usize> = layout
         .tags
         .iter()
@@ -242,21 +299,52 @@ pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
         g.phases.push(phase);
         g.rssi.push(rssi);
     }
+    Gathered {
+        freqs,
+        groups,
+        per_tag,
+        sequence,
+        codes_gcd,
+        rssi_values,
+        counted,
+    }
+}
 
-    let mut s = Stats {
-        reads: counted,
-        ..Stats::default()
-    };
-    let mut summaries = Vec::new();
-    let (mut flips, mut outliers, mut rssi_out, mut total) = (0usize, 0usize, 0usize, 0usize);
-    let mut pooled: Vec<f64> = Vec::new();
-    let mut rssi_sigmas = Vec::new();
+/// The groups' summaries and the counts pooled over the groups.
+#[derive(Default)]
+struct Tallies {
+    /// One summary per group big enough, in key order.
+    summaries: Vec<Summary>,
+    /// Reads half a turn off their group's mode.
+    flips: usize,
+    /// Reads more than five robust sigmas off their group's mode.
+    outliers: usize,
+    /// Reads more than 2 dB off their group's median RSSI.
+    rssi_out: usize,
+    /// Reads in the summarised groups.
+    total: usize,
+    /// Main-lobe phase deviations in units of their group's sigma.
+    pooled: Vec<f64>,
+    /// Each group's RSSI sigma.
+    rssi_sigmas: Vec<f64>,
+}
+
+/// Summarises each group (in key order) with enough reads, pooling the counts.
+fn summarise(groups: &HashMap<(usize, usize, usize), Group>) -> Tallies {
+    let mut t = Tallies::default();
     let mut keys: Vec<_> = groups.keys().copied().collect();
     keys.sort_unstable();
     for key in keys {
-        let g = &groups[&key];
+        t.add(key, &groups[&key]);
+    }
+    t
+}
+
+impl Tallies {
+    /// Adds group `g` at `key` (park, tag, channel), unless it has too few main-lobe reads.
+    fn add(&mut self, key: (usize, usize, usize), g: &Group) {
         if g.phases.len() < MIN_GROUP {
-            continue;
+            return;
         }
         let (all_mean, _) = circular_mean(&g.phases);
         let main: Vec<f64> = g
@@ -266,36 +354,36 @@ pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
             .filter(|p| wrap_pi(p - all_mean).abs() < PI / 2.0)
             .collect();
         if main.len() < MIN_GROUP {
-            continue;
+            return;
         }
         let (mode, r) = circular_mean(&main);
         let sigma = (-2.0 * r.min(1.0).ln()).max(0.0).sqrt();
         let devs: Vec<f64> = g.phases.iter().map(|p| wrap_pi(p - mode)).collect();
-        flips += devs.iter().filter(|d| d.abs() > 0.75 * PI).count();
+        self.flips += devs.iter().filter(|d| d.abs() > 0.75 * PI).count();
         let abs: Vec<f64> = devs.iter().map(|d| d.abs()).collect();
         let robust = 1.4826 * quantile(&abs, 0.5).unwrap_or(0.0);
         // A quantised group can have a zero MAD: count against one phase step then.
         let robust = robust.max(TAU / 4096.0);
-        outliers += abs.iter().filter(|&&d| d > 5.0 * robust).count();
+        self.outliers += abs.iter().filter(|&&d| d > 5.0 * robust).count();
         let main_devs: Vec<f64> = devs
             .iter()
             .copied()
             .filter(|d| d.abs() < PI / 2.0)
             .collect();
         if let Some(sd) = population_std(&main_devs).filter(|&sd| sd > 0.0) {
-            pooled.extend(main_devs.iter().map(|d| d / sd));
+            self.pooled.extend(main_devs.iter().map(|d| d / sd));
         }
         let median_rssi = quantile(&g.rssi, 0.5).unwrap_or(0.0);
-        rssi_out += g
+        self.rssi_out += g
             .rssi
             .iter()
             .filter(|&&x| (x - median_rssi).abs() > 2.0)
             .count();
-        total += g.phases.len();
+        self.total += g.phases.len();
         if let Some(sd) = std(&g.rssi) {
-            rssi_sigmas.push(sd);
+            self.rssi_sigmas.push(sd);
         }
-        summaries.push(Summary {
+        self.summaries.push(Summary {
             park: key.0,
             tag: key.1,
             channel: key.2,
@@ -304,10 +392,10 @@ pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
             rssi_mean: mean(&g.rssi).unwrap_or(f64::NAN),
         });
     }
-    s.groups = summaries.len();
-    if summaries.is_empty() {
-        return s;
-    }
+}
+
+/// The phase sigma's quantiles and its fit against the RSSI level.
+fn phase_noise_stats(s: &mut Stats, summaries: &[Summary]) {
     let sigmas: Vec<f64> = summaries.iter().map(|g| g.sigma).collect();
     s.phase_sigma_median = quantile(&sigmas, 0.5);
     s.phase_sigma_p90 = quantile(&sigmas, 0.9);
@@ -321,27 +409,6 @@ pub fn compute(reads: &[Read], layout: &Layout) -> Stats {
         s.phase_sigma_at_42 = Some(10f64.powf(a + b * -42.0));
         s.phase_sigma_at_57 = Some(10f64.powf(a + b * -57.0));
     }
-    s.pi_flips = Some(flips as f64 / total as f64);
-    s.phase_outliers = Some(outliers as f64 / total as f64);
-    s.rssi_outliers = Some(rssi_out as f64 / total as f64);
-    s.rssi_sigma_median = quantile(&rssi_sigmas, 0.5);
-    s.rssi_sigma_p90 = quantile(&rssi_sigmas, 0.9);
-    s.phase_kurtosis = kurtosis(&pooled);
-    rssi_values.sort_by(f64::total_cmp);
-    s.rssi_step = rssi_values
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|&d| d > 1e-9)
-        .min_by(f64::total_cmp);
-    s.phase_quantum = (codes_gcd > 0).then_some(codes_gcd as f64);
-    let (most, least) = (per_tag.iter().max(), per_tag.iter().min());
-    if let (Some(&m), Some(&l)) = (most, least) {
-        s.reads_ratio = (l > 0).then(|| m as f64 / l as f64);
-    }
-    s.long_gaps = long_gaps(&mut sequence, layout.tags.len());
-
-    geometry_stats(&mut s, &summaries, layout, &freqs);
-    s
 }
 
 fn gcd(a: u64, b: u64) -> u64 {
@@ -391,29 +458,57 @@ fn long_gaps(sequence: &mut [(usize, u64, usize)], tags: usize) -> Option<f64> {
 /// The statistics that need the geometry: slope, off-axis drop, per-channel profiles, level,
 /// phase against frequency and along the aperture.
 fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: &[u64]) {
-    let distance = |park: usize, tag: usize| norm(sub(layout.tags[tag].1, layout.parks[park].at));
-    let off_axis = |park: usize, tag: usize| {
-        let v = sub(layout.tags[tag].1, layout.parks[park].at);
-        let b = layout.boresight;
-        let c = (v[0] * b[0] + v[1] * b[1] + v[2] * b[2]) / norm(v);
-        c.clamp(-1.0, 1.0).acos().to_degrees()
-    };
     let (log_d, levels): (Vec<f64>, Vec<f64>) = summaries
         .iter()
-        .map(|g| (distance(g.park, g.tag).log2(), g.rssi_mean))
+        .map(|g| (distance(layout, g.park, g.tag).log2(), g.rssi_mean))
         .unzip();
     s.rssi_slope = line_fit(&log_d, &levels).map(|(_, b)| b);
     let band = |lo: f64, hi: f64| -> Vec<f64> {
         summaries
             .iter()
-            .filter(|g| (lo..hi).contains(&off_axis(g.park, g.tag)))
+            .filter(|g| (lo..hi).contains(&off_axis(layout, g.park, g.tag)))
             .map(|g| g.rssi_mean)
             .collect()
     };
     if let (Some(off), Some(on)) = (mean(&band(30.0, 40.0)), mean(&band(0.0, 10.0))) {
         s.off_axis_drop = Some(off - on);
     }
+    channel_stats(s, summaries, layout, freqs);
+    front_stats(s, summaries, layout);
+    aperture_stats(s, summaries, layout, freqs);
+}
 
+/// The distance (m) from park `park` to tag `tag`.
+fn distance(layout: &Layout, park: usize, tag: usize) -> f64 {
+    norm(sub(layout.tags[tag].1, layout.parks[park].at))
+}
+
+/// The angle (degrees) of tag `tag` off the boresight at park `park`.
+fn off_axis(layout: &Layout, park: usize, tag: usize) -> f64 {
+    let v = sub(layout.tags[tag].1, layout.parks[park].at);
+    let b = layout.boresight;
+    let c = (v[0] * b[0] + v[1] * b[1] + v[2] * b[2]) / norm(v);
+    c.clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// What the (park, tag) points with a group on every channel give, channel by channel.
+struct Profiles {
+    /// Each point's RSSI sigma across channels.
+    channel_sigmas: Vec<f64>,
+    /// Per channel: the sum of the points' mean-removed RSSI.
+    profile_sum: Vec<f64>,
+    /// Points summed in `profile_sum`.
+    profile_n: usize,
+    /// Each point's RMS residual of phase against frequency after a line fit.
+    fit_residuals: Vec<f64>,
+    /// Each point's spread of φ0 across channels.
+    phi0_profiles: Vec<f64>,
+    /// (park, channel) -> per-tag mean-removed φ0 profile value.
+    phi0_by_channel: HashMap<(usize, usize), Vec<f64>>,
+}
+
+/// The per-channel statistics: RSSI across channels, band tilt, phase against frequency, φ0.
+fn channel_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: &[u64]) {
     // Per (park, tag): the group means by channel, where every channel has a group.
     let n_ch = freqs.len();
     let mut by_point: HashMap<(usize, usize), Vec<Option<Summary>>> = HashMap::new();
@@ -423,13 +518,14 @@ fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: 
             .or_insert_with(|| vec![None; n_ch])[g.channel] = Some(*g);
     }
     let f_mhz: Vec<f64> = freqs.iter().map(|&f| f as f64 / 1e6).collect();
-    let mut channel_sigmas = Vec::new();
-    let mut profile_sum = vec![0.0; n_ch];
-    let mut profile_n = 0usize;
-    let mut fit_residuals = Vec::new();
-    let mut phi0_profiles = Vec::new();
-    // (park, channel) -> per-tag mean-removed φ0 profile value.
-    let mut phi0_by_channel: HashMap<(usize, usize), Vec<f64>> = HashMap::new();
+    let mut p = Profiles {
+        channel_sigmas: Vec::new(),
+        profile_sum: vec![0.0; n_ch],
+        profile_n: 0,
+        fit_residuals: Vec::new(),
+        phi0_profiles: Vec::new(),
+        phi0_by_channel: HashMap::new(),
+    };
     let mut points: Vec<_> = by_point.keys().copied().collect();
     points.sort_unstable();
     for key in points {
@@ -440,25 +536,58 @@ fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: 
         if n_ch < 2 {
             continue;
         }
+        p.add(key, &full, layout, freqs, &f_mhz);
+    }
+    s.channel_rssi_sigma = quantile(&p.channel_sigmas, 0.5);
+    if p.profile_n > 0 && n_ch > 1 {
+        let profile: Vec<f64> = p
+            .profile_sum
+            .iter()
+            .map(|x| x / p.profile_n as f64)
+            .collect();
+        let span = f_mhz[n_ch - 1] - f_mhz[0];
+        s.band_tilt = line_fit(&f_mhz, &profile).map(|(_, b)| b * span);
+    }
+    s.channel_fit_residual = quantile(&p.fit_residuals, 0.5);
+    s.phi0_profile = quantile(&p.phi0_profiles, 0.5);
+    let spreads: Vec<f64> = p
+        .phi0_by_channel
+        .values()
+        .filter(|v| v.len() == layout.tags.len() && v.len() > 1)
+        .filter_map(|v| std(v))
+        .collect();
+    s.phi0_tag_spread = quantile(&spreads, 0.5);
+}
+
+impl Profiles {
+    /// Adds point `key` (park, tag), whose groups `full` cover every channel.
+    fn add(
+        &mut self,
+        key: (usize, usize),
+        full: &[Summary],
+        layout: &Layout,
+        freqs: &[u64],
+        f_mhz: &[f64],
+    ) {
         let rssi: Vec<f64> = full.iter().map(|g| g.rssi_mean).collect();
-        channel_sigmas.extend(std(&rssi));
+        self.channel_sigmas.extend(std(&rssi));
         let m = mean(&rssi).unwrap_or(0.0);
         for (k, x) in rssi.iter().enumerate() {
-            profile_sum[k] += x - m;
+            self.profile_sum[k] += x - m;
         }
-        profile_n += 1;
+        self.profile_n += 1;
         let mut phases: Vec<f64> = full.iter().map(|g| g.mode).collect();
         unwrap(&mut phases);
-        if let Some((a, b)) = line_fit(&f_mhz, &phases) {
+        if let Some((a, b)) = line_fit(f_mhz, &phases) {
             let res: Vec<f64> = f_mhz
                 .iter()
                 .zip(&phases)
                 .map(|(f, p)| p - a - b * f)
                 .collect();
             let rms = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
-            fit_residuals.push(rms);
+            self.fit_residuals.push(rms);
         }
-        let d = distance(key.0, key.1);
+        let d = distance(layout, key.0, key.1);
         let mut psi: Vec<f64> = full
             .iter()
             .zip(freqs)
@@ -466,31 +595,23 @@ fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: 
             .collect();
         unwrap(&mut psi);
         let pm = mean(&psi).unwrap_or(0.0);
-        phi0_profiles.extend(population_std(&psi));
+        self.phi0_profiles.extend(population_std(&psi));
         for (k, p) in psi.iter().enumerate() {
-            phi0_by_channel.entry((key.0, k)).or_default().push(p - pm);
+            self.phi0_by_channel
+                .entry((key.0, k))
+                .or_default()
+                .push(p - pm);
         }
     }
-    s.channel_rssi_sigma = quantile(&channel_sigmas, 0.5);
-    if profile_n > 0 && n_ch > 1 {
-        let profile: Vec<f64> = profile_sum.iter().map(|x| x / profile_n as f64).collect();
-        let span = f_mhz[n_ch - 1] - f_mhz[0];
-        s.band_tilt = line_fit(&f_mhz, &profile).map(|(_, b)| b * span);
-    }
-    s.channel_fit_residual = quantile(&fit_residuals, 0.5);
-    s.phi0_profile = quantile(&phi0_profiles, 0.5);
-    let spreads: Vec<f64> = phi0_by_channel
-        .values()
-        .filter(|v| v.len() == layout.tags.len() && v.len() > 1)
-        .filter_map(|v| std(v))
-        .collect();
-    s.phi0_tag_spread = quantile(&spreads, 0.5);
+}
 
+/// The level and the spread between tags, each tag seen from the park in front of it.
+fn front_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout) {
     // In front of each tag: the park nearest to it along the rail.
     let mut fronts = Vec::new();
     for tag in 0..layout.tags.len() {
-        let Some(park) =
-            (0..layout.parks.len()).min_by(|&a, &b| off_axis(a, tag).total_cmp(&off_axis(b, tag)))
+        let Some(park) = (0..layout.parks.len())
+            .min_by(|&a, &b| off_axis(layout, a, tag).total_cmp(&off_axis(layout, b, tag)))
         else {
             continue;
         };
@@ -507,8 +628,6 @@ fn geometry_stats(s: &mut Stats, summaries: &[Summary], layout: &Layout, freqs: 
         s.tag_spread = Some(max - min);
         s.level = mean(&fronts);
     }
-
-    aperture_stats(s, summaries, layout, freqs);
 }
 
 /// Phase along the aperture against the nominal (and the fitted) geometry.
