@@ -125,35 +125,15 @@ pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) ->
     let world = World::new(scenario);
     let end_us = (seconds * 1e6) as u64;
     let mut reads = Vec::new();
-    let (mut true_poses, mut estimated_poses) = (Poses::new(), Poses::new());
+    let mut poses = (Poses::new(), Poses::new());
     let settings = crate::sim::feed::settings(scenario, Settings::default());
     let mut truth = Vec::new();
     let mut calibrated = true;
-    let pose_error = scenario
-        .readers
-        .iter()
-        .flat_map(|r| &r.antennas)
-        .find_map(|a| match &a.mount {
-            Mount::Robot { robot, .. }
-                if robot.pose_estimate.kind == crate::scenario::PoseEstimateKind::Localized =>
-            {
-                let e = &robot.pose_estimate;
-                Some(PoseErrorModel::new(e.position_sigma_m, e.correlation_s))
-            }
-            _ => None,
-        });
+    let pose_error = pose_error_model(scenario);
     for (i, spec) in scenario.readers.iter().enumerate() {
         let model = std::sync::Arc::new(Model::in_world(&world, scenario, i));
         if i == 0 {
-            truth = (0..model.tag_count())
-                .map(|k| {
-                    (
-                        crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
-                        model.tag_position(k, 0),
-                        scenario.tags.get(k).is_some_and(|t| t.reference),
-                    )
-                })
-                .collect();
+            truth = truth_of(scenario, &model);
         }
         let profile = ReaderProfile::from_scenario(scenario, i, &model);
         calibrated &= spec.antennas.iter().all(|a| {
@@ -180,25 +160,15 @@ pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) ->
                 wall_ms: t / 1000,
             });
             if let Some(bytes) = own.take_output() {
-                let mut at = 0;
-                while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
-                    let len = (h.length as usize).max(llrp::frame::HEADER_LEN);
-                    if at + len > bytes.len() {
-                        break;
-                    }
-                    let _ = decoder.frame(&bytes[at..at + len], t, &mut reads);
-                    at += len;
-                }
+                decode_frames(&bytes, t, &mut decoder, &mut reads);
             }
             if t % POSE_US == 0 {
-                for a in 1..=model.antenna_count() {
-                    true_poses.add(sample(&spec.name, a, t, &model.antenna_pose(a, t)));
-                    estimated_poses.add(sample(&spec.name, a, t, &model.estimated_pose(a, t)));
-                }
+                add_poses(&spec.name, &model, t, &mut poses);
             }
             t += STEP_US;
         }
     }
+    let (true_poses, estimated_poses) = poses;
     Run {
         reads,
         true_poses,
@@ -208,6 +178,58 @@ pub fn simulate_with(scenario: &Scenario, seconds: f64, inventory: Inventory) ->
         seconds,
         calibrated,
         pose_error,
+    }
+}
+
+/// The pose error model of the first robot antenna whose pose is localized, if any.
+fn pose_error_model(scenario: &Scenario) -> Option<PoseErrorModel> {
+    scenario
+        .readers
+        .iter()
+        .flat_map(|r| &r.antennas)
+        .find_map(|a| match &a.mount {
+            Mount::Robot { robot, .. }
+                if robot.pose_estimate.kind == crate::scenario::PoseEstimateKind::Localized =>
+            {
+                let e = &robot.pose_estimate;
+                Some(PoseErrorModel::new(e.position_sigma_m, e.correlation_s))
+            }
+            _ => None,
+        })
+}
+
+/// Each tag of `model`'s world: EPC (upper-case hex), position at time 0, and whether it is
+/// a reference tag.
+fn truth_of(scenario: &Scenario, model: &Model) -> Vec<(String, [f64; 3], bool)> {
+    (0..model.tag_count())
+        .map(|k| {
+            (
+                crate::reads::hex_upper(model.tag_epc(k).as_bytes()),
+                model.tag_position(k, 0),
+                scenario.tags.get(k).is_some_and(|t| t.reference),
+            )
+        })
+        .collect()
+}
+
+/// Decodes the whole LLRP frames in `bytes`, output at `t`, into `reads`.
+fn decode_frames(bytes: &[u8], t: u64, decoder: &mut ReadDecoder, reads: &mut Vec<Read>) {
+    let mut at = 0;
+    while let Some(h) = llrp::FrameHeader::peek(&bytes[at..]) {
+        let len = (h.length as usize).max(llrp::frame::HEADER_LEN);
+        if at + len > bytes.len() {
+            break;
+        }
+        let _ = decoder.frame(&bytes[at..at + len], t, reads);
+        at += len;
+    }
+}
+
+/// Adds every antenna's true and estimated pose at `t` to `poses` (true, estimated).
+fn add_poses(name: &str, model: &Model, t: u64, poses: &mut (Poses, Poses)) {
+    for a in 1..=model.antenna_count() {
+        poses.0.add(sample(name, a, t, &model.antenna_pose(a, t)));
+        poses.1.add(sample(name, a, t, &model.estimated_pose(a, t)));
     }
 }
 

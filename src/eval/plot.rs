@@ -32,6 +32,16 @@ pub(super) fn font() -> bool {
     })
 }
 
+/// The chart `plot` draws on: metres on both axes of a bitmap.
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    plotters::coord::cartesian::Cartesian2d<
+        plotters::coord::types::RangedCoordf64,
+        plotters::coord::types::RangedCoordf64,
+    >,
+>;
+
 /// Draws `run`'s truth and the estimates of `with_true` and `with_estimated` to `path`.
 pub fn plot(
     path: &Path,
@@ -73,6 +83,30 @@ pub fn plot(
         mesh.disable_x_axis().disable_y_axis();
     }
     mesh.draw().map_err(|e| e.to_string())?;
+    draw_truth(&mut chart, run, &path_points, text)?;
+    for (scores, color) in [(with_true, BLUE), (with_estimated, RED)] {
+        draw_estimates(&mut chart, scores, color, text)?;
+    }
+    if text {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+/// Draws the antenna path `path_points` and the tags' true positions, with legend entries
+/// if `text`.
+fn draw_truth(
+    chart: &mut Chart<'_, '_>,
+    run: &Run,
+    path_points: &[(f64, f64)],
+    text: bool,
+) -> Result<(), String> {
     let grey = RGBColor(150, 150, 150);
     let series = chart
         .draw_series(LineSeries::new(path_points.iter().copied(), &grey))
@@ -94,36 +128,35 @@ pub fn plot(
             .label("truth")
             .legend(|(x, y)| Cross::new((x + 10, y), 6, BLACK.stroke_width(2)));
     }
-    for (scores, color) in [(with_true, BLUE), (with_estimated, RED)] {
-        let points: Vec<(f64, f64)> = scores
-            .estimates
-            .iter()
-            .filter_map(|e| e.estimate.map(|p| (p[0], p[1])))
-            .collect();
-        let series = chart
-            .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
-            .map_err(|e| e.to_string())?;
-        if text {
-            series
-                .label(format!(
-                    "{}, {} poses: mean {:.1} mm",
-                    scores.estimator,
-                    scores.poses,
-                    scores.mean * 1e3
-                ))
-                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
-        }
-    }
+    Ok(())
+}
+
+/// Draws the estimates of `scores` in `color`, with a legend entry if `text`.
+fn draw_estimates(
+    chart: &mut Chart<'_, '_>,
+    scores: &Scores,
+    color: RGBColor,
+    text: bool,
+) -> Result<(), String> {
+    let points: Vec<(f64, f64)> = scores
+        .estimates
+        .iter()
+        .filter_map(|e| e.estimate.map(|p| (p[0], p[1])))
+        .collect();
+    let series = chart
+        .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+        .map_err(|e| e.to_string())?;
     if text {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        series
+            .label(format!(
+                "{}, {} poses: mean {:.1} mm",
+                scores.estimator,
+                scores.poses,
+                scores.mean * 1e3
+            ))
+            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
     }
-    root.present().map_err(|e| e.to_string())
+    Ok(())
 }
 
 /// The range of `v` with a margin, at least 1 m wide.
