@@ -169,6 +169,7 @@ impl Builder {
         self.link.pump();
     }
 
+    /// Takes one input from the tap: registers, decodes or publishes it.
     fn take(&mut self, input: Input) {
         match input {
             Input::Reader {
@@ -186,61 +187,12 @@ impl Builder {
                 reader,
                 bytes,
                 now_utc_us,
-            } => {
-                self.came(&reader);
-                let decoder = self.decoders.of(&reader);
-                // The reads of each RO_ACCESS_REPORT apart: without a window, a message each;
-                // with one, all in one list.
-                let apart = self.opts.window.is_zero();
-                let mut reports: Vec<Vec<Read>> = vec![Vec::new()];
-                let mut events = Vec::new();
-                for frame in crate::reads::frames(&bytes) {
-                    let Ok(frame) = frame else {
-                        break;
-                    };
-                    let is_event = llrp::FrameHeader::peek(frame)
-                        .is_some_and(|h| h.msg_type == READER_EVENT_NOTIFICATION);
-                    if is_event {
-                        if let Ok(m) = llrp::Message::decode(frame) {
-                            if let llrp::MessageBody::ReaderEventNotification(n) = m.body {
-                                events.push(n.reader_event_notification_data);
-                            }
-                        }
-                    } else if let Some(reads) = reports.last_mut() {
-                        let _ = decoder.frame(frame, now_utc_us, reads);
-                        if apart && !reads.is_empty() {
-                            reports.push(Vec::new());
-                        }
-                    }
-                }
-                for reads in reports {
-                    self.reads(&reader, reads);
-                }
-                for e in events {
-                    self.event(&reader, &e);
-                }
-            }
-            Input::Reads(reads) => {
-                let mut by_reader: BTreeMap<String, Vec<Read>> = BTreeMap::new();
-                for r in reads {
-                    let name = r.reader.clone().unwrap_or_default();
-                    by_reader.entry(name).or_default().push(r);
-                }
-                for (reader, reads) in by_reader {
-                    self.reads(&reader, reads);
-                }
-            }
+            } => self.frames(&reader, &bytes, now_utc_us),
+            Input::Reads(reads) => self.reads_of_readers(reads),
             Input::Poses(poses) => self.poses(poses),
             // A simulation's ground truth is not published.
             Input::Truth(_) => {}
-            Input::Status { reader, online } => {
-                if online {
-                    self.came(&reader);
-                } else if lock(&self.link.online).remove(&reader) {
-                    let last = self.seqs.get(&reader).cloned().unwrap_or_default();
-                    self.link.status(Some(&reader), false, last);
-                }
-            }
+            Input::Status { reader, online } => self.status(&reader, online),
             Input::Event { reader, data } => {
                 self.came(&reader);
                 self.event(&reader, &data);
@@ -258,6 +210,65 @@ impl Builder {
                 };
                 self.event_of(&reader, "keepalive", &link);
             }
+        }
+    }
+
+    /// The reads and events in the frames `bytes` of reader `reader`, received at
+    /// `now_utc_us`, published.
+    fn frames(&mut self, reader: &str, bytes: &[u8], now_utc_us: u64) {
+        self.came(reader);
+        let decoder = self.decoders.of(reader);
+        // The reads of each RO_ACCESS_REPORT apart: without a window, a message each;
+        // with one, all in one list.
+        let apart = self.opts.window.is_zero();
+        let mut reports: Vec<Vec<Read>> = vec![Vec::new()];
+        let mut events = Vec::new();
+        for frame in crate::reads::frames(bytes) {
+            let Ok(frame) = frame else {
+                break;
+            };
+            let is_event = llrp::FrameHeader::peek(frame)
+                .is_some_and(|h| h.msg_type == READER_EVENT_NOTIFICATION);
+            if is_event {
+                if let Ok(m) = llrp::Message::decode(frame) {
+                    if let llrp::MessageBody::ReaderEventNotification(n) = m.body {
+                        events.push(n.reader_event_notification_data);
+                    }
+                }
+            } else if let Some(reads) = reports.last_mut() {
+                let _ = decoder.frame(frame, now_utc_us, reads);
+                if apart && !reads.is_empty() {
+                    reports.push(Vec::new());
+                }
+            }
+        }
+        for reads in reports {
+            self.reads(reader, reads);
+        }
+        for e in events {
+            self.event(reader, &e);
+        }
+    }
+
+    /// Reads of any readers published, reader by reader.
+    fn reads_of_readers(&mut self, reads: Vec<Read>) {
+        let mut by_reader: BTreeMap<String, Vec<Read>> = BTreeMap::new();
+        for r in reads {
+            let name = r.reader.clone().unwrap_or_default();
+            by_reader.entry(name).or_default().push(r);
+        }
+        for (reader, reads) in by_reader {
+            self.reads(&reader, reads);
+        }
+    }
+
+    /// Reader `reader` went online or offline: said once.
+    fn status(&mut self, reader: &str, online: bool) {
+        if online {
+            self.came(reader);
+        } else if lock(&self.link.online).remove(reader) {
+            let last = self.seqs.get(reader).cloned().unwrap_or_default();
+            self.link.status(Some(reader), false, last);
         }
     }
 

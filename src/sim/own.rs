@@ -153,25 +153,11 @@ pub async fn run(
         if *shutdown.borrow() {
             return;
         }
-        let now = Now {
-            sim_us: task.clock.now_us(),
-            wall_ms: task.clock.wall_ms(),
-        };
-        let Some(mut own) = OwnInventory::start((task.make_reader)(), now) else {
+        let Some(mut own) = start(&task) else {
             return;
         };
-        task.tap
-            .links()
-            .update(&task.name, |l| l.inventory = Inventory::Own);
-        tracing::info!(reader = %task.name, "no client: the reader inventories by itself for the localizer");
         loop {
-            if let Some(bytes) = own.take_output() {
-                task.tap.offer(Input::Frames {
-                    reader: task.name.clone(),
-                    bytes,
-                    now_utc_us: own.reader().utc_us(own.reader().now_us()),
-                });
-            }
+            offer_output(&task, &mut own);
             let wake = task
                 .clock
                 .wake_at(own.deadline())
@@ -183,39 +169,81 @@ pub async fn run(
                     if c.is_err() {
                         return;
                     }
-                    // A client that came and went while a step ran (a session shorter than
-                    // one step, on a busy machine) changed the reader and its status too:
-                    // the own inventory starts again, as after any client.
-                    if *client.borrow() {
-                        tracing::info!(reader = %task.name, "a client connected: the reader's own inventory stops");
-                    }
+                    client_changed(&task, &client);
                     break;
                 }
                 _ = sleep_until(wake) => {
-                    let (back, done) = oneshot::channel();
-                    let clock = task.clock.clone();
-                    let mut feed = std::mem::replace(&mut task.feed, Box::new(|_| {}));
-                    let job = Box::new(move || {
-                        let now = Now { sim_us: clock.now_us(), wall_ms: clock.wall_ms() };
-                        own.advance(now);
-                        feed(own.reader());
-                        let _ = back.send((own, feed));
-                    });
-                    if let Err(job) = pool.run(job) {
-                        job();
-                    }
-                    match done.await {
-                        Ok((o, f)) => {
-                            own = o;
-                            task.feed = f;
-                        }
-                        Err(_) => {
-                            tracing::error!(reader = %task.name, "the own inventory was lost in its physics");
-                            return;
-                        }
-                    }
+                    let Some(o) = step(&mut task, &pool, own).await else {
+                        return;
+                    };
+                    own = o;
                 }
             }
+        }
+    }
+}
+
+/// Starts a fresh reader's own inventory at the clock's time and says so.
+fn start(task: &OwnTask) -> Option<OwnInventory> {
+    let now = Now {
+        sim_us: task.clock.now_us(),
+        wall_ms: task.clock.wall_ms(),
+    };
+    let own = OwnInventory::start((task.make_reader)(), now)?;
+    task.tap
+        .links()
+        .update(&task.name, |l| l.inventory = Inventory::Own);
+    tracing::info!(reader = %task.name, "no client: the reader inventories by itself for the localizer");
+    Some(own)
+}
+
+/// Offers what the reader sent since the last call to the localizer's tap.
+fn offer_output(task: &OwnTask, own: &mut OwnInventory) {
+    if let Some(bytes) = own.take_output() {
+        task.tap.offer(Input::Frames {
+            reader: task.name.clone(),
+            bytes,
+            now_utc_us: own.reader().utc_us(own.reader().now_us()),
+        });
+    }
+}
+
+/// Logs a client's arrival: the own inventory stops (and starts again if it has gone).
+fn client_changed(task: &OwnTask, client: &watch::Receiver<bool>) {
+    // A client that came and went while a step ran (a session shorter than
+    // one step, on a busy machine) changed the reader and its status too:
+    // the own inventory starts again, as after any client.
+    if *client.borrow() {
+        tracing::info!(reader = %task.name, "a client connected: the reader's own inventory stops");
+    }
+}
+
+/// Advances `own` to the clock's time on the readers' pool and feeds the poses; `None` if
+/// the job was lost.
+async fn step(task: &mut OwnTask, pool: &Pool, mut own: OwnInventory) -> Option<OwnInventory> {
+    let (back, done) = oneshot::channel();
+    let clock = task.clock.clone();
+    let mut feed = std::mem::replace(&mut task.feed, Box::new(|_| {}));
+    let job = Box::new(move || {
+        let now = Now {
+            sim_us: clock.now_us(),
+            wall_ms: clock.wall_ms(),
+        };
+        own.advance(now);
+        feed(own.reader());
+        let _ = back.send((own, feed));
+    });
+    if let Err(job) = pool.run(job) {
+        job();
+    }
+    match done.await {
+        Ok((o, f)) => {
+            task.feed = f;
+            Some(o)
+        }
+        Err(_) => {
+            tracing::error!(reader = %task.name, "the own inventory was lost in its physics");
+            None
         }
     }
 }

@@ -21,6 +21,7 @@ use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -36,9 +37,9 @@ use tokio::sync::{mpsc, watch};
 pub mod keepalive;
 mod pump;
 
-use pump::{pump, write_flushed, End, Tee};
+use pump::{pump, write_flushed, End, PumpDone, Tee};
 
-use super::stream::{Stream, WriteHalf};
+use super::stream::{ReadHalf, Stream, WriteHalf};
 use super::{serve, tls};
 use crate::reads::Read;
 use crate::record::{Direction, Event, Recorder};
@@ -402,77 +403,96 @@ impl Session {
         let mut down = Box::pin(pump(upstream_rd, client_wr, from_reader, None));
         tokio::pin!(up);
         tokio::select! {
-            done = &mut down => {
-                let (end, upstream_rd, mut client_wr, from_reader) = done;
-                if let End::WriteError(e) = end {
-                    // The client is gone (a reset): free the reader as when it closes.
-                    let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
-                    let Ok((_, _, mut upstream_wr, to_reader)) =
-                        tokio::time::timeout(LINGER, &mut up).await
-                    else {
-                        return format!("writing to the client failed: {e}; the client's side did not end");
-                    };
-                    let drain = async move { pump(upstream_rd, tokio::io::sink(), from_reader, None).await.0 };
-                    let freed = self
-                        .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
-                        .await;
-                    return format!("writing to the client failed: {e}; {freed}");
-                }
-                // The reader went away: the client's connection closes too. The client's
-                // direction then runs on until the client closes (or LINGER passes), so that
-                // what it had read is recorded, and what it still sends finds its end.
-                let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
-                let _ = tokio::time::timeout(LINGER, &mut up).await;
-                match end {
-                    End::Eof if from_reader.saw_close_response => {
-                        "reader closed the connection after CLOSE_CONNECTION".into()
-                    }
-                    End::Eof => "upstream closed the connection mid-session".into(),
-                    End::ReadError(e) => format!("upstream connection failed: {e}"),
-                    End::WriteError(_) | End::Stopped => {
-                        unreachable!("handled above / the reader's direction has no stop signal")
-                    }
-                }
+            done = &mut down => self.reader_ended(done, up).await,
+            done = &mut up => self.client_ended(done, down).await,
+        }
+    }
+
+    /// The reader's direction ended first (`done`): ends the client's direction `up` and
+    /// says why the session ended.
+    async fn reader_ended<'a>(
+        &'a self,
+        done: PumpDone<'a, ReadHalf, WriteHalf>,
+        mut up: Pin<&mut impl Future<Output = PumpDone<'a, ReadHalf, WriteHalf>>>,
+    ) -> String {
+        let (end, upstream_rd, mut client_wr, from_reader) = done;
+        if let End::WriteError(e) = end {
+            // The client is gone (a reset): free the reader as when it closes.
+            let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+            let Ok((_, _, mut upstream_wr, to_reader)) =
+                tokio::time::timeout(LINGER, &mut up).await
+            else {
+                return format!("writing to the client failed: {e}; the client's side did not end");
+            };
+            let drain = async move {
+                pump(upstream_rd, tokio::io::sink(), from_reader, None)
+                    .await
+                    .0
+            };
+            let freed = self
+                .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
+                .await;
+            return format!("writing to the client failed: {e}; {freed}");
+        }
+        // The reader went away: the client's connection closes too. The client's
+        // direction then runs on until the client closes (or LINGER passes), so that
+        // what it had read is recorded, and what it still sends finds its end.
+        let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+        let _ = tokio::time::timeout(LINGER, &mut up).await;
+        match end {
+            End::Eof if from_reader.saw_close_response => {
+                "reader closed the connection after CLOSE_CONNECTION".into()
             }
-            done = &mut up => {
-                let (end, _, mut upstream_wr, to_reader) = done;
-                if matches!(end, End::Eof) && to_reader.saw_close {
-                    // The client closed after its own CLOSE_CONNECTION: pass the end of stream
-                    // on, and the rest of the reader's answer back until the reader closes.
-                    let _ = tokio::time::timeout(LINGER, upstream_wr.shutdown()).await;
-                    return match tokio::time::timeout(LINGER, &mut down).await {
-                        Ok((_, _, mut client_wr, _)) => {
-                            let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
-                            "client closed after CLOSE_CONNECTION".into()
-                        }
-                        Err(_) => {
-                            "client closed after CLOSE_CONNECTION; the reader did not close in time"
-                                .into()
-                        }
-                    };
-                }
-                let why = match end {
-                    End::Eof => "client closed".to_string(),
-                    End::ReadError(e) => format!("client connection failed: {e}"),
-                    End::WriteError(e) => format!("writing to the reader failed: {e}"),
-                    End::Stopped => "proxy shutting down".to_string(),
-                };
-                let drain = async move {
-                    let (end, rd, mut client_wr, tee) = down.await;
-                    let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
-                    match end {
-                        // The client is gone: keep reading (and recording) what the reader
-                        // sends until it closes.
-                        End::WriteError(_) => pump(rd, tokio::io::sink(), tee, None).await.0,
-                        end => end,
-                    }
-                };
-                let freed = self
-                    .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
-                    .await;
-                format!("{why}; {freed}")
+            End::Eof => "upstream closed the connection mid-session".into(),
+            End::ReadError(e) => format!("upstream connection failed: {e}"),
+            End::WriteError(_) | End::Stopped => {
+                unreachable!("handled above / the reader's direction has no stop signal")
             }
         }
+    }
+
+    /// The client's direction ended first (`done`): frees the reader while the reader's
+    /// direction `down` drains, and says why the session ended.
+    async fn client_ended<'a>(
+        &'a self,
+        done: PumpDone<'a, ReadHalf, WriteHalf>,
+        mut down: Pin<Box<impl Future<Output = PumpDone<'a, ReadHalf, WriteHalf>>>>,
+    ) -> String {
+        let (end, _, mut upstream_wr, to_reader) = done;
+        if matches!(end, End::Eof) && to_reader.saw_close {
+            // The client closed after its own CLOSE_CONNECTION: pass the end of stream
+            // on, and the rest of the reader's answer back until the reader closes.
+            let _ = tokio::time::timeout(LINGER, upstream_wr.shutdown()).await;
+            return match tokio::time::timeout(LINGER, &mut down).await {
+                Ok((_, _, mut client_wr, _)) => {
+                    let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+                    "client closed after CLOSE_CONNECTION".into()
+                }
+                Err(_) => {
+                    "client closed after CLOSE_CONNECTION; the reader did not close in time".into()
+                }
+            };
+        }
+        let why = match end {
+            End::Eof => "client closed".to_string(),
+            End::ReadError(e) => format!("client connection failed: {e}"),
+            End::WriteError(e) => format!("writing to the reader failed: {e}"),
+            End::Stopped => "proxy shutting down".to_string(),
+        };
+        let drain = async move {
+            let (end, rd, mut client_wr, tee) = down.await;
+            let _ = tokio::time::timeout(LINGER, client_wr.shutdown()).await;
+            match end {
+                // The client is gone: keep reading (and recording) what the reader
+                // sends until it closes.
+                End::WriteError(_) => pump(rd, tokio::io::sink(), tee, None).await.0,
+                end => end,
+            }
+        };
+        let freed = self
+            .close_upstream(&mut upstream_wr, to_reader.at_frame_boundary(), drain)
+            .await;
+        format!("{why}; {freed}")
     }
 
     /// Frees the reader for its next client: sends CLOSE_CONNECTION (recorded as sent) when
