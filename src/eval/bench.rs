@@ -198,8 +198,7 @@ fn pose_error_model(scenario: &Scenario) -> Option<PoseErrorModel> {
         })
 }
 
-/// Each tag of `model`'s world: EPC (upper-case hex), position at time 0, and whether it is
-/// a reference tag.
+/// Each tag of `model`'s world: (EPC, position at time 0, whether a reference tag).
 fn truth_of(scenario: &Scenario, model: &Model) -> Vec<(String, [f64; 3], bool)> {
     (0..model.tag_count())
         .map(|k| {

@@ -85,8 +85,7 @@ async fn offer_poses(run: &Run, live: &Live) {
     }
 }
 
-/// Subscribes to the event stream at `addr`; the task pushes each update's latency since
-/// the offer of its read (in `offered`) to `latencies`.
+/// Subscribes to the events at `addr`, pushing each update's latency since its read's offer.
 async fn subscribe(
     addr: std::net::SocketAddr,
     offered: Offered,

@@ -99,8 +99,7 @@ pub fn plot(
     root.present().map_err(|e| e.to_string())
 }
 
-/// Draws the antenna path `path_points` and the tags' true positions, with legend entries
-/// if `text`.
+/// Draws the antenna path and the tags' true positions (with legend entries if `text`).
 fn draw_truth(
     chart: &mut Chart<'_, '_>,
     run: &Run,

@@ -213,8 +213,7 @@ impl Builder {
         }
     }
 
-    /// The reads and events in the frames `bytes` of reader `reader`, received at
-    /// `now_utc_us`, published.
+    /// Publishes the reads and events in the frames `bytes` of reader `reader`.
     fn frames(&mut self, reader: &str, bytes: &[u8], now_utc_us: u64) {
         self.came(reader);
         let decoder = self.decoders.of(reader);

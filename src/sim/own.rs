@@ -218,8 +218,7 @@ fn client_changed(task: &OwnTask, client: &watch::Receiver<bool>) {
     }
 }
 
-/// Advances `own` to the clock's time on the readers' pool and feeds the poses; `None` if
-/// the job was lost.
+/// Advances `own` to the clock's time on `pool`, feeding the poses; `None` if it was lost.
 async fn step(task: &mut OwnTask, pool: &Pool, mut own: OwnInventory) -> Option<OwnInventory> {
     let (back, done) = oneshot::channel();
     let clock = task.clock.clone();

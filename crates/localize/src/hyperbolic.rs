@@ -264,8 +264,7 @@ pub fn locate_with_report(
     })
 }
 
-/// The intersection points of every segment with three anchors or more, and the count of
-/// inconsistent pairs.
+/// The intersection points of the segments with three anchors or more, and inconsistent pairs.
 fn all_intersections(
     all: &[Anchor],
     segments: usize,
@@ -284,8 +283,7 @@ fn all_intersections(
     (points, inconsistent)
 }
 
-/// The fit's problem started at the points' weighted median, each offset at its best for
-/// that start.
+/// The fit's problem, started at the points' weighted median with each offset at its best.
 fn started<'a>(
     all: &'a [Anchor],
     segments: usize,
@@ -319,8 +317,7 @@ fn started<'a>(
     Ok(problem)
 }
 
-/// The fit's covariance from its Jacobian `j` and residuals `r`: the classic one made at
-/// least the cluster-robust one.
+/// The fit's classic covariance made at least the cluster-robust one.
 fn reported_covariance(
     j: &DMatrix<f64>,
     r: &DVector<f64>,
@@ -345,8 +342,7 @@ fn reported_covariance(
     ))
 }
 
-/// Σ of every phase's own squared residual against the fit (tag at `tag`, the segments'
-/// offsets after the position in `p`), as phase.
+/// The sum of every phase's squared residual against the fit (`p`: position, then offsets).
 fn phase_sq(obs: &[Obs], tag: [f64; 3], sign: f64, p: &DVector<f64>) -> f64 {
     let [x, y, z] = tag;
     obs.iter()

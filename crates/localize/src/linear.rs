@@ -83,8 +83,7 @@ pub fn min_distance_d0(along: &[f64], dd: &[f64]) -> Option<f64> {
     (aa > 0.0 && d0.is_finite() && d0 > 0.0).then_some(d0)
 }
 
-/// One straight segment set up for the fit: its line and each sample's place along it and
-/// range beyond the reference sample's.
+/// One straight segment set up for the fit: its line, reference sample and range differences.
 struct Setup {
     /// A point of the path's line (m).
     origin: [f64; 3],
@@ -177,8 +176,7 @@ pub fn circle(seg: &[Obs], sign: f64) -> Result<Circle, NoFix> {
     })
 }
 
-/// The segment's line, reference sample and range differences, if its geometry allows a
-/// fit (straight, long enough, the nearest point inside the aperture).
+/// The segment's [`Setup`], if its geometry allows a fit.
 fn setup(seg: &[Obs], sign: f64) -> Result<Setup, NoFix> {
     let n = seg.len();
     let points: Vec<[f64; 3]> = seg.iter().map(|o| o.antenna).collect();
@@ -223,15 +221,15 @@ fn setup(seg: &[Obs], sign: f64) -> Result<Setup, NoFix> {
     })
 }
 
-/// Ours: p = (C, τ, K) in 2CΔ_i + 2τL_i + K = L_i² − Δ_i², C the range at the reference
-/// sample, τ the nearest point's offset from it along the path, K = C² − d0² − τ²; returns p
-/// and the inverse of the normal matrix, after two reweighted solves from `d0_paper`.
+/// Ours: p = (C, τ, K) and the normal matrix's inverse, after two reweighted solves.
 fn solve(
     seg: &[Obs],
     l: &[f64],
     dd: &[f64],
     d0_paper: f64,
 ) -> Result<(Vector3<f64>, Matrix3<f64>), NoFix> {
+    // 2CΔ_i + 2τL_i + K = L_i² − Δ_i², C the range at the reference sample, τ the nearest
+    // point's offset from it along the path, K = C² − d0² − τ²; started from `d0_paper`.
     let n = seg.len();
     let mut p = Vector3::new(d0_paper, 0.0, 0.0);
     let mut solved = None;
@@ -277,9 +275,7 @@ fn weighted_jacobian_and_residuals(
     (jac, res)
 }
 
-/// The evidence of a smooth error, and `reported_p` made at least the covariance of an
-/// error smooth in the direction the tag is read from (each row's residual moves by that
-/// error, as range, one for one).
+/// The evidence of a smooth error, and `reported_p` made at least its covariance.
 fn with_smooth_error(
     seg: &[Obs],
     l: &[f64],

@@ -131,8 +131,7 @@ fn segment_circles(obs: &[Obs], sign: f64) -> Vec<Circle> {
         .collect()
 }
 
-/// The frame: the best-sampled circle's path, made horizontal (its unit direction u); n across
-/// it, facing.
+/// The best-sampled circle and its frame: u along its path, horizontal; n across it, facing.
 fn frame(circles: &[Circle], facing: [f64; 2]) -> Result<(&Circle, [f64; 2], [f64; 2]), NoFix> {
     let reference = circles
         .iter()
@@ -151,8 +150,7 @@ fn frame(circles: &[Circle], facing: [f64; 2]) -> Result<(&Circle, [f64; 2], [f6
     Ok((reference, u, n))
 }
 
-/// The `parallel` circles in the frame at `o` (u along, n across): the weighted sum of their
-/// centres along the path, its weight, and their loci.
+/// The `parallel` circles as loci, with Σw·along and Σw of their centres along the path.
 fn loci_of(parallel: &[&Circle], o: [f64; 3], u: [f64; 2], n: [f64; 2]) -> (f64, f64, Vec<Locus>) {
     let (mut sx, mut wx) = (0.0, 0.0);
     let mut loci = Vec::new();
@@ -171,8 +169,7 @@ fn loci_of(parallel: &[&Circle], o: [f64; 3], u: [f64; 2], n: [f64; 2]) -> (f64,
     (sx, wx, loci)
 }
 
-/// Where the loci meet in the cross-section (across, height), on the facing side, and the
-/// covariance of that point.
+/// Where the loci meet (across, height), on the facing side, with its covariance.
 fn intersect(loci: &[Locus]) -> Result<(f64, f64, nalgebra::Matrix2<f64>), NoFix> {
     let count = loci.len() as f64;
     let y_mean = loci.iter().map(|l| l.y).sum::<f64>() / count;

@@ -288,8 +288,7 @@ struct Agreed {
     messages: u64,
 }
 
-/// Consensus over the robots still in; while three or more are, the one whose own fix
-/// disagrees most with the others' (and beyond the gate) withdraws and the rest start over.
+/// Consensus rounds, the robot most at odds (beyond the gate) withdrawing while three are in.
 fn withdraw_and_agree(own: &[Node], s: &Settings) -> Agreed {
     let mut active: Vec<usize> = (0..own.len()).collect();
     let mut messages = 0u64;
@@ -324,8 +323,7 @@ fn withdraw_and_agree(own: &[Node], s: &Settings) -> Agreed {
     }
 }
 
-/// What the combination's `weights` give the honest covariances of the fixes of the robots
-/// still in (`active`).
+/// What the combination's `weights` give the honest covariances of the `active` robots' fixes.
 fn honest_spread(
     active: &[usize],
     honest: &[(Vec<Fix>, Vec<Fix>)],

@@ -408,8 +408,7 @@ impl Session {
         }
     }
 
-    /// The reader's direction ended first (`done`): ends the client's direction `up` and
-    /// says why the session ended.
+    /// Ends the session after the reader's direction ended (`done`); says why.
     async fn reader_ended<'a>(
         &'a self,
         done: PumpDone<'a, ReadHalf, WriteHalf>,
@@ -451,8 +450,7 @@ impl Session {
         }
     }
 
-    /// The client's direction ended first (`done`): frees the reader while the reader's
-    /// direction `down` drains, and says why the session ended.
+    /// Ends the session after the client's direction ended (`done`); says why.
     async fn client_ended<'a>(
         &'a self,
         done: PumpDone<'a, ReadHalf, WriteHalf>,

@@ -382,8 +382,7 @@ fn interface() -> InterfaceDescriptionBlock<'static> {
     }
 }
 
-/// Whether entry `e` opens a stream: its connection has none open, and it is neither a
-/// reader line nor a disconnect marker.
+/// Whether entry `e` opens a stream (none open; neither a reader line nor a disconnect).
 fn starts_stream(e: &Entry, open: &HashMap<u32, Stream>) -> bool {
     !open.contains_key(&e.conn())
         && !matches!(e, Entry::Reader { .. })

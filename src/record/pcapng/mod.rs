@@ -158,8 +158,7 @@ fn reassemble(
     Ok(streams)
 }
 
-/// What the LLRP streams of a capture give: entries keyed by capture position, the first
-/// reader's address and every reader's address.
+/// What a capture's LLRP streams give: entries by capture position and the readers.
 struct LlrpStreams {
     /// Each entry with its (packet, order within the packet).
     entries: Vec<((usize, usize), Entry)>,
@@ -169,8 +168,7 @@ struct LlrpStreams {
     readers: Vec<std::net::SocketAddr>,
 }
 
-/// The entries of every LLRP stream, one connection each, with warnings for the streams
-/// skipped and what each stream tolerated.
+/// The entries of every LLRP stream, one connection each, with warnings for what was skipped.
 fn llrp_entries(streams: &Streams, start_us: u64, warnings: &mut Vec<String>) -> LlrpStreams {
     let mut entries: Vec<((usize, usize), Entry)> = Vec::new();
     let mut upstream: Option<std::net::SocketAddr> = None;

@@ -122,8 +122,7 @@ impl Script {
         })
     }
 
-    /// Files each frame of this script's connection as greeting, response or stream frame;
-    /// `start` is the connection's first time.
+    /// Files each frame of the connection as greeting, response or stream frame.
     fn file_frames(&mut self, recording: &Recording, start: u64) {
         let mut seen: HashMap<MessageKind, usize> = HashMap::new();
         // Requests waiting for their answer: message ID → kind.
@@ -179,8 +178,7 @@ impl Script {
         }
     }
 
-    /// The stream to loop and its period: the last one (in recorded order of its anchor)
-    /// with reports.
+    /// The stream to loop and its period: the last one (by its anchor's place) with reports.
     fn loop_stream(&self, recording: &Recording) -> Option<((MessageKind, usize), u64)> {
         let mut best: Option<((MessageKind, usize), u64)> = None;
         let mut best_first = 0;

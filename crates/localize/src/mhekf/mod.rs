@@ -314,8 +314,7 @@ pub fn filtered(
     })
 }
 
-/// The index of the first read and the last read, if the track's values are finite and
-/// its reads enough and spread over half a wavelength or more.
+/// The first read's index and the last read, if the track allows a fix.
 fn check<'a>(
     obs: &[PoseObs],
     reads: &[&'a PoseObs],
@@ -408,8 +407,7 @@ impl Track<'_> {
         (k * d + self.s.phase_offset_rad, k * rho / d.max(1e-12))
     }
 
-    /// The pose covariance at the first read (vertex `start`): the odometry's over the path
-    /// driven to it.
+    /// The pose covariance at vertex `start`: the odometry's over the path driven to it.
     fn pose_before(&self, start: usize) -> M5 {
         let (obs, heading, to_wheels) = (self.obs, &self.heading, self.to_wheels);
         let mut pose = M5::zeros();
@@ -429,8 +427,7 @@ impl Track<'_> {
         pose
     }
 
-    /// Initialisation at the first read, vertex `start` (\[M\] eqs. 21–26): a hypothesis per
-    /// range the phase allows and per bearing.
+    /// The hypotheses at the first read, vertex `start` (\[M\] eqs. 21–26): per range and bearing.
     fn initial(&self, start: usize, pose: &M5) -> Vec<Hypothesis> {
         let (s, z, sign) = (self.s, self.z, self.sign);
         let first = &self.obs[start];
@@ -476,8 +473,7 @@ impl Track<'_> {
         hyps
     }
 
-    /// Moves every hypothesis to vertex `k` (`o`); at a read, updates each with the phase,
-    /// splitting off a hypothesis per other cycle the innovation allows.
+    /// Moves every hypothesis to vertex `k` (`o`), at a read updating and splitting it by cycle.
     fn advance(&self, hyps: &mut Vec<Hypothesis>, k: usize, o: &PoseObs, r2: f64) {
         let (u, omega, q) = self.step(k);
         let mut split: Vec<Hypothesis> = Vec::new();
@@ -495,8 +491,7 @@ impl Track<'_> {
         hyps.append(&mut split);
     }
 
-    /// Updates hypothesis `h`, predicted to `xi` with covariance `p`, with read `o`; the
-    /// other cycles' branches go to `split`.
+    /// Updates hypothesis `h` (predicted: `xi`, `p`) with read `o`; other cycles go to `split`.
     fn update(
         &self,
         h: &mut Hypothesis,
@@ -533,8 +528,7 @@ impl Track<'_> {
     }
 }
 
-/// Drops the hypotheses far lighter than the heaviest and keeps at most the heaviest
-/// `s.max_hypotheses`; an error when none is left.
+/// Drops the light hypotheses and keeps the heaviest few; an error when none is left.
 fn prune(hyps: &mut Vec<Hypothesis>, s: &Settings) -> Result<(), NoFix> {
     let best = hyps
         .iter()
@@ -551,8 +545,7 @@ fn prune(hyps: &mut Vec<Hypothesis>, s: &Settings) -> Result<(), NoFix> {
     Ok(())
 }
 
-/// The heaviest, or among those within a factor 100 of it, the heaviest on the side
-/// `facing` points to from the `last` read.
+/// The heaviest hypothesis, or the heaviest facing one within a factor 100 of it.
 fn choose<'h>(
     hyps: &'h [Hypothesis],
     facing: Option<[f64; 2]>,
