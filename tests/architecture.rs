@@ -655,3 +655,30 @@ fn the_crate_graph_is_the_layering() {
     // The application does reach them: the check sees what it looks for.
     assert!(closure(&graph, "llrp-gateway").contains("tokio"));
 }
+
+#[test]
+fn only_the_composition_root_starts_the_localizer_or_serves_its_api() {
+    // Every command's localizer, HTTP API and metrics registry are built in one place,
+    // `cli/root.rs` (ARCHITECTURE.md, "One composition root"); a second place that starts a
+    // `Live` or launches the API would assemble them again. Test modules are not looked at.
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let root = src.join("cli").join("root.rs");
+    let mut found = Vec::new();
+    for file in sources(&src) {
+        if file == root {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file).expect("a source file");
+        let text = text.split("#[cfg(test)]").next().unwrap_or_default();
+        let code = code(text);
+        for what in ["Live::start", "launch::launch", "launch::{launch"] {
+            if code.replace(char::is_whitespace, "").contains(what) {
+                found.push((file.display().to_string(), what));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "started outside the composition root: {found:?}"
+    );
+}

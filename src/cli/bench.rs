@@ -323,9 +323,40 @@ fn row(e: Estimator, told: bool, references: bool, sc: &Scores) {
     );
 }
 
+/// The live localizer's read-to-HTTP latency on `run` at `speed`: the localizer and its API
+/// on a loopback port built by the composition root, the measurement by `eval::live`.
+fn live_latency(run: &Run, speed: f64) -> Result<crate::eval::live::Latency, String> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())?;
+    rt.block_on(async {
+        let consumers = super::root::Consumers::start(super::root::Plan {
+            command: "bench localize",
+            http: Some(("127.0.0.1:0".into(), true)),
+            http_args: &crate::http::launch::LaunchOptions::default(),
+            simulation: false,
+            settings: crate::eval::live::settings(run),
+            prime: Vec::new(),
+            publish: &crate::fleet::args::PublishConfig::default(),
+            references: Default::default(),
+            headless: false,
+        })
+        .await
+        .map_err(|e| e.to_string())?;
+        let measured = match (consumers.live(), consumers.http_addr()) {
+            (Some(live), Some(addr)) => crate::eval::live::measure(run, speed, live, addr).await,
+            _ => Err("no HTTP port".to_string()),
+        };
+        consumers.stop().await;
+        measured
+    })
+}
+
 /// Measures and prints the live localizer's read-to-HTTP latency.
 fn live(args: &BenchLocalizeArgs, run: &Run) -> Result<(), BenchLocalizeError> {
-    let l = crate::eval::live::measure(run, args.live_speed).map_err(BenchLocalizeError::Live)?;
+    let l = live_latency(run, args.live_speed).map_err(BenchLocalizeError::Live)?;
     println!(
         "\nLive (relock, true poses, the reads offered at {}x real time, {:.0} reads/s): {} estimate updates over HTTP (/api/events); read-to-HTTP latency p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} inputs dropped.",
         args.live_speed,

@@ -91,6 +91,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, Si
         prime,
         publish: &publish,
         references,
+        headless: false,
     })
     .await?)
 }

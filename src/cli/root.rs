@@ -1,10 +1,13 @@
-//! The composition root of the commands that serve or read readers (`sim`, `proxy`, `replay`,
-//! `inventory`): what their reads go to, built once here. Sources (the simulated readers, the
-//! proxy, a replay, the inventory client) offer the feed's [`Tap`]; behind it run the
-//! localizer with its HTTP API, an MQTT publisher, both or neither; every subsystem's metrics
-//! go into one registry, which the API serves.
+//! The composition root of every command that runs the live localizer or publishes reads
+//! (`sim`, `proxy`, `replay`, `inventory`, the MQTT worker of `localize --subscribe`, `bench
+//! localize --live-speed`): what their reads go to, built once here. Sources (the simulated
+//! readers, the proxy, a replay, the inventory client, the worker's broker subscription, the
+//! benchmark's run) offer the feed's [`Tap`]; behind it run the localizer with its HTTP API,
+//! an MQTT publisher, both or neither; every subsystem's metrics go into one registry, which
+//! the API serves.
 
 use std::collections::BTreeSet;
+use std::net::SocketAddr;
 use std::sync::Arc;
 
 use prometheus_client::metrics::counter::Counter;
@@ -36,6 +39,9 @@ pub struct Plan<'a> {
     pub publish: &'a PublishConfig,
     /// The reference tags' EPCs, for the publisher.
     pub references: BTreeSet<String>,
+    /// Run the localizer even where its API is not served (the MQTT worker, which publishes
+    /// its estimates to the broker).
+    pub headless: bool,
 }
 
 /// Why the consumers could not be started.
@@ -55,10 +61,12 @@ pub enum ConsumersError {
 /// The localizer and its API, an MQTT publisher, both or neither (the process's metrics are
 /// in the API's state, which serves them).
 pub struct Consumers {
-    localizer: Option<(Live, Launched)>,
+    localizer: Option<(Live, Option<Launched>)>,
     publisher: Option<Publisher>,
     tap: Option<Tap>,
     links: LinkMetrics,
+    mqtt: MqttMetrics,
+    metrics: Arc<Metrics>,
 }
 
 impl Consumers {
@@ -67,50 +75,12 @@ impl Consumers {
         let metrics = Metrics::new();
         let links = LinkMetrics::default();
         metrics.register(|r| links.register(r));
-        let mut localizer = None;
-        if let Some((addr, chosen)) = &plan.http {
-            let settings = Settings {
-                release_memory: Some(crate::alloc::release_free),
-                ..plan.settings
-            };
-            let live = Live::start(settings).map_err(ConsumersError::Localizer)?;
-            metrics.register(|r| live.shared.metrics.register(r));
-            for input in plan.prime {
-                offer_waiting(&live.tap, input).await;
-            }
-            let launched = launch(
-                addr,
-                *chosen,
-                plan.http_args,
-                plan.simulation,
-                live.shared.clone(),
-                live.tap.clone(),
-                metrics.clone(),
-            )
-            .await
-            .map_err(ConsumersError::Http)?;
-            match launched {
-                Some(http) => {
-                    eprintln!(
-                        "llrp-gateway {}: HTTP API and live map on http://{}/",
-                        plan.command, http.addr
-                    );
-                    localizer = Some((live, http));
-                }
-                None => {
-                    eprintln!(
-                        "llrp-gateway {}: {addr} is taken: running without the HTTP API (choose one with --http ADDR)",
-                        plan.command
-                    );
-                    live.stop();
-                }
-            }
-        }
+        let localizer = localizer(&plan, &metrics).await?;
         let mqtt = MqttMetrics::default();
         metrics.register(|r| mqtt.register(r));
         let publisher = plan
             .publish
-            .start(mqtt, plan.references)
+            .start(mqtt.clone(), plan.references)
             .map_err(ConsumersError::Publish)?;
         let tap = match (&localizer, &publisher) {
             (None, None) => None,
@@ -139,7 +109,29 @@ impl Consumers {
             publisher,
             tap,
             links,
+            mqtt,
+            metrics,
         })
+    }
+
+    /// The localizer, when one runs.
+    pub fn live(&self) -> Option<&Live> {
+        self.localizer.as_ref().map(|(live, _)| live)
+    }
+
+    /// Where the HTTP API is served, when it is.
+    pub fn http_addr(&self) -> Option<SocketAddr> {
+        self.localizer.as_ref()?.1.as_ref().map(|h| h.addr)
+    }
+
+    /// The one registry `GET /metrics` serves, for a part started after the consumers.
+    pub fn metrics(&self) -> &Arc<Metrics> {
+        &self.metrics
+    }
+
+    /// The MQTT counters in the registry, for the part that talks to the broker.
+    pub fn mqtt_metrics(&self) -> MqttMetrics {
+        self.mqtt.clone()
     }
 
     /// Where the sources offer their reads, when anything takes them.
@@ -166,8 +158,68 @@ impl Consumers {
             let _ = tokio::task::spawn_blocking(move || p.stop()).await;
         }
         if let Some((live, http)) = self.localizer {
-            http.stop().await;
+            if let Some(http) = http {
+                http.stop().await;
+            }
             live.stop();
+        }
+    }
+}
+
+/// The localizer `plan` asks for (primed), with its API where it is served; `None` when no
+/// localizer is asked for, or only for an API whose default address is taken.
+async fn localizer(
+    plan: &Plan<'_>,
+    metrics: &Arc<Metrics>,
+) -> Result<Option<(Live, Option<Launched>)>, ConsumersError> {
+    if plan.http.is_none() && !plan.headless {
+        return Ok(None);
+    }
+    let settings = Settings {
+        release_memory: Some(crate::alloc::release_free),
+        ..plan.settings.clone()
+    };
+    let live = Live::start(settings).map_err(ConsumersError::Localizer)?;
+    metrics.register(|r| live.shared.metrics.register(r));
+    for input in plan.prime.iter().cloned() {
+        offer_waiting(&live.tap, input).await;
+    }
+    let Some((addr, chosen)) = &plan.http else {
+        return Ok(Some((live, None)));
+    };
+    let launched = launch(
+        addr,
+        *chosen,
+        plan.http_args,
+        plan.simulation,
+        live.shared.clone(),
+        live.tap.clone(),
+        metrics.clone(),
+    )
+    .await
+    .map_err(ConsumersError::Http)?;
+    match launched {
+        Some(http) => {
+            eprintln!(
+                "llrp-gateway {}: HTTP API and live map on http://{}/",
+                plan.command, http.addr
+            );
+            Ok(Some((live, Some(http))))
+        }
+        None if plan.headless => {
+            eprintln!(
+                "llrp-gateway {}: {addr} is taken: running without the HTTP API (choose one with --http ADDR)",
+                plan.command
+            );
+            Ok(Some((live, None)))
+        }
+        None => {
+            eprintln!(
+                "llrp-gateway {}: {addr} is taken: running without the HTTP API (choose one with --http ADDR)",
+                plan.command
+            );
+            live.stop();
+            Ok(None)
         }
     }
 }

@@ -105,6 +105,7 @@ pub fn run(
             prime: Vec::new(),
             publish: &localize.publish,
             references: scenario_references(&scenario),
+            headless: false,
         })
         .await?;
         opts.frames_in = consumers.frames_in();

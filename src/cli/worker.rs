@@ -4,9 +4,12 @@
 use std::path::PathBuf;
 
 use super::localize::LocalizeArgs;
+use super::root::{Consumers, Plan};
+use crate::fleet::args::PublishConfig;
 use crate::fleet::schema::DEFAULT_SHARDS;
 use crate::fleet::url::BrokerUrl;
 use crate::fleet::worker::{parse_shards, Worker, WorkerOptions};
+use crate::localize::live::Input;
 use crate::localize::offline::SettingsFile;
 use crate::localize::poses::Poses;
 
@@ -92,15 +95,18 @@ pub enum WorkerCommandError {
     /// The worker could not connect to the broker.
     #[error("{0}")]
     Start(crate::fleet::publish::PublishError),
-    /// The HTTP API could not be started.
+    /// The localizer or its HTTP API could not be started.
     #[error("{0}")]
-    Http(#[from] crate::http::launch::LaunchError),
-    /// The HTTP API's address could not be listened on.
-    #[error("--http {addr}: cannot listen")]
-    HttpListen {
-        /// The address.
-        addr: String,
-    },
+    Consumers(#[from] super::root::ConsumersError),
+}
+
+/// What the worker's options ask for: the worker, and the localizer it feeds.
+struct WorkerPlan {
+    worker: WorkerOptions,
+    /// The localizer's settings.
+    settings: crate::localize::live::Settings,
+    /// Per reader, reader time − robot time of the poses robots publish (µs).
+    clock_offsets_us: Vec<(String, i64)>,
 }
 
 /// Runs the worker of `args` (which has `--subscribe`) until Ctrl-C or SIGTERM.
@@ -115,7 +121,7 @@ pub fn run(args: &LocalizeArgs) -> Result<(), WorkerCommandError> {
 }
 
 /// The worker's options from `args`.
-fn options(args: &LocalizeArgs) -> Result<WorkerOptions, WorkerCommandError> {
+fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
     type E = WorkerCommandError;
     let w = &args.worker;
     let url = w.subscribe.as_deref().unwrap_or_default();
@@ -151,49 +157,68 @@ fn options(args: &LocalizeArgs) -> Result<WorkerOptions, WorkerCommandError> {
         .client_id
         .clone()
         .unwrap_or_else(|| format!("llrp-gateway-worker-{first}-{last}-of-{}", w.shard_count));
-    Ok(WorkerOptions {
+    let worker = WorkerOptions {
         url,
         shards,
         shard_count: w.shard_count,
         client_id,
-        settings,
-        clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
         tls: crate::fleet::args::tls_config(w.mqtt_ca.as_deref()).map_err(E::MqttCa)?,
         presence_silence: positive("--presence-silence-s", w.presence_silence_s)
             .map(std::time::Duration::from_secs_f64)?,
         presence_move_m: positive("--presence-move-m", w.presence_move_m)?,
+    };
+    Ok(WorkerPlan {
+        worker,
+        settings,
+        clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
     })
 }
 
-/// Runs the worker of `opts`, with the HTTP API of `w` if asked for, until Ctrl-C or SIGTERM.
-async fn serve(opts: WorkerOptions, w: &WorkerArgs) -> Result<(), WorkerCommandError> {
+/// Runs the worker of `plan` and the localizer it feeds, with the HTTP API of `w` if asked
+/// for, until Ctrl-C or SIGTERM.
+async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandError> {
     let stop = crate::stop::StopSignal::watch();
-    let (url, shards) = (opts.url.clone(), opts.shards.clone());
-    let worker = Worker::start(opts).map_err(WorkerCommandError::Start)?;
     let http_options = crate::http::launch::LaunchOptions::from(w.http.clone());
-    let http = match http_options.address(None) {
-        Some((addr, chosen)) => {
-            // The localizer's metrics and the worker's MQTT counters.
-            let metrics = crate::metrics::Metrics::of_localizer(&worker.live.shared);
-            metrics.register(|r| worker.metrics.register(r));
-            let h = crate::http::launch::launch(
-                &addr,
-                chosen,
-                &http_options,
-                false,
-                worker.live.shared.clone(),
-                worker.live.tap.clone(),
-                metrics,
-            )
-            .await?
-            .ok_or(WorkerCommandError::HttpListen { addr })?;
-            eprintln!(
-                "llrp-gateway localize: HTTP API and live map on http://{}/",
-                h.addr
-            );
-            Some(h)
+    // Each reader's clock offset, before anything else reaches the localizer.
+    let prime = (plan.clock_offsets_us.iter())
+        .map(|(reader, offset)| Input::Reader {
+            name: reader.clone(),
+            hop_table: None,
+            antennas: Vec::new(),
+            clock_offset_us: *offset,
+            poses: None,
+        })
+        .collect();
+    let consumers = Consumers::start(Plan {
+        command: "localize",
+        http: http_options.address(None),
+        http_args: &http_options,
+        simulation: false,
+        settings: plan.settings,
+        prime,
+        publish: &PublishConfig::default(),
+        references: Default::default(),
+        headless: true,
+    })
+    .await?;
+    // A headless plan always runs its localizer (`root::localizer` returns one for it on
+    // every path that is not an error).
+    let live = consumers
+        .live()
+        .expect("a headless plan runs its localizer");
+    let (url, shards) = (plan.worker.url.clone(), plan.worker.shards.clone());
+    let started = Worker::start(
+        plan.worker,
+        live.tap.clone(),
+        live.shared.clone(),
+        consumers.mqtt_metrics(),
+    );
+    let worker = match started {
+        Ok(w) => w,
+        Err(e) => {
+            consumers.stop().await;
+            return Err(WorkerCommandError::Start(e));
         }
-        None => None,
     };
     eprintln!(
         "llrp-gateway localize: worker on {url}, shards {} of {}, subscribed",
@@ -201,10 +226,8 @@ async fn serve(opts: WorkerOptions, w: &WorkerArgs) -> Result<(), WorkerCommandE
         w.shard_count
     );
     stop.wait().await;
-    if let Some(h) = http {
-        h.stop().await;
-    }
     worker.stop();
+    consumers.stop().await;
     eprintln!("llrp-gateway localize: stopped");
     Ok(())
 }

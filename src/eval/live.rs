@@ -1,6 +1,6 @@
 //! `bench localize`'s live part: the run's reads offered to a live localizer in their own
-//! time order (at a multiple of real time), its HTTP API on a loopback port, and an
-//! event-stream subscriber over TCP; the latency of each estimate update is the time from
+//! time order (at a multiple of real time), its HTTP API on a loopback port (both started by
+//! the command's composition root), and an event-stream subscriber over TCP; the latency of each estimate update is the time from
 //! the offer of the read it rests on (its newest) to the update's arrival at the subscriber.
 
 use std::collections::HashMap;
@@ -30,48 +30,34 @@ pub struct Latency {
 /// When each read was offered: (EPC, read time) -> the instant of its offer.
 type Offered = Arc<Mutex<HashMap<(crate::reads::Epc, u64), Instant>>>;
 
-/// Offers `run`'s reads (true poses first) at `speed` times real time and measures each
-/// update's read-to-HTTP latency.
-pub fn measure(run: &Run, speed: f64) -> Result<Latency, String> {
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .map_err(|e| e.to_string())?;
-    rt.block_on(async {
-        let settings = Settings {
-            geometry: run.settings.geometry.clone(),
-            ambiguity: run.settings.ambiguity,
-            release_memory: Some(crate::alloc::release_free),
-            ..Settings::default()
-        };
-        let live = Live::start(settings).map_err(|e| e.to_string())?;
-        let http = crate::http::launch::launch(
-            "127.0.0.1:0",
-            true,
-            &crate::http::launch::LaunchOptions::default(),
-            false,
-            live.shared.clone(),
-            live.tap.clone(),
-            crate::metrics::Metrics::of_localizer(&live.shared),
-        )
-        .await
-        .map_err(|e| e.to_string())?
-        .ok_or("no HTTP port")?;
-        offer_poses(run, &live).await;
-        let offered: Offered = Arc::default();
-        let latencies: Arc<Mutex<Vec<f64>>> = Arc::default();
-        let subscriber = subscribe(http.addr, offered.clone(), latencies.clone()).await?;
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        offer_reads(run, speed, &live, &offered).await;
-        tokio::time::sleep(Duration::from_millis(500)).await;
-        let dropped = live.shared.metrics.dropped_taps.get();
-        http.stop().await;
-        subscriber.abort();
-        live.stop();
-        let v = latencies.lock().map_err(|e| e.to_string())?.clone();
-        percentiles(v, dropped)
-    })
+/// Offers `run`'s reads (true poses first) at `speed` times real time to the localizer `live`,
+/// whose HTTP API is on `http`, and measures each update's read-to-HTTP latency.
+pub async fn measure(
+    run: &Run,
+    speed: f64,
+    live: &Live,
+    http: std::net::SocketAddr,
+) -> Result<Latency, String> {
+    offer_poses(run, live).await;
+    let offered: Offered = Arc::default();
+    let latencies: Arc<Mutex<Vec<f64>>> = Arc::default();
+    let subscriber = subscribe(http, offered.clone(), latencies.clone()).await?;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    offer_reads(run, speed, live, &offered).await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let dropped = live.shared.metrics.dropped_taps.get();
+    subscriber.abort();
+    let v = latencies.lock().map_err(|e| e.to_string())?.clone();
+    percentiles(v, dropped)
+}
+
+/// The localizer settings of `run`'s live measurement.
+pub fn settings(run: &Run) -> Settings {
+    Settings {
+        geometry: run.settings.geometry.clone(),
+        ambiguity: run.settings.ambiguity,
+        ..Settings::default()
+    }
 }
 
 /// Offers every pose of `run` first (a robot's feed that runs ahead of the reads).

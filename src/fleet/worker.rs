@@ -1,6 +1,7 @@
 //! A localizer worker (`localize --subscribe`): takes the read shards it owns, the reference
-//! reads and the poses from the broker with a persistent session, runs the live localizer on
-//! them, and publishes each estimate, retained, to `PREFIX/v1/estimates/{epc}`.
+//! reads and the poses from the broker with a persistent session, feeds them to the live
+//! localizer it is given (the command's composition root starts it), and publishes each
+//! estimate, retained, to `PREFIX/v1/estimates/{epc}`.
 //!
 //! Messages are acknowledged only once the localizer has taken them, so reads published
 //! while the worker is down, or taken but not yet filed when it dies, come again from its
@@ -32,7 +33,7 @@ use super::publish::{mqtt_options, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
 use super::seq::{Seq, Step};
 use super::url::BrokerUrl;
-use crate::localize::live::{Input, Live, Settings};
+use crate::localize::live::{Input, Tap};
 use crate::localize::shared::{Shared, TagJson};
 
 /// How a worker runs.
@@ -46,10 +47,6 @@ pub struct WorkerOptions {
     pub shard_count: u16,
     /// The MQTT client id, which names its persistent session.
     pub client_id: String,
-    /// The localizer's settings.
-    pub settings: Settings,
-    /// Per reader, reader time − robot time of the poses robots publish (µs).
-    pub clock_offsets_us: Vec<(String, i64)>,
     /// TLS settings for `mqtts://`.
     pub tls: Option<Arc<tokio_rustls::rustls::ClientConfig>>,
     /// A tag has departed after this long without a read (wall-clock time at the worker).
@@ -58,12 +55,8 @@ pub struct WorkerOptions {
     pub presence_move_m: f64,
 }
 
-/// A running worker.
+/// A running worker: it feeds a localizer it is given and publishes its estimates.
 pub struct Worker {
-    /// Its localizer.
-    pub live: Live,
-    /// Its MQTT counters.
-    pub metrics: MqttMetrics,
     client: Client,
     stopping: Arc<AtomicBool>,
     connection: Option<JoinHandle<()>>,
@@ -100,24 +93,15 @@ impl Worker {
     /// Starts the localizer, connects and subscribes (waiting up to 5 s for the broker to
     /// acknowledge the subscriptions: a refusal of the connection is an error, an
     /// unreachable broker is retried in the background).
-    pub fn start(opts: WorkerOptions) -> Result<Worker, PublishError> {
+    pub fn start(
+        opts: WorkerOptions,
+        tap: Tap,
+        shared: Arc<Shared>,
+        metrics: MqttMetrics,
+    ) -> Result<Worker, PublishError> {
         let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, opts.tls.clone())?;
         mqtt.set_manual_acks(true);
         let (client, connection) = Client::new(mqtt, 10_000);
-        let live = Live::start(Settings {
-            release_memory: Some(crate::alloc::release_free),
-            ..opts.settings.clone()
-        })?;
-        for (reader, offset) in &opts.clock_offsets_us {
-            live.tap.offer(Input::Reader {
-                name: reader.clone(),
-                hop_table: None,
-                antennas: Vec::new(),
-                clock_offset_us: *offset,
-                poses: None,
-            });
-        }
-        let metrics = MqttMetrics::default();
         let stopping = Arc::new(AtomicBool::new(false));
         let presence = Arc::new(Mutex::new(Presence::new(
             opts.presence_silence,
@@ -127,8 +111,8 @@ impl Worker {
         let mut run = Run {
             opts: opts.clone(),
             client: client.clone(),
-            live_tap: live.tap.clone(),
-            shared: live.shared.clone(),
+            live_tap: tap,
+            shared: shared.clone(),
             metrics: metrics.clone(),
             seen: HashMap::new(),
             ticked: Instant::now(),
@@ -145,14 +129,13 @@ impl Worker {
         }
         if let Ok(Err(reason)) = answer {
             let _ = connection.join();
-            live.stop();
             return Err(PublishError::Refused {
                 url: opts.url.to_string(),
                 reason,
             });
         }
         let out = Out {
-            shared: live.shared.clone(),
+            shared,
             metrics: metrics.clone(),
             client: client.clone(),
             url: opts.url.clone(),
@@ -162,8 +145,6 @@ impl Worker {
             .name("mqtt-estimates".into())
             .spawn(move || publish_estimates(&out, &presence, &stop))?;
         Ok(Worker {
-            live,
-            metrics,
             client,
             stopping,
             connection: Some(connection),
@@ -171,7 +152,8 @@ impl Worker {
         })
     }
 
-    /// Disconnects (unacknowledged messages stay in the session) and stops the localizer.
+    /// Disconnects (unacknowledged messages stay in the session); the localizer it feeds is
+    /// its owner's to stop.
     pub fn stop(mut self) {
         self.stopping.store(true, Ordering::Relaxed);
         let _ = self.client.disconnect();
@@ -181,7 +163,6 @@ impl Worker {
         if let Some(e) = self.estimates.take() {
             let _ = e.join();
         }
-        self.live.stop();
     }
 }
 
@@ -189,7 +170,7 @@ impl Worker {
 struct Run {
     opts: WorkerOptions,
     client: Client,
-    live_tap: crate::localize::live::Tap,
+    live_tap: Tap,
     shared: Arc<Shared>,
     metrics: MqttMetrics,
     /// Per (gateway, reader, topic): the sequence numbers seen and the batches held.
