@@ -381,3 +381,27 @@ impl serde::Serialize for Message {
         st.end()
     }
 }
+
+impl ReaderEventNotification {
+    /// A READER_EVENT_NOTIFICATION with a ConnectionAttemptEvent of `status`, stamped `utc_us`
+    /// (UTC µs): what a reader tells a client of its connection attempt.
+    pub fn connection_attempt(
+        status: crate::enums::ConnectionAttemptStatus,
+        utc_us: u64,
+    ) -> ReaderEventNotification {
+        ReaderEventNotification {
+            reader_event_notification_data: ReaderEventNotificationData {
+                timestamp: Timestamp::Utc(UtcTimestamp {
+                    microseconds: utc_us,
+                    ..Default::default()
+                }),
+                connection_attempt_event: Some(ConnectionAttemptEvent {
+                    status,
+                    ..Default::default()
+                }),
+                ..Default::default()
+            },
+            ..Default::default()
+        }
+    }
+}

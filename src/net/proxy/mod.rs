@@ -546,22 +546,8 @@ async fn refuse(client: Stream) {
 
 /// The READER_EVENT_NOTIFICATION a client gets when the proxy cannot reach the reader.
 pub fn connection_failed(utc_us: u64) -> ReaderEventNotification {
-    use llrp::enums::ConnectionAttemptStatus;
-    use llrp::params::{
-        ConnectionAttemptEvent, ReaderEventNotificationData, Timestamp, UtcTimestamp,
-    };
-    ReaderEventNotification {
-        reader_event_notification_data: ReaderEventNotificationData {
-            timestamp: Timestamp::Utc(UtcTimestamp {
-                microseconds: utc_us,
-                ..Default::default()
-            }),
-            connection_attempt_event: Some(ConnectionAttemptEvent {
-                status: ConnectionAttemptStatus::FailedOtherReason,
-                ..Default::default()
-            }),
-            ..Default::default()
-        },
-        ..Default::default()
-    }
+    ReaderEventNotification::connection_attempt(
+        llrp::enums::ConnectionAttemptStatus::FailedOtherReason,
+        utc_us,
+    )
 }

@@ -8,9 +8,7 @@ use std::sync::Arc;
 use bytes::BytesMut;
 use llrp::enums::ConnectionAttemptStatus;
 use llrp::message::{ErrorMessage, ReaderEventNotification};
-use llrp::params::{
-    ConnectionAttemptEvent, LlrpStatus, ReaderEventNotificationData, Timestamp, UtcTimestamp,
-};
+use llrp::params::LlrpStatus;
 use llrp::{Inbound, Message, StatusCode};
 use llrp_gateway_vocab::session::{Accepted, ClientId, ServerSession, Transmit};
 
@@ -64,20 +62,10 @@ impl ReplayServer {
 /// What a reader tells a second client: a READER_EVENT_NOTIFICATION with
 /// FailedClientInitiatedConnectionExists, stamped `utc_us`.
 pub fn refusal(utc_us: u64) -> BytesMut {
-    let body = ReaderEventNotification {
-        reader_event_notification_data: ReaderEventNotificationData {
-            timestamp: Timestamp::Utc(UtcTimestamp {
-                microseconds: utc_us,
-                ..Default::default()
-            }),
-            connection_attempt_event: Some(ConnectionAttemptEvent {
-                status: ConnectionAttemptStatus::FailedClientInitiatedConnectionExists,
-                ..Default::default()
-            }),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let body = ReaderEventNotification::connection_attempt(
+        ConnectionAttemptStatus::FailedClientInitiatedConnectionExists,
+        utc_us,
+    );
     Message::new(0, body).to_bytes()
 }
 
