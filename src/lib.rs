@@ -12,7 +12,6 @@ pub mod http;
 pub mod inventory;
 pub mod metrics;
 pub mod net;
-pub mod options;
 pub mod realism;
 pub mod record;
 pub mod sim;

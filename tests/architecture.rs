@@ -682,3 +682,21 @@ fn only_the_composition_root_starts_the_localizer_or_serves_its_api() {
         "started outside the composition root: {found:?}"
     );
 }
+
+#[test]
+fn only_the_command_line_names_clap() {
+    // Rule 14 for every source file of the application, not only the layers above: the
+    // single-file modules, `eval/` and `realism/` too. Only `cli/` and `main.rs` name clap.
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let allowed = [src.join("cli"), src.join("main.rs")];
+    let found: Vec<String> = sources(&src)
+        .into_iter()
+        .filter(|f| !allowed.iter().any(|a| f.starts_with(a)))
+        .filter(|f| {
+            let text = std::fs::read_to_string(f).expect("a source file");
+            names_crate(&code(&text), "clap")
+        })
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(found.is_empty(), "names clap outside src/cli/: {found:?}");
+}

@@ -236,6 +236,52 @@ impl DecodeError {
         if let ErrorKind::UnsupportedVersion { .. } = self.kind {
             return LlrpStatus::new(StatusCode::M_UnsupportedVersion, description);
         }
+        let mut params = self.status_params();
+        let field = self.path.iter().rev().find_map(|s| match s {
+            PathSeg::Field { index, .. } => Some(*index),
+            _ => None,
+        });
+        let field_code = match self.kind {
+            ErrorKind::OutOfRange => StatusCode::A_OutOfRange,
+            _ => StatusCode::A_Invalid,
+        };
+        // The error is either about a field of the innermost container, or about a
+        // sub-parameter of it (identified by type).
+        let (sub_ty, m_code, p_code) = self.kind.status_codes();
+        // An LLRPStatus holds at most 1 + MAX_NESTING ParameterErrors (what the decoder takes):
+        // a deeper path is cut, its innermost kept parameter reported as P_ParameterError
+        // without the detail below it (the description still names the whole path).
+        let most = crate::codec::MAX_NESTING as usize + 1;
+        let cut = params.len() + usize::from(sub_ty.is_some()) > most;
+        if cut {
+            params.truncate(most);
+        }
+        let sub_ty = sub_ty.filter(|_| !cut);
+        let field = field.filter(|_| !cut);
+        let field_error = match (sub_ty, field) {
+            (None, Some(index)) => Some(FieldError {
+                field_num: index,
+                error_code: field_code,
+                ..Default::default()
+            }),
+            _ => None,
+        };
+        let inner = sub_ty.map(|ty| ParameterError::new(ty, p_code));
+        let detail_below = sub_ty.is_some() || cut;
+        let (field_error, parameter_error) = nest(&params, field_error, inner, detail_below);
+        let code = match (params.is_empty(), sub_ty) {
+            (false, _) => StatusCode::M_ParameterError,
+            (true, Some(_)) => m_code,
+            (true, None) => StatusCode::M_FieldError,
+        };
+        let mut status = LlrpStatus::new(code, description);
+        status.field_error = field_error;
+        status.parameter_error = parameter_error;
+        status
+    }
+
+    /// The parameter types along the path, outermost first, as the status echoes them.
+    fn status_params(&self) -> Vec<u16> {
         let mut params: Vec<u16> = self
             .path
             .iter()
@@ -252,89 +298,59 @@ impl DecodeError {
                 params.truncate(first + 1);
             }
         }
-        let field = self.path.iter().rev().find_map(|s| match s {
-            PathSeg::Field { index, .. } => Some(*index),
-            _ => None,
-        });
-        let field_code = match self.kind {
-            ErrorKind::OutOfRange => StatusCode::A_OutOfRange,
-            _ => StatusCode::A_Invalid,
-        };
-        // The error is either about a field of the innermost container, or about a
-        // sub-parameter of it (identified by type).
-        let (sub_ty, m_code, p_code) = match self.kind {
-            ErrorKind::UnexpectedParameter { ty } => (
-                Some(ty),
-                StatusCode::M_UnexpectedParameter,
-                StatusCode::P_UnexpectedParameter,
-            ),
-            ErrorKind::MissingParameter { ty, .. } => (
-                Some(ty),
-                StatusCode::M_MissingParameter,
-                StatusCode::P_MissingParameter,
-            ),
-            ErrorKind::DuplicateParameter { ty } => (
-                Some(ty),
-                StatusCode::M_DuplicateParameter,
-                StatusCode::P_DuplicateParameter,
-            ),
-            ErrorKind::UnknownParameter { ty } => (
-                Some(ty),
-                StatusCode::M_UnknownParameter,
-                StatusCode::P_UnknownParameter,
-            ),
-            ErrorKind::BadParameterLength { ty, .. } | ErrorKind::TooDeep { ty, .. } => (
-                Some(ty),
-                StatusCode::M_ParameterError,
-                StatusCode::P_ParameterError,
-            ),
-            _ => (None, StatusCode::M_FieldError, StatusCode::P_FieldError),
-        };
-        // An LLRPStatus holds at most 1 + MAX_NESTING ParameterErrors (what the decoder takes):
-        // a deeper path is cut, its innermost kept parameter reported as P_ParameterError
-        // without the detail below it (the description still names the whole path).
-        let most = crate::codec::MAX_NESTING as usize + 1;
-        let cut = params.len() + usize::from(sub_ty.is_some()) > most;
-        if cut {
-            params.truncate(most);
-        }
-        let sub_ty = sub_ty.filter(|_| !cut);
-        let field = field.filter(|_| !cut);
-        // Innermost detail first, then wrap it in each enclosing parameter.
-        let mut inner: Option<ParameterError> = sub_ty.map(|ty| ParameterError::new(ty, p_code));
-        let mut field_error = match (sub_ty, field) {
-            (None, Some(index)) => Some(FieldError {
-                field_num: index,
-                error_code: field_code,
-                ..Default::default()
-            }),
-            _ => None,
-        };
-        for (depth, ty) in params.iter().enumerate().rev() {
-            let innermost = depth == params.len() - 1;
-            let code = if innermost && sub_ty.is_none() && !cut {
-                StatusCode::P_FieldError
-            } else {
-                StatusCode::P_ParameterError
-            };
-            let mut pe = ParameterError::new(*ty, code);
-            pe.field_error = field_error.take();
-            pe.parameter_error = inner.take().map(Box::new);
-            inner = Some(pe);
-        }
-        let code = if params.is_empty() {
-            if sub_ty.is_some() {
-                m_code
-            } else {
-                StatusCode::M_FieldError
-            }
+        params
+    }
+}
+
+/// Wraps the innermost detail (a field error, or a sub-parameter's error) in one
+/// ParameterError per enclosing parameter, innermost last in `params`. The innermost
+/// enclosing one is a P_FieldError unless there is detail below it (`detail_below`). Gives
+/// what the status itself holds: its FieldError (when no parameter encloses it) and the
+/// outermost ParameterError.
+fn nest(
+    params: &[u16],
+    mut field_error: Option<FieldError>,
+    mut inner: Option<ParameterError>,
+    detail_below: bool,
+) -> (Option<FieldError>, Option<ParameterError>) {
+    for (depth, ty) in params.iter().enumerate().rev() {
+        let innermost = depth == params.len() - 1;
+        let code = if innermost && !detail_below {
+            StatusCode::P_FieldError
         } else {
-            StatusCode::M_ParameterError
+            StatusCode::P_ParameterError
         };
-        let mut status = LlrpStatus::new(code, description);
-        status.field_error = field_error;
-        status.parameter_error = inner;
-        status
+        let mut pe = ParameterError::new(*ty, code);
+        pe.field_error = field_error.take();
+        pe.parameter_error = inner.take().map(Box::new);
+        inner = Some(pe);
+    }
+    (field_error, inner)
+}
+
+impl ErrorKind {
+    /// For an error about a sub-parameter: its type, and the message- and parameter-level
+    /// codes; for an error about a field: no type, M_FieldError and P_FieldError.
+    fn status_codes(&self) -> (Option<u16>, StatusCode, StatusCode) {
+        use StatusCode as S;
+        match *self {
+            ErrorKind::UnexpectedParameter { ty } => {
+                (Some(ty), S::M_UnexpectedParameter, S::P_UnexpectedParameter)
+            }
+            ErrorKind::MissingParameter { ty, .. } => {
+                (Some(ty), S::M_MissingParameter, S::P_MissingParameter)
+            }
+            ErrorKind::DuplicateParameter { ty } => {
+                (Some(ty), S::M_DuplicateParameter, S::P_DuplicateParameter)
+            }
+            ErrorKind::UnknownParameter { ty } => {
+                (Some(ty), S::M_UnknownParameter, S::P_UnknownParameter)
+            }
+            ErrorKind::BadParameterLength { ty, .. } | ErrorKind::TooDeep { ty, .. } => {
+                (Some(ty), S::M_ParameterError, S::P_ParameterError)
+            }
+            _ => (None, S::M_FieldError, S::P_FieldError),
+        }
     }
 }
 

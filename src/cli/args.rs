@@ -47,13 +47,13 @@ pub struct PublishArgs {
     #[arg(long, value_name = "URL")]
     pub publish: Option<String>,
     /// Read shards: a tag's reads go to `PREFIX/v1/reads/{FNV-1a(EPC) % N}`.
-    #[arg(long, value_name = "N", default_value_t = crate::fleet::schema::DEFAULT_SHARDS, value_parser = crate::options::parser::<u16>("shard-count"))]
+    #[arg(long, value_name = "N", default_value_t = crate::fleet::schema::DEFAULT_SHARDS, value_parser = crate::cli::options::parser::<u16>("shard-count"))]
     pub shard_count: u16,
     /// Messages held while the broker is away; beyond it they are dropped and counted.
-    #[arg(long, value_name = "N", default_value_t = 10_000, value_parser = crate::options::parser::<usize>("publish-queue"))]
+    #[arg(long, value_name = "N", default_value_t = 10_000, value_parser = crate::cli::options::parser::<usize>("publish-queue"))]
     pub publish_queue: usize,
     /// Batch each topic's reads over this window (ms); 0: a message per RO_ACCESS_REPORT.
-    #[arg(long, value_name = "MS", default_value_t = 0, value_parser = crate::options::parser::<u64>("publish-window-ms"))]
+    #[arg(long, value_name = "MS", default_value_t = 0, value_parser = crate::cli::options::parser::<u64>("publish-window-ms"))]
     pub publish_window_ms: u64,
     /// This gateway's name on the broker (its status topic and MQTT client id).
     #[arg(long, value_name = "NAME", default_value = "llrp-gateway")]

@@ -39,34 +39,34 @@ pub struct BenchLocalizeArgs {
     #[arg(long, default_value = "S1")]
     pub scenario: String,
     /// Simulated seconds (default: until the slowest robot has driven its path, + 2 s).
-    #[arg(long, value_parser = crate::options::parser::<f64>("seconds"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<f64>("seconds"))]
     pub seconds: Option<f64>,
     /// Write the plot of truth against the `relock` estimates here (PNG).
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Offer the reads to a live localizer with its HTTP API at this multiple of real time
     /// and measure the read-to-HTTP latency of its updates; 0 skips it.
-    #[arg(long, default_value = "10", value_parser = crate::options::parser::<f64>("live-speed"))]
+    #[arg(long, default_value = "10", value_parser = crate::cli::options::parser::<f64>("live-speed"))]
     pub live_speed: f64,
     /// Runs per Monte-Carlo variant of S3 (σ_φ, odometry K, swarm size); 0 skips them.
-    #[arg(long, default_value = "20", value_parser = crate::options::parser::<usize>("runs"))]
+    #[arg(long, default_value = "20", value_parser = crate::cli::options::parser::<usize>("runs"))]
     pub runs: usize,
     /// RF mode (ModeIndex of the reader's mode table) the benchmark's client asks for;
     /// default: the reader's own (1000).
-    #[arg(long, value_parser = crate::options::parser::<u16>("mode"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<u16>("mode"))]
     pub mode: Option<u16>,
     /// Gen2 session (0–3) the benchmark's client asks for; default: the reader's own (2).
-    #[arg(long, value_parser = crate::options::parser::<u8>("session"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<u8>("session"))]
     pub session: Option<u8>,
     /// Runs of each row's localization; the compute time is the best of them (a shared
     /// host's noise).
-    #[arg(long, default_value = "1", value_parser = crate::options::parser::<u32>("repeat"))]
+    #[arg(long, default_value = "1", value_parser = crate::cli::options::parser::<u32>("repeat"))]
     pub repeat: u32,
     /// Only these estimators (repeatable; default: every one that applies).
     #[arg(long = "estimator")]
     pub estimators: Vec<Estimator>,
     /// Set aside reads weaker than this (dBm), as the settings file's `min_rssi_dbm` does.
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::options::parser::<f64>("min-rssi"))]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::cli::options::parser::<f64>("min-rssi"))]
     pub min_rssi: Option<f64>,
     /// Run the scenario with this reader model (`ideal`, `impinj-r420`; docs/measurement.md
     /// "Reader models"); default: the scenario's own.
@@ -102,7 +102,7 @@ pub struct BenchRealismArgs {
 #[derive(clap::Args, Debug)]
 pub struct BenchReadRateArgs {
     /// Simulated seconds per point.
-    #[arg(long, default_value_t = 10.0, value_parser = crate::options::parser::<f64>("seconds"))]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::cli::options::parser::<f64>("seconds"))]
     pub seconds: f64,
     /// Reader model the field is read with (docs/measurement.md "Reader models").
     #[arg(long, default_value = "impinj-r420")]

@@ -21,7 +21,7 @@ pub struct ExportArgs {
     pub pcapng: PathBuf,
     /// Largest TCP payload of a packet; longer frames are split into several segments.
     #[arg(long, default_value_t = DEFAULT_MSS,
-          value_parser = crate::options::parser::<u16>("mss"))]
+          value_parser = crate::cli::options::parser::<u16>("mss"))]
     pub mss: u16,
     /// Replace an existing capture (without it, an existing file is refused).
     #[arg(long)]

@@ -15,27 +15,27 @@ pub struct InventoryArgs {
     /// The reader: HOST or HOST:PORT (port 5084 when none is given); IPv6 as `[ADDR]:PORT`.
     pub reader: String,
     /// Stop after this many seconds (default: run until Ctrl-C or SIGTERM).
-    #[arg(long, value_parser = crate::options::parser::<f64>("seconds"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<f64>("seconds"))]
     pub seconds: Option<f64>,
     /// Antenna ports to inventory, comma-separated (default: all the reader has).
-    #[arg(long, value_delimiter = ',', value_parser = crate::options::parser::<u16>("antennas"))]
+    #[arg(long, value_delimiter = ',', value_parser = crate::cli::options::parser::<u16>("antennas"))]
     pub antennas: Vec<u16>,
     /// Enable the Impinj extensions and ask for Impinj RF phase, peak RSSI and Doppler.
     #[arg(long)]
     pub impinj: bool,
     /// The reader sends a report every N tag entries (a reader may fold a tag's repeated
     /// reads into one entry; reads not yet reported come when the inventory stops).
-    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::options::parser::<u16>("report-every"))]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::cli::options::parser::<u16>("report-every"))]
     pub report_every: u16,
     /// Gen2 session, 0-3 (default: the reader's).
-    #[arg(long, value_parser = crate::options::parser::<u8>("session"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<u8>("session"))]
     pub session: Option<u8>,
     /// Impinj inventory search mode (0 reader selected, 1 single target, 2 dual target,
     /// 3 single target with suppression, ...; default: the reader's).
-    #[arg(long, value_name = "M", value_parser = crate::options::parser::<u16>("search-mode"))]
+    #[arg(long, value_name = "M", value_parser = crate::cli::options::parser::<u16>("search-mode"))]
     pub search_mode: Option<u16>,
     /// RF mode: a ModeIdentifier of the reader's RF mode table (default: the reader's).
-    #[arg(long, value_name = "ID", value_parser = crate::options::parser::<u16>("mode"))]
+    #[arg(long, value_name = "ID", value_parser = crate::cli::options::parser::<u16>("mode"))]
     pub mode: Option<u16>,
     /// Write the reads here: a `.jsonl` file (the reads file), a `.csv` file, or `-` for
     /// JSON Lines on standard output; any other name (`/dev/null`, a FIFO) with `--format`.
@@ -52,16 +52,16 @@ pub struct InventoryArgs {
     pub name: Option<String>,
     /// Keepalive interval asked of the reader, ms (0: none). A reader silent for three
     /// intervals and 5 s more is taken for lost and reconnected.
-    #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = crate::options::parser::<u32>("keepalive-ms"))]
+    #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = crate::cli::options::parser::<u32>("keepalive-ms"))]
     pub keepalive_ms: u32,
     /// Retries after failed connection attempts in a row: a number, or `forever`.
     #[arg(long, default_value = "5", value_parser = parse_retries)]
     pub retries: Retries,
     /// First wait before a retry, ms; it doubles with each failure in a row.
-    #[arg(long, value_name = "MS", default_value_t = 500, value_parser = crate::options::parser::<u64>("backoff-ms"))]
+    #[arg(long, value_name = "MS", default_value_t = 500, value_parser = crate::cli::options::parser::<u64>("backoff-ms"))]
     pub backoff_ms: u64,
     /// Longest wait before a retry, ms.
-    #[arg(long, value_name = "MS", default_value_t = 30_000, value_parser = crate::options::parser::<u64>("backoff-max-ms"))]
+    #[arg(long, value_name = "MS", default_value_t = 30_000, value_parser = crate::cli::options::parser::<u64>("backoff-max-ms"))]
     pub backoff_max_ms: u64,
     /// LLRP over TLS (port 5085 when HOST has none), with --tls-ca or --tls-insecure.
     #[arg(long)]

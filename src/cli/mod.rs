@@ -27,6 +27,7 @@ pub mod decode;
 pub mod inventory;
 pub mod live;
 pub mod localize;
+pub mod options;
 pub mod proxy;
 pub mod replay;
 pub mod root;
@@ -81,7 +82,7 @@ pub enum Command {
         #[arg(long)]
         record: Option<PathBuf>,
         /// Start a numbered next recording file once a file would pass this many bytes.
-        #[arg(long, value_name = "BYTES", value_parser = crate::options::parser::<u64>("record-max-bytes"))]
+        #[arg(long, value_name = "BYTES", value_parser = crate::cli::options::parser::<u64>("record-max-bytes"))]
         record_max_bytes: Option<u64>,
         /// Serve LLRP over TLS with this certificate chain (PEM) on every reader's address
         /// (port 5085 by convention: choose it with --listen); see docs/tls.md.
@@ -99,7 +100,7 @@ pub enum Command {
         poses: args::PoseSourceArg,
         /// Time between two pose samples of each antenna, as a robot publishes its pose
         /// (ms; 100 is 10 Hz).
-        #[arg(long, value_name = "MS", default_value_t = 100, value_parser = crate::options::parser::<u64>("pose-interval-ms"))]
+        #[arg(long, value_name = "MS", default_value_t = 100, value_parser = crate::cli::options::parser::<u64>("pose-interval-ms"))]
         pose_interval_ms: u64,
         /// Do not stamp each read with its antenna's pose at the read (the localizer and
         /// MQTT workers then wait for a pose sample at or after each read).
@@ -239,7 +240,7 @@ mod tests {
     use std::any::TypeId;
     use std::ffi::OsStr;
 
-    use crate::options::{range, RANGES};
+    use crate::cli::options::{range, RANGES};
     use clap::CommandFactory;
 
     use super::Cli;

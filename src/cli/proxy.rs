@@ -34,7 +34,7 @@ pub struct ProxyArgs {
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Start a numbered next recording file once a file would pass this many bytes.
-    #[arg(long, value_name = "BYTES", value_parser = crate::options::parser::<u64>("record-max-bytes"))]
+    #[arg(long, value_name = "BYTES", value_parser = crate::cli::options::parser::<u64>("record-max-bytes"))]
     pub record_max_bytes: Option<u64>,
     /// Regulatory region of the reader (`fcc` or `etsi`), for channel frequencies of tapped
     /// reads until the reader's capabilities are seen.
@@ -42,10 +42,10 @@ pub struct ProxyArgs {
     pub region: Option<super::args::RegionArg>,
     /// Most clients served at once (each with its own connection to the reader); one more
     /// gets a failed ConnectionAttemptEvent and is closed.
-    #[arg(long, value_name = "N", default_value_t = crate::net::proxy::MAX_CLIENTS as u64, value_parser = crate::options::parser::<u64>("max-clients"))]
+    #[arg(long, value_name = "N", default_value_t = crate::net::proxy::MAX_CLIENTS as u64, value_parser = crate::cli::options::parser::<u64>("max-clients"))]
     pub max_clients: u64,
     /// Longest wait for the reader to accept the connection, in milliseconds.
-    #[arg(long, default_value = "5000", value_parser = crate::options::parser::<u64>("connect-timeout-ms"))]
+    #[arg(long, default_value = "5000", value_parser = crate::cli::options::parser::<u64>("connect-timeout-ms"))]
     pub connect_timeout_ms: u64,
     /// Clients connect with TLS: this certificate chain (PEM); see docs/tls.md.
     #[arg(

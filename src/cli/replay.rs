@@ -30,7 +30,7 @@ pub struct ReplayArgs {
     pub looped: bool,
     /// Replay this recorded connection (default: the first that carries an LLRP session,
     /// see `--list`).
-    #[arg(long, value_parser = crate::options::parser::<u32>("conn"))]
+    #[arg(long, value_parser = crate::cli::options::parser::<u32>("conn"))]
     pub conn: Option<u32>,
     /// List the recording's connections (what each holds, which one is replayed by
     /// default) and exit.

@@ -24,7 +24,7 @@ pub struct WorkerArgs {
     #[arg(long, value_name = "LIST", requires = "subscribe")]
     pub shards: Option<String>,
     /// How many shards the publishers split reads into (their `--shard-count`).
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_SHARDS, value_parser = crate::options::parser::<u16>("shard-count"))]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_SHARDS, value_parser = crate::cli::options::parser::<u16>("shard-count"))]
     pub shard_count: u16,
     /// MQTT client id, which names the worker's persistent session (default: from its
     /// shards, so a restarted worker resumes its session).
@@ -43,10 +43,10 @@ pub struct WorkerArgs {
     #[arg(long, value_name = "FILE", requires = "subscribe")]
     pub mqtt_ca: Option<std::path::PathBuf>,
     /// A tag has departed (presence event) after this many seconds without a read.
-    #[arg(long, value_name = "S", default_value_t = 10.0, requires = "subscribe", value_parser = crate::options::parser::<f64>("presence-silence-s"))]
+    #[arg(long, value_name = "S", default_value_t = 10.0, requires = "subscribe", value_parser = crate::cli::options::parser::<f64>("presence-silence-s"))]
     pub presence_silence_s: f64,
     /// A `moved` presence event when the estimate moves more than this (m).
-    #[arg(long, value_name = "M", default_value_t = crate::fleet::presence::DEFAULT_MOVE_M, requires = "subscribe", value_parser = crate::options::parser::<f64>("presence-move-m"))]
+    #[arg(long, value_name = "M", default_value_t = crate::fleet::presence::DEFAULT_MOVE_M, requires = "subscribe", value_parser = crate::cli::options::parser::<f64>("presence-move-m"))]
     pub presence_move_m: f64,
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]

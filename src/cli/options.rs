@@ -152,7 +152,7 @@ pub fn range(name: &str) -> &'static Range {
     RANGES
         .iter()
         .find(|r| r.name == name)
-        .unwrap_or_else(|| panic!("option --{name} has no entry in options::RANGES"))
+        .unwrap_or_else(|| panic!("option --{name} has no entry in cli::options::RANGES"))
 }
 
 /// Parses `text` as a value of option `name`, within its range.
