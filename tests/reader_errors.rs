@@ -67,10 +67,8 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
                 }],
                 ..Default::default()
             },
-            op_specs: vec![OpSpec::C1g2Write(C1g2Write {
+            op_specs: vec![OpSpec::ClientRequestOpSpec(ClientRequestOpSpec {
                 op_spec_id: 1,
-                mb: 3,
-                write_data: vec![1],
                 ..Default::default()
             })],
             ..Default::default()
@@ -95,7 +93,7 @@ async fn malformed_and_unsupported_requests_get_llrp_answers() {
         .and_then(|p| p.parameter_error);
     assert_eq!(
         inner.map(|p| (p.parameter_type, p.error_code)),
-        Some((342, StatusCode::P_UnsupportedParameter))
+        Some((210, StatusCode::P_UnsupportedParameter))
     );
     // The connection survived all of it.
     assert_eq!(

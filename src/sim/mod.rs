@@ -17,6 +17,7 @@ use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve_tls, LiveHook, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
 use crate::physics::{AntennaPose, Model, World};
+use crate::reader::memory::TagMemory;
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
@@ -297,6 +298,8 @@ struct Start<'a> {
     clock: Arc<Clock>,
     shutdown: watch::Receiver<bool>,
     references: Arc<Vec<bool>>,
+    /// The tags' memory, one for every reader: a tag written by one reads so on all.
+    memory: Arc<TagMemory>,
 }
 
 /// One reader started: its serving task and what runs beside it.
@@ -336,6 +339,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         // clock at real-time speed, however long the world took to build.
         utc0: crate::utc::now_us(),
         clock: Arc::new(Clock::new(opts.speed)),
+        memory: Arc::new(TagMemory::new()),
         shutdown: rx,
         references: Arc::new(scenario.tags.iter().map(|t| t.reference).collect()),
     };
@@ -372,7 +376,8 @@ impl Start<'_> {
         let bound = listener.local_addr().map_err(listen_error)?;
         let model = Arc::new(Model::in_world(&self.world, self.scenario, i));
         let profile = ReaderProfile::from_scenario(self.scenario, i, &model);
-        let reader = Reader::new(profile.clone(), model.clone(), self.utc0);
+        let reader =
+            Reader::new(profile.clone(), model.clone(), self.utc0).with_memory(self.memory.clone());
         let mut own = Vec::new();
         let mut observer = self.truth_observer(spec, &model, &mut own);
         let mut hook = None;
@@ -474,9 +479,11 @@ impl Start<'_> {
             frames_in: Some(self.opts.frames_in.clone()),
         };
         if self.opts.speed != Speed::Max {
-            let (model, profile) = (model.clone(), profile.clone());
+            let (model, profile, memory) = (model.clone(), profile.clone(), self.memory.clone());
             let task = own::OwnTask {
-                make_reader: Box::new(move || Reader::new(profile.clone(), model.clone(), utc0)),
+                make_reader: Box::new(move || {
+                    Reader::new(profile.clone(), model.clone(), utc0).with_memory(memory.clone())
+                }),
                 clock: self.clock.clone(),
                 tap: l.tap.clone(),
                 name: spec.name.clone(),

@@ -25,6 +25,8 @@ pub struct VirtualReader {
     inbox: VecDeque<Message>,
     closed: bool,
     next_id: u32,
+    /// The LLRP version the client's messages carry (1 = 1.0.1, 2 = 1.1).
+    version: u8,
 }
 
 impl VirtualReader {
@@ -40,6 +42,7 @@ impl VirtualReader {
             inbox: VecDeque::new(),
             closed: false,
             next_id: 1,
+            version: 1,
         };
         v.connect();
         v
@@ -82,8 +85,21 @@ impl VirtualReader {
     pub fn send(&mut self, body: impl Into<MessageBody>) -> u32 {
         let id = self.next_id;
         self.next_id += 1;
-        self.send_bytes(&Message::new(id, body).to_bytes());
+        let mut m = Message::new(id, body);
+        m.version = self.version;
+        self.send_bytes(&m.to_bytes());
         id
+    }
+
+    /// Switches the session to LLRP `version` (SET_PROTOCOL_VERSION, which must succeed);
+    /// later messages carry it.
+    pub fn set_version(&mut self, version: u8) {
+        let set = llrp::message::SetProtocolVersion {
+            protocol_version: version,
+            ..Default::default()
+        };
+        assert_eq!(self.status(set), StatusCode::M_Success);
+        self.version = version;
     }
 
     /// Sends raw bytes now (whole frames, or the start of a broken one).

@@ -39,7 +39,7 @@ mod tests;
 
 pub use world::World;
 
-use crate::scenario::tagmem::{parse_epc, parse_words};
+use crate::scenario::tagmem::{default_user, parse_epc, parse_password, parse_words};
 use crate::scenario::{
     AntennaSpec, Mount, PhaseOffsets, Pose, PoseSample, RobotSpec, Scenario, VerticalAxis,
 };
@@ -166,6 +166,8 @@ struct TagModel {
     epc: crate::scenario::tagmem::TagEpc,
     tid: Vec<u16>,
     user: Vec<u16>,
+    /// Kill and access passwords.
+    passwords: [u32; 2],
     motion: PolylineMotion,
     radio: tag::TagRadio,
 }
@@ -482,6 +484,13 @@ impl Model {
     /// User memory of tag `tag` as 16-bit words.
     pub fn tag_user(&self, tag: usize) -> Vec<u16> {
         self.tags.get(tag).map_or_else(Vec::new, |t| t.user.clone())
+    }
+
+    /// Kill and access passwords of tag `tag` (0 and 0 for an unknown tag).
+    pub fn tag_passwords(&self, tag: usize) -> (u32, u32) {
+        self.tags
+            .get(tag)
+            .map_or((0, 0), |t| (t.passwords[0], t.passwords[1]))
     }
 
     /// Phase offset φ0 (rad) of (antenna, tag, channel): the scenario's per-channel value if

@@ -45,8 +45,12 @@ impl World {
                     user: t
                         .user
                         .as_deref()
-                        .and_then(|h| parse_words(h).ok())
-                        .unwrap_or_default(),
+                        .map_or_else(default_user, |h| parse_words(h).unwrap_or_default()),
+                    passwords: [&t.kill_password, &t.access_password].map(|p| {
+                        p.as_deref()
+                            .and_then(|h| parse_password(h).ok())
+                            .unwrap_or(0)
+                    }),
                     motion: PolylineMotion::new(t.position, t.path.as_ref()),
                     radio: tag::TagRadio::new(scenario, index, t),
                 }

@@ -12,6 +12,7 @@
 mod access;
 pub mod caps;
 mod config;
+pub mod memory;
 pub mod report;
 mod requests;
 mod rospec;
@@ -137,6 +138,8 @@ pub struct Reader {
     config: ReaderConfig,
     specs: rospec::Specs,
     access: access::AccessSpecs,
+    /// The tags' memory, shared with every reader of the run.
+    memory: Arc<memory::TagMemory>,
     /// The tags' inventoried flags in sessions 1–3 as this reader left them.
     flags: crate::physics::flags::Flags,
     /// Wall-clock ms of the next keepalive, and how many went unanswered.
@@ -164,9 +167,22 @@ impl Reader {
             config,
             specs: rospec::Specs::default(),
             access: access::AccessSpecs::default(),
+            memory: Arc::new(memory::TagMemory::new()),
             keepalive_due_ms: None,
             keepalive_unanswered: 0,
         }
+    }
+
+    /// The reader with the tags' memory `memory`, shared with the run's other readers (by
+    /// default a reader has a memory of its own).
+    pub fn with_memory(mut self, memory: Arc<memory::TagMemory>) -> Self {
+        self.memory = memory;
+        self
+    }
+
+    /// The tags' memory as this reader sees it.
+    pub fn memory(&self) -> &Arc<memory::TagMemory> {
+        &self.memory
     }
 
     /// The reader's fixed description.
@@ -373,6 +389,8 @@ impl Reader {
                 profile: &self.profile,
                 config: &self.config,
                 access: &mut self.access,
+                memory: &self.memory,
+                version: self.version,
                 flags: &mut self.flags,
                 utc_epoch_us: self.utc_epoch_us,
                 impinj: self.impinj,

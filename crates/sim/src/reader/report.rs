@@ -15,6 +15,8 @@ use crate::scenario::tagmem::TagEpc;
 pub struct Observation {
     /// EPC of the tag.
     pub epc: TagEpc,
+    /// The tag's PC word (its EPC length, and the other bits as written).
+    pub pc: u16,
     /// ROSpec that produced the read.
     pub ro_spec_id: u32,
     /// 1-based index of the AISpec in its ROSpec.
@@ -350,11 +352,11 @@ fn add_air_protocol_data(
 ) {
     for m in &s.air_protocol_epc_memory_selector {
         if m.enable_pc_bits {
-            data.push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.epc.pc())));
+            data.push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.pc)));
         }
         if m.enable_crc {
             data.push(AirProtocolTagData::C1g2Crc(C1g2Crc(gen2_crc(
-                o.epc.pc(),
+                o.pc,
                 o.epc.as_bytes(),
             ))));
         }
@@ -427,6 +429,7 @@ mod tests {
         epc[0] = epc0;
         Observation {
             epc: epc.into(),
+            pc: 0x3000,
             ro_spec_id: 1,
             spec_index: 1,
             inventory_parameter_spec_id: 1,
@@ -512,6 +515,7 @@ mod tests {
         };
         let with = |bytes: &[u8]| Observation {
             epc: TagEpc::from_bytes(bytes).expect("whole words"),
+            pc: TagEpc::from_bytes(bytes).expect("whole words").pc(),
             ..obs(0, 1, -60.0, 10)
         };
         let mut long = [0xE2u8; 16];

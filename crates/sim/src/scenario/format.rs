@@ -67,9 +67,16 @@ pub struct TagSpec {
     /// derived from the EPC.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tid: Option<String>,
-    /// User memory as hex (whole 16-bit words); default empty.
+    /// User memory as hex (whole 16-bit words; `""` for none); default 512 bits of zeros,
+    /// Impinj Monza 4QT's user memory.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub user: Option<String>,
+    /// Kill password as 8 hex digits (32 bits); default `00000000` (the tag cannot be killed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kill_password: Option<String>,
+    /// Access password as 8 hex digits (32 bits); default `00000000` (every access is secured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub access_password: Option<String>,
     /// Axis of the tag's dipole (any length but zero); none: the tag is aligned with every
     /// antenna (peak dipole gain, no polarisation loss).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -127,6 +127,23 @@ pub fn parse_epc(hex: &str) -> Result<TagEpc, String> {
     TagEpc::from_bytes(&bytes)
 }
 
+/// Words of user memory a tag has when its scenario gives none: 512 bits of zeros, the user
+/// memory of Impinj's Monza 4QT (Monza 4 Tag Chip Datasheet, memory map).
+pub const DEFAULT_USER_WORDS: usize = 32;
+
+/// User memory of a tag whose scenario gives none ([`DEFAULT_USER_WORDS`] zero words).
+pub fn default_user() -> Vec<u16> {
+    vec![0; DEFAULT_USER_WORDS]
+}
+
+/// Parses a 32-bit password given as exactly 8 hex digits.
+pub fn parse_password(hex: &str) -> Result<u32, String> {
+    if hex.len() != 8 || !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return Err(format!("must be 8 hex digits (32 bits), got {hex:?}"));
+    }
+    u32::from_str_radix(hex, 16).map_err(|e| e.to_string())
+}
+
 /// Parses memory given as hex digits, a whole number of 16-bit words (4 digits each).
 pub fn parse_words(hex: &str) -> Result<Vec<u16>, String> {
     if !hex.chars().all(|c| c.is_ascii_hexdigit()) {

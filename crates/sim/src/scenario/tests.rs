@@ -184,6 +184,16 @@ fn errors_name_the_field_path_and_the_reason() {
             "",
         ),
         (
+            Box::new(|v| v["tags"][0]["kill_password"] = "1234".into()),
+            "tags[0].kill_password: must be 8 hex digits (32 bits), got \"1234\"",
+            "",
+        ),
+        (
+            Box::new(|v| v["tags"][0]["access_password"] = "0000ABCG".into()),
+            "tags[0].access_password: must be 8 hex digits",
+            "",
+        ),
+        (
             Box::new(|v| v["readers"][0]["listen"] = "localhost".into()),
             "readers[0].listen: must be an IP address and port",
             "",

@@ -3,7 +3,7 @@
 
 use std::collections::HashSet;
 
-use super::tagmem::{parse_epc, parse_words};
+use super::tagmem::{parse_epc, parse_password, parse_words};
 use super::{
     AntennaSpec, Mount, NoiseDist, Pose, ReaderSpec, Region, RobotSpec, Scenario, ScenarioError,
 };
@@ -182,6 +182,14 @@ fn validate_tags(s: &Scenario) -> Check {
         }
         if let Some(user) = &t.user {
             parse_words(user).map_err(|e| invalid(format!("{p}.user"), e))?;
+        }
+        for (name, v) in [
+            ("kill_password", &t.kill_password),
+            ("access_password", &t.access_password),
+        ] {
+            if let Some(v) = v {
+                parse_password(v).map_err(|e| invalid(format!("{p}.{name}"), e))?;
+            }
         }
         if let Some(axis) = &t.orientation {
             finite(&format!("{p}.orientation"), axis)?;

@@ -229,14 +229,28 @@ impl Specs {
         slice: &Slice,
         out: &mut Vec<Produced>,
     ) -> bool {
+        // A killed tag never answers (its air time in the round is still spent).
+        let Some((epc, pc)) = ctx.memory.epc(ctx.model, r.tag) else {
+            return false;
+        };
         if slice.air.suppresses() {
             // Reported, so in B now (a read the stop trigger cuts off stays A).
             ctx.flags.read(r.tag, slice.air.session, r.time_us);
         }
-        let (op_spec_results, access_spec_id) =
-            ctx.access.apply(ctx.model, r.tag, slice.antenna, rep.ro_id);
+        let (op_spec_results, access_spec_id) = ctx.access.apply(
+            &crate::reader::access::Tag {
+                model: ctx.model,
+                memory: ctx.memory,
+                tag: r.tag,
+                version: ctx.version,
+            },
+            slice.antenna,
+            rep.ro_id,
+        );
         let o = Observation {
-            epc: ctx.model.tag_epc(r.tag),
+            // The EPC the tag was singulated with, whatever its operations wrote.
+            epc,
+            pc,
             ro_spec_id: rep.ro_id,
             spec_index: (run.spec_idx + 1) as u16,
             inventory_parameter_spec_id: rep.ips_id,

@@ -120,6 +120,11 @@ pub struct RunContext<'a> {
     pub config: &'a ReaderConfig,
     /// AccessSpecs to apply to each read.
     pub access: &'a mut AccessSpecs,
+    /// The tags' memory (what their EPCs are now, which are killed).
+    pub memory: &'a super::memory::TagMemory,
+    /// The session's LLRP version (1 = 1.0.1, 2 = 1.1): the result codes of access
+    /// operations differ.
+    pub version: u8,
     /// The reader's inventoried flags (single-target inventories in sessions 1–3).
     pub flags: &'a mut crate::physics::flags::Flags,
     /// UTC of simulated time 0, µs.

@@ -1,5 +1,9 @@
-//! AccessSpecs: C1G2Read of a tag's TID and user memory (from the scenario) on the tags an
-//! AccessSpec's tag spec selects; other access operations are refused as unsupported.
+//! AccessSpecs: the C1G2 access operations (Read, Write, BlockWrite, BlockErase, Lock, Kill)
+//! on the tags an AccessSpec's tag spec selects, against the tags' memory shared by the run's
+//! readers ([`super::memory`]); ClientRequestOpSpec and vendor operations are refused as
+//! unsupported.
+
+mod ops;
 
 use llrp::codec::BitVec;
 use llrp::enums::*;
@@ -7,14 +11,21 @@ use llrp::params::*;
 use llrp::StatusCode;
 
 use super::config::param_field_error;
+use super::memory::TagMemory;
 use super::{field_error, ReaderProfile, MAX_ACCESS_SPECS};
 use crate::physics::Model;
-use crate::scenario::tagmem::TagEpc;
 
-/// C1G2ReadOpSpecResult result: success.
-const READ_SUCCESS: u8 = 0;
-/// C1G2ReadOpSpecResult result: memory overrun (words beyond the bank).
-const READ_MEMORY_OVERRUN: u8 = 3;
+/// The tag a read singulated, as the AccessSpecs see it.
+pub struct Tag<'a> {
+    /// The reader's physics (the scenario's tag memory).
+    pub model: &'a Model,
+    /// The tags' memory as the run has changed it.
+    pub memory: &'a TagMemory,
+    /// The tag's index in the scenario.
+    pub tag: usize,
+    /// The session's LLRP version (result codes differ between 1.0.1 and 1.1).
+    pub version: u8,
+}
 
 /// One AccessSpec and its counters.
 #[derive(Clone, Debug)]
@@ -61,37 +72,8 @@ impl AccessSpecs {
             return LlrpStatus::new(StatusCode::M_OverflowParameter, "too many AccessSpecs");
         }
         for op in &spec.access_command.op_specs {
-            let ty = match op {
-                OpSpec::C1g2Read(r) => {
-                    if r.mb == 0 {
-                        // Reserved memory (passwords) is not readable in the simulation.
-                        Some(341)
-                    } else {
-                        None
-                    }
-                }
-                OpSpec::C1g2Write(_) => Some(342),
-                OpSpec::C1g2Kill(_) => Some(343),
-                OpSpec::C1g2Lock(_) => Some(344),
-                OpSpec::C1g2BlockErase(_) => Some(346),
-                OpSpec::C1g2BlockWrite(_) => Some(347),
-                OpSpec::ClientRequestOpSpec(_) => Some(210),
-                OpSpec::Custom(_) => Some(1023),
-            };
-            if let Some(ty) = ty {
-                let mut cmd = ParameterError::new(209, StatusCode::P_ParameterError);
-                cmd.parameter_error = Some(Box::new(ParameterError::new(
-                    ty,
-                    StatusCode::P_UnsupportedParameter,
-                )));
-                let mut pe = ParameterError::new(207, StatusCode::P_ParameterError);
-                pe.parameter_error = Some(Box::new(cmd));
-                let mut s = LlrpStatus::new(
-                    StatusCode::M_ParameterError,
-                    format!("access operation type {ty} is not supported (C1G2Read of EPC, TID and user memory is)"),
-                );
-                s.parameter_error = Some(pe);
-                return s;
+            if let Err(status) = ops::check(op) {
+                return status;
             }
         }
         self.entries.push(Entry {
@@ -164,35 +146,24 @@ impl AccessSpecs {
     /// Runs the first enabled AccessSpec that matches this read; returns its results and ID.
     pub fn apply(
         &mut self,
-        model: &Model,
-        tag: usize,
+        tag: &Tag<'_>,
         antenna: u16,
         ro_spec_id: u32,
     ) -> (Vec<OpSpecResult>, u32) {
         if !self.entries.iter().any(|e| e.enabled) {
             return (Vec::new(), 0);
         }
-        let epc = model.tag_epc(tag);
         let pos = self.entries.iter().position(|e| {
             e.enabled
                 && (e.spec.antenna_id == 0 || e.spec.antenna_id == antenna)
                 && (e.spec.ro_spec_id == 0 || e.spec.ro_spec_id == ro_spec_id)
-                && tag_matches(&e.spec.access_command.c1g2_tag_spec, model, tag, &epc)
+                && tag_matches(&e.spec.access_command.c1g2_tag_spec, tag)
         });
         let Some(i) = pos else {
             return (Vec::new(), 0);
         };
         let e = &mut self.entries[i];
-        let results = e
-            .spec
-            .access_command
-            .op_specs
-            .iter()
-            .filter_map(|op| match op {
-                OpSpec::C1g2Read(r) => Some(OpSpecResult::C1g2Read(read(model, tag, &epc, r))),
-                _ => None,
-            })
-            .collect();
+        let results = ops::run(&e.spec.access_command.op_specs, tag);
         let id = e.spec.access_spec_id;
         e.executed += 1;
         let t = &e.spec.access_spec_stop_trigger;
@@ -207,54 +178,11 @@ impl AccessSpecs {
     }
 }
 
-/// Memory bank contents as 16-bit words: 1 EPC (CRC, PC, EPC), 2 TID, 3 user.
-fn bank(model: &Model, tag: usize, epc: &TagEpc, mb: u8) -> Vec<u16> {
-    match mb {
-        1 => {
-            let pc = epc.pc();
-            let mut w = vec![super::report::gen2_crc(pc, epc.as_bytes()), pc];
-            w.extend(
-                epc.as_bytes()
-                    .chunks_exact(2)
-                    .map(|c| u16::from_be_bytes([c[0], c[1]])),
-            );
-            w
-        }
-        2 => model.tag_tid(tag),
-        3 => model.tag_user(tag),
-        _ => Vec::new(),
-    }
-}
-
-fn read(model: &Model, tag: usize, epc: &TagEpc, r: &C1g2Read) -> C1g2ReadOpSpecResult {
-    let words = bank(model, tag, epc, r.mb);
-    let start = usize::from(r.word_pointer);
-    // WordCount 0 reads to the end of the bank.
-    let end = if r.word_count == 0 {
-        words.len()
-    } else {
-        start + usize::from(r.word_count)
-    };
-    match words.get(start..end) {
-        Some(w) if start < end || r.word_count == 0 => C1g2ReadOpSpecResult {
-            result: READ_SUCCESS,
-            op_spec_id: r.op_spec_id,
-            read_data: w.to_vec(),
-            ..Default::default()
-        },
-        _ => C1g2ReadOpSpecResult {
-            result: READ_MEMORY_OVERRUN,
-            op_spec_id: r.op_spec_id,
-            read_data: Vec::new(),
-            ..Default::default()
-        },
-    }
-}
-
 /// Whether a tag satisfies a C1G2TagSpec (first target tag; the second, if any, must too).
-fn tag_matches(spec: &C1g2TagSpec, model: &Model, tag: usize, epc: &TagEpc) -> bool {
+fn tag_matches(spec: &C1g2TagSpec, tag: &Tag<'_>) -> bool {
+    let chip = tag.memory.chip(tag.model, tag.tag);
     spec.c1g2_target_tag.iter().all(|t| {
-        let words = bank(model, tag, epc, t.mb);
+        let words = chip.bank(t.mb);
         let bits: Vec<bool> = words
             .iter()
             .flat_map(|w| (0..16).rev().map(move |b| w >> b & 1 == 1))

@@ -1,0 +1,243 @@
+//! The C1G2 access operations of one AccessSpec on one tag, and their results with the codes
+//! of the session's LLRP version.
+//!
+//! LLRP 1.1 (§16.2.1.5) gives each failure of the tag its own code; LLRP 1.0.1 has none for a
+//! wrong password, nor for a read's overrun or lock. There the tag's behaviour decides: a
+//! Gen2 tag given a wrong access or kill password does not reply (Gen2 v2.0.1 §6.3.2.11.3.5,
+//! .4.4), so the reader sees no response; an error code the tag backscatters is a
+//! nonspecific tag error.
+
+use llrp::params::*;
+use llrp::StatusCode;
+
+use super::Tag;
+use crate::reader::memory::{Fault, Privilege, LOCK_FIELDS};
+
+/// What ADD_ACCESSSPEC refuses of an operation: ClientRequestOpSpec and vendor operations
+/// (unsupported), and a Lock payload whose privilege or data field is out of range.
+pub(super) fn check(op: &OpSpec) -> Result<(), LlrpStatus> {
+    let unsupported = match op {
+        OpSpec::ClientRequestOpSpec(_) => Some(210),
+        OpSpec::Custom(_) => Some(1023),
+        OpSpec::C1g2Lock(l) => {
+            for p in &l.c1g2_lock_payload {
+                let bad_field = if Privilege::from_llrp(p.privilege).is_none() {
+                    Some(0)
+                } else if usize::from(p.data_field) >= LOCK_FIELDS {
+                    Some(1)
+                } else {
+                    None
+                };
+                if let Some(field) = bad_field {
+                    let mut inner = ParameterError::new(345, StatusCode::P_FieldError);
+                    inner.field_error = Some(FieldError {
+                        field_num: field,
+                        error_code: StatusCode::A_OutOfRange,
+                        ..Default::default()
+                    });
+                    return Err(nested(
+                        344,
+                        inner,
+                        "a C1G2LockPayload's Privilege (0–3) or DataField (0–4) is out of range",
+                    ));
+                }
+            }
+            None
+        }
+        _ => None,
+    };
+    match unsupported {
+        Some(ty) => Err(nested(
+            ty,
+            ParameterError::new(ty, StatusCode::P_UnsupportedParameter),
+            &format!("access operation type {ty} is not supported (the C1G2 Read, Write, BlockWrite, BlockErase, Lock and Kill are)"),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// An M_ParameterError whose detail is AccessSpec → AccessCommand → `inner` (the
+/// operation's own error, or the operation's parameter holding it when `op` differs).
+fn nested(op: u16, inner: ParameterError, why: &str) -> LlrpStatus {
+    let op_error = if inner.parameter_type == op {
+        inner
+    } else {
+        let mut e = ParameterError::new(op, StatusCode::P_ParameterError);
+        e.parameter_error = Some(Box::new(inner));
+        e
+    };
+    let mut cmd = ParameterError::new(209, StatusCode::P_ParameterError);
+    cmd.parameter_error = Some(Box::new(op_error));
+    let mut pe = ParameterError::new(207, StatusCode::P_ParameterError);
+    pe.parameter_error = Some(Box::new(cmd));
+    let mut s = LlrpStatus::new(StatusCode::M_ParameterError, why);
+    s.parameter_error = Some(pe);
+    s
+}
+
+/// Runs `ops` in order on `tag`; an operation that fails ends the sequence, its result the
+/// last one reported (ours: after a failure the tag's state is not what the later operations
+/// were written for).
+pub(super) fn run(ops: &[OpSpec], tag: &Tag<'_>) -> Vec<OpSpecResult> {
+    let mut results = Vec::with_capacity(ops.len());
+    for op in ops {
+        let (result, ok) = tag
+            .memory
+            .with_chip(tag.model, tag.tag, |chip| one(op, chip, tag.version));
+        results.extend(result);
+        if !ok {
+            break;
+        }
+    }
+    results
+}
+
+/// One operation on `chip`: its result, and whether it succeeded.
+fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<OpSpecResult>, bool) {
+    if chip.killed {
+        // Killed by an earlier operation of the same AccessSpec: it answers nothing more.
+        return (None, false);
+    }
+    let (result, ok) = match op {
+        OpSpec::C1g2Read(r) => {
+            let got = chip.read(r.mb, r.word_pointer, r.word_count, r.access_password);
+            let ok = got.is_ok();
+            let (result, read_data) = match got {
+                Ok(words) => (0, words),
+                Err(f) => (read_code(f, v), Vec::new()),
+            };
+            let r = C1g2ReadOpSpecResult {
+                result,
+                op_spec_id: r.op_spec_id,
+                read_data,
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2Read(r), ok)
+        }
+        OpSpec::C1g2Write(w) => {
+            let (n, fault) = chip.write(w.mb, w.word_pointer, &w.write_data, w.access_password);
+            let r = C1g2WriteOpSpecResult {
+                result: fault.map_or(0, |f| write_code(f, v)),
+                op_spec_id: w.op_spec_id,
+                num_words_written: n,
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2Write(r), fault.is_none())
+        }
+        OpSpec::C1g2BlockWrite(w) => {
+            let got = chip.block_write(w.mb, w.word_pointer, &w.write_data, w.access_password);
+            let r = C1g2BlockWriteOpSpecResult {
+                result: got.err().map_or(0, |f| write_code(f, v)),
+                op_spec_id: w.op_spec_id,
+                num_words_written: got.unwrap_or(0),
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2BlockWrite(r), got.is_ok())
+        }
+        OpSpec::C1g2BlockErase(e) => {
+            let got = chip.erase(e.mb, e.word_pointer, e.word_count, e.access_password);
+            let r = C1g2BlockEraseOpSpecResult {
+                result: got.err().map_or(0, |f| write_code(f, v)),
+                op_spec_id: e.op_spec_id,
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2BlockErase(r), got.is_ok())
+        }
+        OpSpec::C1g2Lock(l) => {
+            let payloads: Vec<(Privilege, usize)> = l
+                .c1g2_lock_payload
+                .iter()
+                .filter_map(|p| {
+                    Some((
+                        Privilege::from_llrp(p.privilege)?,
+                        usize::from(p.data_field),
+                    ))
+                })
+                .collect();
+            let got = chip.lock(&payloads, l.access_password);
+            let r = C1g2LockOpSpecResult {
+                result: got.err().map_or(0, |f| lock_code(f, v)),
+                op_spec_id: l.op_spec_id,
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2Lock(r), got.is_ok())
+        }
+        OpSpec::C1g2Kill(k) => {
+            let got = chip.kill(k.kill_password);
+            let r = C1g2KillOpSpecResult {
+                result: got.err().map_or(0, |f| kill_code(f, v)),
+                op_spec_id: k.op_spec_id,
+                ..Default::default()
+            };
+            (OpSpecResult::C1g2Kill(r), got.is_ok())
+        }
+        // Refused when the AccessSpec was added (`check`).
+        OpSpec::ClientRequestOpSpec(_) | OpSpec::Custom(_) => return (None, false),
+    };
+    (Some(result), ok)
+}
+
+/// C1G2ReadResultType: 1 Nonspecific_Tag_Error, 2 No_Response_From_Tag; LLRP 1.1 adds
+/// 4 Memory_Overrun_Error, 5 Memory_Locked_Error, 6 Incorrect_Password_Error.
+fn read_code(f: Fault, v: u8) -> u8 {
+    match (f, v >= 2) {
+        (Fault::Overrun, true) => 4,
+        (Fault::Locked, true) => 5,
+        (Fault::Password, true) => 6,
+        (Fault::Password, false) | (Fault::Ignored, _) => 2,
+        _ => 1,
+    }
+}
+
+/// C1G2WriteResultType (also BlockWrite's and BlockErase's): 1 Tag_Memory_Overrun_Error,
+/// 2 Tag_Memory_Locked_Error, 4 Nonspecific_Tag_Error, 5 No_Response_From_Tag; LLRP 1.1
+/// adds 7 Incorrect_Password_Error.
+fn write_code(f: Fault, v: u8) -> u8 {
+    match (f, v >= 2) {
+        (Fault::Overrun, _) => 1,
+        (Fault::Locked, _) => 2,
+        (Fault::Password, true) => 7,
+        (Fault::Password, false) | (Fault::Ignored, _) => 5,
+        _ => 4,
+    }
+}
+
+/// C1G2LockResultType: 2 Nonspecific_Tag_Error, 3 No_Response_From_Tag; LLRP 1.1 adds
+/// 5 Incorrect_Password_Error, 6 Tag_Memory_Overrun_Error, 7 Tag_Memory_Locked_Error.
+fn lock_code(f: Fault, v: u8) -> u8 {
+    match (f, v >= 2) {
+        (Fault::Password, true) => 5,
+        (Fault::Overrun, true) => 6,
+        (Fault::Locked, true) => 7,
+        (Fault::Password, false) | (Fault::Ignored, _) => 3,
+        _ => 2,
+    }
+}
+
+/// C1G2KillResultType: 1 Zero_Kill_Password_Error, 3 Nonspecific_Tag_Error,
+/// 4 No_Response_From_Tag; LLRP 1.1 adds 6 Incorrect_Password_Error.
+fn kill_code(f: Fault, v: u8) -> u8 {
+    match (f, v >= 2) {
+        (Fault::ZeroKillPassword, _) => 1,
+        (Fault::Password, true) => 6,
+        (Fault::Password, false) | (Fault::Ignored, _) => 4,
+        _ => 3,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn llrp_1_0_1_has_no_password_codes_and_a_wrong_password_gets_no_response() {
+        assert_eq!(write_code(Fault::Password, 2), 7);
+        assert_eq!(write_code(Fault::Password, 1), 5);
+        assert_eq!(read_code(Fault::Overrun, 2), 4);
+        assert_eq!(read_code(Fault::Overrun, 1), 1);
+        assert_eq!(kill_code(Fault::ZeroKillPassword, 1), 1);
+        assert_eq!(kill_code(Fault::Password, 2), 6);
+        assert_eq!(lock_code(Fault::Locked, 2), 7);
+        assert_eq!(lock_code(Fault::Locked, 1), 2);
+    }
+}

@@ -1,0 +1,364 @@
+//! Tag memory access as an encoding station uses it: C1G2 Write, BlockWrite, BlockErase, Lock
+//! and Kill on the simulated reader, with the result codes of LLRP 1.0.1 and 1.1 for every
+//! failure, what later inventories report after an EPC write or a kill, and the status a bad
+//! Lock payload gets. Driven in process with a virtual clock (tests/common/virtual_reader.rs).
+
+mod common;
+
+use common::virtual_reader::VirtualReader;
+use common::*;
+use llrp::codec::BitVec;
+use llrp::params::*;
+use llrp_gateway::scenario::Scenario;
+
+/// Runs an inventory on antenna 1 with an AccessSpec (ID `id`, deleted after one execution)
+/// of `ops` on the tags whose EPC ends in `last` (their last EPC byte); gives the results of
+/// the first tag report that carries any, then stops and deletes the ROSpec.
+fn access(v: &mut VirtualReader, id: u32, last: u8, ops: Vec<OpSpec>) -> Vec<OpSpecResult> {
+    let access = AccessSpec {
+        access_spec_id: id,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
+        access_spec_stop_trigger: AccessSpecStopTrigger {
+            access_spec_stop_trigger_type: AccessSpecStopTriggerType::OperationCount,
+            operation_count_value: 1,
+            ..Default::default()
+        },
+        access_command: AccessCommand {
+            c1g2_tag_spec: last_byte_is(last),
+            op_specs: ops,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    v.add_access_spec(access);
+    let tags = inventory(v, |t| t.iter().any(|t| !t.op_spec_results.is_empty()));
+    tags.into_iter()
+        .find(|t| !t.op_spec_results.is_empty())
+        .map(|t| t.op_spec_results)
+        .expect("a tag report with the operations' results")
+}
+
+/// A C1G2TagSpec matching EPC-96s whose last byte is `last` (bits 168–175 of EPC memory).
+fn last_byte_is(last: u8) -> C1g2TagSpec {
+    C1g2TagSpec {
+        c1g2_target_tag: vec![C1g2TargetTag {
+            mb: 1,
+            is_match: true,
+            pointer: 32 + 88,
+            tag_mask: BitVec::from_bytes(&[0xFF]),
+            tag_data: BitVec::from_bytes(&[last]),
+            ..Default::default()
+        }],
+        ..Default::default()
+    }
+}
+
+/// Runs ROSpec 1 on antenna 1 until `done` (at most 10 simulated seconds), then deletes it;
+/// its reports carry every field, the PC word too.
+fn inventory(
+    v: &mut VirtualReader,
+    done: impl FnMut(&[TagReportData]) -> bool,
+) -> Vec<TagReportData> {
+    let mut report = full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1);
+    report
+        .tag_report_content_selector
+        .air_protocol_epc_memory_selector = vec![C1g2EpcMemorySelector {
+        enable_crc: true,
+        enable_pc_bits: true,
+        ..Default::default()
+    }];
+    let spec = rospec(1, vec![1], ro_null(), ai_null(), report);
+    let add = llrp::message::AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(v.status(add), StatusCode::M_Success);
+    let enable = llrp::message::EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(enable), StatusCode::M_Success);
+    let (tags, _) = v.collect_reports(10_000_000, done);
+    let delete = llrp::message::DeleteRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(delete), StatusCode::M_Success);
+    v.take();
+    tags
+}
+
+/// Two tags 1 and 1.2 m in front of the antenna (EPCs ending 01 and 02); the first with kill
+/// password 12345678 and access password 0000ABCD.
+fn scenario() -> Scenario {
+    let mut s = line_scenario(&[1.0, 1.2]);
+    s.tags[0].kill_password = Some("12345678".into());
+    s.tags[0].access_password = Some("0000ABCD".into());
+    s
+}
+
+fn write(op_spec_id: u16, mb: u8, word_pointer: u16, data: &[u16], password: u32) -> OpSpec {
+    OpSpec::C1g2Write(C1g2Write {
+        op_spec_id,
+        access_password: password,
+        mb,
+        word_pointer,
+        write_data: data.to_vec(),
+        ..Default::default()
+    })
+}
+
+fn read(op_spec_id: u16, mb: u8, word_pointer: u16, word_count: u16, password: u32) -> OpSpec {
+    OpSpec::C1g2Read(C1g2Read {
+        op_spec_id,
+        access_password: password,
+        mb,
+        word_pointer,
+        word_count,
+        ..Default::default()
+    })
+}
+
+fn lock(privilege: u8, data_field: u8, password: u32) -> OpSpec {
+    OpSpec::C1g2Lock(C1g2Lock {
+        op_spec_id: 3,
+        access_password: password,
+        c1g2_lock_payload: vec![C1g2LockPayload {
+            privilege,
+            data_field,
+            ..Default::default()
+        }],
+        ..Default::default()
+    })
+}
+
+/// (result, words written) of a Write result; (result, data) of a Read's, as text.
+fn outcome(r: &OpSpecResult) -> String {
+    match r {
+        OpSpecResult::C1g2Write(w) => format!("write {} {}", w.result, w.num_words_written),
+        OpSpecResult::C1g2BlockWrite(w) => {
+            format!("blockwrite {} {}", w.result, w.num_words_written)
+        }
+        OpSpecResult::C1g2Read(r) => format!("read {} {:04X?}", r.result, r.read_data),
+        OpSpecResult::C1g2Lock(l) => format!("lock {}", l.result),
+        OpSpecResult::C1g2Kill(k) => format!("kill {}", k.result),
+        OpSpecResult::C1g2BlockErase(e) => format!("erase {}", e.result),
+        other => format!("{other:?}"),
+    }
+}
+
+fn outcomes(r: &[OpSpecResult]) -> Vec<String> {
+    r.iter().map(outcome).collect()
+}
+
+#[test]
+fn user_memory_written_once_reads_back_in_a_later_inventory() {
+    let mut v = VirtualReader::new(&scenario());
+    let w = access(&mut v, 1, 2, vec![write(1, 3, 0, &[0xBEEF, 0xCAFE], 0)]);
+    assert_eq!(outcomes(&w), ["write 0 2"]);
+    let r = access(&mut v, 2, 2, vec![read(2, 3, 0, 3, 0)]);
+    assert_eq!(outcomes(&r), ["read 0 [BEEF, CAFE, 0000]"]);
+    // The other tag's memory is its own.
+    let r = access(&mut v, 3, 1, vec![read(2, 3, 0, 2, 0)]);
+    assert_eq!(outcomes(&r), ["read 0 [0000, 0000]"]);
+}
+
+#[test]
+fn writing_the_epc_bank_changes_what_later_inventories_report() {
+    let mut v = VirtualReader::new(&scenario());
+    // PC word: 4 words of EPC; then the new 64-bit EPC.
+    // (The user-memory indicator, bit 10, set too: the PC is reported as written.)
+    let data = [0x2400, 0x1111, 0x2222, 0x3333, 0x4444];
+    let w = access(&mut v, 1, 2, vec![write(1, 1, 1, &data, 0)]);
+    assert_eq!(outcomes(&w), ["write 0 5"]);
+    let tags = inventory(&mut v, |t| t.len() >= 20);
+    let epcs: std::collections::BTreeSet<Vec<u8>> =
+        tags.iter().map(|t| t.epc_bytes().to_vec()).collect();
+    let new = vec![0x11, 0x11, 0x22, 0x22, 0x33, 0x33, 0x44, 0x44];
+    assert!(epcs.contains(&new), "{epcs:02X?}");
+    assert!(
+        !epcs.iter().any(|e| e.last() == Some(&2) && e.len() == 12),
+        "{epcs:02X?}"
+    );
+    // The PC word reported is the one written.
+    let pc = tags
+        .iter()
+        .find(|t| t.epc_bytes() == new.as_slice())
+        .and_then(|t| {
+            t.air_protocol_tag_data.iter().find_map(|d| match d {
+                AirProtocolTagData::C1g2Pc(p) => Some(p.0),
+                _ => None,
+            })
+        });
+    assert_eq!(pc, Some(0x2400));
+    // Writing the StoredCRC is refused by the tag.
+    let w = access(&mut v, 2, 1, vec![write(1, 1, 0, &[0], 0)]);
+    assert_eq!(outcomes(&w), ["write 4 0"]);
+}
+
+#[test]
+fn a_killed_tag_is_never_reported_again() {
+    let mut v = VirtualReader::new(&scenario());
+    let kill = |password| {
+        OpSpec::C1g2Kill(C1g2Kill {
+            op_spec_id: 4,
+            kill_password: password,
+            ..Default::default()
+        })
+    };
+    // A wrong kill password: the tag does not reply (LLRP 1.0.1 has no password code).
+    assert_eq!(
+        outcomes(&access(&mut v, 1, 1, vec![kill(0x1234_0000)])),
+        ["kill 4"]
+    );
+    // The second tag's kill password is 0: it does not kill.
+    assert_eq!(
+        outcomes(&access(&mut v, 2, 2, vec![kill(0x1234_5678)])),
+        ["kill 1"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 3, 1, vec![kill(0x1234_5678)])),
+        ["kill 0"]
+    );
+    let tags = inventory(&mut v, |t| t.len() >= 30);
+    assert!(tags.len() >= 30);
+    assert!(
+        tags.iter().all(|t| t.epc_bytes().last() == Some(&2)),
+        "the killed tag answered"
+    );
+}
+
+#[test]
+fn a_locked_bank_needs_the_access_password_and_says_why_in_llrp_1_1() {
+    let mut v = VirtualReader::new(&scenario());
+    v.set_version(2);
+    // Tag 1 has access password 0000ABCD: without it the tag stays open and ignores Lock.
+    assert_eq!(
+        outcomes(&access(&mut v, 1, 1, vec![lock(0, 4, 0)])),
+        ["lock 3"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 2, 1, vec![lock(0, 4, 0x1111)])),
+        ["lock 5"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 3, 1, vec![lock(0, 4, 0xABCD)])),
+        ["lock 0"]
+    );
+    let r = access(
+        &mut v,
+        4,
+        1,
+        vec![write(1, 3, 0, &[1], 0), write(2, 3, 0, &[1], 0xABCD)],
+    );
+    // The first write fails on the locked bank, which ends the sequence.
+    assert_eq!(outcomes(&r), ["write 2 0"]);
+    let r = access(&mut v, 5, 1, vec![write(2, 3, 0, &[1], 0xABCD)]);
+    assert_eq!(outcomes(&r), ["write 0 1"]);
+    let r = access(&mut v, 6, 1, vec![write(2, 3, 0, &[1], 0x1111)]);
+    assert_eq!(outcomes(&r), ["write 7 0"]);
+    // The access password itself, read-locked, reads only with it.
+    assert_eq!(
+        outcomes(&access(&mut v, 7, 1, vec![lock(0, 1, 0xABCD)])),
+        ["lock 0"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 8, 1, vec![read(1, 0, 2, 2, 0)])),
+        ["read 5 []"]
+    );
+    let r = access(&mut v, 9, 1, vec![read(1, 0, 0, 4, 0xABCD)]);
+    assert_eq!(outcomes(&r), ["read 0 [1234, 5678, 0000, ABCD]"]);
+}
+
+#[test]
+fn permalocked_memory_stays_locked() {
+    let mut v = VirtualReader::new(&scenario());
+    v.set_version(2);
+    assert_eq!(
+        outcomes(&access(&mut v, 1, 2, vec![lock(1, 4, 0)])),
+        ["lock 0"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 2, 2, vec![lock(3, 4, 0)])),
+        ["lock 7"]
+    );
+    assert_eq!(
+        outcomes(&access(&mut v, 3, 2, vec![write(1, 3, 0, &[1], 0)])),
+        ["write 2 0"]
+    );
+    // TID memory ships permalocked.
+    assert_eq!(
+        outcomes(&access(&mut v, 4, 2, vec![write(1, 2, 0, &[1], 0)])),
+        ["write 2 0"]
+    );
+}
+
+#[test]
+fn words_beyond_a_bank_overrun_in_both_versions() {
+    let mut v = VirtualReader::new(&scenario());
+    // 32 words of user memory (the default chip): the last word is 31.
+    let r = access(&mut v, 1, 2, vec![write(1, 3, 31, &[7, 8], 0)]);
+    assert_eq!(outcomes(&r), ["write 1 1"]);
+    let r = access(&mut v, 2, 2, vec![read(1, 3, 40, 1, 0)]);
+    assert_eq!(outcomes(&r), ["read 1 []"]);
+    v.set_version(2);
+    let r = access(&mut v, 3, 2, vec![read(1, 3, 40, 1, 0)]);
+    assert_eq!(outcomes(&r), ["read 4 []"]);
+    let erase = OpSpec::C1g2BlockErase(C1g2BlockErase {
+        op_spec_id: 1,
+        mb: 3,
+        word_pointer: 30,
+        word_count: 4,
+        ..Default::default()
+    });
+    assert_eq!(outcomes(&access(&mut v, 4, 2, vec![erase])), ["erase 1"]);
+    let block = OpSpec::C1g2BlockWrite(C1g2BlockWrite {
+        op_spec_id: 1,
+        mb: 3,
+        word_pointer: 0,
+        write_data: vec![9, 9, 9],
+        ..Default::default()
+    });
+    let r = access(&mut v, 5, 2, vec![block, read(2, 3, 0, 3, 0)]);
+    assert_eq!(
+        outcomes(&r),
+        ["blockwrite 0 3", "read 0 [0009, 0009, 0009]"]
+    );
+}
+
+#[test]
+fn a_lock_payload_out_of_range_is_refused_with_the_field_named() {
+    let mut v = VirtualReader::new(&scenario());
+    for (payload, field) in [(lock(4, 2, 0), 0), (lock(0, 5, 0), 1)] {
+        let add = llrp::message::AddAccessspec {
+            access_spec: AccessSpec {
+                access_spec_id: 1,
+                protocol_id: AirProtocol::EpcGlobalClass1Gen2,
+                access_command: AccessCommand {
+                    c1g2_tag_spec: last_byte_is(1),
+                    op_specs: vec![payload],
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let answer = v.request(add);
+        let status = answer.body.status().expect("a response");
+        assert_eq!(status.status_code, StatusCode::M_ParameterError);
+        // AccessSpec → AccessCommand → C1G2Lock → C1G2LockPayload, field `field` out of range.
+        let mut chain = Vec::new();
+        let mut pe = status.parameter_error.as_ref();
+        while let Some(p) = pe {
+            chain.push(p.parameter_type);
+            if let Some(fe) = &p.field_error {
+                assert_eq!(
+                    (fe.field_num, fe.error_code),
+                    (field, StatusCode::A_OutOfRange)
+                );
+            }
+            pe = p.parameter_error.as_deref();
+        }
+        assert_eq!(chain, [207, 209, 344, 345]);
+    }
+}
