@@ -817,14 +817,15 @@ impl Capture {
             let Ok(data) = std::fs::read(path) else {
                 return false;
             };
-            let Ok(read) = pcapng::capture::read(&data) else {
-                return false;
-            };
-            read.packets.iter().any(|p| {
-                p.link.is_ok_and(|l| {
-                    pcapng::packet::parse(l, p.data).is_ok_and(|s| s.dst.port() == probe_port)
-                })
-            })
+            let mut found = false;
+            let _ = pcapng::capture::read_packets(&data[..], |p| {
+                found |= p.link.is_ok_and(|l| {
+                    matches!(pcapng::packet::parse(l, p.data),
+                        Ok(pcapng::packet::Parsed::Segment(s)) if s.dst.port() == probe_port)
+                });
+                Ok(())
+            });
+            found
         };
         let guard = Instant::now() + std::time::Duration::from_secs(30);
         while !seen(path) {

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use crate::files::{Output, OutputError};
 use crate::record::pcapng::{
-    export, import, write_recording, ExportError, ExportOptions, ImportError, DEFAULT_MSS,
+    export, import_into, ExportError, ExportOptions, ImportError, JsonLines, DEFAULT_MSS,
 };
-use crate::record::{Entry, RecordError, Recording};
+use crate::record::{RecordError, Recording};
 
 /// `llrp-gateway export`: a recording as a pcapng capture.
 #[derive(Clone, Debug, clap::Args)]
@@ -155,43 +155,41 @@ fn open_recording(path: &Path) -> Result<Recording, ExportCommandError> {
     Ok(recording)
 }
 
-/// Runs `llrp-gateway import`; warnings and a summary go to standard error.
+/// Runs `llrp-gateway import`: the capture is read and the recording written as they go
+/// (bounded memory); warnings and a summary go to standard error.
 pub fn run_import(args: &ImportArgs) -> Result<(), ImportCommandError> {
     let name = args.capture.display();
     let mut output = Output::create(&args.output, &[&args.capture], args.force)?;
-    let data = std::fs::read(&args.capture).map_err(|source| ImportCommandError::Read {
+    let file = std::fs::File::open(&args.capture).map_err(|source| ImportCommandError::Read {
         path: args.capture.clone(),
         source,
     })?;
-    let recording = import(&data).map_err(|source| ImportCommandError::Import {
-        path: args.capture.clone(),
-        source,
+    let summary = import_into(file, &mut JsonLines(&mut output)).map_err(|source| {
+        ImportCommandError::Import {
+            path: args.capture.clone(),
+            source,
+        }
     })?;
-    for w in &recording.warnings {
+    for w in &summary.warnings {
         eprintln!("llrp-gateway import: warning: {name}: {w}");
     }
-    let frames = recording
-        .entries
-        .iter()
-        .filter(|e| matches!(e, Entry::Frame { .. }))
-        .count();
-    if frames == 0 {
+    if summary.frames == 0 {
+        // The partial recording is removed when `output` is dropped uncommitted.
         return Err(ImportCommandError::NoFrames {
             path: args.capture.clone(),
             out: args.output.clone(),
         });
     }
-    write_recording(&recording, &mut output)
-        .and_then(|()| output.flush())
-        .map_err(|source| ImportCommandError::Write {
-            out: args.output.clone(),
-            source,
-        })?;
+    output.flush().map_err(|source| ImportCommandError::Write {
+        out: args.output.clone(),
+        source,
+    })?;
     output.commit()?;
     eprintln!(
-        "llrp-gateway import: {} connections, {frames} frames, reader {}: {}",
-        recording.connections().len(),
-        recording.header.upstream,
+        "llrp-gateway import: {} connections, {} frames, reader {}: {}",
+        summary.connections,
+        summary.frames,
+        summary.upstream,
         args.output.display()
     );
     Ok(())

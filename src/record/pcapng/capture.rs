@@ -1,14 +1,14 @@
-//! Reading a capture file: pcap or pcapng (told apart by their magic number), each packet
-//! with its link type and its time in UTC microseconds.
+//! Reading a capture file as a stream: pcap or pcapng (told apart by their magic number)
+//! through pcap-parser's readers, which hold one buffer of the file at a time, so a capture
+//! larger than memory is read in bounded memory. Each packet comes with its link type and
+//! its time in UTC microseconds (pcap-parser's pcapng time resolutions: `if_tsresol` as a
+//! power of 10 up to 10^-19 s or of 2 up to 2^-63 s, and `if_tsoffset`).
 
-use std::borrow::Cow;
+use std::io::{Cursor, Read};
 
-use pcap_file::pcap::PcapParser;
-use pcap_file::pcapng::blocks::interface_description::{
-    InterfaceDescriptionBlock, InterfaceDescriptionOption,
-};
-use pcap_file::pcapng::{Block, PcapNgParser};
-use pcap_file::{PcapError, TsResolution};
+use pcap_parser::pcapng::Block;
+use pcap_parser::traits::PcapReaderIterator;
+use pcap_parser::{LegacyPcapReader, PcapBlockOwned, PcapError, PcapNGReader};
 
 use super::packet::Link;
 use super::ImportError;
@@ -24,38 +24,168 @@ pub struct Packet<'a> {
     pub link: Result<Link, u32>,
     /// The bytes captured.
     pub data: &'a [u8],
-}
-
-/// A capture's packets, and what was tolerated while reading it.
-#[derive(Debug, Default)]
-pub struct Packets<'a> {
-    /// The packets in file order.
-    pub packets: Vec<Packet<'a>>,
-    /// Problems tolerated (a capture cut inside its last packet).
-    pub warnings: Vec<String>,
+    /// Whether fewer bytes were captured than the packet had (the snap length).
+    pub cut: bool,
 }
 
 /// The pcapng Section Header Block type, as the file's first four bytes (either byte order).
 const PCAPNG_MAGIC: [u8; 4] = [0x0A, 0x0D, 0x0D, 0x0A];
 
-/// Reads every packet of a pcap or pcapng capture held in memory.
-pub fn read(data: &[u8]) -> Result<Packets<'_>, ImportError> {
-    let magic = data.get(..4).ok_or_else(|| not_a_capture(data))?;
-    if magic == PCAPNG_MAGIC {
-        read_pcapng(data)
-    } else if [
+/// The reader's first buffer; it grows (doubling) for a larger block.
+const BUFFER: usize = 1 << 20;
+
+/// The largest block taken: past this a block length is taken as corrupt.
+pub const MAX_BLOCK: usize = 256 << 20;
+
+/// An interface of a pcapng section: its link, ticks per second and offset in seconds.
+#[derive(Clone, Copy, Debug)]
+struct Interface {
+    link: Result<Link, u32>,
+    ticks_per_s: Option<u64>,
+    offset_s: i64,
+}
+
+/// What the blocks read so far say about the ones to come.
+#[derive(Debug, Default)]
+struct State {
+    /// The legacy pcap's link and whether its fractions are nanoseconds.
+    legacy: Option<(Result<Link, u32>, bool)>,
+    /// The pcapng section's interfaces and byte order.
+    interfaces: Vec<Interface>,
+    big_endian: bool,
+    /// Packets so far, and the last one's time (a Simple Packet Block has none).
+    packets: usize,
+    last_us: u64,
+}
+
+/// Reads every packet of the pcap or pcapng capture `input`, one at a time, handing each to
+/// `each` (which may stop the reading with an error); returns what was tolerated (a capture
+/// cut inside its last packet).
+pub fn read_packets<R: Read + Send>(
+    mut input: R,
+    mut each: impl FnMut(&Packet<'_>) -> Result<(), ImportError>,
+) -> Result<Vec<String>, ImportError> {
+    let start = prefix(&mut input)?;
+    let magic = start.get(..4).ok_or_else(|| not_a_capture(&start))?;
+    let pcapng = magic == PCAPNG_MAGIC;
+    let pcap = [
         [0xA1, 0xB2, 0xC3, 0xD4],
         [0xD4, 0xC3, 0xB2, 0xA1],
         [0xA1, 0xB2, 0x3C, 0x4D],
         [0x4D, 0x3C, 0xB2, 0xA1],
+        [0xA1, 0xB2, 0xCD, 0x34],
+        [0x34, 0xCD, 0xB2, 0xA1],
     ]
     .iter()
-    .any(|m| m == magic)
-    {
-        read_pcap(data)
-    } else {
-        Err(not_a_capture(data))
+    .any(|m| m == magic);
+    if !pcapng && !pcap {
+        return Err(not_a_capture(&start));
     }
+    let input = Cursor::new(start).chain(input);
+    let at_start = |e: PcapError<&'static [u8]>| malformed(0, 0, &e);
+    let mut it: Box<dyn PcapReaderIterator + Send> = if pcapng {
+        Box::new(PcapNGReader::new(BUFFER, input).map_err(at_start)?)
+    } else {
+        Box::new(LegacyPcapReader::new(BUFFER, input).map_err(at_start)?)
+    };
+    let mut state = State::default();
+    let mut capacity = BUFFER;
+    loop {
+        let err = match it.next() {
+            Ok((size, block)) => {
+                state.block(block, &mut each)?;
+                it.consume(size);
+                continue;
+            }
+            Err(e) => Stop::of(e),
+        };
+        let at = it.consumed();
+        match err {
+            Stop::End => return Ok(Vec::new()),
+            Stop::Cut => return Ok(vec![cut(at, it.data().len())]),
+            Stop::More if it.data().len() < capacity => {
+                it.refill().map_err(|e| malformed(at, state.packets, &e))?
+            }
+            Stop::More if capacity < MAX_BLOCK => {
+                capacity *= 2;
+                it.grow(capacity);
+            }
+            Stop::More => return Err(too_large(at, state.packets)),
+            Stop::Bad(reason) => {
+                return Err(ImportError::Pcap {
+                    offset: at,
+                    after: state.packets,
+                    reason,
+                })
+            }
+        }
+    }
+}
+
+/// How a read that gave no block ended.
+enum Stop {
+    /// The end of the file, after a whole block.
+    End,
+    /// The end of the file, inside a block.
+    Cut,
+    /// The buffer needs more of the file, or to grow.
+    More,
+    /// A block that does not parse, and why.
+    Bad(String),
+}
+
+impl Stop {
+    fn of(e: PcapError<&[u8]>) -> Stop {
+        match e {
+            PcapError::Eof => Stop::End,
+            PcapError::UnexpectedEof => Stop::Cut,
+            PcapError::Incomplete(_) | PcapError::BufferTooSmall => Stop::More,
+            other => Stop::Bad(reason(&other)),
+        }
+    }
+}
+
+/// What a pcap-parser error says, without the input it quotes.
+fn reason<I>(e: &PcapError<I>) -> String {
+    match e {
+        PcapError::NomError(_, kind) | PcapError::OwnedNomError(_, kind) => {
+            format!("a block that does not parse ({kind:?})")
+        }
+        PcapError::ReadError => "the file could not be read".into(),
+        PcapError::HeaderNotRecognized => "a header that is neither pcap nor pcapng".into(),
+        PcapError::Eof | PcapError::UnexpectedEof => "the file ends early".into(),
+        PcapError::Incomplete(_) | PcapError::BufferTooSmall => "a block cut short".into(),
+    }
+}
+
+fn malformed<I>(offset: usize, after: usize, e: &PcapError<I>) -> ImportError {
+    ImportError::Pcap {
+        offset,
+        after,
+        reason: reason(e),
+    }
+}
+
+fn too_large(offset: usize, after: usize) -> ImportError {
+    ImportError::Pcap {
+        offset,
+        after,
+        reason: format!(
+            "a block longer than {} MiB, the most this importer takes",
+            MAX_BLOCK >> 20
+        ),
+    }
+}
+
+/// The first bytes of `input` (up to the reader's first buffer): the magic number, and the
+/// first block whole, which pcap-parser's readers parse from their first read.
+fn prefix(input: &mut impl Read) -> Result<Vec<u8>, ImportError> {
+    let mut start = Vec::new();
+    input
+        .take(BUFFER as u64)
+        .read_to_end(&mut start)
+        .map_err(|e| ImportError::Read(e.to_string()))?;
+    Ok(start)
 }
 
 fn not_a_capture(data: &[u8]) -> ImportError {
@@ -80,188 +210,15 @@ fn not_a_capture(data: &[u8]) -> ImportError {
     }
 }
 
-fn bad(data: &[u8], rest: &[u8], source: PcapError) -> ImportError {
-    ImportError::Pcap {
-        offset: data.len() - rest.len(),
-        source,
-    }
-}
-
 /// The warning for a capture that ends inside a packet or block (a capture still being
 /// written, or killed).
-fn cut(data: &[u8], rest: &[u8]) -> String {
+fn cut(offset: usize, rest: usize) -> String {
     format!(
-        "the capture ends inside a packet at byte {} (cut short while written?): its last {} bytes are ignored",
-        data.len() - rest.len(),
-        rest.len()
+        "the capture ends inside a packet at byte {offset} (cut short while written?): its last {rest} bytes are ignored"
     )
 }
 
-/// The bytes of a packet parsed from the capture in memory. The parsers of pcap-file borrow
-/// from their input slice; an owned copy (which they never make) would read as empty.
-fn borrowed(data: Cow<'_, [u8]>) -> &'_ [u8] {
-    match data {
-        Cow::Borrowed(d) => d,
-        Cow::Owned(_) => &[],
-    }
-}
-
-fn read_pcap(data: &[u8]) -> Result<Packets<'_>, ImportError> {
-    let (mut rest, parser) = PcapParser::new(data).map_err(|e| bad(data, data, e))?;
-    let header = parser.header();
-    let linktype = u32::from(header.datalink);
-    let link = Link::from_linktype(linktype).ok_or(linktype);
-    let nanos = header.ts_resolution == TsResolution::NanoSecond;
-    let mut out = Packets::default();
-    while !rest.is_empty() {
-        // Raw packets: pcap-file's checked ones refuse a packet longer than the snap length,
-        // which a capture made with a small snap length has everywhere; such a packet is
-        // skipped as cut short, the capture still read.
-        let (next, p) = match parser.next_raw_packet(rest) {
-            Ok(x) => x,
-            Err(PcapError::IncompleteBuffer) => {
-                out.warnings.push(cut(data, rest));
-                break;
-            }
-            Err(e) => return Err(bad(data, rest, e)),
-        };
-        let frac_us = if nanos { p.ts_frac / 1000 } else { p.ts_frac };
-        out.packets.push(Packet {
-            number: out.packets.len() + 1,
-            utc_us: u64::from(p.ts_sec) * 1_000_000 + u64::from(frac_us),
-            link,
-            data: borrowed(p.data),
-        });
-        rest = next;
-    }
-    Ok(out)
-}
-
-/// An interface's time unit as (numerator, denominator) of seconds per tick, and its offset
-/// in seconds (pcapng's `if_tsresol`, default 10^-6, and `if_tsoffset`).
-fn time_base(idb: &InterfaceDescriptionBlock<'_>) -> Result<(u128, u64), &'static str> {
-    let mut ticks_per_s: u128 = 1_000_000;
-    let mut offset = 0;
-    for o in &idb.options {
-        match o {
-            InterfaceDescriptionOption::IfTsResol(r) if r & 0x80 == 0 => {
-                ticks_per_s = 10u128
-                    .checked_pow(u32::from(*r))
-                    .filter(|_| *r <= 30)
-                    .ok_or("if_tsresol is beyond 10^-30 s")?;
-            }
-            InterfaceDescriptionOption::IfTsResol(r) => {
-                ticks_per_s = 1u128
-                    .checked_shl(u32::from(r & 0x7F))
-                    .filter(|_| r & 0x7F <= 100)
-                    .ok_or("if_tsresol is beyond 2^-100 s")?;
-            }
-            InterfaceDescriptionOption::IfTsOffset(s) => offset = *s,
-            _ => {}
-        }
-    }
-    Ok((ticks_per_s, offset))
-}
-
-fn read_pcapng(data: &[u8]) -> Result<Packets<'_>, ImportError> {
-    let (mut rest, mut parser) = PcapNgParser::new(data).map_err(|e| bad(data, data, e))?;
-    let mut out = Packets::default();
-    let mut last_us = 0;
-    while !rest.is_empty() {
-        let (next, block) = match parser.next_block(rest) {
-            Ok(x) => x,
-            Err(PcapError::IncompleteBuffer) => {
-                out.warnings.push(cut(data, rest));
-                break;
-            }
-            Err(e) => return Err(bad(data, rest, e)),
-        };
-        // (interface, raw timestamp in the interface's ticks, data, original length)
-        let (interface, ticks, bytes): (u32, Option<u128>, &[u8]) = match block {
-            // pcap-file reports the raw timestamp as nanoseconds whatever the unit.
-            Block::EnhancedPacket(p) => (
-                p.interface_id,
-                Some(p.timestamp.as_nanos()),
-                borrowed(p.data),
-            ),
-            Block::Packet(p) => (
-                u32::from(p.interface_id),
-                Some(u128::from(p.timestamp)),
-                borrowed(p.data),
-            ),
-            Block::SimplePacket(p) => {
-                let d = borrowed(p.data);
-                (0, None, &d[..(p.original_len as usize).min(d.len())])
-            }
-            _ => {
-                rest = next;
-                continue;
-            }
-        };
-        let Some(idb) = parser.interfaces().get(interface as usize) else {
-            return Err(bad(data, rest, PcapError::InvalidInterfaceId(interface)));
-        };
-        let linktype = u32::from(idb.linktype);
-        let utc_us = match ticks {
-            Some(t) => {
-                let (per_s, offset) =
-                    time_base(idb).map_err(|e| bad(data, rest, PcapError::InvalidField(e)))?;
-                let us = t.saturating_mul(1_000_000) / per_s;
-                u64::try_from(us)
-                    .unwrap_or(u64::MAX)
-                    .saturating_add(offset.saturating_mul(1_000_000))
-            }
-            // A Simple Packet Block has no time: that of the packet before it.
-            None => last_us,
-        };
-        last_us = utc_us;
-        out.packets.push(Packet {
-            number: out.packets.len() + 1,
-            utc_us,
-            link: Link::from_linktype(linktype).ok_or(linktype),
-            data: bytes,
-        });
-        rest = next;
-    }
-    Ok(out)
-}
+mod blocks;
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A little-endian pcap with `magic`, snap length 60 and one packet cut to 60 bytes of 100.
-    fn pcap(magic: [u8; 4], frac: u32) -> Vec<u8> {
-        let mut p = magic.to_vec();
-        p.extend_from_slice(&[2, 0, 4, 0]);
-        p.extend_from_slice(&[0; 8]);
-        p.extend_from_slice(&60u32.to_le_bytes());
-        p.extend_from_slice(&1u32.to_le_bytes());
-        p.extend_from_slice(&1_700_000_000u32.to_le_bytes());
-        p.extend_from_slice(&frac.to_le_bytes());
-        p.extend_from_slice(&60u32.to_le_bytes());
-        p.extend_from_slice(&100u32.to_le_bytes());
-        p.extend_from_slice(&[0xAB; 60]);
-        p
-    }
-
-    #[test]
-    fn pcap_in_micro_and_nanoseconds_with_packets_cut_by_the_snap_length() {
-        for (magic, frac) in [
-            ([0xD4, 0xC3, 0xB2, 0xA1], 123_456),
-            ([0x4D, 0x3C, 0xB2, 0xA1], 123_456_789),
-        ] {
-            let data = pcap(magic, frac);
-            let read = read(&data).expect("reads");
-            assert!(read.warnings.is_empty(), "{:?}", read.warnings);
-            let [p] = &read.packets[..] else {
-                panic!("one packet: {:?}", read.packets)
-            };
-            assert_eq!(p.utc_us, 1_700_000_000_123_456);
-            assert_eq!(
-                (p.link, p.data.len(), p.number),
-                (Ok(Link::Ethernet), 60, 1)
-            );
-        }
-    }
-}
+mod tests;

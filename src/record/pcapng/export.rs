@@ -2,21 +2,14 @@
 //! of the recording is a TCP stream over loopback, with its handshake, its data in segments
 //! of at most the MSS, an ACK from the receiver after each frame, and its FIN exchange.
 
-use std::borrow::Cow;
 use std::collections::HashMap;
 use std::io::Write;
 use std::net::Ipv4Addr;
-use std::time::Duration;
 
-use pcap_file::pcapng::blocks::enhanced_packet::{EnhancedPacketBlock, EnhancedPacketOption};
-use pcap_file::pcapng::blocks::interface_description::{
-    InterfaceDescriptionBlock, InterfaceDescriptionOption,
-};
-use pcap_file::pcapng::blocks::section_header::{SectionHeaderBlock, SectionHeaderOption};
-use pcap_file::pcapng::PcapNgWriter;
-use pcap_file::{DataLink, Endianness, PcapError};
+use pcap_parser::{Linktype, OptionCode, PcapNGOption};
 
-use super::packet::{ethernet_ipv4_tcp, OutSegment, ACK, FIN, PSH, SYN};
+use super::packet::{ethernet_ipv4_tcp, OutSegment, TooLarge, ACK, FIN, PSH, SYN};
+use super::write::{text, PcapNgOut, WriteError};
 use super::{iso8601, READER_PORT};
 use crate::record::format::{Direction, Entry, Event, Recording};
 
@@ -82,7 +75,10 @@ pub enum ExportError {
     Mss(u16),
     /// Writing the capture failed.
     #[error("writing the capture: {0}")]
-    Write(#[from] PcapError),
+    Write(#[from] WriteError),
+    /// A segment does not fit in a packet (it cannot happen with an MSS in range).
+    #[error("{0}")]
+    Packet(#[from] TooLarge),
 }
 
 /// The client's address and port of connection `conn`.
@@ -110,7 +106,7 @@ struct Stream {
 
 /// Writes packets, counting them.
 struct Out<W: Write> {
-    writer: PcapNgWriter<W>,
+    writer: PcapNgOut<W>,
     packets: usize,
     mss: u16,
 }
@@ -125,7 +121,7 @@ impl<W: Write> Out<W> {
         payload: &[u8],
         utc_us: u64,
         comment: String,
-    ) -> Result<(), PcapError> {
+    ) -> Result<(), ExportError> {
         let other = 1 - end;
         let syn_options = (flags & SYN != 0).then_some((self.mss, WINDOW_SHIFT));
         let data = ethernet_ipv4_tcp(&OutSegment {
@@ -138,7 +134,7 @@ impl<W: Write> Out<W> {
             window: u16::MAX,
             ip_id: s.ip_id[end],
             payload,
-        });
+        })?;
         s.ip_id[end] = s.ip_id[end].wrapping_add(1);
         let used = payload.len() + usize::from(flags & (SYN | FIN) != 0);
         // Sequence numbers are modulo 2^32.
@@ -148,13 +144,9 @@ impl<W: Write> Out<W> {
             s.unacked[other] = 0;
         }
         self.packets += 1;
-        self.writer.write_pcapng_block(EnhancedPacketBlock {
-            interface_id: 0,
-            timestamp: Duration::from_micros(utc_us),
-            original_len: data.len() as u32,
-            data: Cow::Owned(data),
-            options: vec![EnhancedPacketOption::Comment(Cow::Owned(comment))],
-        })?;
+        // Nanoseconds (the interface's if_tsresol 9), to the year 2554.
+        self.writer
+            .packet(utc_us.saturating_mul(1000), &data, &comment)?;
         Ok(())
     }
 
@@ -165,7 +157,7 @@ impl<W: Write> Out<W> {
         generation: u32,
         utc_us: u64,
         why: &str,
-    ) -> Result<Stream, PcapError> {
+    ) -> Result<Stream, ExportError> {
         // Deterministic initial sequence numbers, different per connection and end.
         let isn = conn.wrapping_mul(0x9E37_79B9) ^ generation.wrapping_mul(0x85EB_CA6B);
         let mut s = Stream {
@@ -211,7 +203,7 @@ impl<W: Write> Out<W> {
         bytes: &[u8],
         utc_us: u64,
         what: &str,
-    ) -> Result<(), PcapError> {
+    ) -> Result<(), ExportError> {
         let at = iso8601(utc_us);
         let conn = s.conn;
         let dir = if end == CLIENT {
@@ -260,7 +252,7 @@ impl<W: Write> Out<W> {
     }
 
     /// FIN from the client, FIN from the reader, last ACK.
-    fn close(&mut self, mut s: Stream, utc_us: u64, why: &str) -> Result<(), PcapError> {
+    fn close(&mut self, mut s: Stream, utc_us: u64, why: &str) -> Result<(), ExportError> {
         let at = iso8601(utc_us);
         let conn = s.conn;
         self.send(
@@ -301,8 +293,8 @@ pub fn export(
     if !(MIN_MSS..=MAX_MSS).contains(&options.mss) {
         return Err(ExportError::Mss(options.mss));
     }
-    let mut writer = PcapNgWriter::with_section_header(out, section_header(recording))?;
-    writer.write_pcapng_block(interface())?;
+    let mut writer = PcapNgOut::new(out, section_header(recording))?;
+    writer.interface(Linktype::ETHERNET, 9, interface())?;
     let mut out = Out {
         writer,
         packets: 0,
@@ -342,8 +334,8 @@ pub fn export(
     Ok(summary)
 }
 
-/// The capture's section header: the exporting program and what was recorded.
-fn section_header(recording: &Recording) -> SectionHeaderBlock<'static> {
+/// The capture's section header options: the exporting program and what was recorded.
+fn section_header(recording: &Recording) -> Vec<PcapNGOption<'static>> {
     let h = &recording.header;
     let mut about = format!(
         "llrp-gateway export of a recording of {}, started {}",
@@ -353,33 +345,25 @@ fn section_header(recording: &Recording) -> SectionHeaderBlock<'static> {
     if let Some(s) = &h.scenario {
         about.push_str(&format!(" (scenario {s})"));
     }
-    SectionHeaderBlock {
-        endianness: Endianness::native(),
-        options: vec![
-            SectionHeaderOption::UserApplication(Cow::Owned(format!(
-                "llrp-gateway {}",
-                env!("CARGO_PKG_VERSION")
-            ))),
-            SectionHeaderOption::Comment(Cow::Owned(about)),
-        ],
-        ..SectionHeaderBlock::default()
-    }
+    vec![
+        text(
+            OptionCode::ShbUserAppl,
+            &format!("llrp-gateway {}", env!("CARGO_PKG_VERSION")),
+        ),
+        text(OptionCode::Comment, &about),
+    ]
 }
 
-/// The capture's one interface: Ethernet on loopback, nanosecond timestamps.
-fn interface() -> InterfaceDescriptionBlock<'static> {
-    InterfaceDescriptionBlock {
-        linktype: DataLink::ETHERNET,
-        snaplen: 0,
-        options: vec![
-            InterfaceDescriptionOption::IfName(Cow::Borrowed("lo")),
-            InterfaceDescriptionOption::IfDescription(Cow::Borrowed(
-                "loopback, as exported by llrp-gateway: reader 127.0.0.1:5084",
-            )),
-            // pcap-file writes the timestamps as nanoseconds.
-            InterfaceDescriptionOption::IfTsResol(9),
-        ],
-    }
+/// The options of the capture's one interface: Ethernet on loopback (nanosecond timestamps
+/// are set by the caller).
+fn interface() -> Vec<PcapNGOption<'static>> {
+    vec![
+        text(OptionCode::IfName, "lo"),
+        text(
+            OptionCode::IfDescription,
+            "loopback, as exported by llrp-gateway: reader 127.0.0.1:5084",
+        ),
+    ]
 }
 
 /// Whether entry `e` opens a stream (none open; neither a reader line nor a disconnect).
@@ -410,7 +394,7 @@ impl<W: Write> Out<W> {
         e: &Entry,
         open: &mut HashMap<u32, Stream>,
         summary: &mut ExportSummary,
-    ) -> Result<(), PcapError> {
+    ) -> Result<(), ExportError> {
         let (conn, utc_us) = (e.conn(), e.at().utc_us);
         match e {
             Entry::Frame { dir, frame, .. } => {

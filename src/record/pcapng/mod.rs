@@ -4,19 +4,25 @@
 //! import`; both commands' runners are in `cli::capture`). See `docs/recordings.md`.
 
 pub mod capture;
+pub mod defrag;
+pub mod emit;
 pub mod export;
 pub mod packet;
 pub mod stream;
+pub mod write;
 
-use pcap_file::PcapError;
+use std::io::Read;
+use std::net::SocketAddr;
 
+pub use emit::{JsonLines, Sink};
 pub use export::{export, ExportError, ExportOptions, ExportSummary, DEFAULT_MSS};
 
-use super::format::{
-    encode_entry, encode_header, Direction, Entry, Event, Header, Recording, Stamp,
-};
-use packet::Skip;
-use stream::{Ending, Happening, Piece, Streams};
+use super::format::{Header, Recording};
+use capture::Packet;
+use defrag::Defrag;
+use emit::Emitter;
+use packet::{Parsed, Skip};
+use stream::Streams;
 
 /// The reader's TCP port in an export (LLRP's IANA port, which Wireshark dissects as LLRP).
 pub const READER_PORT: u16 = 5084;
@@ -39,13 +45,29 @@ pub enum ImportError {
         hint: &'static str,
     },
     /// The capture is malformed.
-    #[error("malformed capture at byte {offset}: {source}")]
+    #[error("malformed capture at byte {offset} (after packet {after}): {reason}")]
     Pcap {
-        /// Where the bad block or packet starts.
+        /// Where the bad block starts.
         offset: usize,
-        /// What pcap-file found.
-        source: PcapError,
+        /// The packets read before it.
+        after: usize,
+        /// What pcap-parser found.
+        reason: String,
     },
+    /// A packet cannot be read.
+    #[error("packet {number}: {reason}")]
+    Packet {
+        /// Its number (1-based, as Wireshark counts).
+        number: usize,
+        /// Why.
+        reason: String,
+    },
+    /// The capture file could not be read.
+    #[error("reading the capture: {0}")]
+    Read(String),
+    /// The recording could not be written.
+    #[error("writing the recording: {0}")]
+    Write(#[source] std::io::Error),
     /// No packet has a link type this importer takes apart.
     #[error(
         "no packet of a supported link type (Ethernet, raw IP, Linux cooked, BSD loopback); the capture has link type {0}"
@@ -56,42 +78,172 @@ pub enum ImportError {
     NoLlrp(String),
 }
 
-/// Turns the LLRP streams of a pcap or pcapng capture into a recording: one connection per
-/// TCP stream, in order of their first packet; both directions reassembled and split into
-/// frames; connect and disconnect markers from SYN, FIN and RST. Streams that are not LLRP
-/// are skipped; what was skipped or tolerated is in the recording's `warnings`.
+/// What an import wrote.
+#[derive(Clone, Debug)]
+pub struct ImportSummary {
+    /// The reader of the first connection (the recording's `upstream`).
+    pub upstream: SocketAddr,
+    /// Connections written.
+    pub connections: usize,
+    /// Frames written.
+    pub frames: usize,
+    /// What was skipped or tolerated.
+    pub warnings: Vec<String>,
+}
+
+/// Turns the LLRP streams of a pcap or pcapng capture held in memory into a recording (see
+/// [`import_into`]).
 pub fn import(data: &[u8]) -> Result<Recording, ImportError> {
-    let read = capture::read(data)?;
-    let mut warnings = read.warnings;
-    let packets = read.packets;
-    let Some(first) = packets.first() else {
-        return Err(no_packet(&warnings));
+    let mut recording = Recording {
+        header: Header::new(String::new(), 0),
+        entries: Vec::new(),
+        warnings: Vec::new(),
     };
-    let start_us = first.utc_us;
-    let streams = reassemble(&packets, &mut warnings)?;
-    let llrp = llrp_entries(&streams, start_us, &mut warnings);
-    let Some(upstream) = llrp.upstream else {
-        let n = streams.streams.len();
-        return Err(ImportError::NoLlrp(format!(
-            "{n} TCP streams, none on port 5084 or 5085 nor starting with an LLRP message"
-        )));
+    let summary = import_into(data, &mut recording)?;
+    recording.warnings = summary.warnings;
+    Ok(recording)
+}
+
+/// Turns the LLRP streams of the pcap or pcapng capture `input` into a recording written to
+/// `sink` as it goes, in bounded memory: one connection per TCP stream, in order of their
+/// first packet; both directions reassembled and split into frames; connect and disconnect
+/// markers from SYN, FIN and RST. Streams that are not LLRP are skipped; what was skipped
+/// or tolerated is in the summary's `warnings`. On an error the sink may hold a part.
+pub fn import_into<R: Read + Send, S: Sink>(
+    input: R,
+    sink: &mut S,
+) -> Result<ImportSummary, ImportError> {
+    let mut importer = Importer {
+        streams: Streams::default(),
+        defrag: Defrag::default(),
+        emitter: Emitter::new(sink, 0),
+        packets: 0,
+        linked: 0,
+        last_us: 0,
+        unsupported: Vec::new(),
+        truncated: 0,
     };
-    if llrp.readers.len() > 1 {
-        let all: Vec<String> = llrp.readers.iter().map(|a| a.to_string()).collect();
-        warnings.push(format!(
-            "the capture has {} readers ({}): the recording's header names the first",
-            llrp.readers.len(),
-            all.join(", ")
-        ));
+    let warnings = capture::read_packets(input, |p| importer.packet(p))?;
+    importer.finish(warnings)
+}
+
+/// An import under way.
+struct Importer<'s, S: Sink> {
+    streams: Streams,
+    defrag: Defrag,
+    emitter: Emitter<'s, S>,
+    /// Packets read, those of a supported link type, and the last one's time.
+    packets: usize,
+    linked: usize,
+    last_us: u64,
+    /// The unsupported link types seen.
+    unsupported: Vec<u32>,
+    /// Packets cut short or with inconsistent headers.
+    truncated: usize,
+}
+
+impl<S: Sink> Importer<'_, S> {
+    /// Takes one packet: its TCP segment (or, once whole, the packet its fragment completes)
+    /// goes to its stream, and the recording is written as far as it is decided.
+    fn packet(&mut self, p: &Packet<'_>) -> Result<(), ImportError> {
+        if self.packets == 0 {
+            self.emitter.start_us = p.utc_us;
+        }
+        let index = self.packets;
+        self.packets += 1;
+        self.last_us = p.utc_us;
+        let link = match p.link {
+            Ok(l) => l,
+            Err(t) => {
+                if !self.unsupported.contains(&t) {
+                    self.unsupported.push(t);
+                }
+                return Ok(());
+            }
+        };
+        self.linked += 1;
+        let stream = match packet::parse(link, p.data) {
+            // A TCP segment of a packet cut by the snap length (also one whose IPv4 length
+            // is 0, which says nothing of where it ends) would be taken cut.
+            Ok(_) if p.cut => None,
+            Ok(Parsed::Segment(seg)) => Some(self.streams.segment(&seg, index, p.utc_us)),
+            Ok(Parsed::Fragment(f)) => match self.defrag.add(&f, index) {
+                None => return Ok(()),
+                Some(whole) => packet::reassembled(f.key.src, f.key.dst, &whole)
+                    .ok()
+                    .map(|seg| self.streams.segment(&seg, index, p.utc_us)),
+            },
+            Err(Skip::NotTcp) => return Ok(()),
+            Err(Skip::Truncated) => None,
+        };
+        let Some(stream) = stream else {
+            self.truncated += 1;
+            return Ok(());
+        };
+        self.emitter.take(&mut self.streams, stream);
+        self.emitter
+            .flush(&mut self.streams, false)
+            .map_err(ImportError::Write)
     }
-    let mut entries = llrp.entries;
-    // Capture order: by packet, then by order within the packet (stable).
-    entries.sort_by_key(|(at, _)| *at);
-    Ok(Recording {
-        header: Header::new(upstream.to_string(), start_us),
-        entries: entries.into_iter().map(|(_, e)| e).collect(),
-        warnings,
-    })
+
+    /// At the end of the capture: what the streams still hold is written, and the warnings
+    /// are gathered.
+    fn finish(mut self, mut warnings: Vec<String>) -> Result<ImportSummary, ImportError> {
+        if self.packets == 0 {
+            return Err(no_packet(&warnings));
+        }
+        let types = self
+            .unsupported
+            .iter()
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(", ");
+        if self.linked == 0 {
+            return Err(ImportError::LinkType(types));
+        }
+        self.defrag.finish();
+        self.streams.finish(self.packets - 1, self.last_us);
+        for i in 0..self.streams.streams.len() {
+            self.emitter.take(&mut self.streams, i);
+        }
+        self.emitter
+            .flush(&mut self.streams, true)
+            .map_err(ImportError::Write)?;
+        if !self.unsupported.is_empty() {
+            warnings.push(format!(
+                "packets of link type {types} are skipped (not supported)"
+            ));
+        }
+        warnings.extend(self.defrag.warning());
+        if self.truncated > 0 {
+            warnings.push(format!(
+                "{} packets skipped: cut short (by the capture's snap length?) or with inconsistent headers",
+                self.truncated
+            ));
+        }
+        stream_warnings(&mut self.streams, &mut warnings);
+        let Some(upstream) = self.emitter.upstream else {
+            let n = self.streams.streams.len();
+            return Err(ImportError::NoLlrp(format!(
+                "{n} TCP streams, none on port 5084 or 5085 nor starting with an LLRP message"
+            )));
+        };
+        let readers = &self.emitter.readers;
+        if readers.len() > 1 {
+            let all: Vec<String> = readers.iter().map(|a| a.to_string()).collect();
+            warnings.push(format!(
+                "the capture has {} readers ({}): the recording's header names the first",
+                readers.len(),
+                all.join(", ")
+            ));
+        }
+        Ok(ImportSummary {
+            upstream,
+            connections: self.emitter.connections(),
+            frames: self.emitter.frames,
+            warnings,
+        })
+    }
 }
 
 /// The error for a capture without a whole packet, with the capture's warnings.
@@ -104,77 +256,12 @@ fn no_packet(warnings: &[String]) -> ImportError {
     ImportError::NoLlrp(format!("the capture holds no whole packet{why}"))
 }
 
-/// The TCP streams of the (non-empty) `packets`, with warnings for what was skipped.
-fn reassemble(
-    packets: &[capture::Packet<'_>],
-    warnings: &mut Vec<String>,
-) -> Result<Streams, ImportError> {
-    let mut unsupported: Vec<u32> = Vec::new();
-    let (mut not_tcp, mut fragments, mut truncated) = (0, 0, 0);
-    let mut streams = Streams::default();
-    for (i, p) in packets.iter().enumerate() {
-        let link = match p.link {
-            Ok(l) => l,
-            Err(t) => {
-                if !unsupported.contains(&t) {
-                    unsupported.push(t);
-                }
-                continue;
-            }
-        };
-        match packet::parse(link, p.data) {
-            Ok(seg) => streams.segment(&seg, i, p.utc_us),
-            Err(Skip::NotTcp) => not_tcp += 1,
-            Err(Skip::Fragment) => fragments += 1,
-            Err(Skip::Truncated) => truncated += 1,
-        }
-    }
-    let types = || {
-        let t: Vec<String> = unsupported.iter().map(u32::to_string).collect();
-        t.join(", ")
-    };
-    if !unsupported.is_empty() {
-        if packets.iter().all(|p| p.link.is_err()) {
-            return Err(ImportError::LinkType(types()));
-        }
-        warnings.push(format!(
-            "packets of link type {} are skipped (not supported)",
-            types()
-        ));
-    }
-    if fragments > 0 {
-        warnings.push(format!(
-            "{fragments} IP fragments skipped (fragments are not reassembled)"
-        ));
-    }
-    if truncated > 0 {
-        warnings.push(format!(
-            "{truncated} packets skipped: cut short (by the capture's snap length?) or with inconsistent headers"
-        ));
-    }
-    let _ = not_tcp; // other protocols are of no interest, and not worth a warning
-    let last = packets.len().saturating_sub(1);
-    streams.finish(last, packets[last].utc_us);
-    Ok(streams)
-}
-
-/// What a capture's LLRP streams give: entries by capture position and the readers.
-struct LlrpStreams {
-    /// Each entry with its (packet, order within the packet).
-    entries: Vec<((usize, usize), Entry)>,
-    /// The first LLRP stream's reader.
-    upstream: Option<std::net::SocketAddr>,
-    /// Every reader, in order of first appearance.
-    readers: Vec<std::net::SocketAddr>,
-}
-
-/// The entries of every LLRP stream, one connection each, with warnings for what was skipped.
-fn llrp_entries(streams: &Streams, start_us: u64, warnings: &mut Vec<String>) -> LlrpStreams {
-    let mut entries: Vec<((usize, usize), Entry)> = Vec::new();
-    let mut upstream: Option<std::net::SocketAddr> = None;
-    let (mut conn, mut silent, mut readers) = (0u32, 0usize, Vec::new());
-    for s in &streams.streams {
-        if !s.is_llrp() {
+/// The warnings of each stream, in order: those skipped as not LLRP, and what each LLRP
+/// stream tolerated (gaps, retransmissions, a start inside the stream).
+fn stream_warnings(streams: &mut Streams, warnings: &mut Vec<String>) {
+    let mut silent = 0usize;
+    for s in &mut streams.streams {
+        if !s.decide().llrp {
             if s.payload_bytes == 0 {
                 silent += 1;
             } else {
@@ -185,7 +272,6 @@ fn llrp_entries(streams: &Streams, start_us: u64, warnings: &mut Vec<String>) ->
             }
             continue;
         }
-        conn += 1;
         warnings.extend(s.warnings.iter().cloned());
         if s.duplicate_bytes() > 0 {
             warnings.push(format!(
@@ -195,98 +281,12 @@ fn llrp_entries(streams: &Streams, start_us: u64, warnings: &mut Vec<String>) ->
                 s.duplicate_bytes()
             ));
         }
-        let reader_addr = s.ends[s.reader_end()];
-        upstream.get_or_insert(reader_addr);
-        if !readers.contains(&reader_addr) {
-            readers.push(reader_addr);
-        }
-        stream_entries(s, conn, start_us, &mut entries);
     }
     if silent > 0 {
         warnings.push(format!(
             "{silent} TCP streams without payload, not on an LLRP port, skipped"
         ));
     }
-    LlrpStreams {
-        entries,
-        upstream,
-        readers,
-    }
-}
-
-/// Appends the entries of LLRP stream `s` as connection `conn` to `entries`.
-fn stream_entries(
-    s: &stream::Stream,
-    conn: u32,
-    start_us: u64,
-    entries: &mut Vec<((usize, usize), Entry)>,
-) {
-    let reader = s.reader_end();
-    let client_addr = s.ends[1 - reader];
-    let role = |end: usize| if end == reader { "reader" } else { "client" };
-    for e in &s.events {
-        let at = Stamp {
-            t_us: e.utc_us.saturating_sub(start_us),
-            utc_us: e.utc_us,
-        };
-        let dir = |end: usize| {
-            if end == reader {
-                Direction::FromReader
-            } else {
-                Direction::ToReader
-            }
-        };
-        let entry = match &e.what {
-            Happening::Open { syn } => Entry::Marker {
-                at,
-                conn,
-                event: Event::Connect,
-                reason: if *syn {
-                    format!("client {client_addr}")
-                } else {
-                    format!("client {client_addr} (the capture starts after the handshake)")
-                },
-            },
-            Happening::Data { end, piece } => match piece {
-                Piece::Frame(frame) => Entry::Frame {
-                    at,
-                    conn,
-                    dir: dir(*end),
-                    frame: frame.clone(),
-                    undecodable: None,
-                },
-                Piece::Bytes(bytes) => Entry::Bytes {
-                    at,
-                    conn,
-                    dir: dir(*end),
-                    bytes: bytes.clone(),
-                },
-            },
-            Happening::Close(ending) => Entry::Marker {
-                at,
-                conn,
-                event: Event::Disconnect,
-                reason: match ending {
-                    Ending::Fin(end) => format!("{} closed", role(*end)),
-                    Ending::Reset(end) => format!("reset by the {}", role(*end)),
-                },
-            },
-        };
-        entries.push((e.at, entry));
-    }
-}
-
-/// Writes `recording` (header and entries) to `out`.
-pub fn write_recording(
-    recording: &Recording,
-    out: &mut impl std::io::Write,
-) -> std::io::Result<()> {
-    let mut buf = Vec::new();
-    encode_header(&recording.header, &mut buf);
-    for e in &recording.entries {
-        encode_entry(e, &mut buf);
-    }
-    out.write_all(&buf)
 }
 
 #[cfg(test)]

@@ -1,7 +1,17 @@
-//! Ethernet, IPv4/IPv6 and TCP headers: building the packets of an export (with valid IPv4
-//! and TCP checksums) and taking captured packets apart down to their TCP segment.
+//! Ethernet, IPv4/IPv6 and TCP with etherparse: building the packets of an export (its
+//! packet builder fills in the lengths and the IPv4 and TCP checksums) and taking captured
+//! packets apart down to their TCP segment (its lax slicing, which takes what captures on
+//! the sending host hold: an IPv4 total length of 0 under TCP segmentation offload, IPv6
+//! extension headers, the Authentication Header among them, and IP fragments).
 
-use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+
+use etherparse::err::packet::SliceError;
+use etherparse::{
+    ip_number, EtherType, IpFragOffset, IpHeaders, Ipv4Header, Ipv6ExtensionSlice,
+    LaxIpPayloadSlice, LaxNetSlice, LaxSlicedPacket, PacketBuilder, TcpHeader, TcpOptionElement,
+    TcpSlice, TransportSlice,
+};
 
 /// TCP flag FIN.
 pub const FIN: u8 = 0x01;
@@ -13,13 +23,6 @@ pub const RST: u8 = 0x04;
 pub const PSH: u8 = 0x08;
 /// TCP flag ACK.
 pub const ACK: u8 = 0x10;
-
-/// Ethernet header length.
-const ETHERNET_LEN: usize = 14;
-/// IPv4 header length without options.
-const IPV4_LEN: usize = 20;
-/// TCP header length without options.
-const TCP_LEN: usize = 20;
 
 /// One TCP segment of an export, from `src` to `dst`.
 #[derive(Clone, Debug)]
@@ -44,80 +47,52 @@ pub struct OutSegment<'a> {
     pub payload: &'a [u8],
 }
 
-/// The Internet checksum (RFC 1071) of `data`, continuing from the partial sum `sum`.
-fn ones_complement_sum(mut sum: u32, data: &[u8]) -> u32 {
-    let mut chunks = data.chunks_exact(2);
-    for c in &mut chunks {
-        sum += u32::from(u16::from_be_bytes([c[0], c[1]]));
-    }
-    if let [last] = chunks.remainder() {
-        sum += u32::from(*last) << 8;
-    }
-    sum
-}
+/// Why an export's packet cannot be built: a payload too large for one IPv4 packet.
+#[derive(Debug, thiserror::Error)]
+#[error("a TCP segment of {0} bytes does not fit in an IPv4 packet")]
+pub struct TooLarge(pub usize);
 
-/// Folds a partial sum into the 16-bit one's-complement checksum.
-fn fold(mut sum: u32) -> u16 {
-    while sum > 0xFFFF {
-        sum = (sum & 0xFFFF) + (sum >> 16);
+/// An Ethernet frame holding `seg` in IPv4 (DF, TTL 64) and TCP, lengths and checksums filled
+/// in by etherparse's packet builder. Both MAC addresses are zero, as on Linux's loopback.
+pub fn ethernet_ipv4_tcp(seg: &OutSegment<'_>) -> Result<Vec<u8>, TooLarge> {
+    let too_large = |_| TooLarge(seg.payload.len());
+    // The builder sets the payload length, the protocol and the header checksum.
+    let mut ip = Ipv4Header::new(
+        0,
+        64,
+        ip_number::TCP,
+        seg.src.0.octets(),
+        seg.dst.0.octets(),
+    )
+    .map_err(too_large)?;
+    ip.identification = seg.ip_id;
+    ip.dont_fragment = true;
+    let mut tcp = TcpHeader::new(seg.src.1, seg.dst.1, seg.seq, seg.window);
+    tcp.fin = seg.flags & FIN != 0;
+    tcp.syn = seg.flags & SYN != 0;
+    tcp.rst = seg.flags & RST != 0;
+    tcp.psh = seg.flags & PSH != 0;
+    tcp.ack = seg.flags & ACK != 0;
+    if tcp.ack {
+        tcp.acknowledgment_number = seg.ack;
     }
-    !(sum as u16)
-}
-
-/// Whether the one's-complement sum over `data` (checksum field included) verifies.
-pub fn checksum_ok(data: &[u8]) -> bool {
-    fold(ones_complement_sum(0, data)) == 0
-}
-
-/// An Ethernet frame holding `seg` in IPv4 and TCP, checksums filled in. Both MAC addresses
-/// are zero, as on Linux's loopback interface.
-pub fn ethernet_ipv4_tcp(seg: &OutSegment<'_>) -> Vec<u8> {
-    // MSS (4 bytes), NOP, window scale (3 bytes).
-    let options = if seg.syn_options.is_some() { 8 } else { 0 };
-    let tcp_len = TCP_LEN + options + seg.payload.len();
-    let ip_len = IPV4_LEN + tcp_len;
-    let mut p = Vec::with_capacity(ETHERNET_LEN + ip_len);
-    p.extend_from_slice(&[0; 12]);
-    p.extend_from_slice(&0x0800u16.to_be_bytes());
-    // IPv4: version 4, 5 words, DF, TTL 64, TCP.
-    let ip = p.len();
-    p.extend_from_slice(&[0x45, 0]);
-    // The caller keeps segments within the MSS, far below 65535 bytes.
-    p.extend_from_slice(&(ip_len as u16).to_be_bytes());
-    p.extend_from_slice(&seg.ip_id.to_be_bytes());
-    p.extend_from_slice(&[0x40, 0, 64, 6, 0, 0]);
-    p.extend_from_slice(&seg.src.0.octets());
-    p.extend_from_slice(&seg.dst.0.octets());
-    let sum = fold(ones_complement_sum(0, &p[ip..ip + IPV4_LEN]));
-    p[ip + 10..ip + 12].copy_from_slice(&sum.to_be_bytes());
-    // TCP.
-    let tcp = p.len();
-    p.extend_from_slice(&seg.src.1.to_be_bytes());
-    p.extend_from_slice(&seg.dst.1.to_be_bytes());
-    p.extend_from_slice(&seg.seq.to_be_bytes());
-    let ack = if seg.flags & ACK != 0 { seg.ack } else { 0 };
-    p.extend_from_slice(&ack.to_be_bytes());
-    p.push((((TCP_LEN + options) / 4) as u8) << 4);
-    p.push(seg.flags);
-    p.extend_from_slice(&seg.window.to_be_bytes());
-    p.extend_from_slice(&[0, 0, 0, 0]); // checksum, urgent pointer
     if let Some((mss, shift)) = seg.syn_options {
-        p.extend_from_slice(&[2, 4]);
-        p.extend_from_slice(&mss.to_be_bytes());
-        p.extend_from_slice(&[1, 3, 3, shift]);
+        // MSS (4 bytes), NOP, window scale (3 bytes): 8 bytes, within the 40 TCP allows.
+        tcp.set_options(&[
+            TcpOptionElement::MaximumSegmentSize(mss),
+            TcpOptionElement::Noop,
+            TcpOptionElement::WindowScale(shift),
+        ])
+        .map_err(|_| TooLarge(seg.payload.len()))?;
     }
-    p.extend_from_slice(seg.payload);
-    let mut pseudo = Vec::with_capacity(12);
-    pseudo.extend_from_slice(&seg.src.0.octets());
-    pseudo.extend_from_slice(&seg.dst.0.octets());
-    pseudo.extend_from_slice(&[0, 6]);
-    pseudo.extend_from_slice(&(tcp_len as u16).to_be_bytes());
-    let sum = fold(ones_complement_sum(
-        ones_complement_sum(0, &pseudo),
-        &p[tcp..],
-    ));
-    p[tcp + 16..tcp + 18].copy_from_slice(&sum.to_be_bytes());
-    p
+    let builder = PacketBuilder::ethernet2([0; 6], [0; 6])
+        .ip(IpHeaders::Ipv4(ip, Default::default()))
+        .tcp_header(tcp);
+    let mut p = Vec::with_capacity(builder.size(seg.payload.len()));
+    builder
+        .write(&mut p, seg.payload)
+        .map_err(|_| TooLarge(seg.payload.len()))?;
+    Ok(p)
 }
 
 /// How a capture's packets start (the pcap link types this module takes apart).
@@ -166,60 +141,74 @@ pub struct InSegment<'a> {
     pub payload: &'a [u8],
 }
 
+/// One fragment of an IP packet that carries TCP.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fragment<'a> {
+    /// The sender, the receiver and the identification: the packet it belongs to.
+    pub key: FragmentKey,
+    /// Where its bytes go in the packet's payload.
+    pub offset: IpFragOffset,
+    /// Whether more fragments follow.
+    pub more: bool,
+    /// Its part of the payload.
+    pub payload: &'a [u8],
+}
+
+/// The packet a fragment belongs to: sender, receiver, identification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct FragmentKey {
+    /// Sender.
+    pub src: IpAddr,
+    /// Receiver.
+    pub dst: IpAddr,
+    /// IP identification (IPv4's 16 bits, IPv6's fragment header's 32).
+    pub id: u32,
+}
+
+/// What a captured packet holds that the importer uses.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Parsed<'a> {
+    /// A whole TCP segment.
+    Segment(InSegment<'a>),
+    /// A fragment of an IP packet carrying TCP (to reassemble).
+    Fragment(Fragment<'a>),
+}
+
 /// Why a captured packet holds no TCP segment this module can use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Skip {
     /// Not IP, or IP but not TCP: of no interest.
     NotTcp,
-    /// An IP fragment (fragments are not reassembled).
-    Fragment,
     /// The packet ends before its headers do, or its headers are inconsistent (also a packet
     /// cut short by the capture's snap length).
     Truncated,
 }
 
-/// Takes a captured packet apart down to its TCP segment.
-pub fn parse(link: Link, data: &[u8]) -> Result<InSegment<'_>, Skip> {
-    let ip = match link {
-        Link::RawIp => data,
-        Link::Ethernet => {
-            let mut at = 12;
-            let mut ethertype = be16(data, at)?;
-            // 802.1Q and 802.1ad tags, possibly stacked.
-            while ethertype == 0x8100 || ethertype == 0x88A8 {
-                at += 4;
-                ethertype = be16(data, at)?;
-            }
-            match ethertype {
-                0x0800 | 0x86DD => data.get(at + 2..).ok_or(Skip::Truncated)?,
-                _ => return Err(Skip::NotTcp),
-            }
+/// Takes a captured packet apart down to its TCP segment, or the fragment it is.
+pub fn parse(link: Link, data: &[u8]) -> Result<Parsed<'_>, Skip> {
+    let sliced = match link {
+        Link::RawIp => from_ip(data)?,
+        Link::Ethernet => LaxSlicedPacket::from_ethernet(data).map_err(|_| Skip::Truncated)?,
+        // The cooked headers are a fixed layout ending in the EtherType: 16 bytes in v1
+        // (type at 14), 20 in v2 (type at 0).
+        Link::LinuxSll => {
+            LaxSlicedPacket::from_ether_type(EtherType(be16(data, 14)?), tail(data, 16)?)
         }
-        Link::LinuxSll => match be16(data, 14)? {
-            0x0800 | 0x86DD => data.get(16..).ok_or(Skip::Truncated)?,
-            _ => return Err(Skip::NotTcp),
-        },
-        Link::LinuxSll2 => match be16(data, 0)? {
-            0x0800 | 0x86DD => data.get(20..).ok_or(Skip::Truncated)?,
-            _ => return Err(Skip::NotTcp),
-        },
+        Link::LinuxSll2 => {
+            LaxSlicedPacket::from_ether_type(EtherType(be16(data, 0)?), tail(data, 20)?)
+        }
         Link::Null => {
             let family = data.get(..4).ok_or(Skip::Truncated)?;
             // Written in the capturing host's byte order: 2 is AF_INET, 10/24/28/30 AF_INET6.
             let f = u32::from_le_bytes([family[0], family[1], family[2], family[3]]);
             let f = if f > 0xFFFF { f.swap_bytes() } else { f };
             match f {
-                2 | 10 | 24 | 28 | 30 => &data[4..],
+                2 | 10 | 24 | 28 | 30 => from_ip(&data[4..])?,
                 _ => return Err(Skip::NotTcp),
             }
         }
     };
-    match ip.first().map(|b| b >> 4) {
-        Some(4) => ipv4(ip),
-        Some(6) => ipv6(ip),
-        Some(_) => Err(Skip::NotTcp),
-        None => Err(Skip::Truncated),
-    }
+    tcp_of(&sliced)
 }
 
 fn be16(data: &[u8], at: usize) -> Result<u16, Skip> {
@@ -229,171 +218,113 @@ fn be16(data: &[u8], at: usize) -> Result<u16, Skip> {
     }
 }
 
-fn be32(data: &[u8], at: usize) -> Result<u32, Skip> {
-    match data.get(at..at + 4) {
-        Some(b) => Ok(u32::from_be_bytes([b[0], b[1], b[2], b[3]])),
-        None => Err(Skip::Truncated),
-    }
+fn tail(data: &[u8], at: usize) -> Result<&[u8], Skip> {
+    data.get(at..).ok_or(Skip::Truncated)
 }
 
-fn ipv4(ip: &[u8]) -> Result<InSegment<'_>, Skip> {
-    let ihl = usize::from(ip.first().ok_or(Skip::Truncated)? & 0x0F) * 4;
-    let total = usize::from(be16(ip, 2)?);
-    if ihl < IPV4_LEN || total < ihl || ip.len() < total {
-        return Err(Skip::Truncated);
-    }
-    if ip[9] != 6 {
-        return Err(Skip::NotTcp);
-    }
-    // More-fragments set, or a fragment offset.
-    if be16(ip, 6)? & 0x3FFF != 0 {
-        return Err(Skip::Fragment);
-    }
-    let src = Ipv4Addr::new(ip[12], ip[13], ip[14], ip[15]);
-    let dst = Ipv4Addr::new(ip[16], ip[17], ip[18], ip[19]);
-    tcp(IpAddr::V4(src), IpAddr::V4(dst), &ip[ihl..total])
-}
-
-fn ipv6(ip: &[u8]) -> Result<InSegment<'_>, Skip> {
-    if ip.len() < 40 {
-        return Err(Skip::Truncated);
-    }
-    let payload_len = usize::from(be16(ip, 4)?);
-    let end = 40 + payload_len;
-    if ip.len() < end {
-        return Err(Skip::Truncated);
-    }
-    let addr = |at: usize| {
-        let mut o = [0u8; 16];
-        o.copy_from_slice(&ip[at..at + 16]);
-        Ipv6Addr::from(o)
-    };
-    let (src, dst) = (addr(8), addr(24));
-    let mut next = ip[6];
-    let mut at = 40;
-    loop {
-        match next {
-            6 => break,
-            // Hop-by-hop, routing, destination options: skip them.
-            0 | 43 | 60 => {
-                let h = ip.get(at..at + 2).ok_or(Skip::Truncated)?;
-                next = h[0];
-                at += (usize::from(h[1]) + 1) * 8;
-            }
-            44 => return Err(Skip::Fragment),
-            _ => return Err(Skip::NotTcp),
-        }
-    }
-    if at > end {
-        return Err(Skip::Truncated);
-    }
-    tcp(IpAddr::V6(src), IpAddr::V6(dst), &ip[at..end])
-}
-
-fn tcp(src: IpAddr, dst: IpAddr, t: &[u8]) -> Result<InSegment<'_>, Skip> {
-    let offset = usize::from(t.get(12).ok_or(Skip::Truncated)? >> 4) * 4;
-    if offset < TCP_LEN || t.len() < offset {
-        return Err(Skip::Truncated);
-    }
-    Ok(InSegment {
-        src: SocketAddr::new(src, be16(t, 0)?),
-        dst: SocketAddr::new(dst, be16(t, 2)?),
-        seq: be32(t, 4)?,
-        ack: be32(t, 8)?,
-        flags: t[13],
-        payload: &t[offset..],
+fn from_ip(data: &[u8]) -> Result<LaxSlicedPacket<'_>, Skip> {
+    use etherparse::err::ip::LaxHeaderSliceError;
+    LaxSlicedPacket::from_ip(data).map_err(|e| match e {
+        LaxHeaderSliceError::Len(_) => Skip::Truncated,
+        LaxHeaderSliceError::Content(_) => Skip::NotTcp,
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn segment(payload: &[u8], syn_options: Option<(u16, u8)>) -> Vec<u8> {
-        ethernet_ipv4_tcp(&OutSegment {
-            src: (Ipv4Addr::new(127, 0, 0, 2), 40001),
-            dst: (Ipv4Addr::new(127, 0, 0, 1), 5084),
-            seq: 0xFFFF_FFF0,
-            ack: 7,
-            flags: PSH | ACK,
-            syn_options,
-            window: 65535,
-            ip_id: 3,
-            payload,
-        })
-    }
-
-    #[test]
-    fn built_packets_have_valid_checksums_and_parse_back() {
-        for (payload, mss) in [
-            (&b"odd"[..], None),
-            (&b"even"[..], Some((1460, 7))),
-            (&[][..], None),
-        ] {
-            let p = segment(payload, mss);
-            assert!(checksum_ok(&p[14..34]), "IPv4 header checksum");
-            let tcp_len = p.len() - 34;
-            let mut pseudo = vec![127, 0, 0, 2, 127, 0, 0, 1, 0, 6];
-            pseudo.extend_from_slice(&(tcp_len as u16).to_be_bytes());
-            pseudo.extend_from_slice(&p[34..]);
-            assert!(checksum_ok(&pseudo), "TCP checksum over the pseudo-header");
-            let s = parse(Link::Ethernet, &p).expect("a TCP segment");
-            assert_eq!(s.src, "127.0.0.2:40001".parse().expect("addr"));
-            assert_eq!(s.dst, "127.0.0.1:5084".parse().expect("addr"));
-            assert_eq!((s.seq, s.ack, s.flags), (0xFFFF_FFF0, 7, PSH | ACK));
-            assert_eq!(s.payload, payload);
+/// The TCP segment or fragment of a packet sliced down to its network layer.
+fn tcp_of<'a>(sliced: &LaxSlicedPacket<'a>) -> Result<Parsed<'a>, Skip> {
+    let (src, dst, payload): (IpAddr, IpAddr, &LaxIpPayloadSlice<'a>) = match &sliced.net {
+        Some(LaxNetSlice::Ipv4(v)) => (
+            v.header().source_addr().into(),
+            v.header().destination_addr().into(),
+            v.payload(),
+        ),
+        Some(LaxNetSlice::Ipv6(v)) => (
+            v.header().source_addr().into(),
+            v.header().destination_addr().into(),
+            v.payload(),
+        ),
+        Some(LaxNetSlice::Arp(_)) => return Err(Skip::NotTcp),
+        None => {
+            return Err(match sliced.stop_err {
+                Some((SliceError::Len(_), _)) => Skip::Truncated,
+                _ => Skip::NotTcp,
+            })
         }
+    };
+    let is_tcp = payload.ip_number == ip_number::TCP;
+    if payload.incomplete {
+        // The IP length runs past the bytes captured.
+        return Err(Skip::Truncated);
     }
-
-    #[test]
-    fn a_known_checksum() {
-        // The textbook IPv4 header (192.168.0.1 → 192.168.0.199, UDP): checksum 0xB861.
-        let mut h = [
-            0x45, 0x00, 0x00, 0x73, 0x00, 0x00, 0x40, 0x00, 0x40, 0x11, 0, 0, 0xC0, 0xA8, 0x00,
-            0x01, 0xC0, 0xA8, 0x00, 0xC7,
-        ];
-        let sum = fold(ones_complement_sum(0, &h));
-        assert_eq!(sum, 0xB861);
-        h[10..12].copy_from_slice(&sum.to_be_bytes());
-        assert!(checksum_ok(&h));
+    if payload.fragmented && is_tcp {
+        return fragment(sliced, src, dst, payload).map(Parsed::Fragment);
     }
-
-    #[test]
-    fn cooked_raw_and_vlan_links_and_ethernet_padding() {
-        let eth = segment(b"abc", None);
-        let ip = &eth[14..];
-        assert_eq!(parse(Link::RawIp, ip).expect("raw").payload, b"abc");
-        // Packet type, ARPHRD_LOOPBACK (772), address length 6, address, protocol IPv4.
-        let mut sll = vec![0, 0, 3, 4, 0, 6, 0, 0, 0, 0, 0, 0, 0, 0, 0x08, 0x00];
-        sll.extend_from_slice(ip);
-        assert_eq!(parse(Link::LinuxSll, &sll).expect("sll").payload, b"abc");
-        let mut vlan = eth[..12].to_vec();
-        vlan.extend_from_slice(&[0x81, 0x00, 0x00, 0x05]);
-        vlan.extend_from_slice(&eth[12..]);
-        vlan.extend_from_slice(&[0; 6]); // padding after the IP packet
-        assert_eq!(parse(Link::Ethernet, &vlan).expect("vlan").payload, b"abc");
-        assert_eq!(parse(Link::Ethernet, &eth[..40]), Err(Skip::Truncated));
-        let mut arp = eth.clone();
-        arp[12..14].copy_from_slice(&0x0806u16.to_be_bytes());
-        assert_eq!(parse(Link::Ethernet, &arp), Err(Skip::NotTcp));
-        let mut frag = eth.clone();
-        frag[20] = 0x20; // more fragments
-        assert_eq!(parse(Link::Ethernet, &frag), Err(Skip::Fragment));
-    }
-
-    #[test]
-    fn ipv6_with_an_extension_header() {
-        let eth = segment(b"v6", None);
-        let tcp = &eth[34..];
-        let mut ip = vec![0x60, 0, 0, 0];
-        ip.extend_from_slice(&((tcp.len() + 8) as u16).to_be_bytes());
-        ip.extend_from_slice(&[0, 64]); // next: hop-by-hop
-        ip.extend_from_slice(&Ipv6Addr::LOCALHOST.octets());
-        ip.extend_from_slice(&Ipv6Addr::LOCALHOST.octets());
-        ip.extend_from_slice(&[6, 0, 0, 0, 0, 0, 0, 0]);
-        ip.extend_from_slice(tcp);
-        let s = parse(Link::RawIp, &ip).expect("v6");
-        assert_eq!(s.payload, b"v6");
-        assert_eq!(s.dst, "[::1]:5084".parse().expect("addr"));
+    match (&sliced.transport, &sliced.stop_err) {
+        (Some(TransportSlice::Tcp(t)), _) => Ok(Parsed::Segment(segment(src, dst, t))),
+        (_, Some((SliceError::Len(_), _))) => Err(Skip::Truncated),
+        (_, Some(_)) if is_tcp => Err(Skip::Truncated),
+        _ => Err(Skip::NotTcp),
     }
 }
+
+/// The fragment an IPv4 or IPv6 packet is.
+fn fragment<'a>(
+    sliced: &LaxSlicedPacket<'a>,
+    src: IpAddr,
+    dst: IpAddr,
+    payload: &LaxIpPayloadSlice<'a>,
+) -> Result<Fragment<'a>, Skip> {
+    let (id, offset, more) = match &sliced.net {
+        Some(LaxNetSlice::Ipv4(v)) => {
+            let h = v.header();
+            (
+                u32::from(h.identification()),
+                h.fragments_offset(),
+                h.more_fragments(),
+            )
+        }
+        Some(LaxNetSlice::Ipv6(v)) => v
+            .extensions()
+            .clone()
+            .into_iter()
+            .find_map(|e| match e {
+                Ipv6ExtensionSlice::Fragment(f) => {
+                    Some((f.identification(), f.fragment_offset(), f.more_fragments()))
+                }
+                _ => None,
+            })
+            .ok_or(Skip::Truncated)?,
+        _ => return Err(Skip::NotTcp),
+    };
+    Ok(Fragment {
+        key: FragmentKey { src, dst, id },
+        offset,
+        more,
+        payload: payload.payload,
+    })
+}
+
+fn segment<'a>(src: IpAddr, dst: IpAddr, t: &TcpSlice<'a>) -> InSegment<'a> {
+    let flag = |on: bool, f: u8| if on { f } else { 0 };
+    InSegment {
+        src: SocketAddr::new(src, t.source_port()),
+        dst: SocketAddr::new(dst, t.destination_port()),
+        seq: t.sequence_number(),
+        ack: t.acknowledgment_number(),
+        flags: flag(t.fin(), FIN)
+            | flag(t.syn(), SYN)
+            | flag(t.rst(), RST)
+            | flag(t.psh(), PSH)
+            | flag(t.ack(), ACK),
+        payload: t.payload(),
+    }
+}
+
+/// The TCP segment in a reassembled IP payload from `src` to `dst`.
+pub fn reassembled(src: IpAddr, dst: IpAddr, payload: &[u8]) -> Result<InSegment<'_>, Skip> {
+    let t = TcpSlice::from_slice(payload).map_err(|_| Skip::Truncated)?;
+    Ok(segment(src, dst, &t))
+}
+
+#[cfg(test)]
+mod tests;

@@ -5,10 +5,13 @@
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
 
-use bytes::{Bytes, BytesMut};
-use llrp::{FrameError, FrameHeader, FrameSplitter, MessageKind, Split};
+use bytes::Bytes;
+use llrp::MessageKind;
 
 use super::packet::{InSegment, ACK, FIN, RST, SYN};
+
+mod framer;
+pub use framer::{known_frame, Framer};
 
 /// The LLRP ports: 5084 (plain) and 5085 (TLS, as IANA lists it).
 pub const LLRP_PORTS: [u16; 2] = [5084, 5085];
@@ -22,95 +25,6 @@ pub enum Piece {
     Bytes(Bytes),
 }
 
-/// Splits one direction's byte stream into frames with the codec's [`FrameSplitter`]; after
-/// a length field that cannot be right everything is [`Piece::Bytes`], as a recording has it.
-#[derive(Debug, Default)]
-pub struct Framer {
-    buf: BytesMut,
-    unsynced: bool,
-    /// Looking for the first frame boundary (the capture began after the handshake).
-    hunting: bool,
-    /// Bytes dropped while hunting.
-    pub skipped: usize,
-}
-
-impl Framer {
-    /// A framer for a stream that starts with a frame (`hunting` false) or somewhere inside
-    /// one (`hunting` true: bytes before the first plausible LLRP header are dropped).
-    pub fn new(hunting: bool) -> Framer {
-        Framer {
-            hunting,
-            ..Framer::default()
-        }
-    }
-
-    /// Takes the next bytes of the stream; appends what they complete to `out`.
-    pub fn push(&mut self, data: &[u8], out: &mut Vec<Piece>) {
-        if self.unsynced {
-            out.push(Piece::Bytes(Bytes::copy_from_slice(data)));
-            return;
-        }
-        self.buf.extend_from_slice(data);
-        if self.hunting {
-            self.hunt();
-        }
-        let splitter = FrameSplitter::default();
-        loop {
-            let len = match splitter.split(&self.buf) {
-                Ok(Split::Frame(h)) => h.length as usize,
-                Ok(Split::Incomplete(_)) => return,
-                // A version the codec does not speak is still a whole frame of sane length.
-                Err(FrameError::UnsupportedVersion(h)) if self.buf.len() >= h.length as usize => {
-                    h.length as usize
-                }
-                Err(FrameError::UnsupportedVersion(_)) => return,
-                Err(_) => {
-                    self.unsynced = true;
-                    out.push(Piece::Bytes(self.buf.split().freeze()));
-                    return;
-                }
-            };
-            out.push(Piece::Frame(self.buf.split_to(len).freeze()));
-        }
-    }
-
-    /// Drops the bytes before the first offset where a plausible LLRP header starts (version
-    /// 1 or 2, a sane length, a message type the codec names or CUSTOM_MESSAGE).
-    fn hunt(&mut self) {
-        let found = (0..self.buf.len().saturating_sub(llrp::frame::HEADER_LEN - 1))
-            .find(|&i| plausible(&self.buf[i..]));
-        let drop = match found {
-            Some(i) => {
-                self.hunting = false;
-                i
-            }
-            None => self.buf.len().saturating_sub(llrp::frame::HEADER_LEN - 1),
-        };
-        self.skipped += drop;
-        let _ = self.buf.split_to(drop);
-    }
-
-    /// Bytes left that make no whole frame (at the end of the stream).
-    pub fn finish(&mut self) -> Option<Bytes> {
-        (!self.buf.is_empty()).then(|| self.buf.split().freeze())
-    }
-}
-
-/// Whether `b` starts with a header that could begin an LLRP frame.
-fn plausible(b: &[u8]) -> bool {
-    let (Some(h), Some(k)) = (FrameHeader::peek(b), MessageKind::of_frame(b)) else {
-        return false;
-    };
-    (1..=2).contains(&h.version)
-        && (10..=llrp::frame::DEFAULT_MAX_FRAME_LEN).contains(&h.length)
-        && (k.msg_type == llrp::message::CUSTOM_MESSAGE_TYPE || k.name() != "UNKNOWN")
-}
-
-/// Whether a frame is of a message kind the codec names (or a vendor message) and version.
-pub fn known_frame(frame: &[u8]) -> bool {
-    plausible(frame)
-}
-
 /// One direction of a stream.
 #[derive(Debug, Default)]
 struct Half {
@@ -119,8 +33,9 @@ struct Half {
     /// The absolute sequence number of the next byte expected, and its offset in the stream.
     next_seq: u32,
     next_off: u64,
-    /// Segments beyond a gap, by stream offset.
+    /// Segments beyond a gap, by stream offset, and their bytes (at most [`MAX_HELD`]).
     held: BTreeMap<u64, Vec<u8>>,
+    held_bytes: usize,
     /// Where the FIN is, once seen.
     fin_at: Option<u64>,
     /// The FIN was reached: this direction is done.
@@ -130,6 +45,32 @@ struct Half {
     first_frame: Option<Bytes>,
     /// Bytes that arrived again (retransmissions, duplicates).
     duplicate_bytes: usize,
+    /// Gaps skipped at the out-of-order bound, the bytes the framers before the last one
+    /// dropped at the stream's start, and those dropped after a gap.
+    gaps: usize,
+    skipped_at_start: usize,
+    skipped_after_gaps: usize,
+}
+
+impl Half {
+    /// Whether what decides the stream's kind and reader end is known for this direction:
+    /// its first frame, or that it will never have one.
+    fn settled(&self) -> bool {
+        self.first_frame.is_some() || self.closed || self.framer.unsynced()
+    }
+}
+
+/// The bytes of segments held beyond a gap in one direction before the gap is taken as
+/// lost: 8 MiB, the most a receiver's window lets be in flight at window scale 7.
+pub const MAX_HELD: usize = 8 << 20;
+
+/// What a stream is, once decided: LLRP or not, and which end is the reader.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Role {
+    /// Whether it carries LLRP ([`Stream::is_llrp`]).
+    pub llrp: bool,
+    /// Which end is the reader ([`Stream::reader_end`]).
+    pub reader: usize,
 }
 
 /// What happened in a stream, in capture order.
@@ -184,8 +125,12 @@ pub struct Stream {
     syn_seq: Option<u32>,
     first_data_from: Option<usize>,
     ended: bool,
-    /// Everything that happened, in order.
+    /// What happened, in order, since the importer last took the events.
     pub events: Vec<Event>,
+    /// The packet of the last event and how many it had (the order within a packet).
+    last_event: Option<(usize, usize)>,
+    /// LLRP or not, and the reader's end, once decided ([`Stream::decide`]).
+    pub role: Option<Role>,
     /// Payload bytes seen, both ways.
     pub payload_bytes: u64,
     /// Problems found at its end (gaps never filled, a frame cut).
@@ -203,13 +148,19 @@ impl Stream {
             first_data_from: None,
             ended: false,
             events: Vec::new(),
+            last_event: None,
+            role: None,
             payload_bytes: 0,
             warnings: Vec::new(),
         }
     }
 
     fn event(&mut self, packet: usize, utc_us: u64, what: Happening) {
-        let n = self.events.iter().filter(|e| e.at.0 == packet).count();
+        let n = match self.last_event {
+            Some((p, n)) if p == packet => n + 1,
+            _ => 0,
+        };
+        self.last_event = Some((packet, n));
         self.events.push(Event {
             at: (packet, n),
             utc_us,
@@ -219,7 +170,7 @@ impl Stream {
 
     /// Takes one segment sent by end `end`.
     fn segment(&mut self, end: usize, seg: &InSegment<'_>, packet: usize, utc_us: u64) {
-        if self.events.is_empty() {
+        if self.last_event.is_none() {
             let syn = seg.flags & SYN != 0;
             self.event(packet, utc_us, Happening::Open { syn });
         }
@@ -286,29 +237,29 @@ impl Stream {
             h.duplicate_bytes += bytes.len();
             return;
         }
-        if off > h.next_off {
-            let held = h.held.entry(off).or_default();
-            if held.len() < bytes.len() {
-                *held = bytes.to_vec();
-            }
-            return;
-        }
         let mut out = Vec::new();
-        let fresh = &bytes[(h.next_off - off) as usize..];
-        h.duplicate_bytes += bytes.len() - fresh.len();
-        advance(h, fresh, &mut out);
-        while let Some(first) = h.held.first_entry() {
-            if *first.key() > h.next_off {
+        if off > h.next_off {
+            hold(h, off, bytes);
+        } else {
+            let fresh = &bytes[(h.next_off - off) as usize..];
+            h.duplicate_bytes += bytes.len() - fresh.len();
+            advance(h, fresh, &mut out);
+        }
+        drain_held(h, &mut out);
+        while h.held_bytes > MAX_HELD {
+            let Some((gap, held)) = skip_gap(h, &mut out) else {
                 break;
-            }
-            let (at, held) = first.remove_entry();
-            let skip = (h.next_off - at) as usize;
-            if skip < held.len() {
-                h.duplicate_bytes += skip;
-                advance(h, &held[skip..], &mut out);
-            } else {
-                h.duplicate_bytes += held.len();
-            }
+            };
+            self.warnings.push(format!(
+                "{} <-> {}: {gap} bytes from {} were never captured; the {held} bytes after them \
+                 passed the out-of-order bound ({} MiB), so the stream goes on after the gap, \
+                 from its next LLRP header",
+                self.ends[0],
+                self.ends[1],
+                self.ends[end],
+                MAX_HELD >> 20
+            ));
+            drain_held(h, &mut out);
         }
         if h.first_frame.is_none() {
             h.first_frame = out.iter().find_map(|p| match p {
@@ -350,11 +301,23 @@ impl Stream {
                     self.ends[end]
                 ));
                 h.held.clear();
+                h.held_bytes = 0;
             }
-            if h.framer.skipped > 0 {
+            let (at_start, after_gaps) = if h.gaps == 0 {
+                (h.framer.skipped, 0)
+            } else {
+                (h.skipped_at_start, h.skipped_after_gaps + h.framer.skipped)
+            };
+            if at_start > 0 {
                 self.warnings.push(format!(
-                    "{name}: the capture starts inside the stream; {} bytes from {} before the first LLRP header are dropped",
-                    h.framer.skipped, self.ends[end]
+                    "{name}: the capture starts inside the stream; {at_start} bytes from {} before the first LLRP header are dropped",
+                    self.ends[end]
+                ));
+            }
+            if after_gaps > 0 {
+                self.warnings.push(format!(
+                    "{name}: {after_gaps} bytes from {} after its gaps, before the next LLRP header, are dropped",
+                    self.ends[end]
                 ));
             }
             if let Some(rest) = h.framer.finish() {
@@ -418,6 +381,27 @@ impl Stream {
                 .any(|h| h.first_frame.as_deref().is_some_and(known_frame))
     }
 
+    /// Whether the stream's kind and reader end can no longer change: it ended, or each
+    /// direction has its first frame or will never have one.
+    pub fn settled(&self) -> bool {
+        self.ended || self.halves.iter().all(Half::settled)
+    }
+
+    /// Decides, once, whether the stream is LLRP and which end is the reader, from what is
+    /// known now (the importer decides when [`Stream::settled`], at the end of the capture,
+    /// or when the events waiting for the decision pass its bound).
+    pub fn decide(&mut self) -> Role {
+        if let Some(r) = self.role {
+            return r;
+        }
+        let r = Role {
+            llrp: self.is_llrp(),
+            reader: self.reader_end(),
+        };
+        self.role = Some(r);
+        r
+    }
+
     /// Bytes that arrived twice (retransmissions), both ways.
     pub fn duplicate_bytes(&self) -> usize {
         self.halves.iter().map(|h| h.duplicate_bytes).sum()
@@ -427,6 +411,58 @@ impl Stream {
 /// The stream offset of sequence number `seq` (negative: before the stream's start).
 fn offset(h: &Half, seq: u32) -> i64 {
     h.next_off as i64 + i64::from(seq.wrapping_sub(h.next_seq) as i32)
+}
+
+/// Holds a segment at stream offset `off`, beyond a gap (the longer one if one is there).
+fn hold(h: &mut Half, off: u64, bytes: &[u8]) {
+    let held = h.held.entry(off).or_default();
+    if held.len() < bytes.len() {
+        h.held_bytes += bytes.len() - held.len();
+        *held = bytes.to_vec();
+    }
+}
+
+/// Delivers the held segments the stream has reached.
+fn drain_held(h: &mut Half, out: &mut Vec<Piece>) {
+    while let Some(first) = h.held.first_entry() {
+        if *first.key() > h.next_off {
+            break;
+        }
+        let (at, held) = first.remove_entry();
+        h.held_bytes -= held.len();
+        let skip = (h.next_off - at) as usize;
+        if skip < held.len() {
+            h.duplicate_bytes += skip;
+            advance(h, &held[skip..], out);
+        } else {
+            h.duplicate_bytes += held.len();
+        }
+    }
+}
+
+/// Takes the gap before the first held segment as lost: the bytes of a frame cut by it are
+/// kept as bytes and framing resumes at the next plausible header (a direction that is no
+/// longer LLRP stays bytes). Returns the gap's length and the bytes held after it.
+fn skip_gap(h: &mut Half, out: &mut Vec<Piece>) -> Option<(u64, usize)> {
+    let (&at, _) = h.held.first_key_value()?;
+    let gap = at - h.next_off;
+    let held = h.held_bytes;
+    if !h.framer.unsynced() {
+        if let Some(rest) = h.framer.finish() {
+            out.push(Piece::Bytes(rest));
+        }
+        if h.gaps == 0 {
+            h.skipped_at_start = h.framer.skipped;
+        } else {
+            h.skipped_after_gaps += h.framer.skipped;
+        }
+        h.framer = Framer::new(true);
+    }
+    h.gaps += 1;
+    h.next_off = at;
+    // Sequence numbers are modulo 2^32.
+    h.next_seq = h.next_seq.wrapping_add(gap as u32);
+    Some((gap, held))
 }
 
 fn advance(h: &mut Half, bytes: &[u8], out: &mut Vec<Piece>) {
@@ -446,8 +482,8 @@ pub struct Streams {
 }
 
 impl Streams {
-    /// Takes one captured segment.
-    pub fn segment(&mut self, seg: &InSegment<'_>, packet: usize, utc_us: u64) {
+    /// Takes one captured segment; returns the index of its stream.
+    pub fn segment(&mut self, seg: &InSegment<'_>, packet: usize, utc_us: u64) -> usize {
         let key = if seg.src <= seg.dst {
             (seg.src, seg.dst)
         } else {
@@ -473,6 +509,7 @@ impl Streams {
         let s = &mut self.streams[index];
         let end = usize::from(s.ends[0] != seg.src);
         s.segment(end, seg, packet, utc_us);
+        index
     }
 
     /// Ends the capture: flushes what each stream holds (bytes left in a framer, gaps never

@@ -152,3 +152,51 @@ fn after_a_bad_length_everything_is_bytes() {
     );
     assert_eq!(f.finish(), None);
 }
+
+/// A KEEPALIVE_ACK header claiming `len` bytes, then filler: a whole frame to the splitter.
+fn big_frame(id: u32, len: usize) -> Vec<u8> {
+    let mut f = vec![0x04, 0x48];
+    f.extend_from_slice(&(len as u32).to_be_bytes());
+    f.extend_from_slice(&id.to_be_bytes());
+    f.resize(len, 0x5A);
+    f
+}
+
+#[test]
+fn the_events_of_one_packet_are_numbered_in_order() {
+    let mut wire = Vec::new();
+    for id in 1..=4 {
+        wire.extend_from_slice(&frame(id));
+    }
+    let mut st = Streams::default();
+    st.segment(&seg(true, 100, SYN, &[]), 0, 0);
+    st.segment(&seg(true, 101, ACK, &wire), 1, 0);
+    let at: Vec<(usize, usize)> = st.streams[0].events.iter().map(|e| e.at).collect();
+    assert_eq!(at, [(0, 0), (1, 0), (1, 1), (1, 2), (1, 3)]);
+}
+
+#[test]
+fn a_gap_past_the_out_of_order_bound_is_reported_and_the_stream_goes_on_after_it() {
+    const MIB: usize = 1 << 20;
+    let lost = frame(1);
+    let mut st = Streams::default();
+    st.segment(&seg(true, 100, SYN, &[]), 0, 0);
+    // The first frame is never captured; 9 frames of 1 MiB follow it.
+    let mut seq = 101 + lost.len() as u32;
+    for i in 0..9 {
+        let f = big_frame(i + 2, MIB);
+        st.segment(&seg(true, seq, ACK, &f), 1 + i as usize, 0);
+        seq = seq.wrapping_add(f.len() as u32);
+    }
+    let s = &st.streams[0];
+    assert_eq!(frames_of(s, 0).len(), 9, "delivered once past the bound");
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("10 bytes from 10.1.1.1:51000 were never captured")
+            && s.warnings[0].contains("out-of-order bound (8 MiB)"),
+        "{:?}",
+        s.warnings
+    );
+    st.finish(10, 0);
+    assert_eq!(st.streams[0].warnings.len(), 1, "nothing else dropped");
+}
