@@ -60,7 +60,7 @@ pub struct Emitter<'s, S: Sink> {
     queued_bytes: usize,
     /// Each LLRP stream's connection number, from its first entry written.
     conns: HashMap<usize, u32>,
-    /// The first LLRP stream's reader, and every reader in order of appearance.
+    /// The first LLRP stream's reader (the recording's `upstream`).
     pub upstream: Option<SocketAddr>,
     /// Every reader, in order of first appearance.
     pub readers: Vec<SocketAddr>,
@@ -209,5 +209,59 @@ fn entry(s: &Stream, role: Role, conn: u32, start_us: u64, e: &StreamEvent) -> E
                 Ending::Reset(end) => format!("reset by the {}", name(*end)),
             },
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::pcapng::packet::{InSegment, ACK, PSH, SYN};
+
+    fn seg(seq: u32, flags: u8, payload: &[u8]) -> InSegment<'_> {
+        InSegment {
+            src: "10.1.1.1:51000".parse().expect("addr"),
+            dst: "10.1.1.2:5084".parse().expect("addr"),
+            seq,
+            ack: 0,
+            flags,
+            payload,
+        }
+    }
+
+    #[test]
+    fn a_stream_that_never_settles_is_written_once_its_events_pass_the_bound() {
+        // The client sends 1 MiB frames; the reader never answers, so the stream is not
+        // settled (its reader end might still send a READER_EVENT_NOTIFICATION first).
+        let mut frame = vec![0x04, 0x48];
+        frame.extend_from_slice(&(1u32 << 20).to_be_bytes());
+        frame.resize(1 << 20, 0);
+        let mut recording = Recording {
+            header: Header::new(String::new(), 0),
+            entries: Vec::new(),
+            warnings: Vec::new(),
+        };
+        let mut streams = Streams::default();
+        let mut emitter = Emitter::new(&mut recording, 0);
+        let mut seq = 100;
+        let i = streams.segment(&seg(seq, SYN, &[]), 0, 0);
+        seq += 1;
+        let mut written_at = None;
+        for packet in 1..=20 {
+            streams.segment(&seg(seq, PSH | ACK, &frame), packet, 0);
+            seq += frame.len() as u32;
+            emitter.take(&mut streams, i);
+            emitter.flush(&mut streams, false).expect("writes");
+            if written_at.is_none() && emitter.frames > 0 {
+                written_at = Some(packet);
+            }
+        }
+        assert!(!streams.streams[i].settled());
+        // 16 frames of 1 MiB and the connect marker are past the 16 MiB.
+        assert_eq!(written_at, Some(16), "written once past 16 MiB waiting");
+        assert_eq!(emitter.frames, 20, "and from then on as it comes");
+        assert_eq!(
+            emitter.upstream,
+            Some("10.1.1.2:5084".parse().expect("addr"))
+        );
     }
 }

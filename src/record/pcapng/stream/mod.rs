@@ -262,8 +262,9 @@ impl Stream {
             drain_held(h, &mut out);
         }
         if h.first_frame.is_none() {
+            // A copy: a view would keep the framer's whole buffer of that time alive.
             h.first_frame = out.iter().find_map(|p| match p {
-                Piece::Frame(f) => Some(f.clone()),
+                Piece::Frame(f) => Some(Bytes::copy_from_slice(f)),
                 Piece::Bytes(_) => None,
             });
         }
