@@ -176,3 +176,17 @@ fn fragments_are_handed_over_and_the_reassembled_payload_parses() {
     udp[23] = 17;
     assert_eq!(parse(Link::Ethernet, &udp), Err(Skip::NotTcp));
 }
+
+#[test]
+fn an_ipv6_fragment_header_makes_a_fragment() {
+    // Fragment header: next header TCP, reserved, offset 0 with more fragments, ID 0x01020304.
+    let first = ipv6(44, &[6, 0, 0, 1, 1, 2, 3, 4]);
+    let Ok(Parsed::Fragment(f)) = parse(Link::RawIp, &first) else {
+        panic!("a fragment")
+    };
+    assert!(f.more);
+    assert_eq!((f.key.id, f.offset.value()), (0x0102_0304, 0));
+    assert_eq!(f.key.src, IpAddr::from(Ipv6Addr::LOCALHOST));
+    let s = reassembled(f.key.src, f.key.dst, f.payload).expect("TCP");
+    assert_eq!(s.payload, b"v6");
+}
