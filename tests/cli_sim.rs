@@ -170,15 +170,42 @@ fn failed_accepts_back_off_and_the_reader_recovers() {
     let (ok, log) = sim.terminate();
     assert!(ok, "{log}");
     let failures = log.matches("accept failed").count();
-    // A loop that retried at once would log thousands; 10 ms doubling to 1 s logs a handful.
+    // A loop that retried at once would log thousands; 10 ms about doubling to 1 s logs a
+    // handful.
     assert!(
         (3..=50).contains(&failures),
         "{failures} failed accepts logged:\n{log}"
     );
+    // The pauses (the shared back-off with jitter): 10-20 ms, then 20-40 ms, 40-80 ms, …
+    let pauses: Vec<f64> = log
+        .lines()
+        .filter_map(|l| l.split("pausing accepts for ").nth(1))
+        .map(|p| millis(p.trim()))
+        .collect();
+    assert!(pauses.len() >= 3, "{log}");
     assert!(
-        log.contains("pausing accepts for 20ms"),
-        "the pause grows: {log}"
+        pauses.iter().all(|p| (10.0..=1000.0).contains(p)),
+        "{pauses:?}"
     );
+    assert!(pauses[0] <= 20.0 && pauses[2] >= 40.0, "{pauses:?}");
+    let growing = pauses.iter().take(6).collect::<Vec<_>>();
+    assert!(growing.windows(2).all(|w| w[1] >= w[0]), "{pauses:?}");
+}
+
+/// A duration as `Debug` prints it (`17ms`, `1.5s`, `900µs`), in milliseconds.
+fn millis(text: &str) -> f64 {
+    let (number, scale) = if let Some(n) = text.strip_suffix("ms") {
+        (n, 1.0)
+    } else if let Some(n) = text.strip_suffix("µs") {
+        (n, 1e-3)
+    } else if let Some(n) = text.strip_suffix("ns") {
+        (n, 1e-6)
+    } else if let Some(n) = text.strip_suffix('s') {
+        (n, 1e3)
+    } else {
+        panic!("not a duration: {text}")
+    };
+    number.parse::<f64>().expect("a number") * scale
 }
 
 /// The default HTTP address taken (here, or by anyone else): one line says so, and the

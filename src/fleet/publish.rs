@@ -23,14 +23,23 @@ use super::metrics::MqttMetrics;
 use super::schema::{self, Status, VERSION};
 use super::url::BrokerUrl;
 use crate::localize::live::Mirror;
+use crate::net::backoff::Backoff;
 
 /// Largest MQTT packet sent or accepted (bytes).
 pub const MAX_PACKET: usize = 1 << 20;
 
-/// First wait before reconnecting, doubled per failure up to [`BACKOFF_MAX`].
+/// Least wait before reconnecting to the broker, about doubled per failure up to
+/// [`BACKOFF_MAX`] ([`reconnect_backoff`]).
 const BACKOFF_MIN: Duration = Duration::from_millis(100);
 /// Longest wait before reconnecting.
 const BACKOFF_MAX: Duration = Duration::from_secs(5);
+
+/// The wait between reconnections to the broker, the publisher's and the workers': the
+/// shared [`Backoff`] with jitter, from [`BACKOFF_MIN`] to [`BACKOFF_MAX`], so the gateways
+/// and workers of a fleet do not all come back at once after a broker restart.
+pub(super) fn reconnect_backoff() -> Backoff {
+    Backoff::new(BACKOFF_MIN, BACKOFF_MAX, None)
+}
 
 /// How to publish.
 #[derive(Clone, Debug)]
@@ -390,16 +399,17 @@ impl Publisher {
     }
 }
 
-/// Runs the broker connection: reconnects with backoff, announces the statuses again after
-/// each connection, counts acknowledgements. Tells `first` how the first attempt went.
+/// Runs the broker connection: reconnects with back-off ([`reconnect_backoff`]), announces
+/// the statuses again after each connection, counts acknowledgements. Tells `first` how the
+/// first attempt went.
 fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(), String>>) {
     let mut first = Some(first);
-    let mut backoff = BACKOFF_MIN;
+    let mut backoff = reconnect_backoff();
     let mut outage: Option<(Instant, String)> = None;
     for event in connection.iter() {
         match event {
             Ok(Event::Incoming(Packet::ConnAck(ack))) => {
-                backoff = BACKOFF_MIN;
+                backoff.reset();
                 if let Some(f) = first.take() {
                     let _ = f.send(Ok(()));
                 }
@@ -443,8 +453,7 @@ fn drive(mut connection: Connection, link: &Link, first: mpsc::Sender<Result<(),
                     tracing::warn!(broker = %link.url, error = %e, "broker connection lost: queueing (bounded) and retrying");
                     outage = Some((Instant::now(), e.to_string()));
                 }
-                std::thread::sleep(backoff);
-                backoff = (backoff * 2).min(BACKOFF_MAX);
+                std::thread::sleep(backoff.failed());
             }
         }
     }

@@ -29,7 +29,7 @@ use rumqttc::{Client, Connection, Event, Packet, Publish, QoS};
 
 use super::metrics::MqttMetrics;
 use super::presence::{Presence, PresenceEvent};
-use super::publish::{mqtt_options, refusal, topic_level, PublishError};
+use super::publish::{mqtt_options, reconnect_backoff, refusal, topic_level, PublishError};
 use super::schema::{self, ReadBatch, VERSION};
 use super::seq::{Seq, Step};
 use super::url::BrokerUrl;
@@ -201,7 +201,7 @@ impl Run {
 
     fn drive(&mut self, mut connection: Connection, first: mpsc::Sender<Result<(), String>>) {
         let mut first = Some(first);
-        let mut backoff = Duration::from_millis(100);
+        let mut backoff = reconnect_backoff();
         let mut down = false;
         let mut acks = 0;
         let topics = self.topics().len();
@@ -225,7 +225,7 @@ impl Run {
                     }
                 }
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                    backoff = Duration::from_millis(100);
+                    backoff.reset();
                     acks = 0;
                     if std::mem::take(&mut down) {
                         tracing::info!(broker = %self.opts.url, "broker connection back");
@@ -253,8 +253,7 @@ impl Run {
                         self.metrics.disconnects.inc();
                         tracing::warn!(broker = %self.opts.url, error = %e, "broker connection lost: retrying");
                     }
-                    std::thread::sleep(backoff);
-                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                    std::thread::sleep(backoff.failed());
                 }
             }
         }

@@ -1,9 +1,10 @@
 //! Sockets: one framed [`connection::Connection`] for every LLRP socket (plain TCP or TLS,
 //! [`stream::Stream`], [`tls`]), what every server shares ([`serve`]: the accept loop with its
 //! connection limit, back-off and shutdown; [`drive`]: the loop that serves any sans-IO
-//! session), the simulated reader's server, the replay, an LLRP client, the proxy, and the
-//! simulated clock.
+//! session), the simulated reader's server, the replay, an LLRP client, the proxy, the
+//! simulated clock, and the one back-off with jitter everything that retries uses ([`backoff`]).
 
+pub mod backoff;
 pub mod client;
 pub mod clock;
 pub mod connection;

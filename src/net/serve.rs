@@ -18,10 +18,12 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{watch, Semaphore};
 use tokio::task::JoinSet;
 
-/// First pause after a failed accept (out of file descriptors, a connection reset before it
+use super::backoff::Backoff;
+
+/// Least pause after a failed accept (out of file descriptors, a connection reset before it
 /// was taken)...
 pub const ACCEPT_BACKOFF_MIN: Duration = Duration::from_millis(10);
-/// ... doubled after each further failure, up to this.
+/// ... about doubled after each further failure, up to this ([`accept_backoff`]).
 pub const ACCEPT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 
 /// How long the accept loop waits, once stopped, for its connections' tasks to end (each
@@ -38,29 +40,10 @@ pub fn stopping(
     changed.is_err() || *shutdown.borrow()
 }
 
-/// The pause after failed accepts: [`ACCEPT_BACKOFF_MIN`], doubling up to
-/// [`ACCEPT_BACKOFF_MAX`], back to the start after an accept succeeds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct AcceptBackoff(Duration);
-
-impl Default for AcceptBackoff {
-    fn default() -> Self {
-        AcceptBackoff(ACCEPT_BACKOFF_MIN)
-    }
-}
-
-impl AcceptBackoff {
-    /// An accept succeeded: the next failure pauses for the least again.
-    pub fn succeeded(&mut self) {
-        self.0 = ACCEPT_BACKOFF_MIN;
-    }
-
-    /// An accept failed: how long to pause now (the next failure pauses twice as long).
-    pub fn failed(&mut self) -> Duration {
-        let pause = self.0;
-        self.0 = (self.0 * 2).min(ACCEPT_BACKOFF_MAX);
-        pause
-    }
+/// The pause after failed accepts: the shared [`Backoff`] (with jitter) from
+/// [`ACCEPT_BACKOFF_MIN`] up to [`ACCEPT_BACKOFF_MAX`], reset after an accept succeeds.
+pub fn accept_backoff() -> Backoff {
+    Backoff::new(ACCEPT_BACKOFF_MIN, ACCEPT_BACKOFF_MAX, None)
 }
 
 /// Waits until `at`; forever when there is no deadline.
@@ -105,7 +88,7 @@ where
     let slots = Arc::new(Semaphore::new(limit));
     let refusals = Arc::new(Semaphore::new(limit));
     let mut tasks = JoinSet::new();
-    let mut backoff = AcceptBackoff::default();
+    let mut backoff = accept_backoff();
     loop {
         tokio::select! {
             changed = shutdown.changed() => {
@@ -116,7 +99,7 @@ where
             Some(_) = tasks.join_next(), if !tasks.is_empty() => {}
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
-                    backoff.succeeded();
+                    backoff.reset();
                     if let Ok(slot) = Arc::clone(&slots).try_acquire_owned() {
                         let task = serve(stream, peer);
                         tasks.spawn(async move {
@@ -159,15 +142,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_accept_backoff_doubles_to_its_cap_and_starts_over_after_a_success() {
-        let mut b = AcceptBackoff::default();
+    fn the_accept_backoff_grows_to_its_cap_and_starts_over_after_a_success() {
+        let mut b = accept_backoff().seeded(5);
         let pauses: Vec<Duration> = (0..9).map(|_| b.failed()).collect();
-        assert_eq!(pauses[0], ACCEPT_BACKOFF_MIN);
-        assert_eq!(pauses[1], 2 * ACCEPT_BACKOFF_MIN);
-        assert!(pauses.windows(2).all(|w| w[1] >= w[0]));
-        assert_eq!(*pauses.last().expect("nine"), ACCEPT_BACKOFF_MAX);
-        b.succeeded();
-        assert_eq!(b.failed(), ACCEPT_BACKOFF_MIN);
+        assert!(pauses[0] >= ACCEPT_BACKOFF_MIN && pauses[0] <= 2 * ACCEPT_BACKOFF_MIN);
+        assert!(pauses[..6].windows(2).all(|w| w[1] >= w[0]), "{pauses:?}");
+        let last = *pauses.last().expect("nine");
+        assert!(last >= ACCEPT_BACKOFF_MAX / 2 && last <= ACCEPT_BACKOFF_MAX);
+        b.reset();
+        assert!(b.failed() <= 2 * ACCEPT_BACKOFF_MIN);
     }
 
     #[tokio::test]

@@ -8,11 +8,12 @@
 //! ConnectionAttemptEvent), requests checked for success ([`Client::check`]), capabilities,
 //! keepalives answered automatically ([`Client::answer_keepalives`]), an inventory set up from
 //! an [`InventorySpec`] (configuration, Impinj extensions, ROSpec) and its reports turned into
-//! typed [`Read`](crate::reads::Read)s ([`ReadStream`]), reconnection with a capped exponential
-//! [`Backoff`], and a clean close (CLOSE_CONNECTION, then the reader's close).
+//! typed [`Read`](crate::reads::Read)s ([`ReadStream`]), reconnection with the capped exponential
+//! [`Backoff`] with jitter (`net::backoff`, shared with the servers and MQTT), and a clean
+//! close (CLOSE_CONNECTION, then the reader's close).
 //!
-//! Here: the errors and [`Client`]; the back-off, the inventory spec and the read stream are in
-//! submodules, re-exported.
+//! Here: the errors and [`Client`]; the inventory spec and the read stream are in submodules,
+//! re-exported, as is the back-off.
 
 use std::collections::VecDeque;
 use std::io;
@@ -31,11 +32,10 @@ use tokio::net::{TcpStream, ToSocketAddrs};
 use super::connection::Connection;
 use super::tls::{self, Connector};
 
-mod backoff;
 mod read_stream;
 mod spec;
 
-pub use backoff::Backoff;
+pub use super::backoff::Backoff;
 pub use read_stream::ReadStream;
 pub use spec::InventorySpec;
 

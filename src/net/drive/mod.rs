@@ -24,9 +24,10 @@ use tokio::net::TcpListener;
 use tokio::sync::{oneshot, watch, Semaphore};
 use tokio::task::JoinSet;
 
+use super::backoff::Backoff;
 use super::connection::{Connection, Io};
 use super::report_buffer::ReportBuffer;
-use super::serve::{refuse, sleep_until, stopping, AcceptBackoff, DRAIN};
+use super::serve::{accept_backoff, refuse, sleep_until, stopping, DRAIN};
 use super::stream::Stream;
 use super::tls;
 use crate::record::{Direction, Entry, Event, Recorder};
@@ -67,7 +68,7 @@ struct Driver<H: Host> {
     wire: Wire,
     limits: Limits,
     flushed: Instant,
-    backoff: AcceptBackoff,
+    backoff: Backoff,
     accept_after: Option<tokio::time::Instant>,
     handshakes: JoinSet<(SocketAddr, io::Result<Stream>)>,
     refusals: JoinSet<()>,
@@ -96,7 +97,7 @@ pub async fn drive<H: Host>(
         wire,
         limits,
         flushed: Instant::now(),
-        backoff: AcceptBackoff::default(),
+        backoff: accept_backoff(),
         accept_after: None,
         handshakes: JoinSet::new(),
         refusals: JoinSet::new(),
@@ -341,7 +342,7 @@ impl<H: Host> Driver<H> {
     ) {
         match accepted {
             Ok((stream, peer)) => {
-                self.backoff.succeeded();
+                self.backoff.reset();
                 match tls {
                     Some(acceptor) => {
                         let acceptor = acceptor.clone();
