@@ -1,5 +1,5 @@
 //! Recordings of LLRP sessions: the versioned JSON Lines format ([`mod@format`]), the writer the
-//! proxy and the simulated reader record through ([`mod@writer`]).
+//! proxy and the simulated reader record through, on a thread of its own ([`mod@writer`]).
 
 pub mod format;
 pub mod pcapng;
@@ -7,4 +7,4 @@ pub mod replay;
 pub mod writer;
 
 pub use format::{Direction, Entry, Event, Header, ReaderInfo, RecordError, Recording, Stamp};
-pub use writer::{RecordOptions, Recorder, RecorderTask};
+pub use writer::{Files, RecordOptions, Recorder, RecorderTask, Sink};

@@ -1,26 +1,34 @@
 //! Writing a recording while sessions run: connections hand entries to a [`Recorder`] (a
-//! bounded channel, so a disk that cannot keep up slows the sessions instead of losing
-//! lines), and one task formats and appends them, flushing at most [`FLUSH_MS`] after a line
+//! queue bounded in bytes, so a disk that cannot keep up slows the sessions instead of losing
+//! lines), and one thread of its own per recording formats them and appends them to the
+//! recording's [`Files`] (or any other [`Sink`]), flushing at most [`FLUSH_MS`] after a line
 //! was queued and at every marker, rotating to a numbered next file past `max_bytes`.
+//!
+//! The file work (`std::fs`: writes, `fsync`, opening the next part) never runs on an async
+//! worker: `sim` serves every socket from one, and a disk that stalls (a hung network mount, a
+//! dying card) would stall them all. On its own thread it stalls only the recording; the
+//! sessions go on until [`QUEUE_BYTES`] of entries wait, and then wait for room (an `await`,
+//! which holds no thread) rather than lose a line.
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
-use tokio::sync::{mpsc, OwnedSemaphorePermit, Semaphore};
+use tokio::sync::{oneshot, OwnedSemaphorePermit, Semaphore};
 
 use super::format::{encode_entry, encode_header, Direction, Entry, Event, Header, Stamp};
 
 /// Longest a queued line waits before it is written to the file.
 pub const FLUSH_MS: u64 = 10;
 
-/// Bytes of entries (their frames, plus [`ENTRY_COST`] each) that may wait for the writer
-/// before senders wait: the recorder's memory, however far behind the disk is.
-const QUEUE_BYTES: usize = 16 << 20;
+/// Bytes of entries (their frames, plus a fixed cost for each entry) that may wait for the
+/// writer before senders wait: the recorder's memory, however far behind the disk is.
+pub const QUEUE_BYTES: usize = 16 << 20;
 /// What an entry costs in the queue besides its frame's bytes.
 const ENTRY_COST: usize = 96;
 
@@ -36,10 +44,70 @@ pub struct RecordOptions {
 
 use crate::utc::now_us as utc_now_us;
 
+/// Where a recording's bytes go: its [`Files`], or in tests any writer (one that stalls, to
+/// show that the sessions do not).
+pub trait Sink: Send + 'static {
+    /// One file of the recording.
+    type Part: Write + Send;
+    /// Opens part `part`: 0 when the recording starts (on the caller's thread, so that a file
+    /// that exists is refused at once), 1, 2, … at each rotation (on the writer's thread).
+    fn open(&mut self, part: u32) -> io::Result<Self::Part>;
+    /// Makes what was written to `file` durable: at each rotation and at the end.
+    fn sync(&mut self, file: &mut Self::Part) -> io::Result<()>;
+    /// Part `part`'s name, for the log.
+    fn name(&self, part: u32) -> String;
+}
+
+/// The files of a recording at a path: the path itself, then `NAME.1.EXT`, `NAME.2.EXT`, …
+/// ([`part_path`]); none may exist before (an earlier recording is never overwritten).
+#[derive(Clone, Debug)]
+pub struct Files {
+    path: PathBuf,
+}
+
+impl Files {
+    /// The files of a recording at `path`.
+    pub fn new(path: &Path) -> Files {
+        Files {
+            path: path.to_owned(),
+        }
+    }
+}
+
+impl Sink for Files {
+    type Part = File;
+
+    fn open(&mut self, part: u32) -> io::Result<File> {
+        let first_part = part_path(&self.path, 1);
+        if part == 0 && first_part.exists() {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                format!(
+                    "{} exists (part of an earlier recording): choose another name or remove it",
+                    first_part.display()
+                ),
+            ));
+        }
+        create_new(&part_path(&self.path, part))
+    }
+
+    fn sync(&mut self, file: &mut File) -> io::Result<()> {
+        file.sync_data()
+    }
+
+    fn name(&self, part: u32) -> String {
+        part_path(&self.path, part).display().to_string()
+    }
+}
+
+/// One message to the writer: entries in order, holding their share of the queue's room
+/// until they are written.
+type Batch = (Vec<Entry>, OwnedSemaphorePermit);
+
 /// A handle to a running recording; cheap to clone, one per connection.
 #[derive(Clone, Debug)]
 pub struct Recorder {
-    tx: mpsc::UnboundedSender<(Vec<Entry>, OwnedSemaphorePermit)>,
+    tx: Sender<Batch>,
     /// Bytes of queue left ([`QUEUE_BYTES`]); a batch holds its share until it is written.
     room: Arc<Semaphore>,
     start: Instant,
@@ -47,57 +115,52 @@ pub struct Recorder {
     next_conn: Arc<AtomicU32>,
 }
 
-/// The task that writes the file; await it after the last [`Recorder`] is dropped to know
-/// everything is on disk.
+/// Resolves when the writer has finished (after the last [`Recorder`] is dropped): await it
+/// to know everything is on disk; its error is the writer's.
 pub type RecorderTask = tokio::task::JoinHandle<io::Result<()>>;
 
 impl Recorder {
     /// Creates `path` (which must not exist, nor its numbered parts: an earlier recording is
-    /// never overwritten), writes `header` (its `start_utc_us` is set to now) and starts the
-    /// writing task on the current runtime.
+    /// never overwritten) and starts the writer, which writes `header` first (its
+    /// `start_utc_us` is set to now). Needs a tokio runtime (for the [`RecorderTask`]).
     pub fn create(
         path: &Path,
+        header: Header,
+        options: RecordOptions,
+    ) -> io::Result<(Recorder, RecorderTask)> {
+        Recorder::start(Files::new(path), header, options)
+    }
+
+    /// As [`create`](Recorder::create), into `sink`: opens its first part here, then writes
+    /// on a thread of its own.
+    pub fn start<S: Sink>(
+        mut sink: S,
         mut header: Header,
         options: RecordOptions,
     ) -> io::Result<(Recorder, RecorderTask)> {
         let start = Instant::now();
         let start_utc_us = utc_now_us();
         header.start_utc_us = start_utc_us;
-        let mut file = FileSet::create(path, header, options.max_bytes)?;
+        let first = sink.open(0)?;
+        let files = FileSet {
+            sink,
+            header,
+            max_bytes: options.max_bytes,
+            file: first,
+            written: 0,
+        };
         // Unbounded as a channel, bounded in bytes by `room`.
-        let (tx, mut rx) = mpsc::unbounded_channel::<(Vec<Entry>, OwnedSemaphorePermit)>();
+        let (tx, rx) = std::sync::mpsc::channel::<Batch>();
+        let (done, finished) = oneshot::channel();
+        std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || {
+                let _ = done.send(write_loop(files, &rx));
+            })?;
         let task = tokio::spawn(async move {
-            let mut buf = Vec::with_capacity(FLUSH_BYTES);
-            let mut due: Option<tokio::time::Instant> = None;
-            loop {
-                let entry = match due {
-                    Some(at) => tokio::select! {
-                        e = rx.recv() => e,
-                        _ = tokio::time::sleep_until(at) => {
-                            file.write(&mut buf)?;
-                            due = None;
-                            continue;
-                        }
-                    },
-                    None => rx.recv().await,
-                };
-                let Some((batch, _room)) = entry else { break };
-                let mut marker = false;
-                for entry in &batch {
-                    marker |= matches!(entry, Entry::Marker { .. });
-                    let before = buf.len();
-                    encode_entry(entry, &mut buf);
-                    file.rotate_if_full(&mut buf, before)?;
-                }
-                if marker || buf.len() >= FLUSH_BYTES {
-                    file.write(&mut buf)?;
-                    due = None;
-                } else if due.is_none() {
-                    due = Some(tokio::time::Instant::now() + Duration::from_millis(FLUSH_MS));
-                }
-            }
-            file.write(&mut buf)?;
-            file.file.sync_data()
+            finished
+                .await
+                .unwrap_or_else(|_| Err(io::Error::other("the recording's writer thread panicked")))
         });
         Ok((
             Recorder {
@@ -193,38 +256,56 @@ impl Recorder {
 #[error("the recording's writer has stopped")]
 pub struct RecorderGone;
 
+/// The writer's thread: the header, then every batch in order, written at most [`FLUSH_MS`]
+/// after a line was queued and at once at a marker or [`FLUSH_BYTES`]; at the end (every
+/// [`Recorder`] dropped) what is left, made durable.
+fn write_loop<S: Sink>(mut files: FileSet<S>, rx: &Receiver<Batch>) -> io::Result<()> {
+    files.write_header()?;
+    let mut buf = Vec::with_capacity(FLUSH_BYTES);
+    let mut due: Option<Instant> = None;
+    loop {
+        let next = match due {
+            Some(at) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
+            None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
+        };
+        let (batch, _room) = match next {
+            Ok(b) => b,
+            Err(RecvTimeoutError::Timeout) => {
+                files.write(&mut buf)?;
+                due = None;
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        let mut marker = false;
+        for entry in &batch {
+            marker |= matches!(entry, Entry::Marker { .. });
+            let before = buf.len();
+            encode_entry(entry, &mut buf);
+            files.rotate_if_full(&mut buf, before)?;
+        }
+        if marker || buf.len() >= FLUSH_BYTES {
+            files.write(&mut buf)?;
+            due = None;
+        } else if due.is_none() {
+            due = Some(Instant::now() + Duration::from_millis(FLUSH_MS));
+        }
+    }
+    files.write(&mut buf)?;
+    files.sink.sync(&mut files.file)
+}
+
 /// The current file of a recording and how to open the next.
-struct FileSet {
-    path: PathBuf,
+struct FileSet<S: Sink> {
+    sink: S,
     header: Header,
     max_bytes: Option<u64>,
-    file: File,
+    file: S::Part,
     /// Bytes in the current file (written or buffered) at the last rotation check.
     written: u64,
 }
 
-impl FileSet {
-    fn create(path: &Path, header: Header, max_bytes: Option<u64>) -> io::Result<Self> {
-        if part_path(path, 1).exists() {
-            return Err(io::Error::new(
-                io::ErrorKind::AlreadyExists,
-                format!(
-                    "{} exists (part of an earlier recording): choose another name or remove it",
-                    part_path(path, 1).display()
-                ),
-            ));
-        }
-        let mut set = FileSet {
-            path: path.to_owned(),
-            file: create_new(path)?,
-            header,
-            max_bytes,
-            written: 0,
-        };
-        set.write_header()?;
-        Ok(set)
-    }
-
+impl<S: Sink> FileSet<S> {
     fn write_header(&mut self) -> io::Result<()> {
         let mut line = Vec::new();
         encode_header(&self.header, &mut line);
@@ -233,13 +314,11 @@ impl FileSet {
         Ok(())
     }
 
-    /// Writes and empties `buf`.
-    ///
-    /// A blocking write on the async worker: appends to the page cache take microseconds,
-    /// and the lines are batched (at most every [`FLUSH_MS`] or [`FLUSH_BYTES`]).
+    /// Writes and empties `buf` (on the writer's thread, which may block on a slow disk).
     fn write(&mut self, buf: &mut Vec<u8>) -> io::Result<()> {
         if !buf.is_empty() {
             self.file.write_all(buf)?;
+            self.file.flush()?;
             self.written += buf.len() as u64;
             buf.clear();
         }
@@ -259,11 +338,10 @@ impl FileSet {
         }
         let line = buf.split_off(line_start);
         self.write(buf)?;
-        self.file.sync_data()?;
+        self.sink.sync(&mut self.file)?;
         self.header.part += 1;
-        let next = part_path(&self.path, self.header.part);
-        self.file = create_new(&next)?;
-        tracing::info!(file = %next.display(), "recording continues in the next file");
+        self.file = self.sink.open(self.header.part)?;
+        tracing::info!(file = %self.sink.name(self.header.part), "recording continues in the next file");
         self.write_header()?;
         *buf = line;
         Ok(())
@@ -419,5 +497,67 @@ mod tests {
             part_path(&path, 2).file_name().expect("name"),
             "rec.2.jsonl"
         );
+    }
+
+    /// A sink whose writes wait until `open` is set; what gets through is kept.
+    #[derive(Clone, Default)]
+    struct Held {
+        open: Arc<(std::sync::Mutex<bool>, std::sync::Condvar)>,
+        through: Arc<std::sync::Mutex<Vec<u8>>>,
+    }
+
+    impl Write for Held {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            let (lock, wake) = &*self.open;
+            let mut open = lock.lock().expect("lock");
+            while !*open {
+                open = wake.wait(open).expect("lock");
+            }
+            self.through.lock().expect("lock").extend_from_slice(buf);
+            Ok(buf.len())
+        }
+
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Sink for Held {
+        type Part = Held;
+        fn open(&mut self, _part: u32) -> io::Result<Held> {
+            Ok(self.clone())
+        }
+        fn sync(&mut self, _file: &mut Held) -> io::Result<()> {
+            Ok(())
+        }
+        fn name(&self, part: u32) -> String {
+            format!("held {part}")
+        }
+    }
+
+    #[tokio::test]
+    async fn a_stalled_sink_holds_no_sender_and_gets_every_line_in_order_once_it_goes() {
+        let sink = Held::default();
+        let (rec, task) =
+            Recorder::start(sink.clone(), Header::new("up", 0), RecordOptions::default())
+                .expect("start");
+        // On this runtime's only thread: each send returns although nothing can be written.
+        for conn in 1..=50 {
+            rec.marker(conn, Event::Connect, format!("client {conn}"))
+                .await
+                .expect("queued");
+        }
+        assert!(sink.through.lock().expect("lock").is_empty());
+        {
+            let (lock, wake) = &*sink.open;
+            *lock.lock().expect("lock") = true;
+            wake.notify_all();
+        }
+        drop(rec);
+        task.await.expect("joined").expect("written");
+        let bytes = sink.through.lock().expect("lock").clone();
+        let r = Recording::read(&bytes[..]).expect("a recording");
+        let conns: Vec<u32> = r.entries.iter().map(Entry::conn).collect();
+        assert_eq!(conns, (1..=50).collect::<Vec<_>>());
     }
 }
