@@ -14,6 +14,7 @@ pub mod metrics;
 pub mod net;
 pub mod realism;
 pub mod record;
+pub mod secret;
 pub mod sim;
 pub mod stop;
 

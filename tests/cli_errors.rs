@@ -112,3 +112,74 @@ fn each_command_says_its_run_time_error_as_llrp_gateway_command_message_and_exit
         "missing.jsonl",
     );
 }
+
+/// A secret's file that gives no secret (missing, empty) is an error naming its option and
+/// the file; a password apart from a URL that names no user, or that has one already, too.
+#[test]
+fn a_secret_that_cannot_be_used_is_said_naming_its_option() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = |name: &str, text: Option<&str>| {
+        let p = dir.path().join(name);
+        if let Some(t) = text {
+            std::fs::write(&p, t).expect("writes");
+        }
+        p.display().to_string()
+    };
+    let missing = file("missing", None);
+    let empty = file("empty", Some("\n"));
+    let password = file("password", Some("pw-SECRET\n"));
+    let publish = |url: &str, file: &str| -> Vec<String> {
+        let sim = [
+            "sim",
+            "--no-http",
+            "--listen",
+            "127.0.0.1:0",
+            "--publish",
+            url,
+        ];
+        let password = ["--mqtt-password-file", file];
+        sim.iter().chain(&password).map(|s| s.to_string()).collect()
+    };
+    let worker = |extra: &[&str]| -> Vec<String> {
+        let args = ["localize", "--subscribe", "mqtt://w@127.0.0.1:9"].iter();
+        args.chain(extra).map(|s| s.to_string()).collect()
+    };
+    let cases: Vec<(&str, Vec<String>, String)> = vec![
+        (
+            "sim",
+            vec!["sim".into(), "--http-token-file".into(), missing.clone()],
+            format!("--http-token-file {missing}: cannot read it"),
+        ),
+        (
+            "sim",
+            publish("mqtt://gw@127.0.0.1:9", &empty),
+            format!("--mqtt-password-file {empty}: it is empty"),
+        ),
+        (
+            "sim",
+            publish("mqtt://127.0.0.1:9", &password),
+            "names no user".into(),
+        ),
+        (
+            "sim",
+            publish("mqtt://gw:inurl@127.0.0.1:9", &password),
+            "both in the URL and apart from it".into(),
+        ),
+        (
+            "localize",
+            worker(&["--mqtt-password-file", &missing]),
+            format!("--mqtt-password-file {missing}: cannot read it"),
+        ),
+        (
+            "localize",
+            worker(&["--http", "127.0.0.1:0", "--http-token-file", &empty]),
+            format!("--http-token-file {empty}: it is empty"),
+        ),
+    ];
+    for (command, args, says) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        fails_as(command, &args, &says);
+        let (_, err) = run(&args);
+        assert!(!err.contains("SECRET") && !err.contains("inurl"), "{err}");
+    }
+}

@@ -166,3 +166,72 @@ fn tls_credentials_and_topic_rights_are_enforced_by_the_broker() {
     }
     drop(sim);
 }
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers); ./scripts/test runs it"]
+fn a_password_from_the_environment_or_a_file_logs_in_as_one_in_the_url_does() {
+    let broker = Mosquitto::start_with(|port, dir| {
+        let passwords = dir.join("passwords");
+        add_user(&passwords, "gw", "gw-pass");
+        add_user(&passwords, "worker", "worker-pass");
+        format!(
+            "per_listener_settings false\nallow_anonymous false\npassword_file {}\n\
+             persistence false\nlistener {port} 127.0.0.1\n",
+            passwords.display()
+        )
+    });
+    let url = |user: &str| format!("mqtt://{user}@127.0.0.1:{}/sec", broker.port);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("writes");
+        p.display().to_string()
+    };
+
+    // A wrong password from a file is refused as a wrong one in the URL is, and not shown.
+    let wrong = file("wrong", "wrong-pass-from-file\n");
+    let out = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .args(["sim", "--no-http", "--listen", "127.0.0.1:0", "--publish"])
+        .arg(url("gw"))
+        .args(["--mqtt-password-file", &wrong])
+        .stdin(Stdio::null())
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("refused the connection"), "{err}");
+    assert!(!err.contains("wrong-pass"), "the password is shown: {err}");
+
+    // The worker's password from a file, the simulator's from the environment.
+    let worker_password = file("worker", "worker-pass\n");
+    let (_w, http) = worker(&url("worker"), &["--mqtt-password-file", &worker_password]);
+    let gw = url("gw");
+    let sim_args = [
+        "sim",
+        "--no-http",
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "20",
+        "--publish",
+        gw.as_str(),
+    ];
+    let mut sim =
+        http_support::Proc::spawn_env(&sim_args, &[("LLRP_GATEWAY_MQTT_PASSWORD", "gw-pass")]);
+    sim.address("listening on ");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let tags = request(http, "GET", "/api/tags", &[], b"").json();
+        let located = tags["tags"]
+            .as_array()
+            .map(|t| t.iter().filter(|t| t["estimate"]["x"].is_number()).count())
+            .unwrap_or(0);
+        if located >= 1 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "nothing localized: {tags}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let log = sim.stop_and_log();
+    assert!(log.iter().all(|l| !l.contains("gw-pass")), "{log:#?}");
+}

@@ -45,6 +45,9 @@ pub enum SinksError {
     /// The pose file is bad (the message names the file and the line).
     #[error("{0}")]
     Poses(#[from] PoseFileError),
+    /// A secret's file (`--http-token-file`, `--mqtt-password-file`) gave no secret.
+    #[error("{0}")]
+    Secret(#[from] super::args::SecretOptionError),
     /// The localizer, its API or the publisher did not start.
     #[error("{0}")]
     Consumers(#[from] ConsumersError),
@@ -54,8 +57,8 @@ pub enum SinksError {
 /// `--http` was given, the publisher when `--publish` was; [`super::root`]), with the
 /// settings and pose files of `args`; `command` names the command in messages.
 pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, SinksError> {
-    let http_options = LaunchOptions::from(args.http.clone());
-    let publish = crate::fleet::args::PublishConfig::from(args.publish.clone());
+    let http_options = LaunchOptions::try_from(args.http.clone())?;
+    let publish = crate::fleet::args::PublishConfig::try_from(args.publish.clone())?;
     let http = http_options.address(None);
     let file = match &args.localize_settings {
         Some(p) if http.is_some() || args.publish.publish.is_some() => SettingsFile::load(p)?,

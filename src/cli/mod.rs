@@ -198,12 +198,12 @@ pub fn main() -> ExitCode {
                 scenario,
                 reader_model.as_deref(),
                 sim::SimLocalize {
-                    http: http.into(),
+                    http,
                     poses: poses.into(),
                     pose_interval_ms,
                     read_poses: !no_read_poses,
                     estimator,
-                    publish: publish.into(),
+                    publish,
                 },
                 SimOptions {
                     listen,

@@ -18,6 +18,9 @@ pub enum SimCommandError {
     /// The async runtime could not be started.
     #[error("cannot start the async runtime: {0}")]
     Runtime(std::io::Error),
+    /// A secret's file (`--http-token-file`, `--mqtt-password-file`) gave no secret.
+    #[error("{0}")]
+    Secret(#[from] super::args::SecretOptionError),
     /// The localizer, its API or the MQTT publisher could not be started.
     #[error("{0}")]
     Consumers(#[from] ConsumersError),
@@ -29,7 +32,7 @@ pub enum SimCommandError {
 /// The localizer, HTTP and MQTT side of `sim`.
 pub struct SimLocalize {
     /// Where the HTTP API and live map are served.
-    pub http: crate::http::launch::LaunchOptions,
+    pub http: super::args::HttpArgs,
     /// The antenna poses the localizer is given.
     pub poses: crate::sim::PoseSource,
     /// Time between two pose samples of an antenna (ms).
@@ -39,7 +42,7 @@ pub struct SimLocalize {
     /// The localizer's estimator.
     pub estimator: crate::localize::estimate::Estimator,
     /// Publishing to an MQTT broker.
-    pub publish: crate::fleet::args::PublishConfig,
+    pub publish: super::args::PublishArgs,
 }
 
 /// The EPCs of `scenario`'s reference tags.
@@ -52,6 +55,20 @@ fn scenario_references(scenario: &Scenario) -> std::collections::BTreeSet<String
         .collect()
 }
 
+/// The scenario at `path` (the embedded S1 without one), read as `reader_model` when given.
+fn load(
+    path: Option<&std::path::Path>,
+    reader_model: Option<&str>,
+) -> Result<Scenario, SimCommandError> {
+    let loaded = match path {
+        Some(path) => {
+            Scenario::load_with(path, reader_model).map_err(|e| format!("{}: {e}", path.display()))
+        }
+        None => Scenario::default_s1_with(reader_model).map_err(|e| format!("S1: {e}")),
+    };
+    loaded.map_err(SimCommandError::Scenario)
+}
+
 /// Runs the simulated readers until Ctrl-C or SIGTERM.
 pub fn run(
     scenario: Option<PathBuf>,
@@ -60,13 +77,9 @@ pub fn run(
     mut opts: SimOptions,
 ) -> Result<(), SimCommandError> {
     crate::stop::init_logging();
-    let loaded = match &scenario {
-        Some(path) => {
-            Scenario::load_with(path, reader_model).map_err(|e| format!("{}: {e}", path.display()))
-        }
-        None => Scenario::default_s1_with(reader_model).map_err(|e| format!("S1: {e}")),
-    };
-    let scenario = loaded.map_err(SimCommandError::Scenario)?;
+    let http = crate::http::launch::LaunchOptions::try_from(localize.http)?;
+    let publish = crate::fleet::args::PublishConfig::try_from(localize.publish)?;
+    let scenario = load(scenario.as_deref(), reader_model)?;
     for notice in &scenario.notices {
         tracing::info!("scenario: {notice}");
     }
@@ -98,12 +111,12 @@ pub fn run(
         // the localizer is offered (with --no-http, of what it would be offered).
         let consumers = Consumers::start(Plan {
             command: "sim",
-            http: localize.http.address(Some("127.0.0.1:8080")),
-            http_args: &localize.http,
+            http: http.address(Some("127.0.0.1:8080")),
+            http_args: &http,
             simulation: true,
             settings,
             prime: Vec::new(),
-            publish: &localize.publish,
+            publish: &publish,
             references: scenario_references(&scenario),
             headless: false,
         })

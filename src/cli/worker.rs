@@ -7,8 +7,9 @@ use super::localize::LocalizeArgs;
 use super::root::{Consumers, Plan};
 use crate::fleet::args::PublishConfig;
 use crate::fleet::schema::DEFAULT_SHARDS;
-use crate::fleet::url::BrokerUrl;
+use crate::fleet::url::{BrokerAddress, BrokerUrl};
 use crate::fleet::worker::{parse_shards, Worker, WorkerOptions};
+use crate::http::launch::LaunchOptions;
 use crate::localize::live::Input;
 use crate::localize::offline::SettingsFile;
 use crate::localize::poses::Poses;
@@ -17,9 +18,13 @@ use crate::localize::poses::Poses;
 #[derive(Clone, Debug, Default, PartialEq, clap::Args)]
 pub struct WorkerArgs {
     /// Run as a localizer worker on this MQTT broker's reads instead of a file
-    /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).
+    /// (`mqtt://[USER[:PASS]@]HOST[:PORT][/PREFIX]`, the password better apart:
+    /// `--mqtt-password-file` or the environment variable; docs/fleet.md).
     #[arg(long, value_name = "URL")]
-    pub subscribe: Option<String>,
+    pub subscribe: Option<BrokerAddress>,
+    /// The broker's password apart from the URL.
+    #[command(flatten)]
+    pub password: super::args::MqttPasswordArgs,
     /// The read shards this worker owns: `0-7`, `0,3,8-11`, … (default: all).
     #[arg(long, value_name = "LIST", requires = "subscribe")]
     pub shards: Option<String>,
@@ -56,9 +61,12 @@ pub struct WorkerArgs {
 /// Why the worker of `localize --subscribe` could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum WorkerCommandError {
-    /// `--subscribe` is not a broker address.
+    /// `--subscribe` is not a broker address (or a password apart does not fit it).
     #[error("--subscribe {0}")]
     Subscribe(crate::fleet::url::UrlError),
+    /// A secret's file (`--http-token-file`, `--mqtt-password-file`) gave no secret.
+    #[error("{0}")]
+    Secret(#[from] super::args::SecretOptionError),
     /// `--shards` is not a list of shards below `--shard-count` (the message says why).
     #[error("{0}")]
     Shards(String),
@@ -103,6 +111,8 @@ pub enum WorkerCommandError {
 /// What the worker's options ask for: the worker, and the localizer it feeds.
 struct WorkerPlan {
     worker: WorkerOptions,
+    /// The HTTP API's options (its token read).
+    http: LaunchOptions,
     /// The localizer's settings.
     settings: crate::localize::live::Settings,
     /// Per reader, reader time − robot time of the poses robots publish (µs).
@@ -124,8 +134,11 @@ pub fn run(args: &LocalizeArgs) -> Result<(), WorkerCommandError> {
 fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
     type E = WorkerCommandError;
     let w = &args.worker;
-    let url = w.subscribe.as_deref().unwrap_or_default();
-    let url = BrokerUrl::parse(url).map_err(E::Subscribe)?;
+    let url = w.subscribe.as_ref().map_or("", BrokerAddress::as_str);
+    let password = w.password.password()?;
+    let url = BrokerUrl::parse(url)
+        .and_then(|u| u.with_password(password))
+        .map_err(E::Subscribe)?;
     let shards = match &w.shards {
         Some(list) => parse_shards(list, w.shard_count).map_err(E::Shards)?,
         None => (0..w.shard_count).collect(),
@@ -169,6 +182,7 @@ fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
     };
     Ok(WorkerPlan {
         worker,
+        http: LaunchOptions::try_from(w.http.clone())?,
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
     })
@@ -178,7 +192,7 @@ fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
 /// for, until Ctrl-C or SIGTERM.
 async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandError> {
     let stop = crate::stop::StopSignal::watch();
-    let http_options = crate::http::launch::LaunchOptions::from(w.http.clone());
+    let http_options = plan.http;
     // Each reader's clock offset, before anything else reaches the localizer.
     let prime = (plan.clock_offsets_us.iter())
         .map(|(reader, offset)| Input::Reader {

@@ -6,14 +6,18 @@ use std::time::Duration;
 
 use super::metrics::MqttMetrics;
 use super::publish::{PublishOptions, Publisher};
-use super::url::BrokerUrl;
+use super::url::{BrokerAddress, BrokerUrl};
+use crate::secret::Secret;
 
 /// Publishing to an MQTT broker (docs/fleet.md; the command line's `--publish` options).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PublishConfig {
     /// Publish reads, poses, reader events and statuses to this MQTT broker:
-    /// `mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`.
-    pub publish: Option<String>,
+    /// `mqtt://[USER[:PASS]@]HOST[:PORT][/PREFIX]` (shown without its password).
+    pub publish: Option<BrokerAddress>,
+    /// The broker's password given apart from the URL (`--mqtt-password`, its file or its
+    /// environment variable), for a URL that names the user only.
+    pub password: Option<Secret>,
     /// Read shards: a tag's reads go to `PREFIX/v1/reads/{FNV-1a(EPC) % N}`.
     pub shard_count: u16,
     /// Messages held while the broker is away; beyond it they are dropped and counted.
@@ -41,8 +45,9 @@ impl PublishConfig {
     /// The broker address as shown: its password hidden.
     pub fn shown(&self) -> String {
         self.publish
-            .as_deref()
-            .and_then(|u| BrokerUrl::parse(u).ok())
+            .as_ref()
+            .and_then(|u| BrokerUrl::parse(u.as_str()).ok())
+            .map(|u| u.clone().with_password(self.password.clone()).unwrap_or(u))
             .map(|u| u.to_string())
             .unwrap_or_default()
     }
@@ -57,7 +62,9 @@ impl PublishConfig {
         let Some(url) = &self.publish else {
             return Ok(None);
         };
-        let url = BrokerUrl::parse(url).map_err(|e| format!("--publish {e}"))?;
+        let url = BrokerUrl::parse(url.as_str())
+            .and_then(|u| u.with_password(self.password.clone()))
+            .map_err(|e| format!("--publish {e}"))?;
         let mut opts = PublishOptions::new(url, &self.gateway_name);
         opts.shard_count = self.shard_count;
         opts.queue = self.publish_queue;

@@ -24,6 +24,7 @@ use super::schema::{self, Status, VERSION};
 use super::url::BrokerUrl;
 use crate::localize::live::Mirror;
 use crate::net::backoff::Backoff;
+use crate::secret::Secret;
 
 /// Largest MQTT packet sent or accepted (bytes).
 pub const MAX_PACKET: usize = 1 << 20;
@@ -113,7 +114,8 @@ pub fn mqtt_options(
     o.set_clean_session(clean);
     o.set_max_packet_size(MAX_PACKET, MAX_PACKET);
     if let Some(user) = &url.user {
-        o.set_credentials(user.clone(), url.password.clone().unwrap_or_default());
+        let password = url.password.as_ref().map_or("", Secret::expose);
+        o.set_credentials(user.clone(), password);
     }
     if url.tls {
         let config = tls.ok_or_else(|| {

@@ -2,6 +2,8 @@
 
 use std::fmt;
 
+use crate::secret::Secret;
+
 /// MQTT's registered port (plain TCP).
 pub const MQTT_PORT: u16 = 1883;
 
@@ -19,8 +21,8 @@ pub struct BrokerUrl {
     pub port: u16,
     /// User name, if any.
     pub user: Option<String>,
-    /// Password, if any (only with a user).
-    pub password: Option<String>,
+    /// Password, if any (only with a user); shown as `***`.
+    pub password: Option<Secret>,
     /// Topic prefix (no leading or trailing `/`), empty for none.
     pub prefix: String,
 }
@@ -55,6 +57,51 @@ pub enum UrlError {
     /// A `%` escape that is not two hex digits of UTF-8.
     #[error("'{0}': bad percent escape in the user or password")]
     Escape(String),
+    /// A password apart from the URL, which has one already.
+    #[error("'{0}': a password is given both in the URL and apart from it")]
+    TwoPasswords(String),
+    /// A password apart from the URL, which names no user to go with it.
+    #[error(
+        "'{0}': a password is given apart from the URL, which names no user (mqtt://USER@HOST)"
+    )]
+    PasswordWithoutUser(String),
+}
+
+/// A broker address as given (`--publish`, `--subscribe`): its text, which may hold a
+/// password, shown with the password hidden (`Debug` too), so an options struct holding it
+/// prints none.
+#[derive(Clone, PartialEq, Eq)]
+pub struct BrokerAddress(String);
+
+impl BrokerAddress {
+    /// The address as given, password included: for [`BrokerUrl::parse`] only.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl From<String> for BrokerAddress {
+    fn from(text: String) -> BrokerAddress {
+        BrokerAddress(text)
+    }
+}
+
+impl From<&str> for BrokerAddress {
+    fn from(text: &str) -> BrokerAddress {
+        BrokerAddress(text.to_owned())
+    }
+}
+
+impl fmt::Display for BrokerAddress {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&redact(&self.0))
+    }
+}
+
+impl fmt::Debug for BrokerAddress {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "BrokerAddress({})", redact(&self.0))
+    }
 }
 
 impl BrokerUrl {
@@ -73,14 +120,7 @@ impl BrokerUrl {
             None => (None, authority),
         };
         let (user, password) = match credentials {
-            Some(c) => {
-                let (u, p) = match c.split_once(':') {
-                    Some((u, p)) => (u, Some(p)),
-                    None => (c, None),
-                };
-                let unescape = |s: &str| percent_decode(s).ok_or(UrlError::Escape(redact(url)));
-                (Some(unescape(u)?), p.map(unescape).transpose()?)
-            }
+            Some(c) => login(c, url)?,
             None => (None, None),
         };
         let (host, port) = if let Some(v6) = hostport.strip_prefix('[') {
@@ -97,20 +137,24 @@ impl BrokerUrl {
         if host.is_empty() {
             return Err(UrlError::Host(redact(url)));
         }
-        let port = match port {
-            None => {
-                if tls {
-                    MQTTS_PORT
-                } else {
-                    MQTT_PORT
-                }
+        // An `@` past the authority: most likely a password holding an unescaped `/`, whose
+        // pieces would be taken for the port and the prefix: those are not echoed then.
+        let echo = |part: &str| {
+            if credentials.is_none() && prefix.contains('@') {
+                "***".to_owned()
+            } else {
+                part.to_owned()
             }
+        };
+        let port = match port {
+            None if tls => MQTTS_PORT,
+            None => MQTT_PORT,
             Some(p) => match p.parse::<u16>() {
                 Ok(n) if n > 0 => n,
                 _ => {
                     return Err(UrlError::Port {
                         url: redact(url),
-                        port: p.to_owned(),
+                        port: echo(p),
                     })
                 }
             },
@@ -118,11 +162,14 @@ impl BrokerUrl {
         let prefix = prefix.trim_end_matches('/');
         let bad = |reason| UrlError::Prefix {
             url: redact(url),
-            prefix: prefix.to_owned(),
+            prefix: echo(prefix),
             reason,
         };
         if prefix.contains(['+', '#']) {
             return Err(bad("MQTT wildcards (+, #) are not allowed"));
+        }
+        if prefix.contains('@') {
+            return Err(bad("'@' is not allowed (in a password, write '/' as %2F and '@' as %40, or give it apart: --mqtt-password-file)"));
         }
         if !prefix.is_empty() && prefix.split('/').any(str::is_empty) {
             return Err(bad("empty topic level"));
@@ -135,6 +182,23 @@ impl BrokerUrl {
             password,
             prefix: prefix.to_owned(),
         })
+    }
+
+    /// This address with `password`, given apart from the URL (`--mqtt-password`, its file or
+    /// its environment variable), when there is one: the URL must name the user and no
+    /// password of its own.
+    pub fn with_password(mut self, password: Option<Secret>) -> Result<BrokerUrl, UrlError> {
+        let Some(password) = password else {
+            return Ok(self);
+        };
+        if self.password.is_some() {
+            return Err(UrlError::TwoPasswords(self.to_string()));
+        }
+        if self.user.is_none() {
+            return Err(UrlError::PasswordWithoutUser(self.to_string()));
+        }
+        self.password = Some(password);
+        Ok(self)
     }
 
     /// The topic `rest` under the prefix: `PREFIX/rest`, or `rest` without one.
@@ -177,18 +241,30 @@ impl fmt::Debug for BrokerUrl {
     }
 }
 
-/// `url` with any password replaced by `***`, for error messages.
+/// The user and password of `credentials` (`USER[:PASS]`, percent-escaped) in `url`.
+fn login(credentials: &str, url: &str) -> Result<(Option<String>, Option<Secret>), UrlError> {
+    let (u, p) = match credentials.split_once(':') {
+        Some((u, p)) => (u, Some(p)),
+        None => (credentials, None),
+    };
+    let unescape = |s: &str| percent_decode(s).ok_or(UrlError::Escape(redact(url)));
+    let password = p.map(unescape).transpose()?.map(Secret::new);
+    Ok((Some(unescape(u)?), password))
+}
+
+/// `url` with any password replaced by `***`, for messages: everything between the first
+/// `:` after the scheme and the last `@` (so a password holding an unescaped `/` or `@`,
+/// which does not parse, is hidden all the same; at worst more is hidden than the password).
 fn redact(url: &str) -> String {
     let Some((scheme, rest)) = url.split_once("://") else {
         return url.to_owned();
     };
-    let authority = rest.split('/').next().unwrap_or("");
-    match authority.rsplit_once('@') {
-        Some((cred, _)) if cred.contains(':') => {
-            let user = cred.split(':').next().unwrap_or("");
-            format!("{scheme}://{user}:***@{}", &rest[cred.len() + 1..])
-        }
-        _ => url.to_owned(),
+    match rest.rsplit_once('@') {
+        Some((cred, host)) => match cred.split_once(':') {
+            Some((user, _)) => format!("{scheme}://{user}:***@{host}"),
+            None => url.to_owned(),
+        },
+        None => url.to_owned(),
     }
 }
 
@@ -223,7 +299,7 @@ mod tests {
         assert!(u.tls);
         assert_eq!((u.host.as_str(), u.port), ("broker.local", 18883));
         assert_eq!(u.user.as_deref(), Some("gw"));
-        assert_eq!(u.password.as_deref(), Some("p@ss"));
+        assert_eq!(u.password.as_ref().map(Secret::expose), Some("p@ss"));
         assert_eq!(u.prefix, "site/a");
         assert_eq!(u.topic("v1/refs"), "site/a/v1/refs");
         assert_eq!(BrokerUrl::parse("mqtts://h").expect("parses").port, 8883);
@@ -239,6 +315,46 @@ mod tests {
         let e = BrokerUrl::parse("mqtt://gw:secret@h:99999").expect_err("bad port");
         assert!(!e.to_string().contains("secret"), "{e}");
         assert!(e.to_string().contains("99999"), "{e}");
+        // A password with an unescaped `/` or `@` does not parse, and is not shown either.
+        let urls = [
+            "mqtt://gw:se/cret@h",
+            "mqtt://gw:se@cret@h:0",
+            "mqtt://gw:1/+cret@h",
+            "mqtt://gw:1/cret@h",
+        ];
+        for url in urls {
+            let e = BrokerUrl::parse(url).expect_err("does not parse");
+            assert!(!e.to_string().contains("cret"), "{e}");
+            assert!(!e.to_string().contains("se"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_password_apart_needs_the_user_and_no_password_in_the_url() {
+        let pass = || Some(Secret::new("apart"));
+        let u = BrokerUrl::parse("mqtt://gw@h").expect("parses");
+        let u = u.with_password(pass()).expect("a user without a password");
+        assert_eq!(u.password.as_ref().map(Secret::expose), Some("apart"));
+        assert_eq!(u.to_string(), "mqtt://gw:***@h:1883");
+        let e = (BrokerUrl::parse("mqtt://gw:inurl@h").expect("parses"))
+            .with_password(pass())
+            .expect_err("two passwords");
+        assert!(matches!(e, UrlError::TwoPasswords(_)));
+        assert!(!e.to_string().contains("inurl"), "{e}");
+        let e = (BrokerUrl::parse("mqtt://h").expect("parses"))
+            .with_password(pass())
+            .expect_err("no user");
+        assert!(matches!(e, UrlError::PasswordWithoutUser(_)));
+        let same = BrokerUrl::parse("mqtt://gw:inurl@h").expect("parses");
+        assert_eq!(same.clone().with_password(None), Ok(same));
+    }
+
+    #[test]
+    fn a_broker_address_as_given_shows_no_password() {
+        let a = BrokerAddress::from("mqtts://gw:s3cret@h:8883/p");
+        assert_eq!(a.to_string(), "mqtts://gw:***@h:8883/p");
+        assert!(!format!("{a:?}").contains("s3cret"));
+        assert_eq!(a.as_str(), "mqtts://gw:s3cret@h:8883/p");
     }
 
     #[test]

@@ -15,6 +15,7 @@ use super::{
 use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 use crate::metrics::Metrics;
+use crate::secret::Secret;
 
 /// How the HTTP API beside a command is served (the command line's `--http` options).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -24,8 +25,9 @@ pub struct LaunchOptions {
     pub http: Option<String>,
     /// No HTTP API.
     pub no_http: bool,
-    /// Bearer token the write routes need (every route when bound beyond loopback).
-    pub http_token: Option<String>,
+    /// Bearer token the write routes need (every route when bound beyond loopback); shown as
+    /// `***`.
+    pub http_token: Option<Secret>,
     /// A host name the loopback HTTP API also answers to (beside localhost, 127.0.0.1 and
     /// `[::1]`); `.example.lan` takes a domain and its subdomains. Repeatable.
     pub http_allowed_host: Vec<String>,

@@ -23,6 +23,7 @@ use utoipa_axum::routes;
 use crate::localize::live::Tap;
 use crate::localize::shared::Shared;
 use crate::metrics::Metrics;
+use crate::secret::Secret;
 
 mod events;
 pub mod guard;
@@ -40,8 +41,9 @@ pub const DEFAULT_BODY_LIMIT: usize = 1 << 20;
 /// How the API is served.
 #[derive(Clone, Debug)]
 pub struct HttpOptions {
-    /// Bearer token; with one, write routes (POST) need `Authorization: Bearer <token>`.
-    pub token: Option<String>,
+    /// Bearer token; with one, write routes (POST) need `Authorization: Bearer <token>`
+    /// (shown as `***`).
+    pub token: Option<Secret>,
     /// Every route needs the token, reads too (a listener beyond loopback: see
     /// [`require_token_everywhere`]).
     pub token_everywhere: bool,
@@ -97,8 +99,8 @@ pub fn require_token_everywhere(addr: &SocketAddr) -> bool {
 }
 
 /// Refuses a listener beyond loopback without a token (the message says why).
-pub fn check_bind(addr: &SocketAddr, token: &Option<String>) -> Result<(), String> {
-    let has_token = token.as_deref().is_some_and(|t| !t.is_empty());
+pub fn check_bind(addr: &SocketAddr, token: &Option<Secret>) -> Result<(), String> {
+    let has_token = token.as_ref().is_some_and(|t| !t.is_empty());
     if require_token_everywhere(addr) && !has_token {
         return Err(format!(
             "refusing to serve the HTTP API on {addr} without a token: \
@@ -292,7 +294,7 @@ async fn no_method(method: Method, uri: axum::http::Uri) -> ApiError {
 
 /// The token rule: writes need it when there is one; with `token_everywhere`, reads too.
 async fn authorize(State(state): State<AppState>, request: Request, next: Next) -> Response {
-    let Some(token) = state.options.token.as_deref() else {
+    let Some(token) = state.options.token.as_ref().map(Secret::expose) else {
         return next.run(request).await;
     };
     let write = !matches!(*request.method(), Method::GET | Method::HEAD);
@@ -340,7 +342,7 @@ mod tests {
         let e = check_bind(&any, &None).expect_err("no token");
         assert!(e.contains("0.0.0.0:8080") && e.contains("token"), "{e}");
         assert!(
-            check_bind(&any, &Some(String::new())).is_err(),
+            check_bind(&any, &Some(Secret::new(""))).is_err(),
             "empty token"
         );
         assert!(check_bind(&any, &Some("s3cret".into())).is_ok());

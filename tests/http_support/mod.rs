@@ -384,8 +384,14 @@ pub struct Proc {
 impl Proc {
     /// Starts the binary with `args`, its standard error collected line by line.
     pub fn spawn(args: &[&str]) -> Proc {
+        Proc::spawn_env(args, &[])
+    }
+
+    /// [`Proc::spawn`] with the environment variables `env` set too.
+    pub fn spawn_env(args: &[&str], env: &[(&str, &str)]) -> Proc {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
             .args(args)
+            .envs(env.iter().copied())
             .stdin(std::process::Stdio::null())
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::piped())
@@ -442,6 +448,16 @@ impl Proc {
         }
         let _ = self.child.kill();
         self.child.wait().expect("the child is waited for")
+    }
+
+    /// Stops the child ([`Proc::stop`]) and gives every line it wrote to standard error.
+    pub fn stop_and_log(&mut self) -> Vec<String> {
+        self.stop();
+        // The reader thread ends at the end of the stream, which the exit closed.
+        while let Ok(line) = self.lines.recv_timeout(PATIENCE) {
+            self.log.push(line);
+        }
+        self.log.clone()
     }
 
     /// Kills the child at once (SIGKILL: no clean exit) and waits for it.
