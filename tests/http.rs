@@ -28,7 +28,7 @@ fn pose_json(t_us: u64, x: f64) -> String {
     let mut p = pose(t_us);
     p.reader = "posted".into();
     p.antenna = 2;
-    p.x = x;
+    p.pose.position[0] = x;
     serde_json::to_string(&p).expect("serialises")
 }
 
@@ -90,13 +90,11 @@ fn a_tag_read_from_one_place_says_why_it_has_no_position() {
         let mut r = read(1_000 + k * 1_000);
         r.epc = llrp_gateway::reads::Epc::parse("BEEF").expect("hex");
         // Every read from the same place.
-        r.antenna_pose = Some(llrp_gateway::reads::AntennaPose {
-            x: 0.5,
-            y: 0.0,
-            z: 0.5,
-            yaw_deg: 90.0,
-            pitch_deg: 0.0,
-        });
+        r.antenna_pose = Some(llrp_gateway::reads::Pose::from_degrees(
+            [0.5, 0.0, 0.5],
+            90.0,
+            0.0,
+        ));
         reads.push(r);
     }
     server

@@ -82,7 +82,7 @@ async fn own_inventory_converges(read_poses: bool) {
         tags.len() == 10
             && tags.iter().all(|t| t.estimate.state == State::Converged)
             // The whole pass: the robot stops after 44 s.
-            && s.truth().is_some_and(|t| t.antennas[0].x >= 22.5)
+            && s.truth().is_some_and(|t| t.antennas[0].pose.position[0] >= 22.5)
     })
     .await;
     let tags = shared.tags();

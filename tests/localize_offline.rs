@@ -10,7 +10,7 @@ use std::process::Command;
 use llrp_gateway::cli::localize::load_reads;
 use llrp_gateway::localize::offline::SettingsFile;
 use llrp_gateway::localize::poses::Poses;
-use llrp_gateway::reads::{write_jsonl, AntennaPose};
+use llrp_gateway::reads::write_jsonl;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -178,13 +178,7 @@ fn a_reads_file_with_antenna_poses_gives_the_recordings_estimates() {
         let Some(p) = poses.at(&reader, r.antenna, r.t_us) else {
             continue;
         };
-        r.antenna_pose = Some(AntennaPose {
-            x: p.x,
-            y: p.y,
-            z: p.z,
-            yaw_deg: p.yaw_deg,
-            pitch_deg: p.pitch_deg,
-        });
+        r.antenna_pose = Some(p.pose);
         write_jsonl(&mut file, &r).expect("writes");
     }
     drop(file);

@@ -97,11 +97,7 @@ fn sample(reader: &str, antenna: u16, t_us: u64, p: &AntennaPose) -> PoseSample 
         t_us,
         reader: reader.to_string(),
         antenna,
-        x: p.position[0],
-        y: p.position[1],
-        z: p.position[2],
-        yaw_deg: p.yaw_rad.to_degrees(),
-        pitch_deg: p.pitch_rad.to_degrees(),
+        pose: *p,
     }
 }
 
@@ -412,7 +408,7 @@ pub fn why_not(run: &Run, e: Estimator) -> Option<&'static str> {
         .true_poses
         .first_samples()
         .iter()
-        .map(|p| (p.z * 100.0).round())
+        .map(|p| (p.pose.position[2] * 100.0).round())
         .collect();
     heights.sort_by(f64::total_cmp);
     heights.dedup();

@@ -57,7 +57,7 @@ pub fn plot(
         .true_poses
         .samples()
         .iter()
-        .map(|p| (p.x, p.y))
+        .map(|p| (p.pose.position[0], p.pose.position[1]))
         .collect();
     xs.extend(path_points.iter().map(|p| p.0));
     ys.extend(path_points.iter().map(|p| p.1));

@@ -66,16 +66,17 @@ pub(super) fn tag_read(out: &mut Vec<u8>, r: &TagRead) {
         float(out, v);
     }
     if let Some(p) = &r.antenna_pose {
+        let [x, y, z] = p.position;
         out.extend_from_slice(b",\"antennaPose\":{\"x\":");
-        float(out, p.x);
+        float(out, x);
         out.extend_from_slice(b",\"y\":");
-        float(out, p.y);
+        float(out, y);
         out.extend_from_slice(b",\"z\":");
-        float(out, p.z);
+        float(out, z);
         out.extend_from_slice(b",\"yaw_deg\":");
-        float(out, p.yaw_deg);
+        float(out, p.yaw_deg());
         out.extend_from_slice(b",\"pitch_deg\":");
-        float(out, p.pitch_deg);
+        float(out, p.pitch_deg());
         out.push(b'}');
     }
     out.push(b'}');
@@ -119,7 +120,7 @@ pub(super) fn batch(head: &Head<'_>, reads: &[u8]) -> Vec<u8> {
 mod tests {
     use super::*;
     use crate::fleet::schema::{ReadBatch, VERSION};
-    use crate::reads::AntennaPose;
+    use crate::reads::Pose;
 
     fn read(epc: &str) -> TagRead {
         TagRead {
@@ -132,13 +133,7 @@ mod tests {
             first_seen_us: u64::MAX,
             channel_index: Some(0),
             doppler_hz: Some(-1.5e-7),
-            antenna_pose: Some(AntennaPose {
-                x: 1.0,
-                y: -0.000_001,
-                z: 1e21,
-                yaw_deg: -179.9999,
-                pitch_deg: 0.0,
-            }),
+            antenna_pose: Some(Pose::from_degrees([1.0, -0.000_001, 1e21], -179.9999, 0.0)),
         }
     }
 

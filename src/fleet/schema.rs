@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::reads::{AntennaPose, Epc, Read};
+use crate::reads::{Epc, Pose, Read};
 
 /// The schema version in every message's `v` and in the topics (`v1`).
 pub const VERSION: u32 = 1;
@@ -75,7 +75,7 @@ pub struct TagRead {
     /// The antenna's pose at the read, where the publisher knows it (ours; metres to the µm,
     /// degrees to 1e-4).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub antenna_pose: Option<AntennaPose>,
+    pub antenna_pose: Option<Pose>,
 }
 
 impl TagRead {
@@ -106,12 +106,12 @@ impl TagRead {
             first_seen_us: r.t_us,
             channel_index: r.channel_index,
             doppler_hz: r.doppler_hz,
-            antenna_pose: r.antenna_pose.map(|p| AntennaPose {
-                x: round_to(p.x, 1e6),
-                y: round_to(p.y, 1e6),
-                z: round_to(p.z, 1e6),
-                yaw_deg: round_to(p.yaw_deg, 1e4),
-                pitch_deg: round_to(p.pitch_deg, 1e4),
+            antenna_pose: r.antenna_pose.map(|p| {
+                Pose::from_degrees(
+                    p.position.map(|v| round_to(v, 1e6)),
+                    round_to(p.yaw_deg(), 1e4),
+                    round_to(p.pitch_deg(), 1e4),
+                )
             }),
         }
     }
@@ -341,13 +341,15 @@ mod tests {
             channel_index: None,
             channel_frequency_hz: None,
             doppler_hz: None,
-            antenna_pose: Some(AntennaPose {
-                x: 12.345_678_901_234_567,
-                y: -3.000_000_4,
-                z: 1.000_000_000_000_000_2,
-                yaw_deg: 89.999_999_999_999_99,
-                pitch_deg: -10.123_456,
-            }),
+            antenna_pose: Some(Pose::from_degrees(
+                [
+                    12.345_678_901_234_567,
+                    -3.000_000_4,
+                    1.000_000_000_000_000_2,
+                ],
+                89.999_999_999_999_99,
+                -10.123_456,
+            )),
             last_seen_us: None,
         };
         let json = serde_json::to_string(&TagRead::from_read(&r)).expect("serializes");

@@ -241,7 +241,7 @@ mod tests {
     use crate::localize::estimate::{Estimate, State as EstimateState};
     use crate::localize::poses::PoseSample;
     use crate::localize::shared::{AntennaView, ReaderView, TagJson, TagView};
-    use crate::reads::{AntennaPose as ReadPose, Read as RealRead};
+    use crate::reads::{Pose as ReadPose, Read as RealRead};
 
     fn properties<T: PartialSchema>() -> BTreeSet<String> {
         match T::schema() {
@@ -270,11 +270,7 @@ mod tests {
             t_us: 1,
             reader: "r".into(),
             antenna: 1,
-            x: 0.0,
-            y: 0.0,
-            z: 0.0,
-            yaw_deg: 0.0,
-            pitch_deg: 0.0,
+            pose: ReadPose::from_degrees([0.0, 0.0, 0.0], 0.0, 0.0),
         };
         let read = RealRead {
             epc: crate::reads::Epc::parse("AA").expect("hex"),
@@ -286,13 +282,7 @@ mod tests {
             channel_index: Some(1),
             channel_frequency_hz: Some(865_700_000),
             doppler_hz: Some(0.0),
-            antenna_pose: Some(ReadPose {
-                x: 0.0,
-                y: 0.0,
-                z: 0.0,
-                yaw_deg: 0.0,
-                pitch_deg: 0.0,
-            }),
+            antenna_pose: Some(ReadPose::from_degrees([0.0, 0.0, 0.0], 0.0, 0.0)),
             last_seen_us: None,
         };
         let view = TagView {

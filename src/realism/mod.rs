@@ -11,6 +11,7 @@ use std::path::Path;
 
 use crate::eval::bench::{simulate_with, Inventory};
 use crate::scenario::{Mount, Scenario};
+use llrp_gateway_vocab::pose::{Pose, PoseSample};
 pub use real::DISTANCES;
 use real::{short, FIGURES};
 use stats::{Layout, Park, Stats};
@@ -45,7 +46,7 @@ pub fn run_setup(dir: &Path, distance: f64, reader_model: Option<&str>) -> Resul
             scenario.tags.len()
         ));
     }
-    let first_y = first_pose(&scenario)?.y;
+    let first_y = first_pose(&scenario)?.position[1];
     let nominal: Vec<[f64; 3]> = scenario
         .tags
         .iter()
@@ -74,7 +75,7 @@ fn simulate_layout(scenario: &Scenario, layout: &Layout) -> Stats {
 }
 
 /// The recorded poses of the scenario's first antenna.
-fn recorded(s: &Scenario) -> Result<&[crate::scenario::PoseSample], String> {
+fn recorded(s: &Scenario) -> Result<&[PoseSample], String> {
     let antenna = s
         .readers
         .first()
@@ -87,10 +88,10 @@ fn recorded(s: &Scenario) -> Result<&[crate::scenario::PoseSample], String> {
 }
 
 /// The first recorded pose of the scenario's first antenna.
-fn first_pose(s: &Scenario) -> Result<crate::scenario::PoseSample, String> {
+fn first_pose(s: &Scenario) -> Result<Pose, String> {
     recorded(s)?
         .first()
-        .copied()
+        .map(|p| p.pose)
         .ok_or_else(|| "no poses".to_string())
 }
 
@@ -118,18 +119,17 @@ fn layout(s: &Scenario, nominal: &[[f64; 3]]) -> Result<Layout, String> {
     let mut parks = Vec::new();
     for w in poses.windows(2) {
         let (a, b) = (&w[0], &w[1]);
-        if (a.x, a.y, a.z) == (b.x, b.y, b.z) {
+        if a.pose.position == b.pose.position {
             parks.push(Park {
                 // A read stamped at the very start or end belongs to the move.
-                from_us: (a.t_s * 1e6).round() as u64 + 1,
-                to_us: (b.t_s * 1e6).round() as u64 - 1,
-                at: [a.x, a.y, a.z],
+                from_us: a.t_us + 1,
+                to_us: b.t_us - 1,
+                at: a.pose.position,
             });
         }
     }
     let first = poses.first().ok_or("no poses")?;
-    let yaw = first.yaw_deg.to_radians();
-    let pitch = first.pitch_deg.to_radians();
+    let (yaw, pitch) = (first.pose.yaw_rad, first.pose.pitch_rad);
     let boresight = [
         yaw.cos() * pitch.cos(),
         yaw.sin() * pitch.cos(),

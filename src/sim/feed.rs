@@ -156,30 +156,17 @@ pub fn pose_at(model: Arc<Model>, source: PoseSource, utc0: u64) -> PoseAt {
         if antenna == 0 || antenna > model.antenna_count() {
             return None;
         }
-        let pose = source.pose(&model, antenna, t_us.checked_sub(utc0)?);
-        let [x, y, z] = pose.position;
-        Some(crate::reads::AntennaPose {
-            x,
-            y,
-            z,
-            yaw_deg: pose.yaw_rad.to_degrees(),
-            pitch_deg: pose.pitch_rad.to_degrees(),
-        })
+        Some(source.pose(&model, antenna, t_us.checked_sub(utc0)?))
     })
 }
 
-/// A pose as the pose file and the API write it.
+/// A pose sample of reader `reader`'s `antenna` at `t_us`.
 fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSample {
-    let [x, y, z] = pose.position;
     PoseSample {
         t_us,
         reader: reader.to_string(),
         antenna,
-        x,
-        y,
-        z,
-        yaw_deg: pose.yaw_rad.to_degrees(),
-        pitch_deg: pose.pitch_rad.to_degrees(),
+        pose: *pose,
     }
 }
 

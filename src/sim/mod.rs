@@ -13,6 +13,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use crate::localize::live::{Input, Tap};
+use crate::localize::poses::PoseSample;
 use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve_tls, LiveHook, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
@@ -199,16 +200,21 @@ fn hex(epc: &[u8]) -> String {
 /// `pose` of antenna `antenna` of reader `reader` at `t_us` as a pose-file record (keys
 /// `t_us, reader, antenna, x, y, z, yaw_deg, pitch_deg`).
 fn pose_record(t_us: u64, reader: &str, antenna: u16, pose: &AntennaPose) -> serde_json::Value {
-    let [x, y, z] = pose.position;
+    serde_json::json!(PoseSample {
+        t_us,
+        reader: reader.to_owned(),
+        antenna,
+        pose: *pose,
+    })
+}
+
+/// `pose` as the truth file's `pose` and `odometry` keys have it, in SI units (keys
+/// `position, yaw_rad, pitch_rad`).
+fn si_pose(pose: &AntennaPose) -> serde_json::Value {
     serde_json::json!({
-        "t_us": t_us,
-        "reader": reader,
-        "antenna": antenna,
-        "x": x,
-        "y": y,
-        "z": z,
-        "yaw_deg": pose.yaw_rad.to_degrees(),
-        "pitch_deg": pose.pitch_rad.to_degrees(),
+        "position": pose.position,
+        "yaw_rad": pose.yaw_rad,
+        "pitch_rad": pose.pitch_rad,
     })
 }
 
@@ -232,8 +238,8 @@ fn truth_writer(
                         "antenna": a,
                         "true": pose_record(t, &name, a, &true_pose),
                         "estimated": pose_record(t, &name, a, &m.estimated_pose(a, t)),
-                        "pose": true_pose,
-                        "odometry": m.odometry_pose(a, t),
+                        "pose": si_pose(&true_pose),
+                        "odometry": si_pose(&m.odometry_pose(a, t)),
                     })
                 })
                 .collect();

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use llrp_gateway::http::{self, HttpOptions};
 use llrp_gateway::localize::live::{Input, Live, Settings};
-use llrp_gateway::localize::poses::PoseSample;
+use llrp_gateway::localize::poses::{Pose, PoseSample};
 use llrp_gateway::localize::shared::{Truth, TruthTag};
 use llrp_gateway::reads::Read;
 
@@ -31,20 +31,16 @@ pub fn pose(t_us: u64) -> PoseSample {
         t_us,
         reader: READER.into(),
         antenna: 1,
-        x: -1.0 + t_us as f64 * 1e-6,
-        y: 0.0,
-        z: 0.5,
-        yaw_deg: 90.0,
-        pitch_deg: 0.0,
+        pose: Pose::from_degrees([-1.0 + t_us as f64 * 1e-6, 0.0, 0.5], 90.0, 0.0),
     }
 }
 
 /// A read of the tag at `t_us` with the phase of the antenna's pose then (no pose of its
 /// own: the localizer takes it from the poses).
 pub fn read(t_us: u64) -> Read {
-    let p = pose(t_us);
+    let [x, y, z] = pose(t_us).pose.position;
     let lambda = llrp_gateway::localize::SPEED_OF_LIGHT / FREQUENCY_HZ as f64;
-    let d = ((TAG[0] - p.x).powi(2) + (TAG[1] - p.y).powi(2) + (TAG[2] - p.z).powi(2)).sqrt();
+    let d = ((TAG[0] - x).powi(2) + (TAG[1] - y).powi(2) + (TAG[2] - z).powi(2)).sqrt();
     Read {
         epc: llrp_gateway::reads::Epc::parse(EPC).expect("hex"),
         reader: Some(READER.into()),

@@ -304,7 +304,7 @@ mod tests {
     use crate::poses::Poses;
     use crate::series::Ambiguity;
     use crate::synthetic;
-    use llrp_gateway_vocab::reads::{AntennaPose, Read};
+    use llrp_gateway_vocab::reads::{Pose, Read};
 
     fn read(epc: &str, t_us: u64, x: f64, tag: [f64; 2]) -> Read {
         let f = 865_700_000u64;
@@ -461,12 +461,10 @@ mod tests {
                     channel_index: Some(1),
                     channel_frequency_hz: Some(f),
                     doppler_hz: None,
-                    antenna_pose: Some(AntennaPose {
-                        x: o.antenna[0],
-                        y: o.antenna[1],
-                        z: o.antenna[2],
-                        yaw_deg: o.yaw_rad.to_degrees(),
-                        pitch_deg: 0.0,
+                    antenna_pose: Some(Pose {
+                        position: o.antenna,
+                        yaw_rad: o.yaw_rad,
+                        pitch_rad: 0.0,
                     }),
                     last_seen_us: None,
                 }
@@ -512,9 +510,7 @@ mod tests {
         assert!(tracks[0].obs.windows(2).all(|w| w[0].t_us <= w[1].t_us));
         let o = tracks[0].obs[2];
         assert_eq!((o.t_us, Some(o.phase_rad)), (r1[2].t_us, r1[2].phase_rad));
-        let yaw = r1[2]
-            .antenna_pose
-            .map_or(f64::NAN, |p| p.yaw_deg.to_radians());
+        let yaw = r1[2].antenna_pose.map_or(f64::NAN, |p| p.yaw_rad);
         assert!((o.yaw_rad - yaw).abs() < 1e-12, "{} vs {yaw}", o.yaw_rad);
         assert_ne!(tracks[0].obs[0].wavelength_m, tracks[0].obs[1].wavelength_m);
         for estimator in [Estimator::Mhekf, Estimator::Wls] {

@@ -308,8 +308,8 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
                 .map(|(t_us, p)| PoseObs {
                     t_us,
                     phase_rad: 0.0,
-                    antenna: [p.x, p.y, p.z],
-                    yaw_rad: p.yaw_deg.to_radians(),
+                    antenna: p.pose.position,
+                    yaw_rad: p.pose.yaw_rad,
                     read: false,
                     ..head
                 })

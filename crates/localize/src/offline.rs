@@ -72,20 +72,22 @@ pub struct Outcome {
 pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry {
     let first = reads
         .iter()
-        .find_map(|r| r.antenna_pose.as_ref().map(|p| (p.z, p.yaw_deg)))
-        .or_else(|| poses.first().map(|p| (p.z, p.yaw_deg)));
-    let (z, yaw) = first.unwrap_or((0.0, 90.0));
-    let towards = |yaw_deg: f64| [yaw_deg.to_radians().cos(), yaw_deg.to_radians().sin()];
+        .find_map(|r| r.antenna_pose.as_ref())
+        .or_else(|| poses.first().map(|p| &p.pose))
+        .map(|p| (p.position[2], p.yaw_rad));
+    let (z, yaw) = first.unwrap_or((0.0, std::f64::consts::FRAC_PI_2));
+    let towards = |yaw_rad: f64| [yaw_rad.cos(), yaw_rad.sin()];
     let facing = file.facing.unwrap_or(towards(yaw));
     let phase_sign = file.phase_sign.unwrap_or(1.0);
     // Each reader faces where its own first pose does, unless the file says otherwise.
     let mut own: BTreeMap<String, [f64; 2]> = BTreeMap::new();
     for p in poses.first_samples() {
-        own.entry(p.reader.clone()).or_insert(towards(p.yaw_deg));
+        own.entry(p.reader.clone())
+            .or_insert(towards(p.pose.yaw_rad));
     }
     for r in reads {
         if let (Some(reader), Some(p)) = (&r.reader, &r.antenna_pose) {
-            own.entry(reader.clone()).or_insert(towards(p.yaw_deg));
+            own.entry(reader.clone()).or_insert(towards(p.yaw_rad));
         }
     }
     for name in file.readers.keys() {
@@ -209,18 +211,14 @@ pub enum Progress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::poses::PoseSample;
+    use crate::poses::{Pose, PoseSample};
 
     fn pose(reader: &str, yaw_deg: f64) -> PoseSample {
         PoseSample {
             t_us: 0,
             reader: reader.into(),
             antenna: 1,
-            x: 0.0,
-            y: 0.0,
-            z: 0.8,
-            yaw_deg,
-            pitch_deg: 0.0,
+            pose: Pose::from_degrees([0.0, 0.0, 0.8], yaw_deg, 0.0),
         }
     }
 

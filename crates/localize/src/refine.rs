@@ -13,7 +13,7 @@ use nalgebra::{Matrix2, Vector2};
 use crate::estimate::{estimate_all, Estimate, Estimator, Geometry};
 use crate::ingest::Ingest;
 use crate::live::Settings;
-use crate::poses::{PoseSample, Poses};
+use crate::poses::{Pose, PoseSample, Poses};
 use crate::series::Places;
 pub use crate::settings::PoseErrorModel;
 use llrp_gateway_vocab::reads::Read;
@@ -187,9 +187,12 @@ pub fn refine(
     let corrections = PoseCorrections::from_tags(ingest, tags, sign_of, m);
     poses.mapped(|p, offset| {
         let d = corrections.at(&p.reader, p.t_us.saturating_add_signed(offset));
+        let [x, y, z] = p.pose.position;
         PoseSample {
-            x: p.x + d[0],
-            y: p.y + d[1],
+            pose: Pose {
+                position: [x + d[0], y + d[1], z],
+                ..p.pose
+            },
             ..p.clone()
         }
     })
@@ -276,11 +279,7 @@ mod tests {
             t_us,
             reader: "r".into(),
             antenna: 1,
-            x,
-            y,
-            z: 0.5,
-            yaw_deg: 90.0,
-            pitch_deg: 0.0,
+            pose: Pose::from_degrees([x, y, 0.5], 90.0, 0.0),
         };
         for step in 0..=200u64 {
             let x = 0.05 * step as f64;
@@ -310,14 +309,19 @@ mod tests {
 
     /// RMS horizontal distance between the samples of `a` and `b` at the same times (m).
     fn rms(a: &Poses, b: &Poses) -> f64 {
-        let b: BTreeMap<u64, (f64, f64)> =
-            b.samples().iter().map(|s| (s.t_us, (s.x, s.y))).collect();
+        let b: BTreeMap<u64, (f64, f64)> = b
+            .samples()
+            .iter()
+            .map(|s| (s.t_us, (s.pose.position[0], s.pose.position[1])))
+            .collect();
         let d: Vec<f64> = a
             .samples()
             .iter()
             .filter_map(|s| {
-                b.get(&s.t_us)
-                    .map(|t| (s.x - t.0).powi(2) + (s.y - t.1).powi(2))
+                b.get(&s.t_us).map(|t| {
+                    let [x, y, _] = s.pose.position;
+                    (x - t.0).powi(2) + (y - t.1).powi(2)
+                })
             })
             .collect();
         (d.iter().sum::<f64>() / d.len() as f64).sqrt()

@@ -5,7 +5,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::fix::Obs;
-use llrp_gateway_vocab::reads::{AntennaPose, Read};
+use llrp_gateway_vocab::reads::{Pose, Read};
 
 /// The wavelength of the synthetic channel (m).
 pub const LAMBDA: f64 = 0.3463;
@@ -62,13 +62,7 @@ pub fn read(epc: &str, t_us: u64, phase_rad: f64, at: [f64; 3]) -> Read {
         channel_index: None,
         channel_frequency_hz: Some(FREQUENCY_HZ),
         doppler_hz: None,
-        antenna_pose: Some(AntennaPose {
-            x: at[0],
-            y: at[1],
-            z: at[2],
-            yaw_deg: 90.0,
-            pitch_deg: 0.0,
-        }),
+        antenna_pose: Some(Pose::from_degrees([at[0], at[1], at[2]], 90.0, 0.0)),
         last_seen_us: None,
     }
 }

@@ -1,7 +1,7 @@
 //! The vocabulary every layer of llrp-gateway shares, below the localizer, the simulator and
 //! the application: a tag's EPC with its one case rule ([`epc`]), tag reads in SI units decoded
-//! from LLRP ([`reads`]), antenna pose
-//! samples ([`pose`]), the feed that carries both from any source to any consumer ([`feed`]),
+//! from LLRP ([`reads`]), the one antenna
+//! pose in SI units and its timed sample ([`pose`]), the feed that carries both from any source to any consumer ([`feed`]),
 //! the sans-IO server session every LLRP server here implements ([`session`]) and the wall
 //! clock ([`utc`]). It knows the codec and nothing above it (ARCHITECTURE.md).
 

@@ -229,10 +229,7 @@ impl Ingest {
             return;
         };
         let reader = read.reader.as_deref().unwrap_or_default();
-        let own = read
-            .antenna_pose
-            .as_ref()
-            .map(|p| ([p.x, p.y, p.z], p.yaw_deg));
+        let own = read.antenna_pose.as_ref().map(|p| (p.position, p.yaw_rad));
         let readers = &mut self.readers;
         let (id, pose) = match tracks.get(poses, reader, read.antenna, || intern(readers, reader)) {
             Some(met) => {
@@ -245,7 +242,7 @@ impl Ingest {
                 (intern(readers, reader), pose)
             }
         };
-        let Some((position, yaw_deg)) = pose else {
+        let Some((position, yaw_rad)) = pose else {
             self.set_aside.no_pose += 1;
             return;
         };
@@ -257,9 +254,7 @@ impl Ingest {
         });
         let key = || (read.epc.clone(), reader.to_string(), read.antenna, f_hz);
         let i = found.unwrap_or_else(|| self.add_series(key(), id));
-        self.series[i]
-            .1
-            .push(read.t_us, phase, position, yaw_deg.to_radians());
+        self.series[i].1.push(read.t_us, phase, position, yaw_rad);
         self.taken += 1;
     }
 

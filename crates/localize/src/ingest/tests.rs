@@ -1,7 +1,7 @@
 use super::*;
 use crate::poses::PoseSample;
 use crate::series::Sample;
-use llrp_gateway_vocab::reads::AntennaPose;
+use llrp_gateway_vocab::pose::Pose;
 
 fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
     Read {
@@ -27,11 +27,7 @@ fn reads_are_filed_by_series_or_set_aside_by_reason() {
             t_us: t,
             reader: "r".into(),
             antenna: 1,
-            x,
-            y: 1.0,
-            z: 0.5,
-            yaw_deg: x * 1000.0,
-            pitch_deg: 0.0,
+            pose: Pose::from_degrees([x, 1.0, 0.5], x * 1000.0, 0.0),
         });
     }
     let mut ingest = Ingest::new(poses, Ambiguity::None, 1_000_000);
@@ -44,13 +40,7 @@ fn reads_are_filed_by_series_or_set_aside_by_reason() {
     ingest.push(&read("B2", 900_000, Some(0.3), Some(915_250_000)));
     // A read carrying its own pose needs no pose file.
     let mut own = read("C3", 5_000_000, Some(0.5), Some(915_250_000));
-    own.antenna_pose = Some(AntennaPose {
-        x: 3.0,
-        y: 0.0,
-        z: 1.0,
-        yaw_deg: 0.0,
-        pitch_deg: 0.0,
-    });
+    own.antenna_pose = Some(Pose::from_degrees([3.0, 0.0, 1.0], 0.0, 0.0));
     ingest.push(&own);
     assert_eq!(ingest.taken(), 5);
     assert_eq!(
@@ -161,11 +151,7 @@ fn readers_sharing_a_port_and_channel_keep_their_series_and_their_own_tracks() {
                 t_us: t,
                 reader: reader.into(),
                 antenna,
-                x,
-                y: f64::from(antenna),
-                z: 0.5,
-                yaw_deg: 0.0,
-                pitch_deg: 0.0,
+                pose: Pose::from_degrees([x, f64::from(antenna), 0.5], 0.0, 0.0),
             });
         }
     }
@@ -203,13 +189,7 @@ fn readers_sharing_a_port_and_channel_keep_their_series_and_their_own_tracks() {
 /// A read of phase 0.5 rad carrying its own pose: the antenna at `x` on the x axis.
 fn posed(epc: &str, t_us: u64, x: f64, f_hz: u64) -> Read {
     let mut r = read(epc, t_us, Some(0.5), Some(f_hz));
-    r.antenna_pose = Some(AntennaPose {
-        x,
-        y: 1.0,
-        z: 0.5,
-        yaw_deg: 0.0,
-        pitch_deg: 0.0,
-    });
+    r.antenna_pose = Some(Pose::from_degrees([x, 1.0, 0.5], 0.0, 0.0));
     r
 }
 

@@ -65,8 +65,8 @@ mod tests {
         let one = parse_poses(ONE.as_bytes()).expect("one object");
         assert_eq!(one.len(), 1);
         assert_eq!(
-            (one[0].x, one[0].yaw_deg, one[0].pitch_deg),
-            (1.0, 90.0, 0.0)
+            one[0].pose,
+            super::super::Pose::from_degrees([1.0, 2.0, 0.5], 90.0, 0.0)
         );
         let array = format!("[{ONE}, {ONE}]");
         assert_eq!(parse_poses(array.as_bytes()).expect("array").len(), 2);

@@ -4,11 +4,13 @@
 //!
 //! A read takes the pose of its reader's antenna at its own time plus the reader's clock
 //! offset (reader time − robot time, configurable per reader). Between two samples the position
-//! is interpolated linearly and the yaw along the shorter way round; a read before the first
+//! is interpolated linearly and the yaw (in radians, as every angle past the file) along the
+//! shorter way round; a read before the first
 //! sample, after the last, or between two samples further apart than the reach has no pose
 //! ([`Poses::at`] gives `None`): it is set aside and counted, never guessed.
 
 use std::collections::BTreeMap;
+use std::f64::consts::{PI, TAU};
 use std::io::BufRead;
 
 use rustc_hash::FxHashMap;
@@ -19,7 +21,7 @@ mod message;
 
 pub use message::parse_poses;
 
-pub use llrp_gateway_vocab::pose::PoseSample;
+pub use llrp_gateway_vocab::pose::{Pose, PoseSample};
 
 /// Why a pose file could not be read: the line and the reason, naming the field.
 #[derive(Debug, thiserror::Error)]
@@ -243,20 +245,15 @@ impl Poses {
         let Some((after, f)) = after else {
             return Some(before.clone());
         };
-        let ([x, y, z], yaw_deg, pitch_deg) = blend(before, after, f);
         Some(PoseSample {
             t_us: t,
             reader: before.reader.clone(),
             antenna,
-            x,
-            y,
-            z,
-            yaw_deg,
-            pitch_deg,
+            pose: blend(&before.pose, &after.pose, f),
         })
     }
 
-    /// The position (m) and yaw (°) of [`Poses::at`], without making a sample.
+    /// The position (m) and yaw (rad) of [`Poses::at`], without making a sample.
     pub fn position_at(&self, reader: &str, antenna: u16, t_us: u64) -> Option<([f64; 3], f64)> {
         self.track_at(reader, antenna)?.position_at(t_us, &mut 0)
     }
@@ -315,10 +312,10 @@ impl<'a> Track<'a> {
     pub fn position_at(&self, t_us: u64, cursor: &mut usize) -> Option<([f64; 3], f64)> {
         let (_, before, after) = self.around(t_us, cursor)?;
         let Some((after, f)) = after else {
-            return Some(([before.x, before.y, before.z], before.yaw_deg));
+            return Some((before.pose.position, before.pose.yaw_rad));
         };
-        let (position, yaw_deg, _) = blend(before, after, f);
-        Some((position, yaw_deg))
+        let p = blend(&before.pose, &after.pose, f);
+        Some((p.position, p.yaw_rad))
     }
 
     /// Robot time of reader time `t_us`, and the sample at it, or the samples around it with
@@ -389,15 +386,19 @@ fn at_or_before(track: &[PoseSample], t: u64, hint: usize) -> usize {
     track.partition_point(|s| s.t_us <= t)
 }
 
-/// The position (m), yaw and pitch (°) a fraction `f` of the way from `a` to `b`; the yaw in
-/// [−180, 180), turned the short way round.
-fn blend(a: &PoseSample, b: &PoseSample, f: f64) -> ([f64; 3], f64, f64) {
+/// The pose a fraction `f` of the way from `a` to `b`: the position and pitch linearly, the
+/// yaw turned the short way round, in [−π, π).
+fn blend(a: &Pose, b: &Pose, f: f64) -> Pose {
     let lerp = |u: f64, v: f64| u + (v - u) * f;
-    // Onto [0, 360) without a libm fmod where it is within a turn of it (`series::fold`).
-    let turn = fold(b.yaw_deg - a.yaw_deg + 180.0, 360.0) - 180.0;
-    let yaw = fold(a.yaw_deg + turn * f + 180.0, 360.0) - 180.0;
-    let position = [lerp(a.x, b.x), lerp(a.y, b.y), lerp(a.z, b.z)];
-    (position, yaw, lerp(a.pitch_deg, b.pitch_deg))
+    // Onto [0, 2π) without a libm fmod where it is within a turn of it (`series::fold`).
+    let turn = fold(b.yaw_rad - a.yaw_rad + PI, TAU) - PI;
+    let yaw_rad = fold(a.yaw_rad + turn * f + PI, TAU) - PI;
+    let [p, q] = [a.position, b.position];
+    Pose {
+        position: [lerp(p[0], q[0]), lerp(p[1], q[1]), lerp(p[2], q[2])],
+        yaw_rad,
+        pitch_rad: lerp(a.pitch_rad, b.pitch_rad),
+    }
 }
 
 /// A CSV row under `columns` as a sample.
@@ -430,11 +431,11 @@ fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
         antenna: cell("antenna")
             .parse()
             .map_err(|_| format!("antenna: not a port number: {:?}", cell("antenna")))?,
-        x: number("x")?,
-        y: number("y")?,
-        z: number("z")?,
-        yaw_deg: number("yaw_deg")?,
-        pitch_deg: number("pitch_deg")?,
+        pose: Pose::from_degrees(
+            [number("x")?, number("y")?, number("z")?],
+            number("yaw_deg")?,
+            number("pitch_deg")?,
+        ),
     })
 }
 
@@ -447,17 +448,7 @@ fn check(p: PoseSample) -> Result<PoseSample, String> {
 /// Whether `p`'s numbers are all finite and its antenna is a port (the reason, naming the
 /// field, when not).
 pub fn validate(p: &PoseSample) -> Result<(), String> {
-    for (key, v) in [
-        ("x", p.x),
-        ("y", p.y),
-        ("z", p.z),
-        ("yaw_deg", p.yaw_deg),
-        ("pitch_deg", p.pitch_deg),
-    ] {
-        if !v.is_finite() {
-            return Err(format!("{key}: must be finite, got {v}"));
-        }
-    }
+    p.pose.check_finite()?;
     if p.antenna == 0 {
         return Err("antenna: must be a port number from 1".into());
     }

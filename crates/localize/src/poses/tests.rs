@@ -1,4 +1,5 @@
 use super::*;
+use std::f64::consts::TAU;
 
 #[test]
 fn a_kept_window_drops_what_is_older_on_each_track() {
@@ -8,11 +9,7 @@ fn a_kept_window_drops_what_is_older_on_each_track() {
             t_us: k * 10_000,
             reader: "r".into(),
             antenna: 1,
-            x: 0.0,
-            y: 0.0,
-            z: 0.0,
-            yaw_deg: 0.0,
-            pitch_deg: 0.0,
+            pose: Pose::from_degrees([0.0, 0.0, 0.0], 0.0, 0.0),
         });
     }
     let first = p.first().expect("samples").t_us;
@@ -27,11 +24,7 @@ fn sample(t_us: u64, x: f64, yaw_deg: f64) -> PoseSample {
         t_us,
         reader: "r".into(),
         antenna: 1,
-        x,
-        y: 2.0,
-        z: 0.5,
-        yaw_deg,
-        pitch_deg: 0.0,
+        pose: Pose::from_degrees([x, 2.0, 0.5], yaw_deg, 0.0),
     }
 }
 
@@ -66,6 +59,12 @@ fn the_yaw_wrap_is_rem_euclid() {
             x.rem_euclid(360.0).to_bits(),
             "{x}"
         );
+        let rad = x.to_radians();
+        assert_eq!(
+            fold(rad, TAU).to_bits(),
+            rad.rem_euclid(TAU).to_bits(),
+            "{rad}"
+        );
     }
 }
 
@@ -75,10 +74,18 @@ fn interpolates_between_samples_and_the_short_way_round() {
     p.add(sample(1_000_000, 0.0, 170.0));
     p.add(sample(1_100_000, 1.0, -170.0));
     let mid = p.at("r", 1, 1_050_000).expect("between two samples");
-    assert!((mid.x - 0.5).abs() < 1e-12);
+    assert!((mid.pose.position[0] - 0.5).abs() < 1e-12);
     // 170° to −170° is 20° through 180°, not 340° back through 0°.
-    assert!((mid.yaw_deg.abs() - 180.0).abs() < 1e-9, "{}", mid.yaw_deg);
-    assert_eq!(p.at("r", 1, 1_000_000).map(|s| s.x), Some(0.0));
+    let yaw = mid.pose.yaw_rad;
+    assert!((yaw.abs() - std::f64::consts::PI).abs() < 1e-12, "{yaw}");
+    // A quarter of the way from 170°: 175°, in radians; a quarter from −170°: −175°.
+    let quarter = |t| p.at("r", 1, t).expect("between two samples").pose.yaw_rad;
+    assert!((quarter(1_025_000) - 175f64.to_radians()).abs() < 1e-12);
+    assert!((quarter(1_075_000) + 175f64.to_radians()).abs() < 1e-12);
+    assert_eq!(
+        p.at("r", 1, 1_000_000).map(|s| s.pose.position[0]),
+        Some(0.0)
+    );
     // Outside the track, another antenna or reader: no pose.
     assert!(p.at("r", 1, 999_999).is_none());
     assert!(p.at("r", 1, 1_100_001).is_none());
@@ -97,7 +104,7 @@ fn a_gap_beyond_the_reach_is_no_pose_and_offsets_shift_the_clock() {
     // The reader's clock runs 30 ms ahead of the robot's.
     p.set_offset("r", 30_000);
     let shifted = p.at("r", 1, 80_000).expect("robot time 50 ms");
-    assert!((shifted.x - 0.5).abs() < 1e-12);
+    assert!((shifted.pose.position[0] - 0.5).abs() < 1e-12);
     assert!(
         p.at("r", 1, 10_000).is_none(),
         "before the robot's first sample"

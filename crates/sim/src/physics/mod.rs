@@ -40,9 +40,8 @@ mod tests;
 pub use world::World;
 
 use crate::scenario::tagmem::{default_user, parse_epc, parse_password, parse_words};
-use crate::scenario::{
-    AntennaSpec, Mount, PhaseOffsets, Pose, PoseSample, RobotSpec, Scenario, VerticalAxis,
-};
+use crate::scenario::{AntennaSpec, Mount, PhaseOffsets, Pose, RobotSpec, Scenario, VerticalAxis};
+use llrp_gateway_vocab::pose::PoseSample;
 use seed::default_tid;
 use std::sync::Arc;
 
@@ -59,16 +58,9 @@ pub fn inventory_epoch_us() -> u64 {
     inventory::FIELD_BUCKET_US
 }
 
-/// Position and boresight of an antenna at one instant.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct AntennaPose {
-    /// Position (m).
-    pub position: [f64; 3],
-    /// Boresight azimuth about +z (rad), 0 = +x.
-    pub yaw_rad: f64,
-    /// Boresight elevation (rad), positive up.
-    pub pitch_rad: f64,
-}
+/// Position and boresight of an antenna at one instant (metres, radians): the vocabulary's
+/// one pose.
+pub use llrp_gateway_vocab::pose::Pose as AntennaPose;
 
 /// One successful tag read.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -220,7 +212,7 @@ fn mover_of(mount: &Mount, all_robots: &[&RobotSpec]) -> Mover {
             let global = all_robots.iter().position(|r| *r == robot).unwrap_or(0);
             Mover::Robot {
                 robot: global,
-                offset: offset.clone(),
+                offset: *offset,
                 vertical: robot.vertical.clone(),
             }
         }
@@ -231,7 +223,11 @@ fn mover_of(mount: &Mount, all_robots: &[&RobotSpec]) -> Mover {
 fn still_after_s(mover: &Mover, robots: &[RobotTrajectory]) -> Option<f64> {
     match mover {
         Mover::Fixed(_) => Some(0.0),
-        Mover::Recorded(poses) => Some(poses.last().map_or(0.0, |p| p.t_s + REST_MARGIN_S)),
+        Mover::Recorded(poses) => Some(
+            poses
+                .last()
+                .map_or(0.0, |p| seconds(p.t_us) + REST_MARGIN_S),
+        ),
         Mover::Robot {
             robot, vertical, ..
         } => match vertical {
@@ -248,8 +244,8 @@ fn still_after_s(mover: &Mover, robots: &[RobotTrajectory]) -> Option<f64> {
 fn mount_aim(mount: &Mount) -> Option<MountAim> {
     match mount {
         Mount::Robot { offset, .. } => {
-            let pitch = offset.pitch_deg.to_radians();
-            let (yaw_sin, yaw_cos) = offset.yaw_deg.to_radians().sin_cos();
+            let pitch = offset.pitch_rad;
+            let (yaw_sin, yaw_cos) = offset.yaw_rad.sin_cos();
             Some(MountAim {
                 yaw_cos,
                 yaw_sin,
@@ -553,12 +549,11 @@ fn shared_pattern(patterns: &mut Vec<Arc<Pattern>>, lobe: &Lobe) -> Arc<Pattern>
     p
 }
 
-/// A scenario pose in radians.
+/// A fixed mount's pose, its yaw onto [−π, π].
 fn pose_from(p: &Pose) -> AntennaPose {
     AntennaPose {
-        position: p.position,
-        yaw_rad: wrap_pi(p.yaw_deg.to_radians()),
-        pitch_rad: p.pitch_deg.to_radians(),
+        yaw_rad: wrap_pi(p.yaw_rad),
+        ..*p
     }
 }
 

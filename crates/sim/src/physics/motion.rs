@@ -2,7 +2,9 @@
 //! robot's vertical antenna axis; and where on a robot its antenna is.
 
 use super::geometry::{add_scaled, distance, sub, wrap_pi, Vec3};
-use crate::scenario::{Path, PoseSample, VerticalAxis};
+use super::AntennaPose;
+use crate::scenario::{Path, VerticalAxis};
+use llrp_gateway_vocab::pose::PoseSample;
 
 /// A tag's position over time: still, or moving along a polyline at constant speed.
 #[derive(Clone, Debug, PartialEq)]
@@ -100,69 +102,64 @@ impl PolylineMotion {
     }
 }
 
-/// Pose `[x, y, z, yaw_rad, pitch_rad]` interpolated in a recorded list at `t_s`; held at the
-/// first and last samples outside the recording. Yaw takes the shorter way round.
-pub fn recorded_pose(poses: &[PoseSample], t_s: f64) -> [f64; 5] {
-    let as_array = |p: &PoseSample| {
-        [
-            p.x,
-            p.y,
-            p.z,
-            p.yaw_deg.to_radians(),
-            p.pitch_deg.to_radians(),
-        ]
-    };
+/// The pose interpolated in a recorded list at `t_us` (µs since scenario start); held at
+/// the first and last samples outside the recording. Between two samples the yaw takes the
+/// shorter way round, onto [−π, π].
+pub fn recorded_pose(poses: &[PoseSample], t_us: u64) -> AntennaPose {
     let Some(first) = poses.first() else {
-        return [0.0; 5];
+        return AntennaPose::default();
     };
-    if t_s.is_nan() || t_s <= first.t_s {
-        return as_array(first);
+    if t_us <= first.t_us {
+        return first.pose;
     }
-    let i = poses.partition_point(|p| p.t_s <= t_s);
+    let i = poses.partition_point(|p| p.t_us <= t_us);
     if i >= poses.len() {
-        return as_array(&poses[poses.len() - 1]);
+        return poses[poses.len() - 1].pose;
     }
-    let (a, b) = (as_array(&poses[i - 1]), as_array(&poses[i]));
-    let span = poses[i].t_s - poses[i - 1].t_s;
-    let f = if span > 0.0 {
-        (t_s - poses[i - 1].t_s) / span
+    let (a, b) = (&poses[i - 1].pose, &poses[i].pose);
+    let span = poses[i].t_us - poses[i - 1].t_us;
+    let f = if span > 0 {
+        (t_us - poses[i - 1].t_us) as f64 / span as f64
     } else {
         0.0
     };
     let lerp = |x: f64, y: f64| x + f * (y - x);
-    [
-        lerp(a[0], b[0]),
-        lerp(a[1], b[1]),
-        lerp(a[2], b[2]),
-        wrap_pi(a[3] + f * wrap_pi(b[3] - a[3])),
-        lerp(a[4], b[4]),
-    ]
+    let (ya, yb) = (a.yaw_rad, b.yaw_rad);
+    AntennaPose {
+        position: [
+            lerp(a.position[0], b.position[0]),
+            lerp(a.position[1], b.position[1]),
+            lerp(a.position[2], b.position[2]),
+        ],
+        yaw_rad: wrap_pi(ya + f * wrap_pi(yb - ya)),
+        pitch_rad: lerp(a.pitch_rad, b.pitch_rad),
+    }
 }
 
-/// How far a recorded pose strays from its value at `t0_s` during `[t0_s, t1_s]`: the largest
-/// change of x, y and z (m) and a bound on the boresight's turn (rad: the yaw and pitch steps
-/// summed).
-pub fn recorded_excursion(poses: &[PoseSample], t0_s: f64, t1_s: f64) -> [f64; 4] {
-    let start = recorded_pose(poses, t0_s);
-    let end = recorded_pose(poses, t1_s);
-    let turn = |a: [f64; 5], b: [f64; 5]| wrap_pi(b[3] - a[3]).abs() + (b[4] - a[4]).abs();
+/// How far a recorded pose strays from its value at `t0_us` during `[t0_us, t1_us]`: the
+/// largest change of x, y and z (m) and a bound on the boresight's turn (rad: the yaw and
+/// pitch steps summed).
+pub fn recorded_excursion(poses: &[PoseSample], t0_us: u64, t1_us: u64) -> [f64; 4] {
+    let start = recorded_pose(poses, t0_us);
+    let end = recorded_pose(poses, t1_us);
+    let turn = |a: AntennaPose, b: AntennaPose| {
+        wrap_pi(b.yaw_rad - a.yaw_rad).abs() + (b.pitch_rad - a.pitch_rad).abs()
+    };
     let mut far = [0.0f64; 4];
-    let mut see = |p: [f64; 5]| {
-        for i in 0..3 {
-            far[i] = far[i].max((p[i] - start[i]).abs());
+    let mut see = |p: AntennaPose| {
+        for ((f, x), x0) in far.iter_mut().zip(p.position).zip(start.position) {
+            *f = f.max((x - x0).abs());
         }
     };
     // Positions are linear between samples (each change peaks at a sample or at the end);
     // the boresight turns at most by the sum of the steps between them.
     see(end);
     let (mut swing, mut last) = (0.0, start);
-    if t0_s.is_finite() && t1_s.is_finite() {
-        for p in poses.iter().filter(|p| p.t_s > t0_s && p.t_s < t1_s) {
-            let here = recorded_pose(poses, p.t_s);
-            see(here);
-            swing += turn(last, here);
-            last = here;
-        }
+    for p in poses.iter().filter(|p| p.t_us > t0_us && p.t_us < t1_us) {
+        let here = recorded_pose(poses, p.t_us);
+        see(here);
+        swing += turn(last, here);
+        last = here;
     }
     far[3] = swing + turn(last, end);
     far
@@ -202,6 +199,7 @@ pub fn mounted_position(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use llrp_gateway_vocab::pose::Pose;
 
     #[test]
     fn tag_moves_along_its_waypoints() {
@@ -236,21 +234,19 @@ mod tests {
 
     #[test]
     fn recorded_poses_interpolate_linearly_and_hold_at_the_ends() {
-        let s = |t_s, x, yaw_deg| PoseSample {
-            t_s,
-            x,
-            y: 0.0,
-            z: 1.0,
-            yaw_deg,
-            pitch_deg: 0.0,
+        let s = |t_us, x, yaw_deg| PoseSample {
+            t_us,
+            reader: "r".into(),
+            antenna: 1,
+            pose: Pose::from_degrees([x, 0.0, 1.0], yaw_deg, 0.0),
         };
-        let poses = [s(1.0, 0.0, 170.0), s(3.0, 2.0, -170.0)];
-        assert_eq!(recorded_pose(&poses, 0.0)[0], 0.0);
-        let mid = recorded_pose(&poses, 2.0);
-        assert!((mid[0] - 1.0).abs() < 1e-12);
+        let poses = [s(1_000_000, 0.0, 170.0), s(3_000_000, 2.0, -170.0)];
+        assert_eq!(recorded_pose(&poses, 0).position[0], 0.0);
+        let mid = recorded_pose(&poses, 2_000_000);
+        assert!((mid.position[0] - 1.0).abs() < 1e-12);
         // 170° → −170° goes through 180°, not through 0°.
-        assert!((mid[3].abs() - std::f64::consts::PI).abs() < 1e-9);
-        assert_eq!(recorded_pose(&poses, 9.0)[0], 2.0);
+        assert!((mid.yaw_rad.abs() - std::f64::consts::PI).abs() < 1e-9);
+        assert_eq!(recorded_pose(&poses, 9_000_000).position[0], 2.0);
     }
 
     #[test]

@@ -86,14 +86,7 @@ impl Model {
         let t = seconds(t_us);
         match &a.mover {
             Mover::Fixed(pose) => *pose,
-            Mover::Recorded(poses) => {
-                let p = motion::recorded_pose(poses, t);
-                AntennaPose {
-                    position: [p[0], p[1], p[2]],
-                    yaw_rad: p[3],
-                    pitch_rad: p[4],
-                }
-            }
+            Mover::Recorded(poses) => motion::recorded_pose(poses, t_us),
             Mover::Robot {
                 robot,
                 offset,
@@ -112,8 +105,8 @@ impl Model {
                         vertical.as_ref(),
                         t,
                     ),
-                    yaw_rad: wrap_pi(theta + offset.yaw_deg.to_radians()),
-                    pitch_rad: offset.pitch_deg.to_radians(),
+                    yaw_rad: wrap_pi(theta + offset.yaw_rad),
+                    pitch_rad: offset.pitch_rad,
                 }
             }
         }

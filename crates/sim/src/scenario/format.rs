@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::defaults::*;
 
-use super::recorded::PoseSample;
+use llrp_gateway_vocab::pose::PoseSample;
 
 /// Axis-aligned box that contains every tag, antenna and waypoint of the scenario (metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -215,19 +215,11 @@ pub struct ReaderSpec {
     pub reader_model: Option<String>,
 }
 
-/// Orientation and position of an antenna or an antenna offset.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Pose {
-    /// Position (metres).
-    pub position: [f64; 3],
-    /// Boresight azimuth about +z in degrees, 0 = +x, 90 = +y.
-    #[serde(default)]
-    pub yaw_deg: f64,
-    /// Boresight elevation in degrees, positive up.
-    #[serde(default)]
-    pub pitch_deg: f64,
-}
+/// Orientation and position of an antenna or an antenna offset (metres, radians): the
+/// vocabulary's one pose. The scenario file writes it `{"position": [x, y, z], "yaw_deg",
+/// "pitch_deg"}` (yaw about +z, 0 = +x, 90 = +y; pitch positive up; both 0 when absent),
+/// converted where the mount is read and written (`scenario/mount.rs`).
+pub use llrp_gateway_vocab::pose::Pose;
 
 /// Vertical axis moving a robot's antenna up and down (triangle wave, starting at `min_z`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -343,6 +335,7 @@ pub enum Mount {
     /// A fixed antenna.
     Fixed {
         /// Its pose in the world.
+        #[serde(with = "super::mount::mount_pose")]
         pose: Pose,
     },
     /// An antenna on a robot.
@@ -350,6 +343,7 @@ pub enum Mount {
         /// The robot and its path.
         robot: RobotSpec,
         /// Antenna pose in the robot frame (x forward, y left, z up from the floor).
+        #[serde(with = "super::mount::mount_pose")]
         offset: Pose,
     },
     /// An antenna moved along a recorded pose list.
@@ -357,7 +351,8 @@ pub enum Mount {
         /// CSV (header `t_s,x,y,z,yaw_deg,pitch_deg`) or JSONL with the same keys; a relative
         /// path resolves against the scenario file's directory.
         file: String,
-        /// The poses read from `file` when the scenario was loaded.
+        /// The poses read from `file` when the scenario was loaded (in µs and radians, the
+        /// reader's name and this antenna's port on each).
         #[serde(skip)]
         poses: Vec<PoseSample>,
     },

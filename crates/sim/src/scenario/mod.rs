@@ -18,7 +18,6 @@ pub use format::{
     RobotSpec, RssiModel, TagSpec, TagVariation, VerticalAxis, WorldBounds, DEFAULT_RSSI_NOISE,
 };
 pub use format::{PoseEstimate, PoseEstimateKind};
-pub use recorded::PoseSample;
 
 /// A complete simulation scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -9,6 +9,7 @@ use super::format::{Mount, Pose, RobotSpec};
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct FixedRepr {
+    #[serde(with = "mount_pose")]
     pose: Pose,
 }
 
@@ -16,6 +17,7 @@ struct FixedRepr {
 #[serde(deny_unknown_fields)]
 struct RobotRepr {
     robot: RobotSpec,
+    #[serde(with = "mount_pose")]
     offset: Pose,
 }
 
@@ -86,5 +88,38 @@ impl<'de> Deserialize<'de> for Mount {
                 "{INNER_PATH_MARK}type: unknown mount type \"{other}\", expected \"fixed\", \"robot\" or \"recorded\""
             ))),
         }
+    }
+}
+
+/// A [`Pose`] as the scenario file has it: `{"position": [x, y, z], "yaw_deg", "pitch_deg"}`
+/// (metres, degrees; yaw and pitch 0 when absent; no other key). The degrees stop here.
+pub(super) mod mount_pose {
+    use llrp_gateway_vocab::pose::Pose;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Record {
+        position: [f64; 3],
+        #[serde(default)]
+        yaw_deg: f64,
+        #[serde(default)]
+        pitch_deg: f64,
+    }
+
+    /// Writes `pose` in degrees (rounded as [`Pose::yaw_deg`] rounds them).
+    pub fn serialize<S: Serializer>(pose: &Pose, s: S) -> Result<S::Ok, S::Error> {
+        Record {
+            position: pose.position,
+            yaw_deg: pose.yaw_deg(),
+            pitch_deg: pose.pitch_deg(),
+        }
+        .serialize(s)
+    }
+
+    /// Reads a pose given in degrees.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Pose, D::Error> {
+        let r = Record::deserialize(d)?;
+        Ok(Pose::from_degrees(r.position, r.yaw_deg, r.pitch_deg))
     }
 }

@@ -1,31 +1,55 @@
 //! Recorded antenna pose lists: CSV (`t_s,x,y,z,yaw_deg,pitch_deg`) or JSON Lines with the
-//! same keys, one pose per line, times strictly increasing.
+//! same keys, one pose per line, times strictly increasing. The file's seconds and degrees
+//! stop here: the list is parsed into [`PoseSample`]s (µs, radians).
 
-use serde::{Deserialize, Serialize};
+use llrp_gateway_vocab::pose::{Pose, PoseSample};
+use serde::Deserialize;
 
-/// One recorded antenna pose.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// One line of a recorded pose list, as the file has it (seconds, metres, degrees).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PoseSample {
-    /// Time since scenario start, in seconds.
-    pub t_s: f64,
-    /// Position x (m).
-    pub x: f64,
-    /// Position y (m).
-    pub y: f64,
-    /// Position z (m).
-    pub z: f64,
-    /// Boresight azimuth in degrees.
-    pub yaw_deg: f64,
-    /// Boresight elevation in degrees.
-    pub pitch_deg: f64,
+struct Row {
+    t_s: f64,
+    x: f64,
+    y: f64,
+    z: f64,
+    yaw_deg: f64,
+    pitch_deg: f64,
 }
 
 const COLUMNS: [&str; 6] = ["t_s", "x", "y", "z", "yaw_deg", "pitch_deg"];
 
-/// Parses a pose list; JSON Lines if the first non-blank line starts with `{`, CSV otherwise.
-/// The error names the 1-based line and the reason.
-pub fn parse_poses(text: &str) -> Result<Vec<PoseSample>, String> {
+/// Parses the pose list of antenna `antenna` of reader `reader`; JSON Lines if the first
+/// non-blank line starts with `{`, CSV otherwise. The error names the 1-based line and the
+/// reason, or the pose (1-based) for times out of order.
+pub fn parse_poses(text: &str, reader: &str, antenna: u16) -> Result<Vec<PoseSample>, String> {
+    let rows = parse_rows(text)?;
+    check_rows(&rows)?;
+    let mut poses: Vec<PoseSample> = Vec::with_capacity(rows.len());
+    for (i, r) in rows.iter().enumerate() {
+        // Finite and at least 0 (checked above); `as` saturates past u64's µs (half a
+        // million years).
+        let t_us = (r.t_s * 1e6).round() as u64;
+        if let Some(before) = poses.last().filter(|p| p.t_us >= t_us) {
+            return Err(format!(
+                "pose {}: t_s must be at least 1 µs after the one before, got {} after {} s",
+                i + 1,
+                r.t_s,
+                before.t_us as f64 * 1e-6
+            ));
+        }
+        poses.push(PoseSample {
+            t_us,
+            reader: reader.to_owned(),
+            antenna,
+            pose: Pose::from_degrees([r.x, r.y, r.z], r.yaw_deg, r.pitch_deg),
+        });
+    }
+    Ok(poses)
+}
+
+/// The rows of a pose list, JSON Lines or CSV.
+fn parse_rows(text: &str) -> Result<Vec<Row>, String> {
     let mut lines = text
         .lines()
         .enumerate()
@@ -34,56 +58,54 @@ pub fn parse_poses(text: &str) -> Result<Vec<PoseSample>, String> {
     let Some((first_no, first)) = lines.next() else {
         return Err("no poses".to_string());
     };
-    let mut poses = Vec::new();
+    let mut rows = Vec::new();
     if first.starts_with('{') {
         for (no, line) in std::iter::once((first_no, first)).chain(lines) {
-            let p: PoseSample =
-                serde_json::from_str(line).map_err(|e| format!("line {no}: {e}"))?;
-            poses.push(p);
+            let r: Row = serde_json::from_str(line).map_err(|e| format!("line {no}: {e}"))?;
+            rows.push(r);
         }
-    } else {
-        let header: Vec<&str> = first.split(',').map(str::trim).collect();
-        if header != COLUMNS {
+        return Ok(rows);
+    }
+    let header: Vec<&str> = first.split(',').map(str::trim).collect();
+    if header != COLUMNS {
+        return Err(format!(
+            "line {first_no}: CSV header must be `{}`, got `{first}`",
+            COLUMNS.join(",")
+        ));
+    }
+    for (no, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != COLUMNS.len() {
             return Err(format!(
-                "line {first_no}: CSV header must be `{}`, got `{first}`",
-                COLUMNS.join(",")
+                "line {no}: expected {} values, got {}",
+                COLUMNS.len(),
+                fields.len()
             ));
         }
-        for (no, line) in lines {
-            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-            if fields.len() != COLUMNS.len() {
-                return Err(format!(
-                    "line {no}: expected {} values, got {}",
-                    COLUMNS.len(),
-                    fields.len()
-                ));
-            }
-            let mut v = [0.0; 6];
-            for (slot, (field, name)) in v.iter_mut().zip(fields.iter().zip(COLUMNS)) {
-                *slot = field
-                    .parse::<f64>()
-                    .map_err(|_| format!("line {no}: {name} is not a number: `{field}`"))?;
-            }
-            poses.push(PoseSample {
-                t_s: v[0],
-                x: v[1],
-                y: v[2],
-                z: v[3],
-                yaw_deg: v[4],
-                pitch_deg: v[5],
-            });
+        let mut v = [0.0; 6];
+        for (slot, (field, name)) in v.iter_mut().zip(fields.iter().zip(COLUMNS)) {
+            *slot = field
+                .parse::<f64>()
+                .map_err(|_| format!("line {no}: {name} is not a number: `{field}`"))?;
         }
+        rows.push(Row {
+            t_s: v[0],
+            x: v[1],
+            y: v[2],
+            z: v[3],
+            yaw_deg: v[4],
+            pitch_deg: v[5],
+        });
     }
-    check_poses(&poses)?;
-    Ok(poses)
+    Ok(rows)
 }
 
 /// Checks that a pose list is non-empty, finite and strictly increasing in time from t ≥ 0.
-pub fn check_poses(poses: &[PoseSample]) -> Result<(), String> {
-    if poses.is_empty() {
+fn check_rows(rows: &[Row]) -> Result<(), String> {
+    if rows.is_empty() {
         return Err("no poses".to_string());
     }
-    for (i, p) in poses.iter().enumerate() {
+    for (i, p) in rows.iter().enumerate() {
         let values = [p.t_s, p.x, p.y, p.z, p.yaw_deg, p.pitch_deg];
         if values.iter().any(|v| !v.is_finite()) {
             return Err(format!("pose {}: values must be finite", i + 1));
@@ -91,12 +113,12 @@ pub fn check_poses(poses: &[PoseSample]) -> Result<(), String> {
         if p.t_s < 0.0 {
             return Err(format!("pose {}: t_s must be >= 0, got {}", i + 1, p.t_s));
         }
-        if i > 0 && p.t_s <= poses[i - 1].t_s {
+        if i > 0 && p.t_s <= rows[i - 1].t_s {
             return Err(format!(
                 "pose {}: t_s must increase strictly, got {} after {}",
                 i + 1,
                 p.t_s,
-                poses[i - 1].t_s
+                rows[i - 1].t_s
             ));
         }
     }
@@ -112,22 +134,29 @@ mod tests {
         let csv = "t_s,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,90,0\n1.5,2,2,3,180,10\n";
         let jsonl = "{\"t_s\":0,\"x\":1,\"y\":2,\"z\":3,\"yaw_deg\":90,\"pitch_deg\":0}\n\
                      {\"t_s\":1.5,\"x\":2,\"y\":2,\"z\":3,\"yaw_deg\":180,\"pitch_deg\":10}\n";
-        let a = parse_poses(csv).expect("valid CSV");
-        let b = parse_poses(jsonl).expect("valid JSONL");
+        let a = parse_poses(csv, "r", 2).expect("valid CSV");
+        let b = parse_poses(jsonl, "r", 2).expect("valid JSONL");
         assert_eq!(a, b);
         assert_eq!(a.len(), 2);
-        assert_eq!(a[1].yaw_deg, 180.0);
+        assert_eq!(
+            (a[1].t_us, a[1].reader.as_str(), a[1].antenna),
+            (1_500_000, "r", 2)
+        );
+        assert_eq!(a[1].pose, Pose::from_degrees([2.0, 2.0, 3.0], 180.0, 10.0));
     }
 
     #[test]
     fn bad_pose_lists_name_the_line() {
-        let err = parse_poses("t_s,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,90\n").unwrap_err();
+        let parse = |text| parse_poses(text, "r", 1);
+        let err = parse("t_s,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,90\n").unwrap_err();
         assert!(err.contains("line 2"), "{err}");
-        let err = parse_poses("t,x,y,z,yaw,pitch\n").unwrap_err();
+        let err = parse("t,x,y,z,yaw,pitch\n").unwrap_err();
         assert!(err.contains("header"), "{err}");
-        let err =
-            parse_poses("t_s,x,y,z,yaw_deg,pitch_deg\n1,0,0,0,0,0\n1,0,0,0,0,0\n").unwrap_err();
+        let err = parse("t_s,x,y,z,yaw_deg,pitch_deg\n1,0,0,0,0,0\n1,0,0,0,0,0\n").unwrap_err();
         assert!(err.contains("increase"), "{err}");
-        assert!(parse_poses("").is_err());
+        let err =
+            parse("t_s,x,y,z,yaw_deg,pitch_deg\n1,0,0,0,0,0\n1.0000001,0,0,0,0,0\n").unwrap_err();
+        assert!(err.contains("pose 2") && err.contains("1 µs"), "{err}");
+        assert!(parse("").is_err());
     }
 }

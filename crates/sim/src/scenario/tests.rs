@@ -307,7 +307,7 @@ fn s2_configurations_hold_44_references_and_their_tags_on_the_antennas_side() {
                 "{name}: robot not heading along the drive"
             );
             assert!(
-                offset.yaw_deg.to_radians().sin() > 0.5,
+                offset.yaw_rad.sin() > 0.5,
                 "{name}: antenna not facing left"
             );
             for t in s.tags.iter().filter(|t| !t.reference) {

@@ -431,8 +431,9 @@ fn validate_pose(s: &Scenario, p: &str, pose: &Pose, in_world: bool) -> Check {
     } else {
         finite(&format!("{p}.position"), &pose.position)?;
     }
-    in_range(&format!("{p}.yaw_deg"), pose.yaw_deg, -360.0, 360.0)?;
-    in_range(&format!("{p}.pitch_deg"), pose.pitch_deg, -90.0, 90.0)
+    // In the file's degrees, as its author wrote them (rounded back to 1e-9°).
+    in_range(&format!("{p}.yaw_deg"), pose.yaw_deg(), -360.0, 360.0)?;
+    in_range(&format!("{p}.pitch_deg"), pose.pitch_deg(), -90.0, 90.0)
 }
 
 fn validate_robot(s: &Scenario, p: &str, r: &RobotSpec) -> Check {
@@ -500,11 +501,13 @@ pub(super) fn load_recorded(s: &mut Scenario, dir: &std::path::Path) -> Check {
     for (r, reader) in s.readers.iter_mut().enumerate() {
         for (a, antenna) in reader.antennas.iter_mut().enumerate() {
             if let Mount::Recorded { file, poses } = &mut antenna.mount {
+                // At most MAX_ANTENNAS (64) antennas: `validate` checked it before.
+                let port = u16::try_from(a + 1).unwrap_or(u16::MAX);
                 let p = format!("readers[{r}].antennas[{a}].mount.file");
                 let path = dir.join(&*file);
                 let text = std::fs::read_to_string(&path)
                     .map_err(|e| invalid(&p, format!("cannot read {}: {e}", path.display())))?;
-                *poses = super::recorded::parse_poses(&text)
+                *poses = super::recorded::parse_poses(&text, &reader.name, port)
                     .map_err(|e| invalid(&p, format!("{}: {e}", path.display())))?;
             }
         }

@@ -16,6 +16,7 @@ use llrp::Message;
 use serde::{Deserialize, Serialize};
 
 pub use crate::epc::{Epc, EpcError};
+pub use crate::pose::Pose;
 
 /// One tag read (one TagReportData), in SI units; a line of the reads file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -46,46 +47,27 @@ pub struct Read {
     #[serde(default)]
     pub doppler_hz: Option<f64>,
     /// Pose of the antenna at the read, where the source knows it (stands in for a pose
-    /// file).
+    /// file); in the reads file `{"x", "y", "z"[, "yaw_deg", "pitch_deg"]}` (metres, degrees).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub antenna_pose: Option<AntennaPose>,
+    pub antenna_pose: Option<Pose>,
     /// Last-seen time, UTC µs (not a reads-file field: the CSV output carries it).
     #[serde(skip)]
     pub last_seen_us: Option<u64>,
 }
 
-/// The antenna's pose at a read, in the reads file: `{"x", "y", "z"[, "yaw_deg", "pitch_deg"]}`
-/// (metres, degrees).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AntennaPose {
-    /// Position (m).
-    pub x: f64,
-    /// Position (m).
-    pub y: f64,
-    /// Position (m).
-    pub z: f64,
-    /// Boresight azimuth about +z (degrees, 0 = +x).
-    #[serde(default)]
-    pub yaw_deg: f64,
-    /// Boresight elevation (degrees, positive up).
-    #[serde(default)]
-    pub pitch_deg: f64,
-}
-
 /// Where a reader's source knows them (a simulator), the pose of each antenna at a read's
 /// time: `(antenna, read time in UTC µs) → pose`.
 #[derive(Clone)]
-pub struct PoseAt(std::sync::Arc<dyn Fn(u16, u64) -> Option<AntennaPose> + Send + Sync>);
+pub struct PoseAt(std::sync::Arc<dyn Fn(u16, u64) -> Option<Pose> + Send + Sync>);
 
 impl PoseAt {
     /// Poses from `f`.
-    pub fn new(f: impl Fn(u16, u64) -> Option<AntennaPose> + Send + Sync + 'static) -> PoseAt {
+    pub fn new(f: impl Fn(u16, u64) -> Option<Pose> + Send + Sync + 'static) -> PoseAt {
         PoseAt(std::sync::Arc::new(f))
     }
 
     /// The pose of `antenna` at `t_us` (UTC µs), if known.
-    pub fn at(&self, antenna: u16, t_us: u64) -> Option<AntennaPose> {
+    pub fn at(&self, antenna: u16, t_us: u64) -> Option<Pose> {
         (self.0)(antenna, t_us)
     }
 }

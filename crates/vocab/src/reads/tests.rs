@@ -160,12 +160,9 @@ fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
     };
     // Antenna 1 moves along x at 1 m/s from t = 1 s; there is no antenna 2.
     let poses = PoseAt::new(|antenna, t_us| {
-        (antenna == 1).then(|| AntennaPose {
-            x: t_us.saturating_sub(1_000_000) as f64 * 1e-6,
-            y: 2.0,
-            z: 0.5,
-            yaw_deg: 90.0,
-            pitch_deg: 0.0,
+        (antenna == 1).then(|| {
+            let x = t_us.saturating_sub(1_000_000) as f64 * 1e-6;
+            Pose::from_degrees([x, 2.0, 0.5], 90.0, 0.0)
         })
     });
     let mut d = ReadDecoder::new(Some("r".into())).with_poses(Some(poses));
@@ -175,7 +172,10 @@ fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
     d.frame(&report(2, 3_500_000), 0, &mut out)
         .expect("decodes");
     let p = out[0].antenna_pose.expect("antenna 1's pose");
-    assert_eq!((p.x, p.y, p.yaw_deg), (2.5, 2.0, 90.0));
+    assert_eq!(
+        (p.position[0], p.position[1], p.yaw_deg()),
+        (2.5, 2.0, 90.0)
+    );
     assert_eq!(out[1].antenna_pose, None, "no pose known for antenna 2");
     // Without poses, none.
     let mut plain = ReadDecoder::new(None);
@@ -197,13 +197,7 @@ fn a_read_naming_no_antenna_is_the_sole_antennas_and_gets_its_pose() {
     });
     let poses = || {
         Some(PoseAt::new(|antenna, _| {
-            (antenna == 3).then_some(AntennaPose {
-                x: 1.0,
-                y: 2.0,
-                z: 0.5,
-                yaw_deg: 90.0,
-                pitch_deg: 0.0,
-            })
+            (antenna == 3).then_some(Pose::from_degrees([1.0, 2.0, 0.5], 90.0, 0.0))
         }))
     };
     let mut out = Vec::new();
@@ -269,10 +263,8 @@ fn an_antenna_pose_stands_in_for_a_pose_file() {
     let line = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":null,"antenna_pose":{"x":1,"y":2,"z":0.5,"yaw_deg":90}}"#;
     let r = read_jsonl(&line[..]).expect("parses");
     let p = r[0].antenna_pose.expect("a pose");
-    assert_eq!(
-        (p.x, p.y, p.z, p.yaw_deg, p.pitch_deg),
-        (1.0, 2.0, 0.5, 90.0, 0.0)
-    );
+    assert_eq!(p, Pose::from_degrees([1.0, 2.0, 0.5], 90.0, 0.0));
+    assert_eq!((p.yaw_rad, p.pitch_rad), (std::f64::consts::FRAC_PI_2, 0.0));
     let bad = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":null,"antenna_pose":{"x":1,"y":2}}"#;
     let e = read_jsonl(&bad[..]).expect_err("z missing");
     assert!(

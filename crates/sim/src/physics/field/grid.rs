@@ -384,7 +384,8 @@ impl Model {
         match &a.mover {
             Mover::Fixed(_) => Motion::default(),
             Mover::Recorded(poses) => {
-                let [x, y, z, turn] = crate::physics::motion::recorded_excursion(poses, t0, t1);
+                let [x, y, z, turn] =
+                    crate::physics::motion::recorded_excursion(poses, t0_us, t1_us);
                 Motion {
                     axes: [x, y, z],
                     turn,
