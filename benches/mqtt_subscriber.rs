@@ -53,12 +53,11 @@ fn connect(port: u16, filter: &str) -> rumqttc::Connection {
 fn connect_qos(port: u16, filter: &str, qos: QoS, tag: &str) -> rumqttc::Connection {
     let mut o = MqttOptions::new(
         format!("bench-subscriber-{}{tag}", std::process::id()),
-        "127.0.0.1",
-        port,
+        rumqttc::Broker::tcp("127.0.0.1", port),
     );
     o.set_max_packet_size(1 << 22, 1 << 22);
-    o.set_keep_alive(Duration::from_secs(30));
-    let (client, connection) = Client::new(o, 1000);
+    o.set_keep_alive(30);
+    let (client, connection) = Client::builder(o).capacity(1000).build();
     if client.subscribe(filter, qos).is_err() {
         eprintln!("mqtt_subscriber: cannot subscribe");
         std::process::exit(1);

@@ -109,8 +109,8 @@ pub fn mqtt_options(
     clean: bool,
     tls: Option<Arc<tokio_rustls::rustls::ClientConfig>>,
 ) -> Result<MqttOptions, PublishError> {
-    let mut o = MqttOptions::new(id, url.host.clone(), url.port);
-    o.set_keep_alive(Duration::from_secs(5));
+    let mut o = MqttOptions::new(id, rumqttc::Broker::tcp(url.host.clone(), url.port));
+    o.set_keep_alive(5);
     o.set_clean_session(clean);
     o.set_max_packet_size(MAX_PACKET, MAX_PACKET);
     if let Some(user) = &url.user {
@@ -128,6 +128,11 @@ pub fn mqtt_options(
         ));
     }
     Ok(o)
+}
+
+/// A QoS 1 publication, retained or not: how every message of the fleet is sent.
+pub fn at_least_once(retain: bool) -> rumqttc::PublishOptions {
+    rumqttc::PublishOptions::new(QoS::AtLeastOnce).retain(retain)
 }
 
 /// Most messages handed to the connection and not yet acknowledged.
@@ -215,7 +220,7 @@ impl Link {
     fn direct(&self, m: Outgoing) {
         match self
             .client
-            .try_publish(m.topic, QoS::AtLeastOnce, m.retain, m.payload)
+            .try_publish(m.topic, m.payload, at_least_once(m.retain))
         {
             Ok(()) => {
                 self.sent.fetch_add(1, Ordering::Relaxed);
@@ -323,7 +328,7 @@ impl Publisher {
         ));
         // The request channel holds the window of unacknowledged messages and the rest;
         // what waits for the broker waits in the outbox, which is bounded by `queue`.
-        let (client, connection) = Client::new(mqtt, WINDOW as usize + 64);
+        let (client, connection) = Client::builder(mqtt).capacity(WINDOW as usize + 64).build();
         let link = Arc::new(Link {
             client,
             url: opts.url.clone(),

@@ -100,8 +100,8 @@ impl Worker {
         metrics: MqttMetrics,
     ) -> Result<Worker, PublishError> {
         let mut mqtt = mqtt_options(&opts.url, &opts.client_id, false, opts.tls.clone())?;
-        mqtt.set_manual_acks(true);
-        let (client, connection) = Client::new(mqtt, 10_000);
+        mqtt.set_ack_mode(rumqttc::AckMode::Manual);
+        let (client, connection) = Client::builder(mqtt).capacity(10_000).build();
         let stopping = Arc::new(AtomicBool::new(false));
         let presence = Arc::new(Mutex::new(Presence::new(
             opts.presence_silence,
@@ -264,7 +264,8 @@ impl Run {
     fn message(&mut self, p: Publish) {
         self.metrics.received.inc();
         let base = self.opts.url.topic(&format!("v{VERSION}/"));
-        let Some(rest) = p.topic.strip_prefix(&base).map(str::to_owned) else {
+        let topic = std::str::from_utf8(&p.topic).unwrap_or_default();
+        let Some(rest) = topic.strip_prefix(&base).map(str::to_owned) else {
             self.metrics.malformed.inc();
             self.ack(&p);
             return;
@@ -484,7 +485,7 @@ impl Out {
         let topic = self.url.topic(&format!("v{VERSION}/{rest}"));
         if self
             .client
-            .try_publish(topic, QoS::AtLeastOnce, retain, payload)
+            .try_publish(topic, payload, super::publish::at_least_once(retain))
             .is_ok()
         {
             self.metrics.published.inc();

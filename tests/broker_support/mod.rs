@@ -223,15 +223,15 @@ impl Probe {
         topics: &[&str],
         clean: bool,
     ) -> Probe {
-        let mut o = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
+        let mut o = rumqttc::MqttOptions::new(id, rumqttc::Broker::tcp("127.0.0.1", port));
         o.set_max_packet_size(1 << 20, 1 << 20);
         o.set_clean_session(clean);
         if let Some((user, pass)) = login {
-            o.set_credentials(user, pass);
+            o.set_credentials(user, pass.to_owned());
         }
         let acks = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
         let counted = acks.clone();
-        let (client, mut connection) = rumqttc::Client::new(o, 100);
+        let (client, mut connection) = rumqttc::Client::builder(o).capacity(100).build();
         // Subscribed once connected (and again after each reconnection), as the worker does.
         let subscriber = client.clone();
         let filters: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
@@ -257,7 +257,14 @@ impl Probe {
                         counted.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
                     }
                     Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
-                        if tx.send((p.topic, p.payload.to_vec(), p.retain)).is_err() {
+                        if tx
+                            .send((
+                                String::from_utf8_lossy(&p.topic).into_owned(),
+                                p.payload.to_vec(),
+                                p.retain,
+                            ))
+                            .is_err()
+                        {
                             return;
                         }
                     }
@@ -290,7 +297,11 @@ impl Probe {
     /// Publishes `payload` to `topic` at QoS 1.
     pub fn publish(&self, topic: &str, payload: &[u8]) {
         self.client
-            .publish(topic, rumqttc::QoS::AtLeastOnce, false, payload.to_vec())
+            .publish(
+                topic,
+                payload.to_vec(),
+                rumqttc::PublishOptions::at_least_once(),
+            )
             .expect("publishes");
     }
 
