@@ -71,7 +71,7 @@ pub fn set_log_format(format: LogFormat) {
 /// empty (no-color.org).
 pub fn log_colours() -> bool {
     use std::io::IsTerminal;
-    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").map_or(true, |v| v.is_empty())
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
 /// Logs to standard error at `RUST_LOG`'s level (default `info`), in the format

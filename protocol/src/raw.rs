@@ -61,7 +61,7 @@ pub fn to_hex(bytes: &[u8]) -> String {
 /// Bytes from hex text; whitespace is ignored.
 pub fn from_hex(text: &str) -> Result<Vec<u8>, HexError> {
     let digits: Vec<u8> = text.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
-    if digits.len() % 2 != 0 {
+    if !digits.len().is_multiple_of(2) {
         return Err(HexError::OddLength);
     }
     digits

@@ -338,7 +338,7 @@ impl Builder {
     fn flush(&mut self, all: bool) {
         self.flush_poses(all);
         let now = Instant::now();
-        if !all && self.next_due.map_or(true, |d| now < d) {
+        if !all && self.next_due.is_none_or(|d| now < d) {
             return;
         }
         let window = self.opts.window;

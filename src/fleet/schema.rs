@@ -21,8 +21,9 @@ pub fn shard(epc_hex: &str, count: u16) -> u16 {
     const PRIME: u64 = 0x0000_0100_0000_01b3;
     let fold = |h: u64, b: u8| (h ^ u64::from(b)).wrapping_mul(PRIME);
     let digits = epc_hex.as_bytes();
-    let hex =
-        !digits.is_empty() && digits.len() % 2 == 0 && digits.iter().all(u8::is_ascii_hexdigit);
+    let hex = !digits.is_empty()
+        && digits.len().is_multiple_of(2)
+        && digits.iter().all(u8::is_ascii_hexdigit);
     let hash = if hex {
         digits
             .chunks_exact(2)

@@ -54,7 +54,7 @@ impl Epc {
                 offset,
             });
         }
-        if text.len() % 2 != 0 {
+        if !text.len().is_multiple_of(2) {
             return Err(EpcError::OddDigits {
                 text: text.to_string(),
                 digits: text.len(),

@@ -140,7 +140,7 @@ impl<H: Host> Driver<H> {
                 && self.handshakes.len() < self.limits.handshakes
                 && self
                     .accept_after
-                    .map_or(true, |t| t <= tokio::time::Instant::now());
+                    .is_none_or(|t| t <= tokio::time::Instant::now());
             let may_turn = here && streaming && queued < TURN_BYTES;
             let backlogged = self
                 .here
@@ -414,7 +414,7 @@ impl<H: Host> Driver<H> {
         };
         let connected = self.client.is_some();
         // While the host is away on its turn it is inventorying.
-        let inventorying = connected && self.here.as_deref().map_or(true, Host::inventorying);
+        let inventorying = connected && self.here.as_deref().is_none_or(Host::inventorying);
         if self.told == Some((connected, inventorying)) {
             return;
         }

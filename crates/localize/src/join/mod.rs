@@ -396,7 +396,7 @@ fn levels(
                     }
                     let q = at(p, [i, j, k], [step; 3]);
                     if let Some(v) = score(q) {
-                        if best.map_or(true, |b| v > b.0) {
+                        if best.is_none_or(|b| v > b.0) {
                             best = Some((v, q));
                         }
                     }

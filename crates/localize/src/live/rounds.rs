@@ -105,9 +105,9 @@ impl Worker {
             .iter()
             .filter_map(|(epc, t)| {
                 if let Some(since) = t.dirty_since {
-                    let rested = t.last_estimate.map_or(true, |l| {
-                        now.duration_since(l) >= self.settings.min_interval
-                    });
+                    let rested = t
+                        .last_estimate
+                        .is_none_or(|l| now.duration_since(l) >= self.settings.min_interval);
                     return (all || rested).then(|| (false, since, epc.clone(), all));
                 }
                 let last = t.last_estimate?;

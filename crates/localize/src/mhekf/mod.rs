@@ -556,7 +556,7 @@ fn choose<'h>(
         .map(|h| h.log_w)
         .fold(f64::NEG_INFINITY, f64::max);
     let faces = |h: &&Hypothesis| {
-        facing.map_or(true, |f| {
+        facing.is_none_or(|f| {
             let (t, _) = h.tag();
             (t[0] - last.antenna[0]) * f[0] + (t[1] - last.antenna[1]) * f[1] >= 0.0
         })

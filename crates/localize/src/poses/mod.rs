@@ -352,7 +352,7 @@ impl<'a> Track<'a> {
 fn at_or_before(track: &[PoseSample], t: u64, hint: usize) -> usize {
     // Exactly i + 1 samples are at or before t (the times in order).
     let fits = |i: usize| {
-        i < track.len() && track[i].t_us <= t && track.get(i + 1).map_or(true, |s| s.t_us > t)
+        i < track.len() && track[i].t_us <= t && track.get(i + 1).is_none_or(|s| s.t_us > t)
     };
     if let Some(i) = [hint.checked_sub(1), Some(hint)]
         .into_iter()

@@ -168,7 +168,7 @@ pub(super) fn fit(
             continue;
         };
         let score = join::coherence(&joint, position(&fit.0 .0, s), sign);
-        if best.as_ref().map_or(true, |b| score > b.0) {
+        if best.as_ref().is_none_or(|b| score > b.0) {
             best = Some((score, fit));
         }
         if score >= COHERENT {

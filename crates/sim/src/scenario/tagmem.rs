@@ -28,7 +28,7 @@ impl TagEpc {
                 "must not be empty (1 to {MAX_EPC_WORDS} 16-bit words of 4 hex digits)"
             ));
         }
-        if bytes.len() % 2 != 0 {
+        if !bytes.len().is_multiple_of(2) {
             return Err(format!(
                 "must be whole 16-bit words, got {} bytes",
                 bytes.len()
@@ -149,7 +149,7 @@ pub fn parse_words(hex: &str) -> Result<Vec<u16>, String> {
     if !hex.chars().all(|c| c.is_ascii_hexdigit()) {
         return Err(format!("must be hex digits, got \"{hex}\""));
     }
-    if hex.len() % 4 != 0 {
+    if !hex.len().is_multiple_of(4) {
         return Err(format!(
             "must be whole 16-bit words (a multiple of 4 hex digits), got {} digits",
             hex.len()

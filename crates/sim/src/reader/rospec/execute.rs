@@ -482,7 +482,7 @@ impl Run {
     fn rotate(&mut self, reached: u64, antennas: usize) {
         if reached >= self.slice_end_us {
             self.antenna_pos += 1;
-            if self.antenna_pos % antennas.max(1) == 0 {
+            if self.antenna_pos.is_multiple_of(antennas.max(1)) {
                 self.rounds += 1;
             }
             self.slice_end_us = dwell_end(reached);
