@@ -386,7 +386,7 @@ fn with_token_everywhere_reads_need_it_too() {
 }
 
 #[test]
-fn metrics_are_prometheus_text_with_the_read_counter() {
+fn metrics_are_prometheus_text_or_openmetrics_as_asked_with_the_read_counter() {
     let server = open();
     server.feed_tag();
     server.converged();
@@ -398,12 +398,34 @@ fn metrics_are_prometheus_text_with_the_read_counter() {
         "{:?}",
         r.headers
     );
+    assert_eq!(r.header("vary"), Some("Accept"));
     let text = r.text();
     assert!(
         text.lines().any(|l| l == "llrp_gateway_reads_total 301"),
         "{text}"
     );
+    // The classic format names a counter's family after its sample.
+    assert!(
+        text.contains("# TYPE llrp_gateway_reads_total counter"),
+        "{text}"
+    );
     assert!(text.contains("# TYPE llrp_gateway_estimator_seconds histogram"));
+    assert!(!text.contains("# EOF"), "{text}");
+
+    // A client asking for OpenMetrics (Prometheus does) gets it, said so.
+    let om = [(
+        "Accept",
+        "application/openmetrics-text;version=1.0.0,*/*;q=0.1",
+    )];
+    let r = request(server.addr, "GET", "/metrics", &om, b"");
+    assert_eq!(
+        r.header("content-type"),
+        Some("application/openmetrics-text; version=1.0.0; charset=utf-8")
+    );
+    let text = r.text();
+    assert!(text.contains("# TYPE llrp_gateway_reads counter"), "{text}");
+    assert!(text.contains("# UNIT llrp_gateway_estimator_seconds seconds"));
+    assert!(text.ends_with("# EOF\n"), "{text}");
 }
 
 #[test]

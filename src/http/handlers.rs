@@ -19,9 +19,6 @@ use crate::reads::Read;
 /// The live map: one page, its script inline, nothing fetched from elsewhere.
 const MAP_HTML: &str = include_str!("map.html");
 
-/// The Prometheus text format's content type.
-pub const METRICS_CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
-
 /// The document's title and version, before the routes add their paths.
 pub(super) fn base_document() -> OpenApi {
     OpenApiBuilder::new()
@@ -69,12 +66,27 @@ pub(super) async fn healthz() -> &'static str {
 }
 
 #[utoipa::path(get, path = "/metrics", tag = "ops",
-    responses((status = 200, description = "Counters and histograms in the Prometheus text format",
-        body = String, content_type = "text/plain; version=0.0.4")))]
-pub(super) async fn metrics(State(state): State<AppState>) -> Response {
+    responses((status = 200, description = "Counters and histograms: OpenMetrics 1.0 text for a \
+        client whose Accept asks for it (Prometheus does), else the Prometheus text format 0.0.4",
+        content(
+            (String = "application/openmetrics-text; version=1.0.0"),
+            (String = "text/plain; version=0.0.4")))))]
+pub(super) async fn metrics(State(state): State<AppState>, headers: HeaderMap) -> Response {
+    // Several Accept headers are one list (RFC 9110, 5.3).
+    let accept: Vec<&str> = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .collect();
+    let format = crate::metrics::exposition::negotiate(
+        Some(accept.join(",").as_str()).filter(|a| !a.is_empty()),
+    );
     (
-        [(header::CONTENT_TYPE, METRICS_CONTENT_TYPE)],
-        state.metrics.render(),
+        [
+            (header::CONTENT_TYPE, format.content_type()),
+            (header::VARY, "Accept"),
+        ],
+        state.metrics.render_as(format),
     )
         .into_response()
 }

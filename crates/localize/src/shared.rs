@@ -17,6 +17,7 @@ use llrp_gateway_vocab::reads::Read;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::histogram::Histogram;
 use prometheus_client::registry::Registry;
+use prometheus_client::registry::Unit;
 use serde::Serialize;
 
 /// Recent reads kept per tag for its detail view.
@@ -195,24 +196,27 @@ impl Metrics {
             self.set_aside.clone(),
         );
         registry.register("poses", "Pose samples taken in", self.poses.clone());
-        registry.register(
-            "estimator_seconds",
+        registry.register_with_unit(
+            "estimator",
             "Compute time of one tag's estimate",
+            Unit::Seconds,
             self.estimator_seconds.clone(),
         );
-        registry.register(
-            "update_latency_seconds",
+        registry.register_with_unit(
+            "update_latency",
             "From a read's filing (its pose in) to its tag's updated estimate",
+            Unit::Seconds,
             self.update_latency_seconds.clone(),
         );
-        registry.register(
-            "pose_wait_seconds",
+        registry.register_with_unit(
+            "pose_wait",
             "From a read's arrival at the localizer to its filing: the wait for its pose",
+            Unit::Seconds,
             self.pose_wait_seconds.clone(),
         );
     }
 
-    /// The localizer's metrics alone in the Prometheus text exposition format, named as the
+    /// The localizer's metrics alone in the OpenMetrics text format, named as the
     /// application serves them (`llrp_gateway_reads_total`, …).
     pub fn render(&self) -> String {
         let mut registry = Registry::with_prefix("llrp_gateway");

@@ -1,7 +1,10 @@
 //! The process's metrics: each subsystem keeps its own (the localizer's
 //! `localize::shared::Metrics`, the MQTT publisher's or worker's
 //! [`crate::fleet::metrics::MqttMetrics`], the LLRP links' [`LinkMetrics`]), and the command
-//! registers those it runs in one [`Metrics`], which `GET /metrics` serves.
+//! registers those it runs in one [`Metrics`], which `GET /metrics` serves in the format the
+//! client asks for ([`exposition`]).
+
+pub mod exposition;
 
 use std::sync::{Arc, Mutex};
 
@@ -40,13 +43,21 @@ impl Metrics {
         add(&mut self.0.lock().unwrap_or_else(|e| e.into_inner()));
     }
 
-    /// Everything registered, in the Prometheus text exposition format.
+    /// Everything registered, in the OpenMetrics text format (prometheus-client's).
     pub fn render(&self) -> String {
         let mut out = String::new();
         let registry = self.0.lock().unwrap_or_else(|e| e.into_inner());
         // Writing into a String cannot fail.
         let _ = prometheus_client::encoding::text::encode(&mut out, &registry);
         out
+    }
+
+    /// Everything registered, in `format`.
+    pub fn render_as(&self, format: exposition::Format) -> String {
+        match format {
+            exposition::Format::OpenMetrics => self.render(),
+            exposition::Format::Classic => exposition::classic(&self.render()),
+        }
     }
 }
 
