@@ -115,7 +115,7 @@ pub fn mqtt_options(
     o.set_max_packet_size(MAX_PACKET, MAX_PACKET);
     if let Some(user) = &url.user {
         let password = url.password.as_ref().map_or("", Secret::expose);
-        o.set_credentials(user.clone(), password);
+        o.set_credentials(user.clone(), password.to_owned());
     }
     if url.tls {
         let config = tls.ok_or_else(|| {
