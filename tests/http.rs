@@ -26,7 +26,7 @@ fn with_token(token_everywhere: bool) -> Server {
 
 fn pose_json(t_us: u64, x: f64) -> String {
     let mut p = pose(t_us);
-    p.reader = "posted".into();
+    p.reader = "posted".parse().ok();
     p.antenna = 2;
     p.pose.position[0] = x;
     serde_json::to_string(&p).expect("serialises")
@@ -309,7 +309,7 @@ fn posted_poses_are_503_while_the_localizer_is_behind() {
         let poses = (0..20_000u64)
             .map(|k| {
                 let mut p = pose(k * 1_000);
-                p.reader = "filler".into();
+                p.reader = "filler".parse().ok();
                 p
             })
             .collect();

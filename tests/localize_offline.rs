@@ -174,8 +174,8 @@ fn a_reads_file_with_antenna_poses_gives_the_recordings_estimates() {
     let reads_path = dir.path().join("reads.jsonl");
     let mut file = std::io::BufWriter::new(std::fs::File::create(&reads_path).expect("creates"));
     for mut r in load_reads(&rec).expect("reads") {
-        let reader = r.reader.clone().unwrap_or_default();
-        let Some(p) = poses.at(&reader, r.antenna, r.t_us) else {
+        let reader = r.reader.as_deref().unwrap_or_default();
+        let Some(p) = poses.at(reader, r.antenna, r.t_us) else {
             continue;
         };
         r.antenna_pose = Some(p.pose);

@@ -89,7 +89,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
     for t in &tags {
         let read = Read {
             epc: llrp_gateway::reads::Epc::from_bytes(t.epc_bytes()),
-            reader: Some("s1-reader".into()),
+            reader: Some("s1-reader".parse().expect("a reader name")),
             antenna: t.antenna_id.map_or(0, |a| a.0),
             t_us: t.first_seen_timestamp_utc.map_or(0, |u| u.0),
             phase_rad: t

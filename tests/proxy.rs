@@ -51,7 +51,7 @@ async fn proxy(upstream: &str, record: Option<&Path>, tap: Option<Tap>) -> Runni
         None => (None, None),
     };
     let config = ProxyConfig {
-        name: "test".into(),
+        name: "test".parse().expect("a reader name"),
         upstream: upstream.into(),
         listen: "127.0.0.1:0".into(),
         record: record.map(Path::to_owned),
@@ -861,7 +861,7 @@ async fn a_client_over_the_limit_is_told_and_closed_and_a_freed_place_is_taken_a
         }
     });
     let config = ProxyConfig {
-        name: "limited".into(),
+        name: "limited".parse().expect("a reader name"),
         upstream,
         listen: "127.0.0.1:0".into(),
         record: None,

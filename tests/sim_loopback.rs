@@ -202,7 +202,7 @@ async fn ground_truth_carries_true_and_estimated_poses_with_the_pose_file_keys()
 async fn every_reader_of_a_scenario_listens() {
     let mut scenario = s1();
     let mut second = scenario.readers[0].clone();
-    second.name = "reader-2".into();
+    second.name = "reader-2".parse().expect("a reader name");
     scenario.readers.push(second);
     let sim = start(&scenario, Speed::Factor(1.0)).await;
     assert_eq!(sim.addrs.len(), 2);

@@ -400,7 +400,7 @@ async fn proxy(
         None => (None, None),
     };
     let config = ProxyConfig {
-        name: "tls".into(),
+        name: "tls".parse().expect("a reader name"),
         upstream: upstream.to_string(),
         listen: "127.0.0.1:0".into(),
         record: record.map(Path::to_owned),

@@ -2,6 +2,7 @@
 //! into the run's settings, the localizer and publisher of [`super::live`] started beside the
 //! run, and the run's error said at the exit. The inventory itself: [`crate::inventory`].
 
+use crate::reads::{ReaderName, ReaderNameError};
 use std::path::PathBuf;
 
 use super::live::{start_sinks, LiveArgs, SinksError};
@@ -49,7 +50,7 @@ pub struct InventoryArgs {
     pub force: bool,
     /// Reader name written in each read (default: the reader address as given).
     #[arg(long)]
-    pub name: Option<String>,
+    pub name: Option<ReaderName>,
     /// Keepalive interval asked of the reader, ms (0: none). A reader silent for three
     /// intervals and 5 s more is taken for lost and reconnected.
     #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = crate::cli::options::parser::<u32>("keepalive-ms"))]
@@ -152,6 +153,14 @@ pub enum InventoryCommandError {
     /// The inventory failed (the reader, the connection, the output).
     #[error("{0}")]
     Inventory(#[from] InventoryError),
+    /// No `--name`, and the reader address is no reader name to stand for one.
+    #[error("the reader address {address:?} cannot name the reader ({source}): give --name")]
+    Name {
+        /// The reader address.
+        address: String,
+        /// Why it is no name.
+        source: ReaderNameError,
+    },
 }
 
 impl InventoryArgs {
@@ -214,7 +223,15 @@ impl InventoryArgs {
                 keepalive_ms: self.keepalive_ms,
                 ..InventorySpec::default()
             },
-            name: self.name.clone().unwrap_or_else(|| self.reader.clone()),
+            name: match &self.name {
+                Some(name) => name.clone(),
+                None => ReaderName::parse(&self.reader).map_err(|source| {
+                    InventoryCommandError::Name {
+                        address: self.reader.clone(),
+                        source,
+                    }
+                })?,
+            },
             seconds: self.seconds,
             output,
             force: self.force,
@@ -268,6 +285,23 @@ mod tests {
             parse(&["reader", "--antennas", "1,x"]).is_err(),
             "not a number"
         );
+    }
+
+    #[test]
+    fn the_reader_name_is_given_or_the_address_and_keeps_the_rule() {
+        let named = parse(&["10.0.0.5", "--name", "dock 1"]).expect("parses");
+        assert_eq!(named.options().expect("options").name, "dock 1");
+        let unnamed = parse(&["10.0.0.5:5084"]).expect("parses");
+        assert_eq!(unnamed.options().expect("options").name, "10.0.0.5:5084");
+        let Err(e) = parse(&["r", "--name", "dock\t1"]) else {
+            panic!("a tab in --name is refused");
+        };
+        assert!(e.to_string().contains("control character"), "{e}");
+        let blank = parse(&[" "]).expect("parses");
+        assert!(matches!(
+            blank.options(),
+            Err(InventoryCommandError::Name { .. })
+        ));
     }
 
     #[test]

@@ -285,11 +285,13 @@ pub fn load_reads(path: &Path) -> Result<Vec<Read>, ReadsError> {
         path: path.to_owned(),
         source,
     })?;
-    let upstream = &recording.header.upstream;
-    let reader = upstream
-        .strip_prefix("sim:")
-        .unwrap_or(upstream)
-        .to_string();
+    let reader = recording
+        .header
+        .reader_name()
+        .map_err(|source| ReadsError::Recording {
+            path: path.to_owned(),
+            source,
+        })?;
     let mut reads = Vec::new();
     for conn in recording.connections() {
         let mut decoder = ReadDecoder::new(Some(reader.clone()));

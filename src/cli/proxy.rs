@@ -3,6 +3,7 @@
 //! localizer and publisher of [`super::live`] fed with the tapped reads, until Ctrl-C or
 //! SIGTERM. The proxy itself is [`crate::net::proxy`], its config file [`crate::gateway`].
 
+use crate::reads::ReaderName;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -122,7 +123,7 @@ pub enum ProxyCommandError {
     #[error("'{name}': TLS: {source}")]
     Tls {
         /// The proxy.
-        name: String,
+        name: ReaderName,
         /// Why.
         source: Box<TlsError>,
     },
@@ -130,7 +131,7 @@ pub enum ProxyCommandError {
     #[error("{name}: cannot listen on {listen}: {source}")]
     Listen {
         /// The proxy.
-        name: String,
+        name: ReaderName,
         /// Its listening address.
         listen: String,
         /// Why.
@@ -180,7 +181,8 @@ fn entries(args: &ProxyArgs) -> Result<Vec<ProxyEntry>, ProxyCommandError> {
     match (&args.config, &args.upstream) {
         (Some(path), _) => Ok(GatewayConfig::load(path)?.proxies),
         (None, Some(upstream)) => Ok(vec![ProxyEntry {
-            name: "reader".into(),
+            // "reader" keeps the rule (not empty, no white space or control character).
+            name: "reader".parse().expect("a reader name"),
             upstream: upstream.clone(),
             listen: args.listen.clone(),
             record: args.record.clone(),

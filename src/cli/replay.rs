@@ -154,11 +154,13 @@ async fn serve(
         Err(e) => eprintln!("llrp-gateway replay: {e}"),
     }
     let sinks = start_sinks(&args.live, "replay").await?;
-    let upstream = &recording.header.upstream;
-    let name = upstream
-        .strip_prefix("sim:")
-        .unwrap_or(upstream)
-        .to_string();
+    let name = recording
+        .header
+        .reader_name()
+        .map_err(|source| ReplayCommandError::Recording {
+            path: args.file.clone(),
+            source,
+        })?;
     let tap = sinks.tap().map(|t| (name, t));
     let options = ReplayOptions {
         speed: match args.speed {

@@ -1,6 +1,7 @@
 //! `llrp-gateway localize --subscribe URL --shards LIST`: a localizer worker until Ctrl-C or
 //! SIGTERM, with the HTTP API for its shards when given `--http ADDR`.
 
+use crate::reads::ReaderName;
 use std::path::PathBuf;
 
 use super::localize::LocalizeArgs;
@@ -116,7 +117,7 @@ struct WorkerPlan {
     /// The localizer's settings.
     settings: crate::localize::live::Settings,
     /// Per reader, reader time − robot time of the poses robots publish (µs).
-    clock_offsets_us: Vec<(String, i64)>,
+    clock_offsets_us: Vec<(ReaderName, i64)>,
 }
 
 /// Runs the worker of `args` (which has `--subscribe`) until Ctrl-C or SIGTERM.

@@ -3,6 +3,7 @@
 //! per read), localized by every applicable estimator with the true antenna poses and with
 //! the poses the robot itself reports; errors against the ground truth and compute times.
 
+use crate::reads::ReaderName;
 use std::time::Instant;
 
 use crate::localize::estimate::{estimate_all, Estimate, Estimator, Geometry};
@@ -92,10 +93,10 @@ pub fn duration_s(s: &Scenario) -> f64 {
     }
 }
 
-fn sample(reader: &str, antenna: u16, t_us: u64, p: &AntennaPose) -> PoseSample {
+fn sample(reader: &ReaderName, antenna: u16, t_us: u64, p: &AntennaPose) -> PoseSample {
     PoseSample {
         t_us,
-        reader: reader.to_string(),
+        reader: Some(reader.clone()),
         antenna,
         pose: *p,
     }
@@ -221,7 +222,7 @@ fn decode_frames(bytes: &[u8], t: u64, decoder: &mut ReadDecoder, reads: &mut Ve
 }
 
 /// Adds every antenna's true and estimated pose at `t` to `poses` (true, estimated).
-fn add_poses(name: &str, model: &Model, t: u64, poses: &mut (Poses, Poses)) {
+fn add_poses(name: &ReaderName, model: &Model, t: u64, poses: &mut (Poses, Poses)) {
     for a in 1..=model.antenna_count() {
         poses.0.add(sample(name, a, t, &model.antenna_pose(a, t)));
         poses.1.add(sample(name, a, t, &model.estimated_pose(a, t)));

@@ -1,6 +1,7 @@
 //! The publishing thread: turns what the tap mirrors (LLRP frames, reads, poses, readers
 //! coming) into messages for the outbox ([`super::publish`]).
 
+use crate::reads::ReaderName;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
@@ -81,7 +82,7 @@ pub(super) struct Builder {
     link: Arc<Link>,
     decoders: crate::reads::Decoders,
     /// Reader time − robot time, per reader (poses go out in the reads' clock).
-    offsets: HashMap<String, i64>,
+    offsets: HashMap<ReaderName, i64>,
     /// Per reader, per topic (under `v1/`), the last sequence number used.
     seqs: BTreeMap<String, BTreeMap<String, u64>>,
     /// Per reader: the reads waiting for their window.
@@ -214,7 +215,7 @@ impl Builder {
     }
 
     /// Publishes the reads and events in the frames `bytes` of reader `reader`.
-    fn frames(&mut self, reader: &str, bytes: &[u8], now_utc_us: u64) {
+    fn frames(&mut self, reader: &ReaderName, bytes: &[u8], now_utc_us: u64) {
         self.came(reader);
         let decoder = self.decoders.of(reader);
         // The reads of each RO_ACCESS_REPORT apart: without a window, a message each;
@@ -251,9 +252,10 @@ impl Builder {
 
     /// Reads of any readers published, reader by reader.
     fn reads_of_readers(&mut self, reads: Vec<Read>) {
+        // The reads that name no reader are published under "".
         let mut by_reader: BTreeMap<String, Vec<Read>> = BTreeMap::new();
         for r in reads {
-            let name = r.reader.clone().unwrap_or_default();
+            let name = r.reader.as_deref().unwrap_or_default().to_owned();
             by_reader.entry(name).or_default().push(r);
         }
         for (reader, reads) in by_reader {
@@ -422,9 +424,10 @@ impl Builder {
     fn poses(&mut self, poses: Vec<PoseSample>) {
         for mut p in poses {
             // In the reads' clock, as a worker files them.
-            let offset = self.offsets.get(&p.reader).copied().unwrap_or(0);
+            let reader = p.reader.as_deref().unwrap_or_default();
+            let offset = self.offsets.get(reader).copied().unwrap_or(0);
             p.t_us = p.t_us.saturating_add_signed(offset);
-            let rest = format!("poses/{}/{}", topic_level(&p.reader), p.antenna);
+            let rest = format!("poses/{}/{}", topic_level(reader), p.antenna);
             self.pending_poses
                 .entry(rest)
                 .or_insert_with(|| (Vec::new(), Instant::now()))

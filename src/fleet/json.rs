@@ -158,7 +158,7 @@ mod tests {
             ("gw", "r1", vec![read("E280")]),
             (
                 "g\"w",
-                "réader\n",
+                "réader \"q\" \\",
                 vec![bare.clone(), read("E280"), odd.clone()],
             ),
             ("", "", vec![odd, bare]),
@@ -167,7 +167,8 @@ mod tests {
             let want = serde_json::to_vec(&ReadBatch {
                 v: VERSION,
                 gateway: gateway.into(),
-                reader: reader.into(),
+                // "" is the reads that name no reader.
+                reader: reader.parse().ok(),
                 run: 1_764_633_000_000_000,
                 seq: 7,
                 reads: reads.clone(),

@@ -3,6 +3,8 @@
 //! `moved` when the estimate has moved more than a distance from where the last presence
 //! event put it. Sans IO: reads, estimates and the time go in, events come out.
 
+use crate::reads::ReaderName;
+use llrp_gateway_vocab::reader_name::none_as_empty;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -26,8 +28,9 @@ pub struct PresenceEvent {
     pub epc: String,
     /// `arrived`, `departed` or `moved`.
     pub event: &'static str,
-    /// The reader of the tag's newest read.
-    pub reader: String,
+    /// The reader of the tag's newest read (`""` when it named none).
+    #[serde(serialize_with = "none_as_empty")]
+    pub reader: Option<ReaderName>,
     /// Its antenna.
     pub antenna: u16,
     /// The newest read's time (UTC µs, the reads' clock).
@@ -41,7 +44,7 @@ pub struct PresenceEvent {
 struct Tag {
     present: bool,
     last_read: Instant,
-    reader: String,
+    reader: Option<ReaderName>,
     antenna: u16,
     last_seen_us: u64,
     /// The newest estimate.
@@ -85,7 +88,7 @@ impl Presence {
     pub fn read(
         &mut self,
         epc: &str,
-        reader: &str,
+        reader: Option<&ReaderName>,
         antenna: u16,
         t_us: u64,
         now: Instant,
@@ -93,7 +96,7 @@ impl Presence {
         let t = self.tags.entry(epc.to_owned()).or_insert_with(|| Tag {
             present: false,
             last_read: now,
-            reader: reader.to_owned(),
+            reader: reader.cloned(),
             antenna,
             last_seen_us: t_us,
             position: None,
@@ -102,7 +105,9 @@ impl Presence {
         t.last_read = now;
         if t_us >= t.last_seen_us {
             t.last_seen_us = t_us;
-            t.reader = reader.to_owned();
+            if t.reader.as_ref() != reader {
+                t.reader = reader.cloned();
+            }
             t.antenna = antenna;
         }
         if t.present {
@@ -155,14 +160,19 @@ impl Presence {
 mod tests {
     use super::*;
 
+    fn reader() -> Option<ReaderName> {
+        Some("r".parse().expect("a reader name"))
+    }
+
     #[test]
     fn a_tag_arrives_once_moves_beyond_the_distance_and_departs_after_the_silence() {
         let t0 = Instant::now();
         let s = Duration::from_secs(10);
         let mut p = Presence::new(s, 0.5);
-        let a = p.read("E1", "r", 1, 100, t0).expect("arrived");
+        let r = reader();
+        let a = p.read("E1", r.as_ref(), 1, 100, t0).expect("arrived");
         assert_eq!((a.event, a.position), ("arrived", None));
-        assert_eq!(p.read("E1", "r", 2, 200, t0 + s / 2), None);
+        assert_eq!(p.read("E1", r.as_ref(), 2, 200, t0 + s / 2), None);
         // The first estimate is news; a small change is not; a large one is.
         let m = p.estimate("E1", [1.0, 2.0, 0.0]).expect("moved");
         assert_eq!((m.event, m.antenna, m.last_seen_us), ("moved", 2, 200));
@@ -181,7 +191,9 @@ mod tests {
         );
         assert!(p.tick(t0 + 3 * s).is_empty());
         // Read again: arrived again, where it was last estimated.
-        let again = p.read("E1", "r", 1, 900, t0 + 3 * s).expect("arrived");
+        let again = p
+            .read("E1", r.as_ref(), 1, 900, t0 + 3 * s)
+            .expect("arrived");
         assert_eq!(
             (again.event, again.position),
             ("arrived", Some([1.6, 2.0, 0.0]))

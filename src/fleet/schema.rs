@@ -4,9 +4,10 @@
 //! `antennaPort`, `peakRssiCdbm` in centi-dBm, `frequency` in kHz, `phaseAngle` in degrees,
 //! `lastSeenTime` as RFC 3339); the rest are ours, in the same camelCase (docs/fleet.md).
 
+use llrp_gateway_vocab::reader_name::{empty_is_none, none_as_empty};
 use serde::{Deserialize, Serialize};
 
-use crate::reads::{Epc, Pose, Read};
+use crate::reads::{Epc, Pose, Read, ReaderName};
 
 /// The schema version in every message's `v` and in the topics (`v1`).
 pub const VERSION: u32 = 1;
@@ -118,10 +119,10 @@ impl TagRead {
     }
 
     /// The read of reader `reader` this stands for; `None` when its EPC is not hex bytes.
-    pub fn to_read(&self, reader: &str) -> Option<Read> {
+    pub fn to_read(&self, reader: Option<&ReaderName>) -> Option<Read> {
         Some(Read {
             epc: Epc::parse(&self.epc_hex).ok()?,
-            reader: Some(reader.to_owned()),
+            reader: reader.cloned(),
             antenna: self.antenna_port,
             t_us: self.first_seen_us,
             phase_rad: self.phase_angle.map(f64::to_radians),
@@ -143,8 +144,9 @@ pub struct ReadBatch {
     pub v: u32,
     /// The publishing gateway's name.
     pub gateway: String,
-    /// The reader that read them.
-    pub reader: String,
+    /// The reader that read them (`""` for reads that name none).
+    #[serde(deserialize_with = "empty_is_none", serialize_with = "none_as_empty")]
+    pub reader: Option<ReaderName>,
     /// The gateway's run: when it started, UTC µs since the Unix epoch (0 or absent: not
     /// named).
     #[serde(default)]
@@ -167,7 +169,8 @@ pub struct Status {
     pub status: String,
     /// The gateway the status comes from.
     pub gateway: String,
-    /// The reader, for a reader's status.
+    /// The reader, for a reader's status: its name (a [`ReaderName`]), or `""` for the reads
+    /// that name none (kept as the text the message carries).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reader: Option<String>,
     /// The gateway's run (as in [`ReadBatch::run`]), which `last_seq` counts in.
@@ -293,7 +296,7 @@ mod tests {
     fn a_read_goes_to_the_broker_and_back_unchanged() {
         let r = Read {
             epc: crate::reads::Epc::parse("E2801160600002049ACB0065").expect("hex"),
-            reader: Some("r1".into()),
+            reader: Some("r1".parse().expect("a reader name")),
             antenna: 3,
             t_us: 1_764_633_600_123_456,
             phase_rad: Some(1.25),
@@ -319,7 +322,8 @@ mod tests {
             assert!(json.get(key).is_some(), "{key} in {json}");
         }
         let back: TagRead = serde_json::from_value(json).expect("parses");
-        let again = back.to_read("r1").expect("an EPC");
+        let r1 = "r1".parse().ok();
+        let again = back.to_read(r1.as_ref()).expect("an EPC");
         assert!((again.phase_rad.expect("phase") - 1.25).abs() < 1e-12);
         assert_eq!(
             Read {

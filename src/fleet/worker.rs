@@ -18,6 +18,7 @@
 //! while holding loses what it held, at most [`super::seq::MAX_HELD`] batches a topic. A malformed message or one on a topic not
 //! ours is counted and skipped.
 
+use crate::reads::ReaderName;
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -307,7 +308,7 @@ impl Run {
         match &s.reader {
             Some(reader) => {
                 self.gateways.insert(reader.clone(), s.gateway.clone());
-                self.shared.links().update(reader, |l| l.connected = online);
+                set_link(&self.shared, reader, online);
                 let now = Instant::now();
                 for (rest, &last) in &s.last_seq {
                     let key = (s.gateway.clone(), reader.clone(), rest.clone());
@@ -320,7 +321,7 @@ impl Run {
             None if !online => {
                 for (reader, gateway) in &self.gateways {
                     if *gateway == s.gateway {
-                        self.shared.links().update(reader, |l| l.connected = false);
+                        set_link(&self.shared, reader, false);
                     }
                 }
             }
@@ -340,7 +341,8 @@ impl Run {
                 return;
             }
         };
-        let key = (batch.gateway.clone(), batch.reader.clone(), rest.to_owned());
+        let reader = batch.reader.as_deref().unwrap_or_default().to_owned();
+        let key = (batch.gateway.clone(), reader, rest.to_owned());
         let (run, seq) = (batch.run, batch.seq);
         let held = Held {
             batch,
@@ -409,7 +411,8 @@ impl Run {
                 b.reads
                     .iter()
                     .filter_map(|r| {
-                        p.read(&r.epc_hex, &b.reader, r.antenna_port, r.first_seen_us, now)
+                        let reader = b.reader.as_ref();
+                        p.read(&r.epc_hex, reader, r.antenna_port, r.first_seen_us, now)
                     })
                     .collect()
             };
@@ -434,7 +437,7 @@ impl Run {
                         .contains(&schema::shard(&r.epc_hex, self.opts.shard_count))
             })
             // (A read whose EPC is not hex bytes names no tag: it is left out.)
-            .filter_map(|r| r.to_read(&b.reader))
+            .filter_map(|r| r.to_read(b.reader.as_ref()))
             .collect();
         if !reads.is_empty() {
             self.offer(Input::Reads(reads));
@@ -546,6 +549,14 @@ fn publish_estimates(out: &Out, presence: &Mutex<Presence>, stop: &AtomicBool) {
             }
             Err(tokio::sync::broadcast::error::TryRecvError::Closed) => return,
         }
+    }
+}
+
+/// Marks reader `reader`'s link (dis)connected, from a status: a reader's name has a link; the
+/// reads that name none (`""`) have none.
+fn set_link(shared: &Shared, reader: &str, connected: bool) {
+    if let Ok(name) = ReaderName::parse(reader) {
+        shared.links().update(&name, |l| l.connected = connected);
     }
 }
 

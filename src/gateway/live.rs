@@ -3,6 +3,7 @@
 //! and keepalive links handed to it ([`forward`]). The command-line side (the options, the
 //! localizer and publisher started through `cli::root`) is `cli::live`.
 
+use crate::reads::ReaderName;
 use std::time::{Duration, Instant};
 
 use crate::localize::estimate::Estimator;
@@ -62,13 +63,13 @@ pub async fn forward(
 }
 
 /// Logs, counts and hands on a change of `reader`'s keepalive link.
-fn keepalive_change(tap: &Tap, losses: &Counter, reader: &str, change: Change) {
+fn keepalive_change(tap: &Tap, losses: &Counter, reader: &ReaderName, change: Change) {
     let ms = |d: Duration| u64::try_from(d.as_millis()).unwrap_or(u64::MAX);
     let (lost, period, silent) = match change {
         Change::Lost { period, silent } => {
             losses.inc();
             tracing::warn!(
-                reader,
+                reader = %reader,
                 period_ms = ms(period),
                 "no KEEPALIVE for {} periods: the reader's link is taken for lost",
                 keepalive::MISSES
@@ -77,7 +78,7 @@ fn keepalive_change(tap: &Tap, losses: &Counter, reader: &str, change: Change) {
         }
         Change::Restored { period, silent } => {
             tracing::info!(
-                reader,
+                reader = %reader,
                 silent_ms = ms(silent),
                 "KEEPALIVEs again: the reader's link is back"
             );
@@ -85,7 +86,7 @@ fn keepalive_change(tap: &Tap, losses: &Counter, reader: &str, change: Change) {
         }
     };
     tap.offer(Input::Keepalive {
-        reader: reader.to_owned(),
+        reader: reader.clone(),
         lost,
         period_ms: ms(period),
         silent_ms: ms(silent),

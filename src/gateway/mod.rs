@@ -4,6 +4,7 @@
 //! statistics in the log ([`log_stats`]), and the live localizer's feed from a proxy
 //! ([`live`]).
 
+use crate::reads::ReaderName;
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -42,8 +43,8 @@ impl Region {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProxyEntry {
-    /// Name in logs and on tapped reads.
-    pub name: String,
+    /// Name in logs and on tapped reads (the rule of [`ReaderName`]).
+    pub name: ReaderName,
     /// The reader, `HOST[:PORT]`.
     pub upstream: String,
     /// Where clients connect.
@@ -228,7 +229,7 @@ pub fn with_default_port(addr: &str) -> String {
 pub use crate::net::with_port_or;
 
 /// Logs, every 10 s while frames flow, how many the proxy `name` has forwarded.
-pub async fn log_stats(name: String, stats: std::sync::Arc<Stats>) {
+pub async fn log_stats(name: ReaderName, stats: std::sync::Arc<Stats>) {
     use std::sync::atomic::Ordering::Relaxed;
     let mut last = 0u64;
     let mut tick = tokio::time::interval(Duration::from_secs(10));

@@ -31,6 +31,13 @@ fn a_config_names_the_bad_field() {
     assert!(e.to_string().contains("proxies[1].name"), "{e}");
     let e = load(r#"{"proxies":[]}"#).expect_err("none");
     assert!(e.to_string().contains("no proxy"), "{e}");
+    let e = load(r#"{"proxies":[{"name":"a ","upstream":"x","listen":"l1"}]}"#)
+        .expect_err("a name ending in a space");
+    assert!(
+        e.to_string()
+            .contains("proxies[0].name: reader name \"a \" starts or ends with white space"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -82,7 +82,7 @@ pub struct AntennaPose {
 pub struct Read {
     /// EPC, upper-case hex.
     pub epc: String,
-    /// The reader that reported it (absent when unknown).
+    /// The name of the reader that reported it (absent when unknown).
     pub reader: Option<String>,
     /// Antenna port (1-based; 0 when the report carried none).
     pub antenna: u16,
@@ -142,7 +142,8 @@ pub struct Pose {
     /// the reads' clock). Shown by `/api/readers` and `/api/truth`: the reads' clock (UTC µs
     /// for LLRP readers), as every other time of the API.
     pub t_us: u64,
-    /// Reader name (not empty).
+    /// Reader name: not empty, no white space at either end, no control character, at most
+    /// 256 bytes (UTF-8); case kept and compared exactly.
     pub reader: String,
     /// Antenna port, from 1.
     pub antenna: u16,
@@ -171,7 +172,7 @@ pub struct Antenna {
 /// One reader.
 #[derive(ToSchema)]
 pub struct Reader {
-    /// The reader's name.
+    /// The reader's name (empty for the reads that name no reader).
     pub name: String,
     /// Whether an LLRP client (or a proxy's upstream) is connected.
     pub connected: bool,
@@ -268,13 +269,13 @@ mod tests {
     fn the_schemas_name_every_key_the_real_json_has() {
         let pose = PoseSample {
             t_us: 1,
-            reader: "r".into(),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             pose: ReadPose::from_degrees([0.0, 0.0, 0.0], 0.0, 0.0),
         };
         let read = RealRead {
             epc: crate::reads::Epc::parse("AA").expect("hex"),
-            reader: Some("r".into()),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             t_us: 1,
             phase_rad: Some(1.0),

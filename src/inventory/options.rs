@@ -2,6 +2,7 @@
 //! command line), where its reads go ([`Output`]), how often it reconnects ([`Retries`]), and
 //! the reader address with its default port ([`reader_address`]).
 
+use crate::reads::ReaderName;
 use std::path::PathBuf;
 
 use crate::net::client::InventorySpec;
@@ -18,7 +19,7 @@ pub struct InventoryOptions {
     /// The ROSpec and keepalives asked of the reader.
     pub spec: InventorySpec,
     /// Reader name written in each read.
-    pub name: String,
+    pub name: ReaderName,
     /// Stop after this many seconds (`None`: run until Ctrl-C or SIGTERM).
     pub seconds: Option<f64>,
     /// Where the reads go, its format settled (not [`Output::Unnamed`]).

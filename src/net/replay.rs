@@ -2,6 +2,7 @@
 //! replay session of the script; a second is refused as a reader refuses it) served by the
 //! loop every session shares ([`drive`]), on the wall clock.
 
+use crate::reads::ReaderName;
 use std::io;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -84,7 +85,7 @@ pub async fn serve_tapped(
     options: ReplayOptions,
     tls: Option<Acceptor>,
     shutdown: watch::Receiver<bool>,
-    tap: Option<(String, Tap)>,
+    tap: Option<(ReaderName, Tap)>,
 ) -> io::Result<()> {
     tracing::info!("replaying connection {} of the recording", script.conn());
     let host = ReplayHost {

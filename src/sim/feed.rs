@@ -4,6 +4,7 @@
 //! feed would, the same pose at each read to stamp the reads with ([`pose_at`]), and the
 //! ground truth for `GET /api/truth`.
 
+use crate::reads::ReaderName;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -48,7 +49,7 @@ impl PoseSource {
 /// Reader `name`'s pose and truth feed.
 pub struct Feed {
     tap: Tap,
-    name: String,
+    name: ReaderName,
     source: PoseSource,
     references: Arc<Vec<bool>>,
     /// Simulated time of the next sample.
@@ -69,7 +70,7 @@ impl Feed {
     /// one at or before `now_us`.
     pub fn new(
         tap: Tap,
-        name: String,
+        name: ReaderName,
         source: PoseSource,
         references: Arc<Vec<bool>>,
         interval_us: u64,
@@ -161,10 +162,10 @@ pub fn pose_at(model: Arc<Model>, source: PoseSource, utc0: u64) -> PoseAt {
 }
 
 /// A pose sample of reader `reader`'s `antenna` at `t_us`.
-fn sample(reader: &str, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSample {
+fn sample(reader: &ReaderName, antenna: u16, t_us: u64, pose: &AntennaPose) -> PoseSample {
     PoseSample {
         t_us,
-        reader: reader.to_string(),
+        reader: Some(reader.clone()),
         antenna,
         pose: *pose,
     }
@@ -231,7 +232,7 @@ pub fn settings(scenario: &Scenario, base: Settings) -> Settings {
                 .collect();
         }
         s.geometry.readers.insert(
-            spec.name.clone(),
+            spec.name.to_string(),
             ReaderGeometry {
                 phase_sign: a.phase_sign,
                 facing,

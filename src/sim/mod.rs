@@ -1,6 +1,7 @@
 //! `llrp-gateway sim`: builds one simulated reader per scenario reader, listens on each one's
 //! LLRP address and writes ground truth (tag positions, antenna poses over time) as JSONL.
 
+use crate::reads::ReaderName;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::net::SocketAddr;
@@ -106,7 +107,7 @@ pub enum SimError {
     #[error("reader {reader}: cannot listen on {addr}: {source}")]
     Listen {
         /// Reader name.
-        reader: String,
+        reader: ReaderName,
         /// The address.
         addr: String,
         /// Why.
@@ -116,7 +117,7 @@ pub enum SimError {
     #[error("reader {reader}: cannot create the recording {path}: {source}")]
     Record {
         /// Reader name.
-        reader: String,
+        reader: ReaderName,
         /// The file.
         path: PathBuf,
         /// Why.
@@ -132,7 +133,7 @@ pub struct RunningSim {
     /// Bound address of each reader, in scenario order.
     pub addrs: Vec<SocketAddr>,
     /// Names of the readers, in scenario order.
-    pub names: Vec<String>,
+    pub names: Vec<ReaderName>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
@@ -199,10 +200,15 @@ fn hex(epc: &[u8]) -> String {
 
 /// `pose` of antenna `antenna` of reader `reader` at `t_us` as a pose-file record (keys
 /// `t_us, reader, antenna, x, y, z, yaw_deg, pitch_deg`).
-fn pose_record(t_us: u64, reader: &str, antenna: u16, pose: &AntennaPose) -> serde_json::Value {
+fn pose_record(
+    t_us: u64,
+    reader: &ReaderName,
+    antenna: u16,
+    pose: &AntennaPose,
+) -> serde_json::Value {
     serde_json::json!(PoseSample {
         t_us,
-        reader: reader.to_owned(),
+        reader: Some(reader.clone()),
         antenna,
         pose: *pose,
     })
@@ -222,7 +228,7 @@ fn si_pose(pose: &AntennaPose) -> serde_json::Value {
 /// positions every [`TRUTH_INTERVAL_US`] of simulated time, up to the time it is called with.
 fn truth_writer(
     truth: Arc<Truth>,
-    name: String,
+    name: ReaderName,
     moving: Vec<usize>,
     utc0: u64,
     m: Arc<Model>,

@@ -7,6 +7,7 @@
 //! a client connects to never ran it, so the client sees exactly what it saw before (the
 //! same ROSpecs, configuration and tag flags). The moment a client connects it stops.
 
+use crate::reads::ReaderName;
 use std::sync::Arc;
 
 use bytes::Bytes;
@@ -130,7 +131,7 @@ pub struct OwnTask {
     /// The localizer's tap.
     pub tap: Tap,
     /// The reader's name.
-    pub name: String,
+    pub name: ReaderName,
     /// The reader's pose and truth feed.
     pub feed: Box<dyn FnMut(&Reader) + Send>,
 }

@@ -29,7 +29,7 @@ const FREQUENCY_HZ: u64 = 865_700_000;
 pub fn pose(t_us: u64) -> PoseSample {
     PoseSample {
         t_us,
-        reader: READER.into(),
+        reader: Some(READER.parse().expect("a reader name")),
         antenna: 1,
         pose: Pose::from_degrees([-1.0 + t_us as f64 * 1e-6, 0.0, 0.5], 90.0, 0.0),
     }
@@ -43,7 +43,7 @@ pub fn read(t_us: u64) -> Read {
     let d = ((TAG[0] - x).powi(2) + (TAG[1] - y).powi(2) + (TAG[2] - z).powi(2)).sqrt();
     Read {
         epc: llrp_gateway::reads::Epc::parse(EPC).expect("hex"),
-        reader: Some(READER.into()),
+        reader: Some(READER.parse().expect("a reader name")),
         antenna: 1,
         t_us,
         phase_rad: Some((0.9 + 4.0 * std::f64::consts::PI * d / lambda) % std::f64::consts::TAU),

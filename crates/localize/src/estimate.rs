@@ -311,7 +311,7 @@ mod tests {
         let lambda = crate::SPEED_OF_LIGHT / f as f64;
         let d = ((tag[0] - x).powi(2) + tag[1].powi(2)).sqrt();
         Read {
-            reader: Some("r".into()),
+            reader: Some("r".parse().expect("a reader name")),
             channel_index: Some(1),
             channel_frequency_hz: Some(f),
             ..synthetic::read(
@@ -450,7 +450,7 @@ mod tests {
                     .sqrt();
                 Read {
                     epc: llrp_gateway_vocab::epc::Epc::parse(epc).expect("hex"),
-                    reader: Some(reader.into()),
+                    reader: Some(reader.parse().expect("a reader name")),
                     antenna: 1,
                     t_us: o.t_us,
                     phase_rad: Some(
@@ -505,7 +505,10 @@ mod tests {
         };
         let tracks = pose_observations(&ingest, "AA", &plus);
         assert_eq!(tracks.len(), 2);
-        assert_eq!((tracks[0].reader.as_str(), tracks[0].antenna), ("r1", 1));
+        assert_eq!(
+            (tracks[0].reader.as_deref(), tracks[0].antenna),
+            (Some("r1"), 1)
+        );
         assert_eq!(tracks[0].obs.len(), r1.len());
         assert!(tracks[0].obs.windows(2).all(|w| w[0].t_us <= w[1].t_us));
         let o = tracks[0].obs[2];

@@ -13,6 +13,7 @@ use crate::linear;
 use crate::mhekf::PoseObs;
 use crate::outliers::outliers;
 use crate::series::{Places, SAME_PLACE_M};
+use llrp_gateway_vocab::reader_name::ReaderName;
 
 /// One tag's phases for the phase estimators.
 #[derive(Clone, Debug, PartialEq)]
@@ -258,8 +259,8 @@ fn weigh_parked(
 /// One (reader, antenna) track of a tag's phases as reported, for the filters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseTrack {
-    /// Reader name.
-    pub reader: String,
+    /// Reader name; `None` for the reads that name none.
+    pub reader: Option<ReaderName>,
     /// Antenna port.
     pub antenna: u16,
     /// Every channel's reads, in time order.
@@ -290,7 +291,10 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
     }
     tracks
         .into_iter()
-        .map(|((reader, antenna), mut obs)| {
+        .map(|((key, antenna), mut obs)| {
+            // The series key holds the reads' reader name as it came, "" for none: a name
+            // is one again.
+            let reader = ReaderName::parse(&key).ok();
             obs.sort_by_key(|o| o.t_us);
             // The antenna's pose samples up to its last read: the path the filter's odometry
             // noise is charged on (\[M\] eq. 26 before the first read, and between reads).
@@ -303,7 +307,7 @@ pub fn pose_observations(ingest: &Ingest, epc: &str, g: &Geometry) -> Vec<PoseTr
             };
             let mut path: Vec<PoseObs> = ingest
                 .poses()
-                .track(&reader, antenna)
+                .track(&key, antenna)
                 .take_while(|(t_us, _)| *t_us <= end)
                 .map(|(t_us, p)| PoseObs {
                     t_us,
@@ -345,7 +349,7 @@ mod tests {
                 let d = (tag[0] - x).hypot(tag[1]);
                 let phase = sign * 4.0 * std::f64::consts::PI * d / lambda + 0.4;
                 Read {
-                    reader: Some(reader.to_string()),
+                    reader: Some(reader.parse().expect("a reader name")),
                     ..synthetic::read(epc, k * 10_000, phase, [x, 0.0, 0.5])
                 }
             })

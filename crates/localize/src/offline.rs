@@ -82,21 +82,21 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
     // Each reader faces where its own first pose does, unless the file says otherwise.
     let mut own: BTreeMap<String, [f64; 2]> = BTreeMap::new();
     for p in poses.first_samples() {
-        own.entry(p.reader.clone())
+        own.entry(p.reader.as_deref().unwrap_or_default().to_owned())
             .or_insert(towards(p.pose.yaw_rad));
     }
     for r in reads {
         if let (Some(reader), Some(p)) = (&r.reader, &r.antenna_pose) {
-            own.entry(reader.clone()).or_insert(towards(p.yaw_rad));
+            own.entry(reader.to_string()).or_insert(towards(p.yaw_rad));
         }
     }
     for name in file.readers.keys() {
-        own.entry(name.clone()).or_insert(facing);
+        own.entry(name.to_string()).or_insert(facing);
     }
     let readers = own
         .into_iter()
         .map(|(name, derived)| {
-            let mine = file.readers.get(&name).cloned().unwrap_or_default();
+            let mine = file.readers.get(name.as_str()).cloned().unwrap_or_default();
             let r = ReaderGeometry {
                 phase_sign: mine.phase_sign.unwrap_or(phase_sign),
                 facing: mine.facing.or(file.facing).unwrap_or(derived),
@@ -216,7 +216,7 @@ mod tests {
     fn pose(reader: &str, yaw_deg: f64) -> PoseSample {
         PoseSample {
             t_us: 0,
-            reader: reader.into(),
+            reader: Some(reader.parse().expect("a reader name")),
             antenna: 1,
             pose: Pose::from_degrees([0.0, 0.0, 0.8], yaw_deg, 0.0),
         }
@@ -236,7 +236,7 @@ mod tests {
         // The file's own values: a default facing for all, a reader's own above it.
         file.facing = Some([1.0, 0.0]);
         file.readers.insert(
-            "right".into(),
+            "right".parse().expect("a reader name"),
             ReaderSettings {
                 phase_sign: Some(-1.0),
                 facing: None,

@@ -186,7 +186,8 @@ pub fn refine(
 ) -> Poses {
     let corrections = PoseCorrections::from_tags(ingest, tags, sign_of, m);
     poses.mapped(|p, offset| {
-        let d = corrections.at(&p.reader, p.t_us.saturating_add_signed(offset));
+        let reader = p.reader.as_deref().unwrap_or_default();
+        let d = corrections.at(reader, p.t_us.saturating_add_signed(offset));
         let [x, y, z] = p.pose.position;
         PoseSample {
             pose: Pose {
@@ -277,7 +278,7 @@ mod tests {
         let (mut truth, mut reported) = (Poses::new(), Poses::new());
         let sample = |t_us, x, y| PoseSample {
             t_us,
-            reader: "r".into(),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             pose: Pose::from_degrees([x, y, 0.5], 90.0, 0.0),
         };
@@ -297,7 +298,7 @@ mod tests {
                 if d < 3.0 {
                     let phase = 4.0 * std::f64::consts::PI * d / lambda;
                     reads.push(Read {
-                        reader: Some("r".into()),
+                        reader: Some("r".parse().expect("a reader name")),
                         antenna_pose: None,
                         ..read(epc, step * 20_000, phase, [x, 0.0, 0.5])
                     });

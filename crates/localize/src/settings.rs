@@ -4,6 +4,7 @@
 //! pose error) and the pose error model the pose refinement assumes ([`PoseErrorModel`]).
 
 use llrp_gateway_vocab::epc::Epc;
+use llrp_gateway_vocab::reader_name::ReaderName;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -130,10 +131,10 @@ pub struct SettingsFile {
     pub references: Vec<ReferenceTag>,
     /// Per reader, reader time − robot time of the pose file (µs).
     #[serde(default)]
-    pub clock_offsets_us: BTreeMap<String, i64>,
+    pub clock_offsets_us: BTreeMap<ReaderName, i64>,
     /// Per reader name, its own phase sign and facing (the keys above for the others).
     #[serde(default)]
-    pub readers: BTreeMap<String, ReaderSettings>,
+    pub readers: BTreeMap<ReaderName, ReaderSettings>,
     /// The robot's pose error, where its poses come from a localization stack: the poses
     /// are then refined from the tags' phases ([`crate::refine`]).
     pub pose_error: Option<PoseErrorSettings>,
@@ -249,5 +250,40 @@ impl PoseErrorModel {
             correlation_s,
             range_sigma_m: 0.003,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_reader_name_is_named_with_its_reason() {
+        let dir = std::env::temp_dir().join(format!("llrp-settings-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a temporary folder");
+        let path = dir.join("settings.json");
+        let load = |text: &str| {
+            std::fs::write(&path, text).expect("written");
+            SettingsFile::load(&path)
+        };
+        let good = load(r#"{"clock_offsets_us": {"dock 1": 5}, "readers": {"R": {}}}"#)
+            .expect("good names");
+        assert_eq!(good.clock_offsets_us.get("dock 1"), Some(&5));
+        assert!(good.readers.contains_key("R") && !good.readers.contains_key("r"));
+        let e = load(r#"{"clock_offsets_us": {"": 5}}"#)
+            .expect_err("an empty name")
+            .to_string();
+        assert!(
+            e.contains("clock_offsets_us") && e.contains("the reader name is empty"),
+            "{e}"
+        );
+        let e = load(r#"{"readers": {"r\t": {}}}"#)
+            .expect_err("a tab")
+            .to_string();
+        assert!(
+            e.contains("readers") && e.contains("control character"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

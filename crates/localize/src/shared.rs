@@ -13,6 +13,7 @@ use crate::estimate::{Estimate, State};
 use crate::poses::PoseSample;
 use llrp_gateway_vocab::feed::Links;
 pub use llrp_gateway_vocab::feed::{Truth, TruthTag};
+use llrp_gateway_vocab::reader_name::ReaderName;
 use llrp_gateway_vocab::reads::Read;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::histogram::Histogram;
@@ -103,7 +104,7 @@ pub struct ReaderStats {
 /// (from the localizer).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct ReaderView {
-    /// The reader's name.
+    /// The reader's name (a [`ReaderName`], or empty for the reads that name none).
     pub name: String,
     /// Whether an LLRP client is connected (for a simulated reader; a proxied reader's
     /// upstream connection).
@@ -284,14 +285,19 @@ impl Shared {
     pub fn readers(&self) -> Vec<ReaderView> {
         let links = self.links.all();
         let stats = read(&self.readers);
-        let names: BTreeSet<&String> = links.keys().chain(stats.keys()).collect();
+        // The readers read from include the unnamed one (""), of reads that name none.
+        let names: BTreeSet<&str> = links
+            .keys()
+            .map(ReaderName::as_str)
+            .chain(stats.keys().map(String::as_str))
+            .collect();
         names
             .into_iter()
             .map(|name| {
                 let link = links.get(name).cloned().unwrap_or_default();
                 let s = stats.get(name).cloned().unwrap_or_default();
                 ReaderView {
-                    name: name.clone(),
+                    name: name.to_owned(),
                     connected: link.connected,
                     peer: link.peer,
                     inventory: link.inventory.as_str().to_owned(),

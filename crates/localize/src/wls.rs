@@ -15,6 +15,7 @@ use crate::fix::{Fix, Fix3, NoFix};
 use crate::mhekf::{self, PoseObs};
 use crate::observe::pose_observations;
 use crate::robust;
+use llrp_gateway_vocab::reader_name::ReaderName;
 
 /// The exchange's settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -370,12 +371,15 @@ impl Locate for Wls {
             },
             ..Settings::default()
         };
-        let mut robots: BTreeMap<String, Vec<Vec<PoseObs>>> = BTreeMap::new();
+        let mut robots: BTreeMap<Option<ReaderName>, Vec<Vec<PoseObs>>> = BTreeMap::new();
         for t in pose_observations(tag.ingest, tag.epc, g) {
             robots.entry(t.reader).or_default().push(t.obs);
         }
         // One side for the consensus: the first robot's (a swarm's readers share a layout).
-        let facing = robots.keys().next().map_or(g.facing, |r| g.facing_of(r));
+        let facing = robots
+            .keys()
+            .next()
+            .map_or(g.facing, |r| g.facing_of(r.as_deref().unwrap_or_default()));
         let robots: Vec<Vec<Vec<PoseObs>>> = robots.into_values().collect();
         locate(&robots, g.tag_height_m, SIGN, Some(facing), &s).map(|(fix, _)| fix.planar())
     }

@@ -8,6 +8,8 @@
 
 use serde::{Deserialize, Serialize, Serializer};
 
+use crate::reader_name::{empty_is_none, ReaderName};
+
 /// Position and boresight of an antenna at one instant (metres, radians).
 ///
 /// In files and messages it is the pose record `{"x", "y", "z"[, "yaw_deg", "pitch_deg"]}`
@@ -113,14 +115,15 @@ impl From<Pose> for PoseRecord {
 /// recorded pose of a scenario.
 ///
 /// In files and messages it is the flat record `{"t_us", "reader", "antenna", "x", "y", "z",
-/// "yaw_deg", "pitch_deg"}` (reader, yaw and pitch may be left out; no other key).
+/// "yaw_deg", "pitch_deg"}` (reader, yaw and pitch may be left out; no other key); an
+/// unnamed reader's `reader` is `""`.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(from = "SampleRecord")]
 pub struct PoseSample {
     /// Robot (or site) time, µs.
     pub t_us: u64,
-    /// Reader name.
-    pub reader: String,
+    /// Reader name; `None` for the unnamed reader (whose reads name none either).
+    pub reader: Option<ReaderName>,
     /// Antenna port, 1-based.
     pub antenna: u16,
     /// The antenna's pose.
@@ -132,8 +135,8 @@ pub struct PoseSample {
 #[serde(deny_unknown_fields)]
 struct SampleRecord {
     t_us: u64,
-    #[serde(default)]
-    reader: String,
+    #[serde(default, deserialize_with = "empty_is_none")]
+    reader: Option<ReaderName>,
     antenna: u16,
     x: f64,
     y: f64,
@@ -173,7 +176,7 @@ impl Serialize for PoseSample {
         let [x, y, z] = self.pose.position;
         SampleOut {
             t_us: self.t_us,
-            reader: &self.reader,
+            reader: self.reader.as_deref().unwrap_or(""),
             antenna: self.antenna,
             x,
             y,
@@ -241,7 +244,15 @@ mod tests {
         assert!(e.to_string().contains("unknown field `yaw`"), "{e}");
         let s: PoseSample =
             serde_json::from_str(r#"{"t_us":1,"antenna":1,"x":1,"y":2,"z":3}"#).expect("a sample");
-        assert_eq!((s.reader.as_str(), s.pose.yaw_rad), ("", 0.0));
+        assert_eq!((&s.reader, s.pose.yaw_rad), (&None, 0.0));
+        assert!(serde_json::to_string(&s)
+            .expect("text")
+            .contains(r#""reader":"""#));
+        let e = serde_json::from_str::<PoseSample>(
+            r#"{"t_us":1,"reader":"r\n","antenna":1,"x":1,"y":2,"z":3}"#,
+        )
+        .expect_err("a line end");
+        assert!(e.to_string().contains("control character"), "{e}");
         let e = serde_json::from_str::<PoseSample>(r#"{"t_us":1,"antenna":1,"x":1,"y":2}"#)
             .expect_err("no z");
         assert!(e.to_string().contains("`z`"), "{e}");

@@ -1,6 +1,7 @@
 //! [`ReadStream`]: a running inventory on one connection, its reports turned into typed
 //! [`Read`]s, stamped with the wall clock ([`crate::utc::now_us`]).
 
+use crate::reads::ReaderName;
 use std::time::Duration;
 
 use llrp::message::{MessageBody, MessageDef};
@@ -35,7 +36,7 @@ impl ReadStream {
     pub async fn start(
         mut client: Client,
         spec: &InventorySpec,
-        reader: Option<String>,
+        reader: Option<ReaderName>,
         timeout: Duration,
     ) -> Result<ReadStream, ClientError> {
         client.answer_keepalives(true);

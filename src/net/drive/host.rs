@@ -1,6 +1,7 @@
 //! What the serve loop needs of a session's owner ([`Host`]) and of the wire ([`Wire`]), and
 //! its bounds ([`Limits`]).
 
+use crate::reads::ReaderName;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
@@ -73,7 +74,7 @@ pub trait Host: Send + 'static {
 /// The live localizer's view of a served session.
 pub struct LiveHook {
     /// The reader's name in the localizer.
-    pub name: String,
+    pub name: ReaderName,
     /// The localizer's tap: every frame sent to the client is offered to it.
     pub tap: Tap,
     /// Told whether a client is connected (the simulator's own inventory runs while not).

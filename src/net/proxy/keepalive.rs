@@ -3,6 +3,7 @@
 //! seen between two KEEPALIVEs; after [`MISSES`] periods without one the link is lost, and
 //! the next KEEPALIVE restores it.
 
+use crate::reads::ReaderName;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -115,15 +116,15 @@ pub enum LinkNote {
 /// they see, and whoever polls them for changes (never through the bounded tap, so a tap
 /// full of reads cannot make a link look lost).
 #[derive(Clone, Debug, Default)]
-pub struct Links(Arc<Mutex<HashMap<u64, (String, Watch)>>>);
+pub struct Links(Arc<Mutex<HashMap<u64, (ReaderName, Watch)>>>);
 
 impl Links {
     /// Session `session` of reader `reader` saw `note` at `now`.
-    pub fn note(&self, session: u64, reader: &str, note: LinkNote, now: Instant) {
+    pub fn note(&self, session: u64, reader: &ReaderName, note: LinkNote, now: Instant) {
         let mut links = self.lock();
         let (_, w) = links
             .entry(session)
-            .or_insert_with(|| (reader.to_owned(), Watch::default()));
+            .or_insert_with(|| (reader.clone(), Watch::default()));
         match note {
             LinkNote::Keepalive => {
                 w.keepalive(now);
@@ -138,14 +139,14 @@ impl Links {
     }
 
     /// The changes of every link at `now`, with their readers' names.
-    pub fn poll(&self, now: Instant) -> Vec<(String, Change)> {
+    pub fn poll(&self, now: Instant) -> Vec<(ReaderName, Change)> {
         self.lock()
             .values_mut()
             .filter_map(|(reader, w)| w.poll(now).map(|c| (reader.clone(), c)))
             .collect()
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u64, (String, Watch)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u64, (ReaderName, Watch)>> {
         // A panicked holder leaves watches still worth using.
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -222,14 +223,16 @@ mod tests {
     fn links_report_each_sessions_loss_and_return_once_and_forget_ended_sessions() {
         let t = Instant::now();
         let links = Links::default();
-        links.note(0, "a", LinkNote::Spec(Some(100 * MS)), t);
-        links.note(1, "b", LinkNote::Spec(Some(1000 * MS)), t);
+        let name = |n: &str| -> ReaderName { n.parse().expect("a reader name") };
+        let (a, b) = (name("a"), name("b"));
+        links.note(0, &a, LinkNote::Spec(Some(100 * MS)), t);
+        links.note(1, &b, LinkNote::Spec(Some(1000 * MS)), t);
         assert!(links.poll(t + 200 * MS).is_empty());
         let lost = links.poll(t + 300 * MS);
         assert_eq!(lost.len(), 1);
         assert_eq!(lost[0].0, "a");
         assert!(matches!(lost[0].1, Change::Lost { .. }));
-        links.note(0, "a", LinkNote::Keepalive, t + 400 * MS);
+        links.note(0, &a, LinkNote::Keepalive, t + 400 * MS);
         let back = links.poll(t + 400 * MS);
         assert!(
             matches!(back.as_slice(), [(_, Change::Restored { .. })]),

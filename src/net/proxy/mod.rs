@@ -17,6 +17,7 @@
 //! whose TLS handshake fails is dropped (logged, and in the recording); an upstream whose TLS
 //! handshake fails is treated as unreachable: the client gets a failed ConnectionAttemptEvent.
 
+use crate::reads::ReaderName;
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
@@ -59,7 +60,7 @@ const PROXY_CLOSE_ID: u32 = 0x7072_7879;
 #[derive(Clone, Debug)]
 pub struct ProxyConfig {
     /// Name in logs and on tapped reads.
-    pub name: String,
+    pub name: ReaderName,
     /// The reader, `HOST:PORT`.
     pub upstream: String,
     /// Where clients connect.
@@ -84,7 +85,7 @@ pub enum Tapped {
     /// A READER_EVENT_NOTIFICATION, decoded.
     Event {
         /// The proxy's name.
-        reader: String,
+        reader: ReaderName,
         /// Its connection number.
         conn: u32,
         /// The message.

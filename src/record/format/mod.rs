@@ -9,6 +9,7 @@
 //! {"t_us":9000,"utc_us":…,"conn":1,"event":"disconnect","reason":"client closed"}
 //! ```
 
+use crate::reads::ReaderName;
 use std::io::{self, BufRead};
 
 use base64::engine::general_purpose::STANDARD as BASE64;
@@ -54,6 +55,12 @@ impl Header {
             start_utc_us,
             part: 0,
         }
+    }
+
+    /// The name of the reader the frames came from: `upstream` without its `sim:`.
+    pub fn reader_name(&self) -> Result<ReaderName, RecordError> {
+        let name = self.upstream.strip_prefix("sim:").unwrap_or(&self.upstream);
+        ReaderName::parse(name).map_err(|e| RecordError::Header(format!("upstream: {e}")))
     }
 }
 

@@ -6,7 +6,7 @@ use llrp_gateway_vocab::pose::Pose;
 fn read(epc: &str, t_us: u64, phase: Option<f64>, f: Option<u64>) -> Read {
     Read {
         epc: llrp_gateway_vocab::epc::Epc::parse(epc).expect("hex"),
-        reader: Some("r".into()),
+        reader: Some("r".parse().expect("a reader name")),
         antenna: 1,
         t_us,
         phase_rad: phase,
@@ -25,7 +25,7 @@ fn reads_are_filed_by_series_or_set_aside_by_reason() {
     for (t, x) in [(0, 0.0), (100_000, 0.01), (200_000, 0.02)] {
         poses.add(PoseSample {
             t_us: t,
-            reader: "r".into(),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             pose: Pose::from_degrees([x, 1.0, 0.5], x * 1000.0, 0.0),
         });
@@ -149,7 +149,7 @@ fn readers_sharing_a_port_and_channel_keep_their_series_and_their_own_tracks() {
         for t in [0, 100_000] {
             poses.add(PoseSample {
                 t_us: t,
-                reader: reader.into(),
+                reader: Some(reader.parse().expect("a reader name")),
                 antenna,
                 pose: Pose::from_degrees([x, f64::from(antenna), 0.5], 0.0, 0.0),
             });
@@ -158,7 +158,7 @@ fn readers_sharing_a_port_and_channel_keep_their_series_and_their_own_tracks() {
     let reads: Vec<Read> = (0..3u64)
         .flat_map(|k| {
             antennas.iter().map(move |&(reader, antenna, _)| Read {
-                reader: Some(reader.into()),
+                reader: Some(reader.parse().expect("a reader name")),
                 antenna,
                 ..read("A1", 1_000 + k * 1_000, Some(0.5), Some(915_250_000))
             })

@@ -354,14 +354,20 @@ impl Worker {
     /// derives the geometry of readers with their first pose.
     fn take_poses(&mut self, poses: Vec<PoseSample>) {
         self.shared.metrics.poses.inc_by(poses.len() as u64);
+        // The unnamed reader (of reads that name none) is "" in the localizer's maps.
+        let name = |p: &PoseSample| p.reader.as_deref().unwrap_or_default().to_owned();
         let new: Vec<String> = poses
             .iter()
-            .filter(|p| !self.derived.contains(&p.reader))
-            .map(|p| p.reader.clone())
+            .filter(|p| {
+                !self
+                    .derived
+                    .contains(p.reader.as_deref().unwrap_or_default())
+            })
+            .map(name)
             .collect();
         let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
         for p in poses {
-            newest.insert((p.reader.clone(), p.antenna), p.clone());
+            newest.insert((name(&p), p.antenna), p.clone());
             self.ingest.poses_mut().add(p);
         }
         for ((reader, antenna), mut p) in newest {
@@ -415,7 +421,7 @@ impl Worker {
                 .collect();
             let new = posed
                 .iter()
-                .map(|r| r.reader.clone().unwrap_or_default())
+                .map(|r| r.reader.as_deref().unwrap_or_default().to_owned())
                 .collect();
             self.derive(new, &posed);
         }
@@ -438,14 +444,14 @@ impl Worker {
     fn flush_waiting(&mut self, all: bool) {
         let mut keep = VecDeque::new();
         while let Some((r, at)) = self.waiting.pop_front() {
-            let reader = r.reader.clone().unwrap_or_default();
+            let reader = r.reader.as_deref().unwrap_or_default();
             let ready = all
                 || r.antenna_pose.is_some()
                 || r.phase_rad.is_none()
                 || self
                     .ingest
                     .poses()
-                    .newest(&reader, r.antenna)
+                    .newest(reader, r.antenna)
                     .is_some_and(|t| t >= r.t_us)
                 || at.elapsed() >= POSE_WAIT;
             if ready {
@@ -486,7 +492,7 @@ impl Worker {
                 .inc_by(aside - self.set_aside_seen);
             self.set_aside_seen = aside;
         }
-        let reader = r.reader.clone().unwrap_or_default();
+        let reader = r.reader.as_deref().unwrap_or_default().to_owned();
         let rate = self
             .reader_rates
             .entry(reader.clone())

@@ -239,7 +239,7 @@ impl Locate for Mhekf {
         pose_observations(tag.ingest, tag.epc, g)
             .iter()
             .filter_map(|t| {
-                let facing = g.facing_of(&t.reader);
+                let facing = g.facing_of(t.reader.as_deref().unwrap_or_default());
                 locate(&t.obs, g.tag_height_m, SIGN, Some(facing), &s).ok()
             })
             .min_by(|a, b| {

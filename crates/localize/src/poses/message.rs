@@ -47,7 +47,8 @@ fn pose(v: Value) -> Result<PoseSample, String> {
         }
     })?;
     validate(&p)?;
-    if p.reader.trim().is_empty() {
+    // A name breaking the rule was refused above (`ReaderName`); none at all is refused here.
+    if p.reader.is_none() {
         return Err("reader: must be a reader's name, not empty".into());
     }
     Ok(p)
@@ -86,6 +87,13 @@ mod tests {
         assert_eq!(e, "pose 0: antenna: must be a port number from 1");
         let e = bad(ONE.replace("\"reader\": \"r\"", "\"reader\": \" \""));
         assert!(e.starts_with("pose 0: reader:"), "{e}");
+        let e = bad(ONE.replace("\"reader\": \"r\"", "\"reader\": \"\""));
+        assert_eq!(e, "pose 0: reader: must be a reader's name, not empty");
+        let e = bad(ONE.replace("\"reader\": \"r\"", "\"reader\": \"r\\t1\""));
+        assert!(
+            e.starts_with("pose 0: reader: reader name \"r\\t1\" holds a control character"),
+            "{e}"
+        );
         let e = bad(ONE.replace(", \"z\": 0.5", ""));
         assert!(e.contains("pose 0") && e.contains("`z`"), "{e}");
         let e = bad(ONE.replace("\"z\"", "\"w\""));

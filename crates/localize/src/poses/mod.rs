@@ -22,6 +22,7 @@ mod message;
 pub use message::parse_poses;
 
 pub use llrp_gateway_vocab::pose::{Pose, PoseSample};
+use llrp_gateway_vocab::reader_name::ReaderName;
 
 /// Why a pose file could not be read: the line and the reason, naming the field.
 #[derive(Debug, thiserror::Error)]
@@ -102,13 +103,15 @@ impl Poses {
 
     /// Adds a sample (kept in time order; a sample at a time already held replaces it).
     pub fn add(&mut self, p: PoseSample) {
-        if !self.tracks.contains_key(&p.reader) {
-            self.tracks.insert(p.reader.clone(), BTreeMap::new());
+        // The unnamed reader's track is under "", where its reads (naming none) look.
+        let reader = p.reader.as_deref().unwrap_or_default();
+        if !self.tracks.contains_key(reader) {
+            self.tracks.insert(reader.to_owned(), BTreeMap::new());
         }
         // The reader's map is there: inserted just above where it was not.
         let track = self
             .tracks
-            .get_mut(&p.reader)
+            .get_mut(reader)
             .expect("the reader's map, inserted above")
             .entry(p.antenna)
             .or_default();
@@ -427,7 +430,10 @@ fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
         t_us: cell("t_us")
             .parse()
             .map_err(|_| format!("t_us: not a whole number of µs: {:?}", cell("t_us")))?,
-        reader: cell("reader").to_string(),
+        reader: match cell("reader") {
+            "" => None,
+            name => Some(ReaderName::parse(name).map_err(|e| format!("reader: {e}"))?),
+        },
         antenna: cell("antenna")
             .parse()
             .map_err(|_| format!("antenna: not a port number: {:?}", cell("antenna")))?,

@@ -7,7 +7,7 @@ fn a_kept_window_drops_what_is_older_on_each_track() {
     for k in 0..1000u64 {
         p.add(PoseSample {
             t_us: k * 10_000,
-            reader: "r".into(),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             pose: Pose::from_degrees([0.0, 0.0, 0.0], 0.0, 0.0),
         });
@@ -22,7 +22,7 @@ fn a_kept_window_drops_what_is_older_on_each_track() {
 fn sample(t_us: u64, x: f64, yaw_deg: f64) -> PoseSample {
     PoseSample {
         t_us,
-        reader: "r".into(),
+        reader: Some("r".parse().expect("a reader name")),
         antenna: 1,
         pose: Pose::from_degrees([x, 2.0, 0.5], yaw_deg, 0.0),
     }

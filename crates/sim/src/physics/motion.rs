@@ -236,7 +236,7 @@ mod tests {
     fn recorded_poses_interpolate_linearly_and_hold_at_the_ends() {
         let s = |t_us, x, yaw_deg| PoseSample {
             t_us,
-            reader: "r".into(),
+            reader: Some("r".parse().expect("a reader name")),
             antenna: 1,
             pose: Pose::from_degrees([x, 0.0, 1.0], yaw_deg, 0.0),
         };

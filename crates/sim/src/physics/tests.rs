@@ -479,7 +479,7 @@ fn leaving_out_phase_and_doppler_changes_nothing_else() {
 fn readers_in_one_world_share_its_data_and_read_the_same() {
     let mut s = Scenario::default_s1();
     let mut second = s.readers[0].clone();
-    second.name = "second".into();
+    second.name = "second".parse().expect("a reader name");
     s.readers.push(second);
     let world = World::new(&s);
     let a = Model::in_world(&world, &s, 0);

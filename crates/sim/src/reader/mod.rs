@@ -29,6 +29,7 @@ use llrp::{DecodeError, FrameHeader, Message, MessageKind, StatusCode};
 
 use crate::physics::Model;
 use crate::scenario::Scenario;
+use llrp_gateway_vocab::reader_name::ReaderName;
 
 pub use config::ReaderConfig;
 pub use rospec::SpecState;
@@ -52,7 +53,7 @@ pub const KEEPALIVE_MISSES: u32 = 3;
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReaderProfile {
     /// Reader name in the scenario.
-    pub name: String,
+    pub name: ReaderName,
     /// Number of antenna ports.
     pub antennas: u16,
     /// Frequency hopping (FCC) or a fixed channel list (ETSI).

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::defaults::*;
 
 use llrp_gateway_vocab::pose::PoseSample;
+use llrp_gateway_vocab::reader_name::ReaderName;
 
 /// Axis-aligned box that contains every tag, antenna and waypoint of the scenario (metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -175,8 +176,8 @@ pub enum Region {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReaderSpec {
-    /// Reader name (unique in the scenario).
-    pub name: String,
+    /// Reader name (unique in the scenario; the rule of [`ReaderName`]).
+    pub name: ReaderName,
     /// TCP address the simulated reader listens on.
     #[serde(default = "default_listen")]
     pub listen: String,

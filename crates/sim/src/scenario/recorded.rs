@@ -3,6 +3,7 @@
 //! stop here: the list is parsed into [`PoseSample`]s (µs, radians).
 
 use llrp_gateway_vocab::pose::{Pose, PoseSample};
+use llrp_gateway_vocab::reader_name::ReaderName;
 use serde::Deserialize;
 
 /// One line of a recorded pose list, as the file has it (seconds, metres, degrees).
@@ -22,7 +23,11 @@ const COLUMNS: [&str; 6] = ["t_s", "x", "y", "z", "yaw_deg", "pitch_deg"];
 /// Parses the pose list of antenna `antenna` of reader `reader`; JSON Lines if the first
 /// non-blank line starts with `{`, CSV otherwise. The error names the 1-based line and the
 /// reason, or the pose (1-based) for times out of order.
-pub fn parse_poses(text: &str, reader: &str, antenna: u16) -> Result<Vec<PoseSample>, String> {
+pub fn parse_poses(
+    text: &str,
+    reader: &ReaderName,
+    antenna: u16,
+) -> Result<Vec<PoseSample>, String> {
     let rows = parse_rows(text)?;
     check_rows(&rows)?;
     let mut poses: Vec<PoseSample> = Vec::with_capacity(rows.len());
@@ -40,7 +45,7 @@ pub fn parse_poses(text: &str, reader: &str, antenna: u16) -> Result<Vec<PoseSam
         }
         poses.push(PoseSample {
             t_us,
-            reader: reader.to_owned(),
+            reader: Some(reader.clone()),
             antenna,
             pose: Pose::from_degrees([r.x, r.y, r.z], r.yaw_deg, r.pitch_deg),
         });
@@ -134,20 +139,22 @@ mod tests {
         let csv = "t_s,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,90,0\n1.5,2,2,3,180,10\n";
         let jsonl = "{\"t_s\":0,\"x\":1,\"y\":2,\"z\":3,\"yaw_deg\":90,\"pitch_deg\":0}\n\
                      {\"t_s\":1.5,\"x\":2,\"y\":2,\"z\":3,\"yaw_deg\":180,\"pitch_deg\":10}\n";
-        let a = parse_poses(csv, "r", 2).expect("valid CSV");
-        let b = parse_poses(jsonl, "r", 2).expect("valid JSONL");
+        let r = ReaderName::parse("r").expect("a name");
+        let a = parse_poses(csv, &r, 2).expect("valid CSV");
+        let b = parse_poses(jsonl, &r, 2).expect("valid JSONL");
         assert_eq!(a, b);
         assert_eq!(a.len(), 2);
         assert_eq!(
-            (a[1].t_us, a[1].reader.as_str(), a[1].antenna),
-            (1_500_000, "r", 2)
+            (a[1].t_us, a[1].reader.as_ref(), a[1].antenna),
+            (1_500_000, Some(&r), 2)
         );
         assert_eq!(a[1].pose, Pose::from_degrees([2.0, 2.0, 3.0], 180.0, 10.0));
     }
 
     #[test]
     fn bad_pose_lists_name_the_line() {
-        let parse = |text| parse_poses(text, "r", 1);
+        let r = ReaderName::parse("r").expect("a name");
+        let parse = |text| parse_poses(text, &r, 1);
         let err = parse("t_s,x,y,z,yaw_deg,pitch_deg\n0,1,2,3,90\n").unwrap_err();
         assert!(err.contains("line 2"), "{err}");
         let err = parse("t,x,y,z,yaw,pitch\n").unwrap_err();

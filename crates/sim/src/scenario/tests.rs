@@ -111,6 +111,16 @@ fn errors_name_the_field_path_and_the_reason() {
             "",
         ),
         (
+            Box::new(|v| v["readers"][0]["name"] = "".into()),
+            "readers[0].name: the reader name is empty",
+            "",
+        ),
+        (
+            Box::new(|v| v["readers"][0]["name"] = "dock\n1".into()),
+            "readers[0].name: reader name \"dock\\n1\" holds a control character",
+            "",
+        ),
+        (
             Box::new(|v| v["readers"][0]["antennas"] = serde_json::json!([])),
             "readers[0].antennas: must list at least one antenna",
             "",

@@ -227,9 +227,6 @@ fn validate_tags(s: &Scenario) -> Check {
 }
 
 fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
-    if r.name.trim().is_empty() {
-        return Err(invalid(format!("{p}.name"), "must not be empty"));
-    }
     if r.listen.parse::<std::net::SocketAddr>().is_err() {
         return Err(invalid(
             format!("{p}.listen"),

@@ -4,6 +4,8 @@
 use std::collections::BTreeMap;
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
+use crate::reader_name::ReaderName;
+
 /// Who runs a reader's inventory.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Inventory {
@@ -41,7 +43,7 @@ pub struct Link {
 
 /// Every reader's link, by name.
 #[derive(Debug, Default)]
-pub struct Links(RwLock<BTreeMap<String, Link>>);
+pub struct Links(RwLock<BTreeMap<ReaderName, Link>>);
 
 fn read<T>(lock: &RwLock<T>) -> RwLockReadGuard<'_, T> {
     // A writer that panicked leaves the links as they were: still worth showing.
@@ -54,11 +56,11 @@ fn write<T>(lock: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
 
 impl Links {
     /// Changes reader `name`'s link (created disconnected and idle if new).
-    pub fn update(&self, name: &str, f: impl FnOnce(&mut Link)) {
+    pub fn update(&self, name: &ReaderName, f: impl FnOnce(&mut Link)) {
         let mut links = write(&self.0);
-        match links.get_mut(name) {
+        match links.get_mut(name.as_str()) {
             Some(link) => f(link),
-            None => f(links.entry(name.to_owned()).or_default()),
+            None => f(links.entry(name.clone()).or_default()),
         }
     }
 
@@ -68,7 +70,7 @@ impl Links {
     }
 
     /// Every reader's link, by name.
-    pub fn all(&self) -> BTreeMap<String, Link> {
+    pub fn all(&self) -> BTreeMap<ReaderName, Link> {
         read(&self.0).clone()
     }
 }
@@ -80,13 +82,14 @@ mod tests {
     #[test]
     fn a_link_is_created_disconnected_and_idle_and_keeps_what_was_written() {
         let links = Links::default();
+        let r1 = ReaderName::parse("r1").expect("a name");
         assert_eq!(links.get("r1"), None);
-        links.update("r1", |l| {
+        links.update(&r1, |l| {
             assert_eq!(*l, Link::default());
             l.connected = true;
             l.inventory = Inventory::Client;
         });
-        links.update("r1", |l| l.peer = Some("127.0.0.1:5".into()));
+        links.update(&r1, |l| l.peer = Some("127.0.0.1:5".into()));
         let l = links.get("r1").expect("written above");
         assert!(l.connected);
         assert_eq!(l.peer.as_deref(), Some("127.0.0.1:5"));

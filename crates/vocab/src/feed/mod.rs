@@ -12,6 +12,7 @@ use prometheus_client::metrics::counter::Counter;
 use serde::Serialize;
 
 use crate::pose::PoseSample;
+use crate::reader_name::ReaderName;
 use crate::reads::Read;
 
 mod links;
@@ -25,7 +26,7 @@ pub enum Input {
     /// until its own capabilities response is seen.
     Reader {
         /// The reader's name.
-        name: String,
+        name: ReaderName,
         /// The hop table the reader advertises, when known beforehand.
         hop_table: Option<HopTable>,
         /// Its antenna ports.
@@ -39,7 +40,7 @@ pub enum Input {
     /// Whole LLRP frames reader `reader` sent to its client.
     Frames {
         /// The reader's name.
-        reader: String,
+        reader: ReaderName,
         /// The frames, back to back.
         bytes: Bytes,
         /// Arrival time to stamp reads that carry no timestamp (UTC µs).
@@ -54,7 +55,7 @@ pub enum Input {
     /// Reader `reader` came (its upstream connection is up) or went.
     Status {
         /// The reader's name.
-        reader: String,
+        reader: ReaderName,
         /// Up or gone.
         online: bool,
     },
@@ -62,7 +63,7 @@ pub enum Input {
     /// an MQTT publisher forwards it).
     Event {
         /// The reader's name.
-        reader: String,
+        reader: ReaderName,
         /// The event.
         data: Box<llrp::params::ReaderEventNotificationData>,
     },
@@ -70,7 +71,7 @@ pub enum Input {
     /// it; an MQTT publisher forwards it).
     Keepalive {
         /// The reader's name.
-        reader: String,
+        reader: ReaderName,
         /// Lost (no KEEPALIVE for three periods), or back.
         lost: bool,
         /// The period expected (ms).

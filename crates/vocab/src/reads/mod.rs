@@ -17,15 +17,20 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::epc::{Epc, EpcError};
 pub use crate::pose::Pose;
+pub use crate::reader_name::{ReaderName, ReaderNameError};
 
 /// One tag read (one TagReportData), in SI units; a line of the reads file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Read {
     /// EPC, upper-case hex (any case in a reads file).
     pub epc: Epc,
-    /// Name of the reader that reported it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reader: Option<String>,
+    /// Name of the reader that reported it (absent, or `""` in a reads file, when unknown).
+    #[serde(
+        default,
+        deserialize_with = "crate::reader_name::empty_is_none",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub reader: Option<ReaderName>,
     /// Antenna port (1-based AntennaID); 0 when the report carried none.
     pub antenna: u16,
     /// First-seen time, UTC microseconds since the Unix epoch (FirstSeenTimestampUTC; a
@@ -106,7 +111,7 @@ impl Read {
 /// Turns one connection's LLRP frames into [`Read`]s.
 #[derive(Clone, Debug, Default)]
 pub struct ReadDecoder {
-    reader: Option<String>,
+    reader: Option<ReaderName>,
     hop_table: Option<HopTable>,
     /// The hop table came from the reader's capabilities (not overridden by a fallback).
     from_reader: bool,
@@ -130,7 +135,7 @@ pub enum ReadError {
 
 impl ReadDecoder {
     /// A decoder labelling its reads with `reader` (if given), with no hop table yet.
-    pub fn new(reader: Option<String>) -> Self {
+    pub fn new(reader: Option<ReaderName>) -> Self {
         ReadDecoder {
             reader,
             ..ReadDecoder::default()
@@ -268,33 +273,33 @@ impl ReadDecoder {
 
 /// One [`ReadDecoder`] per reader, by name.
 #[derive(Debug, Default)]
-pub struct Decoders(std::collections::HashMap<String, ReadDecoder>);
+pub struct Decoders(std::collections::HashMap<ReaderName, ReadDecoder>);
 
 impl Decoders {
     /// Reader `name` advertises `hop_table` and has antenna ports `antennas`, and its source
     /// knows its antennas' poses where `poses` is given (its decoder keeps what it has learnt).
     pub fn register(
         &mut self,
-        name: &str,
+        name: &ReaderName,
         hop_table: Option<llrp::units::HopTable>,
         antennas: &[u16],
         poses: Option<PoseAt>,
     ) {
         let d = self
             .0
-            .remove(name)
-            .unwrap_or_else(|| ReadDecoder::new(Some(name.to_owned())))
+            .remove(name.as_str())
+            .unwrap_or_else(|| ReadDecoder::new(Some(name.clone())))
             .with_fallback_table(hop_table)
             .with_antennas(antennas)
             .with_poses(poses);
-        self.0.insert(name.to_owned(), d);
+        self.0.insert(name.clone(), d);
     }
 
     /// Reader `name`'s decoder, made when first asked for.
-    pub fn of(&mut self, name: &str) -> &mut ReadDecoder {
+    pub fn of(&mut self, name: &ReaderName) -> &mut ReadDecoder {
         self.0
-            .entry(name.to_owned())
-            .or_insert_with(|| ReadDecoder::new(Some(name.to_owned())))
+            .entry(name.clone())
+            .or_insert_with(|| ReadDecoder::new(Some(name.clone())))
     }
 }
 

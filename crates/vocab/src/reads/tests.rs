@@ -57,7 +57,7 @@ fn a_reads_file_line_with_an_empty_or_non_hex_epc_is_refused_by_number() {
 fn a_read_round_trips_through_the_reads_file() {
     let read = Read {
         epc: Epc::parse("3034F8").expect("hex"),
-        reader: Some("dock".into()),
+        reader: Some("dock".parse().expect("a reader name")),
         antenna: 2,
         t_us: 1_700_000_000_000_000,
         phase_rad: Some(1.5),
@@ -165,7 +165,7 @@ fn a_decoder_given_poses_stamps_each_read_with_its_antennas_pose_at_the_read() {
             Pose::from_degrees([x, 2.0, 0.5], 90.0, 0.0)
         })
     });
-    let mut d = ReadDecoder::new(Some("r".into())).with_poses(Some(poses));
+    let mut d = ReadDecoder::new("r".parse().ok()).with_poses(Some(poses));
     let mut out = Vec::new();
     d.frame(&report(1, 3_500_000), 0, &mut out)
         .expect("decodes");
@@ -201,14 +201,14 @@ fn a_read_naming_no_antenna_is_the_sole_antennas_and_gets_its_pose() {
         }))
     };
     let mut out = Vec::new();
-    let mut sole = ReadDecoder::new(Some("r".into()))
+    let mut sole = ReadDecoder::new("r".parse().ok())
         .with_antennas(&[3])
         .with_poses(poses());
     sole.frame(&frame, 0, &mut out).expect("decodes");
     assert_eq!(out[0].antenna, 3);
     assert!(out[0].antenna_pose.is_some(), "{:?}", out[0]);
     // A reader of several antennas: which one is unknown.
-    let mut several = ReadDecoder::new(Some("r".into()))
+    let mut several = ReadDecoder::new("r".parse().ok())
         .with_antennas(&[1, 3])
         .with_poses(poses());
     out.clear();
@@ -269,6 +269,26 @@ fn an_antenna_pose_stands_in_for_a_pose_file() {
     let e = read_jsonl(&bad[..]).expect_err("z missing");
     assert!(
         e.message.contains("antenna_pose") && e.message.contains('z'),
+        "{}",
+        e.message
+    );
+}
+
+#[test]
+fn a_reads_file_reader_is_a_reader_name_or_none() {
+    let line = |reader: &str| {
+        format!(
+            r#"{{"epc":"AB","reader":{reader},"antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":null}}"#
+        )
+    };
+    let r = read_jsonl(line(r#""dock 1""#).as_bytes()).expect("parses");
+    assert_eq!(r[0].reader.as_deref(), Some("dock 1"));
+    let r = read_jsonl(line(r#""""#).as_bytes()).expect("parses");
+    assert_eq!(r[0].reader, None, "empty: unknown");
+    let e = read_jsonl(line(r#"" dock""#).as_bytes()).expect_err("white space");
+    assert!(
+        e.message
+            .starts_with("reader: reader name \" dock\" starts or ends with white space"),
         "{}",
         e.message
     );
