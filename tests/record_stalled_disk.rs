@@ -112,7 +112,7 @@ fn serve(server: &tokio::runtime::Runtime, gate: &Gate) -> Served {
         let (recorder, recording) =
             Recorder::start(gate.clone(), header, RecordOptions::default()).expect("recording");
         let config = ProxyConfig {
-            name: "stalled".into(),
+            name: llrp_gateway::reads::ReaderName::parse("stalled").expect("a valid reader name"),
             upstream,
             listen: "127.0.0.1:0".into(),
             record: None,
