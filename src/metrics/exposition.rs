@@ -119,8 +119,9 @@ fn without_exemplar(line: &str) -> &str {
 }
 
 /// `# HELP`/`# TYPE` line `rest` (after the keyword) for the classic format: a counter's
-/// family takes its samples' `_total`, an info family its `_info`; types the classic format
-/// lacks are written as it names them.
+/// family takes its samples' `_total`, an info family its `_info`; a type the classic format
+/// lacks becomes the nearest it has (info and stateset: gauge; unknown and gaugehistogram,
+/// whose `_gcount` and `_gsum` no classic type has: untyped).
 fn descriptor(
     keyword: &str,
     rest: &str,
@@ -136,9 +137,8 @@ fn descriptor(
         ""
     };
     let tail = match (keyword, tail) {
-        ("TYPE", "unknown") => "untyped",
+        ("TYPE", "unknown" | "gaugehistogram") => "untyped",
         ("TYPE", "info" | "stateset") => "gauge",
-        ("TYPE", "gaugehistogram") => "histogram",
         _ => tail,
     };
     format!("# {keyword} {name}{suffix} {tail}")
