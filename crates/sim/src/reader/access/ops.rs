@@ -144,17 +144,7 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2BlockErase(r), got.is_ok())
         }
         OpSpec::C1g2Lock(l) => {
-            let payloads: Vec<(Privilege, usize)> = l
-                .c1g2_lock_payload
-                .iter()
-                .filter_map(|p| {
-                    Some((
-                        Privilege::from_llrp(p.privilege)?,
-                        usize::from(p.data_field),
-                    ))
-                })
-                .collect();
-            let got = chip.lock(&payloads, l.access_password);
+            let got = chip.lock(&payloads(l), l.access_password);
             let r = C1g2LockOpSpecResult {
                 result: got.err().map_or(0, |f| lock_code(f, v)),
                 op_spec_id: l.op_spec_id,
@@ -175,6 +165,19 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
         OpSpec::ClientRequestOpSpec(_) | OpSpec::Custom(_) => return (None, false),
     };
     (Some(result), ok)
+}
+
+/// A Lock's payloads as (privilege, field), every one in range (`check` refused the others).
+fn payloads(l: &C1g2Lock) -> Vec<(Privilege, usize)> {
+    l.c1g2_lock_payload
+        .iter()
+        .filter_map(|p| {
+            Some((
+                Privilege::from_llrp(p.privilege)?,
+                usize::from(p.data_field),
+            ))
+        })
+        .collect()
 }
 
 /// C1G2ReadResultType: 1 Nonspecific_Tag_Error, 2 No_Response_From_Tag; LLRP 1.1 adds

@@ -9,6 +9,7 @@ mod air;
 mod execute;
 mod flagged;
 mod schedule;
+mod stops;
 mod validate;
 
 use schedule::{first_start, start_type};
