@@ -8,7 +8,8 @@
 mod common;
 
 use std::path::PathBuf;
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use common::*;
 use llrp_gateway::net::clock::Speed;
@@ -20,12 +21,24 @@ fn access(port: u16, args: &[&str]) -> Value {
         .expect("LLRP_SLLURP3_PYTHON must name sllurp 3.0.5's python (set by ./scripts/test)");
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/interop/sllurp3_access.py");
-    let out = Command::new(python)
+    let mut child = Command::new(python)
         .arg(script)
         .args(["127.0.0.1", &port.to_string()])
         .args(args)
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("the script runs");
+    // A hang guard, not a measurement: the script gives up after 20 s and 10 s of close.
+    let guard = Instant::now() + Duration::from_secs(90);
+    while child.try_wait().expect("wait").is_none() {
+        if Instant::now() > guard {
+            let _ = child.kill();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().expect("the script's output");
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.trim())
         .unwrap_or_else(|e| panic!("{e}: {text}\n{}", String::from_utf8_lossy(&out.stderr)))

@@ -20,6 +20,7 @@ Usage: sllurp3_access.py HOST PORT (--write HEX | --read N) [--mb 3] [--word-ptr
 """
 import argparse
 import json
+import os
 import sys
 import threading
 import time
@@ -114,9 +115,11 @@ def main():
             reader.join(10)
         except Exception as e:  # noqa: BLE001
             error = error or repr(e)
-    print(json.dumps({"result": got.get("result"), "epc": got.get("epc"), "error": error}))
+    print(json.dumps({"result": got.get("result"), "epc": got.get("epc"), "error": error}), flush=True)
     return 0 if "result" in got else 1
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # sllurp 3.0.5's reader thread is not a daemon, and its disconnect() can lose a race with
+    # it (see sllurp3_session.py) and leave it running: end the process without waiting.
+    os._exit(main())
