@@ -7,16 +7,21 @@
 //! antennas face. Circles at two heights at least are needed.
 //!
 //! Ours, where \[A\] is silent: the mean of the centres and the terms of the sum are weighted
-//! by the inverse variances from the circles (w_i = 1/(4R_i²σ_R²)); the covariance of (y, z)
-//! is (JᵀWJ)⁻¹, scaled up by the reduced χ² when that exceeds 1; cross terms between the
-//! position along the path and (y, z) are taken as 0.
+//! by the inverse variances from the circles (w_i = 1/(4R_i²σ_R²)); the covariance is the
+//! circles' own propagated to the fix, with an error smooth in the direction the tag is read
+//! from that the circles share, and at least the classic one scaled by the circles'
+//! disagreement (`loci3d/covariance.rs`; docs/localize.md).
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Matrix3, Owned, Vector2};
+use nalgebra::{DMatrix, DVector, Dyn, Owned, Vector2};
 
 use crate::estimator::{Locate, Need, Tag, Takes, SIGN};
 use crate::fix::{Fix3, NoFix, Obs};
 use crate::linear::{circle, Circle, MAX_SLOPE};
+
+mod covariance;
+#[cfg(test)]
+mod tests;
 
 /// Least spread of the circles' heights for a 3D fix (m, ours).
 pub const MIN_HEIGHT_SPREAD_M: f64 = 0.05;
@@ -77,12 +82,13 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
     let circles = segment_circles(obs, sign);
     let (reference, u, n) = frame(&circles, facing)?;
     let o = reference.centre;
-    let parallel: Vec<&Circle> = circles
+    let parallel: Vec<covariance::Part<'_>> = circles
         .iter()
-        .filter(|c| {
+        .filter(|(_, c)| {
             let d = c.direction;
             (d[0] * u[0] + d[1] * u[1]).abs() >= MAX_PATH_ANGLE_RAD.cos()
         })
+        .map(|(seg, c)| (seg.as_slice(), c))
         .collect();
     let (sx, wx, loci) = loci_of(&parallel, o, u, n);
     let (z_lo, z_hi) = loci.iter().fold((f64::MAX, f64::MIN), |(lo, hi), l| {
@@ -92,19 +98,20 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
         return Err(NoFix::InsufficientGeometry);
     }
     let x = sx / wx;
-    let (y, z, cov_yz) = intersect(&loci)?;
-    let rot = Matrix3::new(u[0], n[0], 0.0, u[1], n[1], 0.0, 0.0, 0.0, 1.0);
-    let mut path = Matrix3::zeros();
-    path[(0, 0)] = 1.0 / wx;
-    path.fixed_view_mut::<2, 2>(1, 1).copy_from(&cov_yz);
-    let cov = rot * path * rot.transpose();
+    let (y, z, jacobian, residuals) = intersect(&loci)?;
     let across = Vector2::from(n) * y;
     let position = [o[0] + x * u[0] + across[0], o[1] + x * u[1] + across[1], z];
-    let covariance: [f64; 9] = std::array::from_fn(|k| cov[(k / 3, k % 3)]);
-    if !covariance.iter().all(|v| v.is_finite()) {
-        return Err(NoFix::InsufficientGeometry);
-    }
-    let (sq, used) = parallel.iter().fold((0.0, 0usize), |(sq, used), c| {
+    let covariance = covariance::covariance(&covariance::Solved {
+        parts: &parallel,
+        loci: &loci,
+        u,
+        n,
+        jacobian: &jacobian,
+        residuals: &residuals,
+        position,
+    })
+    .ok_or(NoFix::InsufficientGeometry)?;
+    let (sq, used) = parallel.iter().fold((0.0, 0usize), |(sq, used), (_, c)| {
         (
             sq + c.rms_rad * c.rms_rad * c.samples as f64,
             used + c.samples,
@@ -117,24 +124,29 @@ pub fn locate(obs: &[Obs], sign: f64, facing: [f64; 2]) -> Result<Fix3, NoFix> {
     })
 }
 
-/// The circle of each segment of `obs` that gives one with a positive covariance.
-fn segment_circles(obs: &[Obs], sign: f64) -> Vec<Circle> {
+/// The circle of each segment of `obs` that gives one with a positive covariance, with the
+/// segment's phases.
+fn segment_circles(obs: &[Obs], sign: f64) -> Vec<(Vec<Obs>, Circle)> {
     let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
     let mut by_segment: Vec<Vec<Obs>> = vec![Vec::new(); segments];
     for o in obs {
         by_segment[o.segment].push(*o);
     }
     by_segment
-        .iter()
-        .filter_map(|s| circle(s, sign).ok())
-        .filter(|c| c.covariance[0] > 0.0 && c.covariance[3] > 0.0)
+        .into_iter()
+        .filter_map(|s| circle(&s, sign).ok().map(|c| (s, c)))
+        .filter(|(_, c)| c.covariance[0] > 0.0 && c.covariance[3] > 0.0)
         .collect()
 }
 
 /// The best-sampled circle and its frame: u along its path, horizontal; n across it, facing.
-fn frame(circles: &[Circle], facing: [f64; 2]) -> Result<(&Circle, [f64; 2], [f64; 2]), NoFix> {
+fn frame(
+    circles: &[(Vec<Obs>, Circle)],
+    facing: [f64; 2],
+) -> Result<(&Circle, [f64; 2], [f64; 2]), NoFix> {
     let reference = circles
         .iter()
+        .map(|(_, c)| c)
         .max_by_key(|c| c.samples)
         .ok_or(NoFix::InsufficientGeometry)?;
     let [ux, uy, uz] = reference.direction;
@@ -151,10 +163,15 @@ fn frame(circles: &[Circle], facing: [f64; 2]) -> Result<(&Circle, [f64; 2], [f6
 }
 
 /// The `parallel` circles as loci, with Σw·along and Σw of their centres along the path.
-fn loci_of(parallel: &[&Circle], o: [f64; 3], u: [f64; 2], n: [f64; 2]) -> (f64, f64, Vec<Locus>) {
+fn loci_of(
+    parallel: &[covariance::Part<'_>],
+    o: [f64; 3],
+    u: [f64; 2],
+    n: [f64; 2],
+) -> (f64, f64, Vec<Locus>) {
     let (mut sx, mut wx) = (0.0, 0.0);
     let mut loci = Vec::new();
-    for c in parallel {
+    for (_, c) in parallel {
         let (dx, dy) = (c.centre[0] - o[0], c.centre[1] - o[1]);
         let w = 1.0 / c.covariance[0];
         sx += w * (dx * u[0] + dy * u[1]);
@@ -169,8 +186,9 @@ fn loci_of(parallel: &[&Circle], o: [f64; 3], u: [f64; 2], n: [f64; 2]) -> (f64,
     (sx, wx, loci)
 }
 
-/// Where the loci meet (across, height), on the facing side, with its covariance.
-fn intersect(loci: &[Locus]) -> Result<(f64, f64, nalgebra::Matrix2<f64>), NoFix> {
+/// Where the loci meet (across, height), on the facing side, with the weighted Jacobian and
+/// residuals there.
+fn intersect(loci: &[Locus]) -> Result<(f64, f64, DMatrix<f64>, DVector<f64>), NoFix> {
     let count = loci.len() as f64;
     let y_mean = loci.iter().map(|l| l.y).sum::<f64>() / count;
     let z_mean = loci.iter().map(|l| l.z).sum::<f64>() / count;
@@ -184,21 +202,10 @@ fn intersect(loci: &[Locus]) -> Result<(f64, f64, nalgebra::Matrix2<f64>), NoFix
     let (y, z) = (solved.p[0], solved.p[1]);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    let dof = loci.len().saturating_sub(2);
-    let chi2 = if dof > 0 {
-        (r.norm_squared() / dof as f64).max(1.0)
-    } else {
-        1.0
-    };
-    let cov_yz = (j.transpose() * &j)
-        .try_inverse()
-        .ok_or(NoFix::InsufficientGeometry)?
-        * chi2;
     if !(y > y_mean && y.is_finite() && z.is_finite()) {
         return Err(NoFix::InsufficientGeometry);
     }
-    let cov_yz = nalgebra::Matrix2::from_column_slice(cov_yz.as_slice());
-    Ok((y, z, cov_yz))
+    Ok((y, z, j, r))
 }
 
 /// 3D by loci intersection as the localizer runs it.
@@ -224,75 +231,5 @@ impl Locate for Loci3d {
 
     fn locate(&self, tag: &Tag<'_>) -> Result<Fix3, NoFix> {
         locate(&tag.observed.obs, SIGN, tag.observed.facing)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::synthetic;
-
-    /// Passes at `heights`, phase offsets 0.3 apart.
-    fn pass(tag: [f64; 3], heights: &[f64], noise: f64, seed: u64) -> Vec<Obs> {
-        synthetic::passes(tag, heights, (0.0, 0.3), noise, seed)
-    }
-
-    const HEIGHTS: [f64; 4] = [0.3, 0.6, 0.9, 1.2];
-
-    fn err(fix: &Fix3, tag: [f64; 3]) -> f64 {
-        (0..3)
-            .map(|k| (fix.position[k] - tag[k]).powi(2))
-            .sum::<f64>()
-            .sqrt()
-    }
-
-    #[test]
-    fn a_noise_free_tag_is_recovered_within_a_millimetre_in_3d() {
-        for tag in [[0.8f64, 1.5, 0.75], [1.234, -1.2, 1.4], [0.3, 0.9, 0.1]] {
-            let facing = [0.0, tag[1].signum()];
-            let fix = locate(&pass(tag, &HEIGHTS, 0.0, 1), 1.0, facing).expect("a fix");
-            assert!(err(&fix, tag) < 1e-3, "{tag:?}: {fix:?}");
-        }
-        // Two heights are enough.
-        let tag = [0.5, 1.3, 0.9];
-        let fix = locate(&pass(tag, &[0.4, 1.1], 0.0, 1), 1.0, [0.0, 1.0]).expect("a fix");
-        assert!(err(&fix, tag) < 1e-3, "{fix:?}");
-        assert!(fix.covariance[8] > 0.0, "the height is estimated: {fix:?}");
-    }
-
-    #[test]
-    fn with_noise_the_error_stays_within_the_covariance() {
-        let tag = [0.8, 1.5, 0.75];
-        let mut within = 0;
-        for seed in 0..20 {
-            let fix = locate(&pass(tag, &HEIGHTS, 0.1, seed), 1.0, [0.0, 1.0]).expect("a fix");
-            assert!(err(&fix, tag) < 0.05, "seed {seed}: {} m", err(&fix, tag));
-            // Mahalanobis distance² of a 3D Gaussian error: ≤ 7.81 holds 95 % of the time.
-            let c = Matrix3::from_row_slice(&fix.covariance);
-            let e = nalgebra::Vector3::from(fix.position) - nalgebra::Vector3::from(tag);
-            let m2 = (e.transpose() * c.try_inverse().expect("invertible") * e)[0];
-            within += usize::from(m2 <= 7.81);
-        }
-        assert!(within >= 16, "{within} of 20 within the 95 % ellipsoid");
-    }
-
-    #[test]
-    fn one_height_or_too_little_is_insufficient_geometry() {
-        let insufficient = Err(NoFix::InsufficientGeometry);
-        let tag = [0.8, 1.5, 0.75];
-        // Two passes at one height: the circles cannot fix z.
-        assert_eq!(
-            locate(&pass(tag, &[0.5, 0.5], 0.0, 1), 1.0, [0.0, 1.0]),
-            insufficient
-        );
-        assert_eq!(
-            locate(&pass(tag, &[0.5], 0.0, 1), 1.0, [0.0, 1.0]),
-            insufficient
-        );
-        assert_eq!(locate(&[], 1.0, [0.0, 1.0]), insufficient);
-        // Two heights but one pass too short for its circle.
-        let mut obs = pass(tag, &[0.3, 1.2], 0.0, 1);
-        obs.retain(|o| o.segment == 0 || o.antenna[0] < -0.95);
-        assert_eq!(locate(&obs, 1.0, [0.0, 1.0]), insufficient);
     }
 }
