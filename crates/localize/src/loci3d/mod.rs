@@ -27,6 +27,9 @@ mod tests;
 pub const MIN_HEIGHT_SPREAD_M: f64 = 0.05;
 /// Largest angle between a circle's path and the reference circle's (rad, ours).
 pub const MAX_PATH_ANGLE_RAD: f64 = 0.05;
+/// Least distance of the intersection from the circles' path line, on the facing side (m,
+/// ours): nearer, the circles do not meet and the solver stopped on the line.
+pub const MIN_ACROSS_M: f64 = 0.01;
 
 /// One circle in the path's frame: across-path and height of its centre, radius, and the
 /// radius's standard deviation.
@@ -202,7 +205,9 @@ fn intersect(loci: &[Locus]) -> Result<(f64, f64, DMatrix<f64>, DVector<f64>), N
     let (y, z) = (solved.p[0], solved.p[1]);
     let r = solved.residuals().ok_or(NoFix::InsufficientGeometry)?;
     let j = solved.jacobian().ok_or(NoFix::InsufficientGeometry)?;
-    if !(y > y_mean && y.is_finite() && z.is_finite()) {
+    // Off the path line on the facing side: on the line itself the sum's slope across the
+    // path vanishes whatever the height, and circles that do not meet leave the solver there.
+    if !(y > y_mean + MIN_ACROSS_M && y.is_finite() && z.is_finite()) {
         return Err(NoFix::InsufficientGeometry);
     }
     Ok((y, z, j, r))

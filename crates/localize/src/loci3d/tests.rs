@@ -81,3 +81,26 @@ fn a_phase_error_smooth_in_the_direction_read_from_stays_inside_the_95_percent_e
     // only, scaled by the reduced χ², no cross terms).
     assert!(held >= 33, "{held} of 40 inside the 95 % ellipsoid");
 }
+
+#[test]
+fn circles_that_do_not_meet_are_insufficient_geometry_not_a_fix_on_the_path() {
+    // Radii 0.5 m at heights 1.6 m apart: the sum is least on the path line itself, where its
+    // slope across the path vanishes; the solver stops there, a hair either side by rounding.
+    for (gap, r) in [(1.6, 0.5), (1.2, 0.3), (2.0, 0.9), (0.9, 0.2)] {
+        let loci = [
+            Locus {
+                y: 0.25,
+                z: 0.4,
+                r,
+                sigma_r: 0.01,
+            },
+            Locus {
+                y: 0.25,
+                z: 0.4 + gap,
+                r,
+                sigma_r: 0.02,
+            },
+        ];
+        assert!(intersect(&loci).is_err(), "{gap} m apart, radius {r} m");
+    }
+}
