@@ -28,11 +28,16 @@ pub const MIN_REFERENCES: usize = 2;
 /// differences, to be used.
 pub const MIN_AGREEMENT: f64 = 0.8;
 
-/// Each calibrated antenna's offset relative to its reader's base antenna on a channel (rad).
+/// What an estimator measures on the reference tags once for every tag
+/// ([`crate::estimator::Locate::calibration`]): each calibrated antenna's offset relative to
+/// its reader's base antenna on a channel (rad), for `relock`; the reference tags located from
+/// the others, for `fingerprint`'s covariance.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibration {
     /// (reader, channel frequency Hz) → antenna port → offset (rad).
     offsets: BTreeMap<(String, u64), BTreeMap<u16, f64>>,
+    /// Reference tags located from the others: (EPC, position, estimate).
+    located: Vec<(String, [f64; 3], [f64; 3])>,
 }
 
 /// The circular mean of `angles` (rad, period `period`) and their mean resultant length.
@@ -125,7 +130,23 @@ impl Calibration {
                 offsets.insert(channel, table);
             }
         }
-        Calibration { offsets }
+        Calibration {
+            offsets,
+            located: Vec::new(),
+        }
+    }
+
+    /// The reference tags `located` from the others (EPC, position, estimate), and no offsets.
+    pub fn from_located(located: Vec<(String, [f64; 3], [f64; 3])>) -> Calibration {
+        Calibration {
+            offsets: BTreeMap::new(),
+            located,
+        }
+    }
+
+    /// The reference tags located from the others (EPC, position, estimate).
+    pub fn located(&self) -> &[(String, [f64; 3], [f64; 3])] {
+        &self.located
     }
 
     /// Antenna `antenna`'s offset relative to its reader's base antenna on the channel of

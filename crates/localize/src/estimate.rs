@@ -151,8 +151,9 @@ pub fn estimate_tag(ingest: &Ingest, epc: &str, estimator: Estimator, g: &Geomet
     )
 }
 
-/// The calibration `estimator` uses ([`Locate::calibration`]): `relock`'s from the
-/// references of `g`, none for the others.
+/// The calibration `estimator` uses ([`Locate::calibration`]) from the references of `g`:
+/// `relock`'s antenna offsets, `fingerprint`'s references located from each other, nothing
+/// for the others.
 pub fn calibration(ingest: &Ingest, estimator: Estimator, g: &Geometry) -> Calibration {
     estimator.locator().calibration(ingest, g)
 }
@@ -196,6 +197,7 @@ pub fn estimate_from(
         epc,
         geometry: g,
         hint,
+        calibration,
     };
     // A fix farther than twice the reach from every antenna position that read the tag is
     // a solver gone astray (a degenerate geometry, bad poses), not an estimate.

@@ -26,6 +26,8 @@ pub struct Tag<'a> {
     pub geometry: &'a Geometry,
     /// The tag's last fix, for an estimator that can start from it ([`Locate::warm_starts`]).
     pub hint: Option<[f64; 3]>,
+    /// What the estimator measured on the reference tags ([`Locate::calibration`]).
+    pub calibration: &'a Calibration,
 }
 
 /// What of a tag's reads an estimator locates it from.
@@ -78,7 +80,8 @@ pub trait Locate: Sync {
         false
     }
 
-    /// The antenna calibration it wants from the reads of `ingest`: none by default.
+    /// What it measures on the reference tags of `g` in `ingest` once for every tag (antenna
+    /// offsets, the references located from each other): nothing by default.
     fn calibration(&self, _ingest: &Ingest, _g: &Geometry) -> Calibration {
         Calibration::default()
     }
