@@ -459,13 +459,15 @@ fn the_vocabulary_crate_depends_only_on_the_codec_and_serialization() {
     // Reads and poses in SI units, the feed and the wall clock sit below the localizer, the
     // simulator and the application: the crate names none of them (the compiler enforces it
     // once the manifest does not list them) and no async or network crate. The feed's drop
-    // counters are metric handles (prometheus-client's, without IO).
+    // counters are metric handles (prometheus-client's, without IO); CSV is the csv crate's
+    // (a parser over `io::Read`, no IO of its own).
     depends_only_on(
         "crates/vocab/Cargo.toml",
         "llrp",
         &[
             "llrp",
             "bytes",
+            "csv",
             "prometheus-client",
             "serde",
             "serde_json",

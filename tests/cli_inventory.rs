@@ -317,31 +317,38 @@ fn impinj_inventory_writes_a_reads_file_with_the_readers_hop_table() {
 }
 
 #[test]
-fn csv_output_has_the_header_and_a_row_per_read() {
+fn csv_output_has_the_header_and_a_row_per_read_with_a_name_that_needs_quotes() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (sim, addr) = sim_anywhere(None);
-    let (status, out, err, path) =
-        inventory_to(dir.path(), "reads.csv", &[&addr, "--seconds", "1"]);
+    // A comma and quotes in the reader's name: quoted as RFC 4180 says, so that a CSV
+    // reader (the csv crate here, a spreadsheet elsewhere) gets the name back whole.
+    let name = "dock \"7\", north";
+    let (status, out, err, path) = inventory_to(
+        dir.path(),
+        "reads.csv",
+        &[&addr, "--seconds", "1", "--name", name],
+    );
     drop(sim);
     assert!(status.success(), "{err}");
     let text = std::fs::read_to_string(&path).expect("the CSV exists");
-    let mut lines = text.lines();
-    assert_eq!(lines.next(), Some(CSV_HEADER));
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(text.lines().next(), Some(CSV_HEADER));
+    let mut csv = csv::Reader::from_reader(text.as_bytes());
+    let rows: Vec<csv::StringRecord> = csv.records().map(|r| r.expect("valid CSV")).collect();
     assert!(!rows.is_empty(), "rows");
     let columns = CSV_HEADER.split(',').count();
     let etsi = HopTable::etsi();
     for row in &rows {
         assert_eq!(row.len(), columns, "{row:?}");
-        assert!(s1_epcs().contains(row[0]), "a scenario EPC: {row:?}");
-        assert_eq!(row[2], "1", "S1's one antenna");
-        assert_eq!(row[5], "", "no Impinj phase without --impinj");
+        assert!(s1_epcs().contains(&row[0]), "a scenario EPC: {row:?}");
+        assert_eq!(&row[1], name, "the name, whole");
+        assert_eq!(&row[2], "1", "S1's one antenna");
+        assert_eq!(&row[5], "", "no Impinj phase without --impinj");
         let rssi: f64 = row[6].parse().expect("PeakRSSI");
         assert_eq!(rssi.fract(), 0.0, "PeakRSSI is whole dBm");
         // S1 is ETSI, fixed on channel 1: 865.7 MHz.
-        assert_eq!(row[7], "1");
+        assert_eq!(&row[7], "1");
         let khz = etsi.frequency_khz(1).expect("channel 1");
-        assert_eq!(row[8], (u64::from(khz) * 1000).to_string());
+        assert_eq!(&row[8], (u64::from(khz) * 1000).to_string());
     }
     assert_eq!(summary_number(&out, " reads,"), rows.len() as u64, "{out}");
 }

@@ -5,6 +5,7 @@ use std::io::{self, Write};
 
 use super::Output;
 use crate::reads::{self, Read};
+use llrp_gateway_vocab::table::CsvWriter;
 
 /// Bytes of whole lines buffered before they are written out.
 const SINK_BUFFER: usize = 64 * 1024;
@@ -14,7 +15,8 @@ const SINK_BUFFER: usize = 64 * 1024;
 /// writes: a reader following it live only ever sees whole reads.
 pub(super) struct Sink {
     out: Option<Box<dyn Write>>,
-    csv: bool,
+    /// CSV rows, quoted where a cell needs it, when the destination is CSV.
+    csv: Option<CsvWriter>,
     buf: Vec<u8>,
 }
 
@@ -36,12 +38,11 @@ impl Sink {
         };
         let mut sink = Sink {
             out,
-            csv,
+            csv: csv.then(CsvWriter::new),
             buf: Vec::with_capacity(SINK_BUFFER),
         };
-        if csv {
-            sink.buf.extend_from_slice(reads::CSV_HEADER.as_bytes());
-            sink.buf.push(b'\n');
+        if let Some(w) = &mut sink.csv {
+            w.row(reads::CSV_HEADER.split(','))?;
             sink.flush()?;
         }
         Ok(sink)
@@ -51,19 +52,26 @@ impl Sink {
         if self.out.is_none() {
             return Ok(());
         }
-        if self.csv {
-            self.buf.extend_from_slice(r.csv_row().as_bytes());
-            self.buf.push(b'\n');
-        } else {
-            reads::write_jsonl(&mut self.buf, r)?;
-        }
-        if self.buf.len() >= SINK_BUFFER {
+        let buffered = match &mut self.csv {
+            Some(w) => {
+                w.row(r.csv_cells())?;
+                w.buffered().len()
+            }
+            None => {
+                reads::write_jsonl(&mut self.buf, r)?;
+                self.buf.len()
+            }
+        };
+        if buffered >= SINK_BUFFER {
             self.flush()?;
         }
         Ok(())
     }
 
     pub(super) fn flush(&mut self) -> io::Result<()> {
+        if let Some(w) = &mut self.csv {
+            self.buf = w.take();
+        }
         if let Some(out) = &mut self.out {
             out.write_all(&self.buf)?;
             out.flush()?;

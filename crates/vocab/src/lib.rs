@@ -3,7 +3,8 @@
 //! one rule ([`reader_name`]), tag reads in SI units decoded from LLRP ([`reads`]), the one
 //! antenna pose in SI units and its timed sample ([`pose`]), the feed that carries both from
 //! any source to any consumer ([`feed`]), the sans-IO server session every LLRP server here
-//! implements ([`session`]) and the wall clock ([`utc`]). It knows the codec and nothing above
+//! implements ([`session`]), CSV as every file here has it ([`table`]) and the wall clock
+//! ([`utc`]). It knows the codec and nothing above
 //! it (ARCHITECTURE.md).
 
 pub mod epc;
@@ -12,4 +13,5 @@ pub mod pose;
 pub mod reader_name;
 pub mod reads;
 pub mod session;
+pub mod table;
 pub mod utc;

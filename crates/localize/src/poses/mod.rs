@@ -23,6 +23,7 @@ pub use message::parse_poses;
 
 pub use llrp_gateway_vocab::pose::{Pose, PoseSample};
 use llrp_gateway_vocab::reader_name::ReaderName;
+use llrp_gateway_vocab::table;
 
 /// Why a pose file could not be read: the line and the reason, naming the field.
 #[derive(Debug, thiserror::Error)]
@@ -205,36 +206,76 @@ impl Poses {
         Poses::read(std::io::BufReader::new(file)).map_err(failed)
     }
 
-    /// Reads a pose file, JSON Lines or CSV (told apart by its first line).
-    pub fn read(input: impl BufRead) -> Result<Poses, PoseError> {
+    /// Reads a pose file, JSON Lines or CSV (told apart by its first line that is not
+    /// blank; CSV through [`llrp_gateway_vocab::table`]: quoted cells, a byte-order mark and
+    /// CRLF line ends are read as a spreadsheet writes them).
+    pub fn read(mut input: impl BufRead) -> Result<Poses, PoseError> {
+        let mut first = String::new();
+        let mut skipped = 0;
+        while first.trim().is_empty() {
+            first.clear();
+            if input.read_line(&mut first)? == 0 {
+                return Ok(Poses::new());
+            }
+            skipped += 1;
+        }
+        if table::is_json_lines(&first) {
+            return Self::read_json_lines(skipped, &first, input);
+        }
+        // Blank lines before the header are kept, so the CSV reader's line numbers are the
+        // file's.
+        let head = "\n".repeat(skipped - 1) + &first;
+        Self::read_csv(std::io::Read::chain(std::io::Cursor::new(head), input))
+    }
+
+    /// The JSON Lines form, whose first line that is not blank, `first`, is line `first_no`.
+    fn read_json_lines(
+        first_no: usize,
+        first: &str,
+        input: impl BufRead,
+    ) -> Result<Poses, PoseError> {
         let mut poses = Poses::new();
-        let mut csv: Option<Vec<String>> = None;
-        for (i, line) in input.lines().enumerate() {
+        let first = table::strip_bom(first).to_string();
+        let lines = std::iter::once(Ok(first)).chain(input.lines());
+        for (i, line) in lines.enumerate() {
             let line = line?;
-            let n = i + 1;
             let text = line.trim();
             if text.is_empty() {
                 continue;
             }
-            if n == 1 && !text.starts_with('{') {
-                let columns: Vec<String> = text.split(',').map(|c| c.trim().to_string()).collect();
-                for key in CSV_HEADER.split(',') {
-                    if !columns.iter().any(|c| c == key) {
-                        return Err(PoseError::Line {
-                            line: n,
-                            reason: format!("CSV header lacks the column {key:?}"),
-                        });
-                    }
-                }
-                csv = Some(columns);
-                continue;
+            let sample = serde_json::from_str::<PoseSample>(text)
+                .map_err(|e| e.to_string())
+                .and_then(check)
+                .map_err(|reason| PoseError::Line {
+                    line: first_no + i,
+                    reason,
+                })?;
+            poses.add(sample);
+        }
+        Ok(poses)
+    }
+
+    /// The CSV form: a header naming at least the columns of [`CSV_HEADER`], in any order.
+    fn read_csv(input: impl std::io::Read) -> Result<Poses, PoseError> {
+        let mut rows = table::CsvRows::new(input).map_err(csv_error)?;
+        let columns = rows.header().to_vec();
+        for key in CSV_HEADER.split(',') {
+            if !columns.iter().any(|c| c == key) {
+                return Err(PoseError::Line {
+                    line: 1,
+                    reason: format!("CSV header lacks the column {key:?}"),
+                });
             }
-            let sample = match &csv {
-                Some(columns) => csv_sample(columns, text),
-                None => serde_json::from_str::<PoseSample>(text).map_err(|e| e.to_string()),
-            }
-            .and_then(check)
-            .map_err(|reason| PoseError::Line { line: n, reason })?;
+        }
+        let mut poses = Poses::new();
+        for row in rows.by_ref() {
+            let row = row.map_err(csv_error)?;
+            let sample = csv_sample(&columns, &row.cells)
+                .and_then(check)
+                .map_err(|reason| PoseError::Line {
+                    line: row.line as usize,
+                    reason,
+                })?;
             poses.add(sample);
         }
         Ok(poses)
@@ -404,9 +445,19 @@ fn blend(a: &Pose, b: &Pose, f: f64) -> Pose {
     }
 }
 
-/// A CSV row under `columns` as a sample.
-fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
-    let cells: Vec<&str> = text.split(',').map(str::trim).collect();
+/// A CSV file's error as a pose file's.
+fn csv_error(e: table::CsvError) -> PoseError {
+    match e {
+        table::CsvError::Io(e) => PoseError::Io(e),
+        table::CsvError::Syntax { line, reason } => PoseError::Line {
+            line: line as usize,
+            reason,
+        },
+    }
+}
+
+/// A CSV row's cells under `columns` as a sample.
+fn csv_sample(columns: &[String], cells: &[String]) -> Result<PoseSample, String> {
     if cells.len() != columns.len() {
         return Err(format!(
             "has {} fields, the header {}",
@@ -418,8 +469,8 @@ fn csv_sample(columns: &[String], text: &str) -> Result<PoseSample, String> {
         columns
             .iter()
             .position(|c| c == key)
-            .and_then(|i| cells.get(i).copied())
-            .unwrap_or("")
+            .and_then(|i| cells.get(i))
+            .map_or("", String::as_str)
     };
     let number = |key: &str| -> Result<f64, String> {
         let v = cell(key);

@@ -172,3 +172,27 @@ fn a_pose_file_is_loaded_by_its_path_and_its_errors_name_the_file_and_the_line()
     assert!(e.starts_with(&format!("{}: ", missing.display())), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_spreadsheets_csv_reads_as_the_plain_one() {
+    // Excel's "CSV UTF-8": a byte-order mark, CRLF line ends, and a reader name with a comma
+    // quoted.
+    let excel = "\u{feff}t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\r\n\
+                 0,\"dock, north\",1,0,2,0.5,90,0\r\n\
+                 1000,\"dock, north\",1,0.1,2,0.5,90,0\r\n";
+    let poses = Poses::read(excel.as_bytes()).expect("reads");
+    assert_eq!(poses.len(), 2);
+    let p = poses
+        .at("dock, north", 1, 500)
+        .expect("between the two samples");
+    assert!((p.pose.position[0] - 0.05).abs() < 1e-12, "{p:?}");
+    let err = Poses::read(
+        "\u{feff}t_us,reader,antenna,x,y,z,yaw_deg,pitch_deg\r\n\r\n0,r,1,0,two,0.5,0,0\r\n"
+            .as_bytes(),
+    )
+    .expect_err("y is not a number")
+    .to_string();
+    assert_eq!(err, "line 3: y: not a number: \"two\"");
+    let jsonl = "\u{feff}{\"t_us\":0,\"reader\":\"r\",\"antenna\":1,\"x\":0,\"y\":0,\"z\":0,\"yaw_deg\":0}\r\n";
+    assert_eq!(Poses::read(jsonl.as_bytes()).expect("JSON Lines").len(), 1);
+}

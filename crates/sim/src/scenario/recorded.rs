@@ -4,6 +4,7 @@
 
 use llrp_gateway_vocab::pose::{Pose, PoseSample};
 use llrp_gateway_vocab::reader_name::ReaderName;
+use llrp_gateway_vocab::table;
 use serde::Deserialize;
 
 /// One line of a recorded pose list, as the file has it (seconds, metres, degrees).
@@ -53,42 +54,58 @@ pub fn parse_poses(
     Ok(poses)
 }
 
-/// The rows of a pose list, JSON Lines or CSV.
+/// The rows of a pose list, JSON Lines or CSV (through [`table`]: quoted cells, a
+/// byte-order mark and CRLF line ends as a spreadsheet writes them). Blank lines and lines
+/// starting with `#` are skipped in both.
 fn parse_rows(text: &str) -> Result<Vec<Row>, String> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-    let Some((first_no, first)) = lines.next() else {
-        return Err("no poses".to_string());
-    };
-    let mut rows = Vec::new();
-    if first.starts_with('{') {
-        for (no, line) in std::iter::once((first_no, first)).chain(lines) {
-            let r: Row = serde_json::from_str(line).map_err(|e| format!("line {no}: {e}"))?;
-            rows.push(r);
-        }
-        return Ok(rows);
+    let text = table::strip_bom(text);
+    if !table::is_json_lines(text) {
+        return parse_csv_rows(text);
     }
-    let header: Vec<&str> = first.split(',').map(str::trim).collect();
-    if header != COLUMNS {
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let r: Row = serde_json::from_str(line).map_err(|e| format!("line {}: {e}", i + 1))?;
+        rows.push(r);
+    }
+    if rows.is_empty() {
+        return Err("no poses".to_string());
+    }
+    Ok(rows)
+}
+
+/// The rows of a pose list in CSV, under the header [`COLUMNS`].
+fn parse_csv_rows(text: &str) -> Result<Vec<Row>, String> {
+    if text
+        .lines()
+        .all(|l| l.trim().is_empty() || l.trim().starts_with('#'))
+    {
+        return Err("no poses".to_string());
+    }
+    let mut csv = table::CsvRows::new(text.as_bytes()).map_err(|e| e.to_string())?;
+    if csv.header() != COLUMNS {
         return Err(format!(
-            "line {first_no}: CSV header must be `{}`, got `{first}`",
-            COLUMNS.join(",")
+            "CSV header must be `{}`, got `{}`",
+            COLUMNS.join(","),
+            csv.header().join(",")
         ));
     }
-    for (no, line) in lines {
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() != COLUMNS.len() {
+    let mut rows = Vec::new();
+    for row in csv.by_ref() {
+        let row = row.map_err(|e| e.to_string())?;
+        let no = row.line;
+        if row.cells.len() != COLUMNS.len() {
             return Err(format!(
                 "line {no}: expected {} values, got {}",
                 COLUMNS.len(),
-                fields.len()
+                row.cells.len()
             ));
         }
         let mut v = [0.0; 6];
-        for (slot, (field, name)) in v.iter_mut().zip(fields.iter().zip(COLUMNS)) {
+        for (slot, (field, name)) in v.iter_mut().zip(row.cells.iter().zip(COLUMNS)) {
             *slot = field
                 .parse::<f64>()
                 .map_err(|_| format!("line {no}: {name} is not a number: `{field}`"))?;
@@ -144,6 +161,10 @@ mod tests {
         let b = parse_poses(jsonl, &r, 2).expect("valid JSONL");
         assert_eq!(a, b);
         assert_eq!(a.len(), 2);
+        // As a spreadsheet saves it: a byte-order mark, CRLF, a quoted cell.
+        let excel =
+            "\u{feff}t_s,x,y,z,yaw_deg,pitch_deg\r\n0,1,2,3,\"90\",0\r\n1.5,2,2,3,180,10\r\n";
+        assert_eq!(parse_poses(excel, &r, 2).expect("valid CSV"), a);
         assert_eq!(
             (a[1].t_us, a[1].reader.as_ref(), a[1].antenna),
             (1_500_000, Some(&r), 2)

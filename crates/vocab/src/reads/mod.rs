@@ -87,24 +87,24 @@ impl std::fmt::Debug for PoseAt {
 pub const CSV_HEADER: &str = "epc,reader,antenna,t_us,last_seen_us,phase_rad,rssi_dbm,channel_index,channel_frequency_hz,doppler_hz";
 
 impl Read {
-    /// One CSV row (no line end) in the order of [`CSV_HEADER`]; absent values are empty.
-    pub fn csv_row(&self) -> String {
+    /// The cells of one CSV row in the order of [`CSV_HEADER`]; absent values are empty.
+    /// Written through [`crate::table::CsvWriter`], which quotes a reader name that needs it.
+    pub fn csv_cells(&self) -> [String; 10] {
         fn opt<T: ToString>(v: &Option<T>) -> String {
             v.as_ref().map(ToString::to_string).unwrap_or_default()
         }
-        format!(
-            "{},{},{},{},{},{},{},{},{},{}",
-            self.epc,
-            self.reader.as_deref().unwrap_or(""),
-            self.antenna,
-            self.t_us,
+        [
+            self.epc.to_string(),
+            self.reader.as_deref().unwrap_or("").to_string(),
+            self.antenna.to_string(),
+            self.t_us.to_string(),
             opt(&self.last_seen_us),
             opt(&self.phase_rad),
             opt(&self.rssi_dbm),
             opt(&self.channel_index),
             opt(&self.channel_frequency_hz),
             opt(&self.doppler_hz),
-        )
+        ]
     }
 }
 
