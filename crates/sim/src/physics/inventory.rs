@@ -288,6 +288,7 @@ impl Model {
             rssi_dbm,
             phase_rad,
             doppler_hz,
+            margin_db,
         })
     }
 

@@ -82,6 +82,9 @@ pub struct Read {
     /// Doppler shift in Hz, positive when the tag approaches the antenna (0 when not asked
     /// for).
     pub doppler_hz: f64,
+    /// The forward link's margin over the tag's read sensitivity at the read, dB: what an
+    /// access on the tag has to work with (a write needs more, `reader::access::link`).
+    pub margin_db: f64,
 }
 
 /// Which optional values of a [`Read`] to work out; the others (tag, antenna, time, channel,
@@ -465,6 +468,19 @@ impl Model {
     /// Number of tags.
     pub fn tag_count(&self) -> usize {
         self.tags.len()
+    }
+
+    /// The generator of the draws of an access on `tag` singulated by `antenna` at
+    /// `time_us`: seeded by the scenario and that identity only.
+    pub fn access_stream(&self, tag: usize, antenna: u16, time_us: u64) -> seed::Stream {
+        seed::stream(&[
+            self.seed,
+            seed::domain::ACCESS,
+            self.reader as u64,
+            tag as u64,
+            u64::from(antenna),
+            time_us,
+        ])
     }
 
     /// EPC of tag `tag` (an all-zero EPC-96 for an unknown tag).

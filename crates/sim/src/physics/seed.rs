@@ -101,6 +101,8 @@ pub mod domain {
     pub const FLAGS: u64 = 8;
     /// What hardware adds: the antennas' phase patterns and fixed per-channel draws.
     pub const HARDWARE: u64 = 9;
+    /// Tag access operations: the link's fades while a tag is accessed.
+    pub const ACCESS: u64 = 10;
 }
 
 /// Default TID: `E2801160` (class E2, Impinj-style XTID manufacturer 0x801, model 0x160)

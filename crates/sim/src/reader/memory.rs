@@ -31,8 +31,11 @@ pub enum Fault {
     ZeroKillPassword,
     /// Any other error the tag backscatters (a write to the StoredCRC).
     Tag,
-    /// The tag ignores the command and does not reply (a Lock in the open state).
+    /// The tag ignores the command and does not reply (a Lock in the open state), or the
+    /// reply is lost (the tag faded out of the field: `access::link`).
     Ignored,
+    /// The tag has too little power to program its memory (Gen2 error code 0x0B).
+    Power,
 }
 
 /// The lock bits of one field (Gen2 Table 6.45): pwd-write or pwd-read/write, and permalock.

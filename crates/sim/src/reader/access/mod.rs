@@ -3,6 +3,7 @@
 //! readers ([`super::memory`]); ClientRequestOpSpec and vendor operations are refused as
 //! unsupported.
 
+pub mod link;
 mod ops;
 
 use llrp::codec::BitVec;
@@ -25,6 +26,12 @@ pub struct Tag<'a> {
     pub tag: usize,
     /// The session's LLRP version (result codes differ between 1.0.1 and 1.1).
     pub version: u8,
+    /// The antenna whose read singulated the tag.
+    pub antenna: u16,
+    /// The time of that read, µs of simulated time.
+    pub time_us: u64,
+    /// That read's forward-link margin over the tag's read sensitivity, dB ([`link`]).
+    pub margin_db: f64,
 }
 
 /// One AccessSpec and its counters.
@@ -163,7 +170,11 @@ impl AccessSpecs {
             return (Vec::new(), 0);
         };
         let e = &mut self.entries[i];
-        let results = ops::run(&e.spec.access_command.op_specs, tag);
+        let mut link = link::Link::new(
+            tag.margin_db,
+            tag.model.access_stream(tag.tag, tag.antenna, tag.time_us),
+        );
+        let results = ops::run(&e.spec.access_command.op_specs, tag, &mut link);
         let id = e.spec.access_spec_id;
         e.executed += 1;
         let t = &e.spec.access_spec_stop_trigger;

@@ -10,6 +10,7 @@
 use llrp::params::*;
 use llrp::StatusCode;
 
+use super::link::{Exchange, Link};
 use super::Tag;
 use crate::reader::memory::{Fault, Privilege, LOCK_FIELDS};
 
@@ -78,12 +79,12 @@ fn nested(op: u16, inner: ParameterError, why: &str) -> LlrpStatus {
 /// Runs `ops` in order on `tag`; an operation that fails ends the sequence, its result the
 /// last one reported (ours: after a failure the tag's state is not what the later operations
 /// were written for).
-pub(super) fn run(ops: &[OpSpec], tag: &Tag<'_>) -> Vec<OpSpecResult> {
+pub(super) fn run(ops: &[OpSpec], tag: &Tag<'_>, link: &mut Link) -> Vec<OpSpecResult> {
     let mut results = Vec::with_capacity(ops.len());
     for op in ops {
         let (result, ok) = tag
             .memory
-            .with_chip(tag.model, tag.tag, |chip| one(op, chip, tag.version));
+            .with_chip(tag.model, tag.tag, |chip| one(op, chip, tag.version, link));
         results.extend(result);
         if !ok {
             break;
@@ -92,15 +93,23 @@ pub(super) fn run(ops: &[OpSpec], tag: &Tag<'_>) -> Vec<OpSpecResult> {
     results
 }
 
-/// One operation on `chip`: its result, and whether it succeeded.
-fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<OpSpecResult>, bool) {
+/// One operation on `chip` over `link`: its result, and whether it succeeded.
+fn one(
+    op: &OpSpec,
+    chip: &mut crate::reader::memory::Chip,
+    v: u8,
+    link: &mut Link,
+) -> (Option<OpSpecResult>, bool) {
     if chip.killed {
         // Killed by an earlier operation of the same AccessSpec: it answers nothing more.
         return (None, false);
     }
     let (result, ok) = match op {
         OpSpec::C1g2Read(r) => {
-            let got = chip.read(r.mb, r.word_pointer, r.word_count, r.access_password);
+            let got = match link.exchange(false) {
+                Exchange::Done => chip.read(r.mb, r.word_pointer, r.word_count, r.access_password),
+                _ => Err(Fault::Ignored),
+            };
             let ok = got.is_ok();
             let (result, read_data) = match got {
                 Ok(words) => (0, words),
@@ -115,7 +124,7 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2Read(r), ok)
         }
         OpSpec::C1g2Write(w) => {
-            let (n, fault) = chip.write(w.mb, w.word_pointer, &w.write_data, w.access_password);
+            let (n, fault) = write_words(chip, w, link);
             let r = C1g2WriteOpSpecResult {
                 result: fault.map_or(0, |f| write_code(f, v)),
                 op_spec_id: w.op_spec_id,
@@ -125,7 +134,9 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2Write(r), fault.is_none())
         }
         OpSpec::C1g2BlockWrite(w) => {
-            let got = chip.block_write(w.mb, w.word_pointer, &w.write_data, w.access_password);
+            let got = powered(link).and_then(|()| {
+                chip.block_write(w.mb, w.word_pointer, &w.write_data, w.access_password)
+            });
             let r = C1g2BlockWriteOpSpecResult {
                 result: got.err().map_or(0, |f| write_code(f, v)),
                 op_spec_id: w.op_spec_id,
@@ -135,7 +146,8 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2BlockWrite(r), got.is_ok())
         }
         OpSpec::C1g2BlockErase(e) => {
-            let got = chip.erase(e.mb, e.word_pointer, e.word_count, e.access_password);
+            let got = powered(link)
+                .and_then(|()| chip.erase(e.mb, e.word_pointer, e.word_count, e.access_password));
             let r = C1g2BlockEraseOpSpecResult {
                 result: got.err().map_or(0, |f| write_code(f, v)),
                 op_spec_id: e.op_spec_id,
@@ -144,7 +156,7 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2BlockErase(r), got.is_ok())
         }
         OpSpec::C1g2Lock(l) => {
-            let got = chip.lock(&payloads(l), l.access_password);
+            let got = powered(link).and_then(|()| chip.lock(&payloads(l), l.access_password));
             let r = C1g2LockOpSpecResult {
                 result: got.err().map_or(0, |f| lock_code(f, v)),
                 op_spec_id: l.op_spec_id,
@@ -153,7 +165,7 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
             (OpSpecResult::C1g2Lock(r), got.is_ok())
         }
         OpSpec::C1g2Kill(k) => {
-            let got = chip.kill(k.kill_password);
+            let got = powered(link).and_then(|()| chip.kill(k.kill_password));
             let r = C1g2KillOpSpecResult {
                 result: got.err().map_or(0, |f| kill_code(f, v)),
                 op_spec_id: k.op_spec_id,
@@ -165,6 +177,43 @@ fn one(op: &OpSpec, chip: &mut crate::reader::memory::Chip, v: u8) -> (Option<Op
         OpSpec::ClientRequestOpSpec(_) | OpSpec::Custom(_) => return (None, false),
     };
     (Some(result), ok)
+}
+
+/// A Write, a word at a time, each word one exchange over `link` (Gen2 writes one word per
+/// Write command): the words written, and the fault that stopped it.
+fn write_words(
+    chip: &mut crate::reader::memory::Chip,
+    w: &C1g2Write,
+    link: &mut Link,
+) -> (u16, Option<Fault>) {
+    let mut written = 0u16;
+    for (i, word) in w.write_data.iter().enumerate() {
+        if let Err(f) = powered(link) {
+            return (written, Some(f));
+        }
+        // The pointer of a word past the 16-bit address space is an overrun.
+        let Some(pointer) = u16::try_from(i)
+            .ok()
+            .and_then(|i| w.word_pointer.checked_add(i))
+        else {
+            return (written, Some(Fault::Overrun));
+        };
+        let (n, fault) = chip.write(w.mb, pointer, std::slice::from_ref(word), w.access_password);
+        written += n;
+        if fault.is_some() {
+            return (written, fault);
+        }
+    }
+    (written, None)
+}
+
+/// One exchange of a command that programs the tag's memory: the fault it ends in, if any.
+fn powered(link: &mut Link) -> Result<(), Fault> {
+    match link.exchange(true) {
+        Exchange::Done => Ok(()),
+        Exchange::InsufficientPower => Err(Fault::Power),
+        Exchange::Lost => Err(Fault::Ignored),
+    }
 }
 
 /// A Lock's payloads as (privilege, field), every one in range (`check` refused the others).
@@ -193,22 +242,25 @@ fn read_code(f: Fault, v: u8) -> u8 {
 }
 
 /// C1G2WriteResultType (also BlockWrite's and BlockErase's): 1 Tag_Memory_Overrun_Error,
-/// 2 Tag_Memory_Locked_Error, 4 Nonspecific_Tag_Error, 5 No_Response_From_Tag; LLRP 1.1
-/// adds 7 Incorrect_Password_Error.
+/// 2 Tag_Memory_Locked_Error, 3 Insufficient_Power, 4 Nonspecific_Tag_Error,
+/// 5 No_Response_From_Tag; LLRP 1.1 adds 7 Incorrect_Password_Error.
 fn write_code(f: Fault, v: u8) -> u8 {
     match (f, v >= 2) {
         (Fault::Overrun, _) => 1,
         (Fault::Locked, _) => 2,
+        (Fault::Power, _) => 3,
         (Fault::Password, true) => 7,
         (Fault::Password, false) | (Fault::Ignored, _) => 5,
         _ => 4,
     }
 }
 
-/// C1G2LockResultType: 2 Nonspecific_Tag_Error, 3 No_Response_From_Tag; LLRP 1.1 adds
-/// 5 Incorrect_Password_Error, 6 Tag_Memory_Overrun_Error, 7 Tag_Memory_Locked_Error.
+/// C1G2LockResultType: 1 Insufficient_Power, 2 Nonspecific_Tag_Error, 3 No_Response_From_Tag;
+/// LLRP 1.1 adds 5 Incorrect_Password_Error, 6 Tag_Memory_Overrun_Error,
+/// 7 Tag_Memory_Locked_Error.
 fn lock_code(f: Fault, v: u8) -> u8 {
     match (f, v >= 2) {
+        (Fault::Power, _) => 1,
         (Fault::Password, true) => 5,
         (Fault::Overrun, true) => 6,
         (Fault::Locked, true) => 7,
@@ -217,11 +269,12 @@ fn lock_code(f: Fault, v: u8) -> u8 {
     }
 }
 
-/// C1G2KillResultType: 1 Zero_Kill_Password_Error, 3 Nonspecific_Tag_Error,
-/// 4 No_Response_From_Tag; LLRP 1.1 adds 6 Incorrect_Password_Error.
+/// C1G2KillResultType: 1 Zero_Kill_Password_Error, 2 Insufficient_Power,
+/// 3 Nonspecific_Tag_Error, 4 No_Response_From_Tag; LLRP 1.1 adds 6 Incorrect_Password_Error.
 fn kill_code(f: Fault, v: u8) -> u8 {
     match (f, v >= 2) {
         (Fault::ZeroKillPassword, _) => 1,
+        (Fault::Power, _) => 2,
         (Fault::Password, true) => 6,
         (Fault::Password, false) | (Fault::Ignored, _) => 4,
         _ => 3,
