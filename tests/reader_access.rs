@@ -424,3 +424,75 @@ fn a_marginal_tag_reads_but_fails_writes_for_want_of_power() {
         "{far:?}"
     );
 }
+
+/// Runs ROSpec 1 on antenna 1 with report trigger None (reads wait for GET_REPORT) for one
+/// simulated second with AccessSpec 5 (a Read of user word 0 on every tag, its own
+/// AccessReportSpec `own`, the reader's default `default`); gives the RO_ACCESS_REPORTs'
+/// tag reports that arrived meanwhile.
+fn unasked_reports(
+    own: Option<AccessReportTriggerType>,
+    default: AccessReportTriggerType,
+) -> Vec<TagReportData> {
+    let mut v = VirtualReader::new(&scenario());
+    let config = llrp::message::SetReaderConfig {
+        access_report_spec: Some(AccessReportSpec {
+            access_report_trigger: default,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(v.status(config), StatusCode::M_Success);
+    v.add_access_spec(AccessSpec {
+        access_spec_id: 5,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
+        access_command: AccessCommand {
+            c1g2_tag_spec: last_byte_is(1),
+            op_specs: vec![read(1, 3, 0, 1, 0)],
+            ..Default::default()
+        },
+        access_report_spec: own.map(|t| AccessReportSpec {
+            access_report_trigger: t,
+            ..Default::default()
+        }),
+        ..Default::default()
+    });
+    let spec = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::None, 0),
+    );
+    let add = llrp::message::AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(v.status(add), StatusCode::M_Success);
+    let enable = llrp::message::EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(enable), StatusCode::M_Success);
+    v.collect_reports(1_000_000, |_| false).0
+}
+
+#[test]
+fn access_results_are_reported_at_once_with_end_of_accessspec() {
+    use AccessReportTriggerType::{EndOfAccessSpec, WheneverRoReportIsGenerated};
+    // The reader's default: with the ROSpec's reports, which wait for GET_REPORT here.
+    assert!(unasked_reports(None, WheneverRoReportIsGenerated).is_empty());
+    // End of AccessSpec, set on the reader or on the AccessSpec: each tag's results come at
+    // once, in a report of their own, carrying only the accessed tag and its results.
+    for (own, default) in [
+        (None, EndOfAccessSpec),
+        (Some(EndOfAccessSpec), WheneverRoReportIsGenerated),
+    ] {
+        let tags = unasked_reports(own, default);
+        assert!(tags.len() >= 5, "{} reports", tags.len());
+        assert!(tags.iter().all(|t| t.epc_bytes().last() == Some(&1)
+            && t.access_spec_id == Some(AccessSpecId(5))
+            && outcomes(&t.op_spec_results) == ["read 0 [0000]"]));
+    }
+    // The AccessSpec's own spec wins over the reader's.
+    assert!(unasked_reports(Some(WheneverRoReportIsGenerated), EndOfAccessSpec).is_empty());
+}

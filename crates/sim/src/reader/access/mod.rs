@@ -150,15 +150,18 @@ impl AccessSpecs {
             .collect()
     }
 
-    /// Runs the first enabled AccessSpec that matches this read; returns its results and ID.
+    /// Runs the first enabled AccessSpec that matches this read: its results, ID and when
+    /// they are reported (the AccessSpec's own AccessReportSpec, else `default_report`, the
+    /// reader's).
     pub fn apply(
         &mut self,
         tag: &Tag<'_>,
         antenna: u16,
         ro_spec_id: u32,
-    ) -> (Vec<OpSpecResult>, u32) {
+        default_report: AccessReportTriggerType,
+    ) -> Applied {
         if !self.entries.iter().any(|e| e.enabled) {
-            return (Vec::new(), 0);
+            return Applied::default();
         }
         let pos = self.entries.iter().position(|e| {
             e.enabled
@@ -167,7 +170,7 @@ impl AccessSpecs {
                 && tag_matches(&e.spec.access_command.c1g2_tag_spec, tag)
         });
         let Some(i) = pos else {
-            return (Vec::new(), 0);
+            return Applied::default();
         };
         let e = &mut self.entries[i];
         let mut link = link::Link::new(
@@ -176,6 +179,11 @@ impl AccessSpecs {
         );
         let results = ops::run(&e.spec.access_command.op_specs, tag, &mut link);
         let id = e.spec.access_spec_id;
+        let report = e
+            .spec
+            .access_report_spec
+            .as_ref()
+            .map_or(default_report, |r| r.access_report_trigger);
         e.executed += 1;
         let t = &e.spec.access_spec_stop_trigger;
         if t.access_spec_stop_trigger_type == AccessSpecStopTriggerType::OperationCount
@@ -185,8 +193,24 @@ impl AccessSpecs {
             // Operation count reached: the AccessSpec is deleted, as the spec says.
             self.entries.remove(i);
         }
-        (results, id)
+        Applied {
+            results,
+            access_spec_id: id,
+            at_once: report == AccessReportTriggerType::EndOfAccessSpec,
+        }
     }
+}
+
+/// What an AccessSpec did on a tag.
+#[derive(Debug, Default)]
+pub struct Applied {
+    /// The results of its operations (none when no AccessSpec ran).
+    pub results: Vec<OpSpecResult>,
+    /// The AccessSpec that ran (0: none).
+    pub access_spec_id: u32,
+    /// Reported at once, in an RO_ACCESS_REPORT of their own (AccessReportTrigger End of
+    /// AccessSpec), not with the ROSpec's reports.
+    pub at_once: bool,
 }
 
 /// Whether a tag satisfies a C1G2TagSpec (first target tag; the second, if any, must too).

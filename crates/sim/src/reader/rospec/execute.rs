@@ -236,7 +236,7 @@ impl Specs {
             // Reported, so in B now (a read the stop trigger cuts off stays A).
             ctx.flags.read(r.tag, slice.air.session, r.time_us);
         }
-        let (op_spec_results, access_spec_id) = ctx.access.apply(
+        let applied = ctx.access.apply(
             &crate::reader::access::Tag {
                 model: ctx.model,
                 memory: ctx.memory,
@@ -248,8 +248,9 @@ impl Specs {
             },
             slice.antenna,
             rep.ro_id,
+            ctx.config.access_report_spec.access_report_trigger,
         );
-        let o = Observation {
+        let mut o = Observation {
             // The EPC the tag was singulated with, whatever its operations wrote.
             epc,
             pc,
@@ -263,14 +264,24 @@ impl Specs {
             doppler_hz: r.doppler_hz,
             utc_us: ctx.utc_epoch_us + r.time_us,
             uptime_us: r.time_us,
-            op_spec_results,
-            access_spec_id,
+            op_spec_results: applied.results,
+            access_spec_id: applied.access_spec_id,
             tid: if rep.content.impinj.serialized_tid {
                 ctx.model.tag_tid(r.tag)
             } else {
                 Vec::new()
             },
         };
+        if applied.at_once && applied.access_spec_id != 0 {
+            // The access results go out now, in a report of their own with the ROSpec's
+            // content; the read itself waits for the ROSpec's report trigger.
+            out.push(Produced::Reports(vec![crate::reader::report::build(
+                &o,
+                rep.content,
+            )]));
+            o.op_spec_results = Vec::new();
+            o.access_spec_id = 0;
+        }
         self.buffer.add(&o, rep.content, rep.aggregate);
         if run.seen.insert(r.tag) {
             run.last_new_us = r.time_us;
