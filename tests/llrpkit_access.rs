@@ -78,3 +78,81 @@ async fn llrpkit_writes_reads_and_relabels_a_tag() {
     assert!(lower.contains("111122223333444455556666"), "{text}");
     assert!(!lower.contains("e20000000000000000000001"), "{text}");
 }
+
+/// A simulator of `s` keeping its tags' memory in `file` (`sim --tag-memory`), if given.
+async fn sim_with_memory(
+    s: &llrp_gateway::scenario::Scenario,
+    file: Option<&std::path::Path>,
+) -> llrp_gateway::sim::RunningSim {
+    llrp_gateway::sim::start(
+        s,
+        &llrp_gateway::sim::SimOptions {
+            tag_memory: file.map(std::path::Path::to_path_buf),
+            ..Default::default()
+        },
+    )
+    .await
+    .expect("simulator starts")
+}
+
+/// `llrpkit read` of three words of user memory on a simulator of `s` keeping its memory in
+/// `file`; then the simulator stops.
+async fn read_user(
+    s: &llrp_gateway::scenario::Scenario,
+    file: Option<&std::path::Path>,
+) -> (String, bool) {
+    let sim = sim_with_memory(s, file).await;
+    let port = sim.addrs[0].port();
+    let read = tokio::task::spawn_blocking(move || {
+        llrpkit(port, &["read", "--words", "3", "--bank", "user"])
+    })
+    .await
+    .expect("join");
+    sim.shutdown().await;
+    read
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs llrpkit 0.3.0 (LLRP_LLRPKIT, set by ./scripts/test)"]
+async fn a_tag_written_in_one_run_reads_so_in_the_next_with_tag_memory() {
+    let s = line_scenario(&[1.0]);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("memory.json");
+    let sim = sim_with_memory(&s, Some(&file)).await;
+    let port = sim.addrs[0].port();
+    let write = tokio::task::spawn_blocking(move || {
+        llrpkit(port, &["write", "--data", "BEEFCAFE", "--bank", "user"])
+    })
+    .await
+    .expect("join");
+    sim.shutdown().await;
+    assert!(
+        write.1 && write.0.contains("2 word(s) written"),
+        "{}",
+        write.0
+    );
+    let saved = std::fs::read_to_string(&file).expect("the memory was written out");
+    assert!(saved.contains("\"user\": \"BEEFCAFE"), "{saved}");
+    // The next run starts from the file; one without it from the scenario.
+    let read = read_user(&s, Some(&file)).await;
+    assert!(read.1 && read.0.contains("data beefcafe0000"), "{}", read.0);
+    let fresh = read_user(&s, None).await;
+    assert!(
+        fresh.1 && fresh.0.contains("data 000000000000"),
+        "{}",
+        fresh.0
+    );
+    // A file that is not a tag memory of this scenario is refused, naming the field.
+    std::fs::write(&file, saved.replace("\"scenario_epc\": \"E2", "\"scenario_epc\": \"AB")).expect("written");
+    let e = llrp_gateway::sim::start(
+        &s,
+        &llrp_gateway::sim::SimOptions {
+            tag_memory: Some(file.clone()),
+            ..Default::default()
+        },
+    )
+    .await
+    .err()
+    .expect("refused");
+    assert!(e.to_string().contains("tags[0].scenario_epc"), "{e}");
+}

@@ -77,6 +77,10 @@ pub enum Command {
         /// Replace an existing truth file (without it, an existing file is refused).
         #[arg(long, requires = "truth")]
         force: bool,
+        /// Keep the tags' memory (what clients wrote, locked and killed) in this file: read at
+        /// the start when it exists, written back as it changes (docs/simulator.md).
+        #[arg(long, value_name = "FILE")]
+        tag_memory: Option<PathBuf>,
         /// Record every session to this file (one file per reader, `FILE-NAME`, when the
         /// scenario has several), as the proxy does (docs/recordings.md).
         #[arg(long)]
@@ -182,6 +186,7 @@ pub fn main() -> ExitCode {
             speed,
             truth,
             force,
+            tag_memory,
             record,
             record_max_bytes,
             tls_cert,
@@ -218,6 +223,7 @@ pub fn main() -> ExitCode {
                         .zip(tls_key)
                         .map(|(cert, key)| crate::net::tls::ServerFiles { cert, key }),
                     localize: None,
+                    tag_memory,
                     ..SimOptions::default()
                 },
             ),

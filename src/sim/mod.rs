@@ -28,6 +28,7 @@ use prometheus_client::metrics::counter::Counter;
 
 pub mod feed;
 pub mod own;
+pub mod tag_memory;
 
 pub use feed::PoseSource;
 
@@ -63,6 +64,9 @@ pub struct SimOptions {
     pub localize: Option<LocalizeFeed>,
     /// Counts the LLRP frames clients send the readers (`/metrics`' `frames_in`).
     pub frames_in: Counter,
+    /// The tags' memory is read from this file (when it exists) and written back to it
+    /// ([`tag_memory`]).
+    pub tag_memory: Option<PathBuf>,
 }
 
 /// What the simulator feeds the live localizer.
@@ -90,6 +94,7 @@ impl Default for SimOptions {
             tls: None,
             localize: None,
             frames_in: Counter::default(),
+            tag_memory: None,
         }
     }
 }
@@ -126,6 +131,9 @@ pub enum SimError {
     /// The truth file could not be created.
     #[error("cannot create the truth file {0}")]
     Truth(crate::files::OutputError),
+    /// The tag memory file could not be read.
+    #[error("{0}")]
+    TagMemory(#[from] tag_memory::TagMemoryError),
 }
 
 /// A running simulation: its listeners and how to stop it.
@@ -139,6 +147,8 @@ pub struct RunningSim {
     truth: Option<Arc<Truth>>,
     recordings: Vec<RecorderTask>,
     own: Vec<JoinHandle<()>>,
+    /// Writes the tags' memory back to its file (`--tag-memory`).
+    saver: Option<Arc<tag_memory::Saver>>,
 }
 
 impl RunningSim {
@@ -170,6 +180,10 @@ impl RunningSim {
         }
         if let Some(t) = &self.truth {
             t.flush();
+        }
+        // The readers have stopped: what they wrote last is in the file.
+        if let Some(saver) = &self.saver {
+            saver.save().await;
         }
     }
 }
@@ -355,6 +369,14 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         shutdown: rx,
         references: Arc::new(scenario.tags.iter().map(|t| t.reference).collect()),
     };
+    let saver = match &opts.tag_memory {
+        Some(path) => {
+            let model = Arc::new(Model::in_world(&s.world, scenario, 0));
+            let saver = Arc::new(tag_memory::Saver::open(path, model, s.memory.clone())?);
+            Some(saver)
+        }
+        None => None,
+    };
     let mut running = RunningSim {
         addrs: Vec::new(),
         names: Vec::new(),
@@ -363,7 +385,11 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         truth: s.truth.clone(),
         recordings: Vec::new(),
         own: Vec::new(),
+        saver: saver.clone(),
     };
+    if let Some(saver) = &saver {
+        running.own.push(saver.spawn(s.shutdown.clone()));
+    }
     for (i, spec) in scenario.readers.iter().enumerate() {
         let started = s.reader(i, spec).await?;
         running.addrs.push(started.addr);

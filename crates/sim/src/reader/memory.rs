@@ -346,6 +346,8 @@ impl Chip {
 pub struct TagMemory {
     /// Whether any tag has been copied into `chips` (until then every read is the scenario's).
     touched: AtomicBool,
+    /// Operations run on tags so far (a saver writes the memory out when it changed).
+    operations: std::sync::atomic::AtomicU64,
     chips: Mutex<HashMap<usize, Chip>>,
 }
 
@@ -385,7 +387,32 @@ impl TagMemory {
             .entry(tag)
             .or_insert_with(|| Chip::from_model(model, tag));
         self.touched.store(true, Ordering::Release);
+        self.operations.fetch_add(1, Ordering::Release);
         f(chip)
+    }
+
+    /// How many operations have run on tags so far: when it has not changed, neither has
+    /// the memory.
+    pub fn operations(&self) -> u64 {
+        self.operations.load(Ordering::Acquire)
+    }
+
+    /// Every tag an operation has touched, by scenario index, in index order.
+    pub fn snapshot(&self) -> Vec<(usize, Chip)> {
+        let mut all: Vec<(usize, Chip)> =
+            self.chips().iter().map(|(k, c)| (*k, c.clone())).collect();
+        all.sort_by_key(|(k, _)| *k);
+        all
+    }
+
+    /// Puts `chips` (by scenario index) in place of those tags' memory.
+    pub fn restore(&self, chips: Vec<(usize, Chip)>) {
+        let mut held = self.chips();
+        for (k, c) in chips {
+            held.insert(k, c);
+        }
+        self.touched.store(true, Ordering::Release);
+        self.operations.fetch_add(1, Ordering::Release);
     }
 
     /// A copy of tag `tag`'s memory as it is now.

@@ -13,6 +13,7 @@ mod access;
 pub mod caps;
 mod config;
 pub mod memory;
+pub mod memory_file;
 pub mod report;
 mod requests;
 mod rospec;
