@@ -5,47 +5,25 @@ use llrp::enums::CapabilitiesRequest;
 use llrp::message::GetReaderCapabilitiesResponse;
 use llrp::params::*;
 
+use super::device::{ModeEntry, DEFAULT};
 use super::ReaderProfile;
 
 /// Impinj's IANA private enterprise number (DeviceManufacturerName of an Impinj reader).
-pub const IMPINJ_VENDOR: u32 = 25882;
-/// ModelName of an Impinj Speedway R420 (what Octane-era clients expect to see).
-pub const MODEL_R420: u32 = 2001002;
-/// Firmware version string reported in GeneralDeviceCapabilities.
-pub const FIRMWARE: &str = "5.12.0.240";
-/// Lowest power of the transmit power table, hundredths of dBm (index 1).
-pub const POWER_MIN_CDBM: i16 = 1000;
-/// Power table step, hundredths of dBm (0.25 dB, as Impinj readers).
-pub const POWER_STEP_CDBM: i16 = 25;
-/// Number of entries of the transmit power table (10.00 … 32.50 dBm).
-pub const POWER_LEVELS: u16 = 91;
-/// Number of entries of the receive sensitivity table.
-pub const SENSITIVITY_LEVELS: u16 = 42;
-/// ModeIdentifiers of the C1G2 RF mode table.
+pub const IMPINJ_VENDOR: u32 = super::device::IMPINJ_PEN;
+/// Highest index of the default device's transmit power table (its highest power).
+pub const POWER_LEVELS: u16 = DEFAULT.power.last_index;
+/// ModeIdentifiers of the default device's C1G2 RF mode table.
 pub const RF_MODES: [u32; 5] = [0, 1, 2, 3, 1000];
-
-/// Transmit power in dBm of a power-table index (1-based); `None` outside the table.
-pub fn power_dbm(index: u16) -> Option<f64> {
-    (1..=POWER_LEVELS)
-        .contains(&index)
-        .then(|| f64::from(POWER_MIN_CDBM + (index as i16 - 1) * POWER_STEP_CDBM) / 100.0)
-}
-
-/// The power-table index closest to `dbm`.
-pub fn power_index(dbm: f64) -> u16 {
-    let steps = ((dbm * 100.0 - f64::from(POWER_MIN_CDBM)) / f64::from(POWER_STEP_CDBM)).round();
-    (steps.clamp(0.0, f64::from(POWER_LEVELS - 1)) as u16) + 1
-}
 
 fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
     GeneralDeviceCapabilities {
         max_number_of_antenna_supported: p.antennas,
         can_set_antenna_properties: false,
         has_utc_clock_capability: true,
-        device_manufacturer_name: IMPINJ_VENDOR,
-        model_name: MODEL_R420,
-        reader_firmware_version: FIRMWARE.into(),
-        receive_sensitivity_table_entry: (1..=SENSITIVITY_LEVELS)
+        device_manufacturer_name: p.device.manufacturer,
+        model_name: p.device.model,
+        reader_firmware_version: p.device.firmware.into(),
+        receive_sensitivity_table_entry: (1..=p.device.sensitivity_levels)
             .map(|i| ReceiveSensitivityTableEntry {
                 index: i,
                 // Index 1 is the full sensitivity (0 dB); higher indices desensitise (Impinj).
@@ -57,13 +35,13 @@ fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
             .map(|a| PerAntennaReceiveSensitivityRange {
                 antenna_id: a,
                 receive_sensitivity_index_min: 1,
-                receive_sensitivity_index_max: SENSITIVITY_LEVELS,
+                receive_sensitivity_index_max: p.device.sensitivity_levels,
                 ..Default::default()
             })
             .collect(),
         gpio_capabilities: GpioCapabilities {
-            num_gpis: 4,
-            num_gpos: 4,
+            num_gpis: p.device.gpis,
+            num_gpos: p.device.gpos,
             ..Default::default()
         },
         per_antenna_air_protocol: (1..=p.antennas)
@@ -77,60 +55,38 @@ fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
     }
 }
 
-fn llrp_caps() -> LlrpCapabilities {
+fn llrp_caps(p: &ReaderProfile) -> LlrpCapabilities {
+    let d = p.device;
     LlrpCapabilities {
         can_do_rf_survey: false,
         can_report_buffer_fill_warning: true,
         supports_client_request_op_spec: false,
         can_do_tag_inventory_state_aware_singulation: true,
         supports_event_and_report_holding: true,
-        max_num_priority_levels_supported: 8,
+        max_num_priority_levels_supported: d.max_priority_levels,
         client_request_op_spec_timeout: 0,
-        max_num_ro_specs: super::MAX_ROSPECS,
-        max_num_specs_per_ro_spec: 32,
+        max_num_ro_specs: d.max_rospecs,
+        max_num_specs_per_ro_spec: d.max_specs_per_rospec,
         max_num_inventory_parameter_specs_per_ai_spec: 1,
-        max_num_access_specs: super::MAX_ACCESS_SPECS,
-        max_num_op_specs_per_access_spec: 8,
+        max_num_access_specs: d.max_access_specs,
+        max_num_op_specs_per_access_spec: d.max_op_specs_per_access_spec,
         ..Default::default()
     }
 }
 
-/// The Tari range (ns) mode `id` of the RF mode table allows.
-pub fn tari_range_ns(id: u32) -> (u32, u32) {
-    let mode = crate::physics::gen2::RfMode::impinj(id)
-        .unwrap_or(crate::physics::gen2::RfMode::IMPINJ_MODE_2);
-    let min = (mode.tari_us * 1e3).round() as u32;
-    (min, if id == 1000 { 25_000 } else { min })
-}
-
-fn rf_mode(id: u32) -> C1g2UhfRfModeTableEntry {
-    // The link parameters the physics runs each mode with; the forward link modulation
-    // (0 PR-ASK, 2 DSB-ASK) and spectral mask (2 multi-interrogator, 3 dense) as Impinj's.
-    let mode = crate::physics::gen2::RfMode::impinj(id)
-        .unwrap_or(crate::physics::gen2::RfMode::IMPINJ_MODE_2);
-    let m = match mode.miller {
-        1 => 0,
-        2 => 1,
-        4 => 2,
-        _ => 3,
-    };
-    let (fwd, mask) = if mode.miller <= 2 { (2, 2) } else { (0, 3) };
-    let dr = true;
-    let bdr = (mode.blf_khz * 1e3).round() as u32;
-    let pie = (mode.pie * 1e3).round() as u32;
-    let (tmin, tmax) = tari_range_ns(id);
+fn rf_mode(m: &ModeEntry) -> C1g2UhfRfModeTableEntry {
     C1g2UhfRfModeTableEntry {
-        mode_identifier: id,
-        dr_value: dr,
-        epc_hag_tc_conformance: false,
-        m_value: m,
-        forward_link_modulation: fwd,
-        spectral_mask_indicator: mask,
-        bdr_value: bdr,
-        pie_value: pie,
-        min_tari_value: tmin,
-        max_tari_value: tmax,
-        step_tari_value: 0,
+        mode_identifier: m.id,
+        dr_value: true,
+        epc_hag_tc_conformance: m.conformance,
+        m_value: m.m_value,
+        forward_link_modulation: m.modulation,
+        spectral_mask_indicator: m.mask,
+        bdr_value: m.bdr,
+        pie_value: m.pie,
+        min_tari_value: m.tari_ns.0,
+        max_tari_value: m.tari_ns.1,
+        step_tari_value: m.step_tari_ns,
         ..Default::default()
     }
 }
@@ -164,16 +120,21 @@ fn regulatory(p: &ReaderProfile) -> RegulatoryCapabilities {
         country_code: p.country_code,
         communications_standard: p.communications_standard,
         uhf_band_capabilities: Some(UhfBandCapabilities {
-            transmit_power_level_table_entry: (1..=POWER_LEVELS)
-                .map(|i| TransmitPowerLevelTableEntry {
-                    index: i,
-                    transmit_power_value: POWER_MIN_CDBM + (i as i16 - 1) * POWER_STEP_CDBM,
-                    ..Default::default()
+            transmit_power_level_table_entry: p
+                .device
+                .power
+                .indices()
+                .filter_map(|i| {
+                    Some(TransmitPowerLevelTableEntry {
+                        index: i,
+                        transmit_power_value: p.device.power.cdbm(i)?,
+                        ..Default::default()
+                    })
                 })
                 .collect(),
             frequency_information: frequency_information(p),
             c1g2_uhf_rf_mode_table: vec![C1g2UhfRfModeTable {
-                entries: RF_MODES.iter().map(|&m| rf_mode(m)).collect(),
+                entries: p.device.modes.iter().map(rf_mode).collect(),
                 ..Default::default()
             }],
             ..Default::default()
@@ -206,7 +167,7 @@ pub fn capabilities(
         llrp_status: LlrpStatus::success(),
         general_device_capabilities: (all || requested == R::GeneralDeviceCapabilities)
             .then(|| general(p)),
-        llrp_capabilities: (all || requested == R::LlrpCapabilities).then(llrp_caps),
+        llrp_capabilities: (all || requested == R::LlrpCapabilities).then(|| llrp_caps(p)),
         regulatory_capabilities: (all || requested == R::RegulatoryCapabilities)
             .then(|| regulatory(p)),
         c1g2_llrp_capabilities: (all || requested == R::AirProtocolLlrpCapabilities)
@@ -222,10 +183,10 @@ pub fn impinj_capabilities(p: &ReaderProfile, requested: u32) -> Vec<Custom> {
     if matches!(requested, 1000 | 1001) {
         out.push(Custom::ImpinjDetailedVersion(Box::new(
             ImpinjDetailedVersion {
-                model_name: "Speedway R420 (llrp-gateway simulation)".into(),
+                model_name: format!("{} (llrp-gateway simulation)", p.device.display_name),
                 serial_number: p.reader_id.iter().map(|b| format!("{b:02x}")).collect(),
-                software_version: FIRMWARE.into(),
-                firmware_version: FIRMWARE.into(),
+                software_version: p.device.firmware.into(),
+                firmware_version: p.device.firmware.into(),
                 fpga_version: "0.0.0.0".into(),
                 pcba_version: "0.0.0.0".into(),
                 ..Default::default()
@@ -271,15 +232,38 @@ pub fn impinj_configuration(p: &ReaderProfile, requested: u32) -> Vec<Custom> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::reader::device::IMPINJ_R420;
 
+    /// The default device's RF mode table is the one the simulator advertised before devices
+    /// existed (the physics' Impinj links, advertised as Impinj readers do).
     #[test]
-    fn power_table_round_trips_indices() {
-        for i in 1..=POWER_LEVELS {
-            let dbm = power_dbm(i).expect("index in table");
-            assert_eq!(power_index(dbm), i);
+    fn the_default_mode_table_is_the_one_advertised_before() {
+        for (m, &id) in IMPINJ_R420.modes.iter().zip(RF_MODES.iter()) {
+            let link = crate::physics::gen2::RfMode::impinj(id).expect("an Impinj mode");
+            let miller = link.miller;
+            let tari = (link.tari_us * 1e3).round() as u32;
+            let want = (
+                id,
+                [1, 2, 4, 8]
+                    .iter()
+                    .position(|&x| x == miller)
+                    .map(|p| p as u8),
+                if miller <= 2 { (2, 2) } else { (0, 3) },
+                (link.blf_khz * 1e3).round() as u32,
+                (link.pie * 1e3).round() as u32,
+                (tari, if id == 1000 { 25_000 } else { tari }),
+            );
+            let got = (
+                m.id,
+                Some(m.m_value),
+                (m.modulation, m.mask),
+                m.bdr,
+                m.pie,
+                m.tari_ns,
+            );
+            assert_eq!(got, want);
+            assert_eq!(m.link, link);
         }
-        assert_eq!(power_dbm(0), None);
-        assert_eq!(power_dbm(POWER_LEVELS + 1), None);
-        assert_eq!(power_dbm(POWER_LEVELS), Some(32.5));
+        assert_eq!(IMPINJ_R420.modes.len(), RF_MODES.len());
     }
 }

@@ -6,7 +6,8 @@ use llrp::message::{GetReaderConfig, GetReaderConfigResponse, SetReaderConfig};
 use llrp::params::*;
 use llrp::StatusCode;
 
-use super::{caps, field_error, ReaderProfile};
+use super::device::Device;
+use super::{field_error, ReaderProfile};
 
 /// The reader event types a client can turn on and off (hopping … antenna, and LLRP 1.1's
 /// SpecLoop).
@@ -15,6 +16,8 @@ pub const EVENT_TYPES: &[NotificationEventType] = NotificationEventType::ALL;
 /// The reader's current configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReaderConfig {
+    /// The device whose tables the configuration indexes (power, RF modes).
+    pub device: &'static Device,
     /// Per antenna (index = antenna ID − 1): its configuration as last set.
     pub antennas: Vec<AntennaConfiguration>,
     /// Default ROReportSpec, used by ROSpecs that carry none.
@@ -48,13 +51,14 @@ impl ReaderConfig {
                         .default_power_index
                         .get(usize::from(a - 1))
                         .copied()
-                        .unwrap_or(caps::POWER_LEVELS),
+                        .unwrap_or(p.device.power.last_index),
                     ..Default::default()
                 }),
                 c1g2_inventory_command: vec![C1g2InventoryCommand {
                     tag_inventory_state_aware: false,
                     c1g2_rf_control: Some(C1g2RfControl {
-                        mode_index: 1000,
+                        // ModeIndex is u16 on the wire; every device's default fits.
+                        mode_index: p.device.default_mode as u16,
                         tari: 0,
                         ..Default::default()
                     }),
@@ -70,6 +74,7 @@ impl ReaderConfig {
             })
             .collect();
         ReaderConfig {
+            device: p.device,
             antennas,
             ro_report_spec: RoReportSpec {
                 ro_report_trigger: RoReportTriggerType::UponNTagsOrEndOfRoSpec,
@@ -118,7 +123,9 @@ impl ReaderConfig {
     /// Configured transmit power of `antenna` in dBm.
     pub fn tx_power_dbm(&self, antenna: u16) -> Option<f64> {
         let a = self.antennas.get(usize::from(antenna).checked_sub(1)?)?;
-        caps::power_dbm(a.rf_transmitter.as_ref()?.transmit_power)
+        self.device
+            .power
+            .dbm(a.rf_transmitter.as_ref()?.transmit_power)
     }
 
     /// GET_READER_CONFIG_RESPONSE for a request.
@@ -386,7 +393,7 @@ pub fn validate_antenna_config(
         return Err(param_field_error(222, 0, 0, StatusCode::A_OutOfRange));
     }
     if let Some(tx) = &c.rf_transmitter {
-        if caps::power_dbm(tx.transmit_power).is_none() {
+        if p.device.power.dbm(tx.transmit_power).is_none() {
             return Err(param_field_error(222, 224, 2, StatusCode::A_OutOfRange));
         }
         if p.hopping && tx.hop_table_id != 1 {
@@ -397,7 +404,7 @@ pub fn validate_antenna_config(
         }
     }
     if let Some(rx) = &c.rf_receiver {
-        if rx.receiver_sensitivity == 0 || rx.receiver_sensitivity > caps::SENSITIVITY_LEVELS {
+        if rx.receiver_sensitivity == 0 || rx.receiver_sensitivity > p.device.sensitivity_levels {
             return Err(param_field_error(222, 223, 0, StatusCode::A_OutOfRange));
         }
     }
@@ -420,11 +427,11 @@ pub fn validate_antenna_config(
             }
         }
         if let Some(rf) = &cmd.c1g2_rf_control {
-            if !caps::RF_MODES.contains(&u32::from(rf.mode_index)) {
+            let Some(mode) = p.device.mode(u32::from(rf.mode_index)) else {
                 return Err(param_field_error(330, 335, 0, StatusCode::A_OutOfRange));
-            }
+            };
             // Tari 0 asks for the mode's own; another must lie in the mode's Tari range.
-            let (min, max) = caps::tari_range_ns(u32::from(rf.mode_index));
+            let (min, max) = mode.tari_ns;
             let tari = u32::from(rf.tari);
             if tari != 0 && !(min..=max).contains(&tari) {
                 let mut e = param_field_error(330, 335, 1, StatusCode::A_OutOfRange);

@@ -3,7 +3,8 @@
 //! drive it directly; [`session::Session`] adds the connections and the framing around it.
 //!
 //! It behaves like an Impinj-class reader: the ROSpec and AccessSpec lifecycles, start/stop
-//! triggers, report triggers, event notifications, keepalives and the Impinj extensions.
+//! triggers, report triggers, event notifications, keepalives and the Impinj extensions; its
+//! [`device::Device`] sets the identity, tables and extensions it presents.
 
 // An LLRPStatus is the natural error of request handling (it is what goes on the wire); it is
 // built only on a client's mistake, so its size on the error path does not matter.
@@ -12,6 +13,9 @@
 mod access;
 pub mod caps;
 mod config;
+pub mod device;
+#[cfg(test)]
+mod device_tests;
 pub mod memory;
 pub mod memory_file;
 pub mod report;
@@ -20,6 +24,7 @@ mod rospec;
 pub mod session;
 #[cfg(test)]
 mod tests;
+mod vendor;
 
 use std::sync::Arc;
 
@@ -36,10 +41,10 @@ pub use config::ReaderConfig;
 pub use rospec::SpecState;
 pub use rospec::ANTENNA_DWELL_US;
 
-/// Most ROSpecs the reader holds at once.
-pub const MAX_ROSPECS: u32 = 32;
-/// Most AccessSpecs the reader holds at once.
-pub const MAX_ACCESS_SPECS: u32 = 64;
+/// Most ROSpecs the default device holds at once.
+pub const MAX_ROSPECS: u32 = device::DEFAULT.max_rospecs;
+/// Most AccessSpecs the default device holds at once.
+pub const MAX_ACCESS_SPECS: u32 = device::DEFAULT.max_access_specs;
 
 /// Most TagReportData in one RO_ACCESS_REPORT (about 40 kB with every field).
 pub const REPORT_CHUNK: usize = 500;
@@ -55,6 +60,8 @@ pub const KEEPALIVE_MISSES: u32 = 3;
 pub struct ReaderProfile {
     /// Reader name in the scenario.
     pub name: ReaderName,
+    /// The device it presents itself as (the scenario reader's `device`).
+    pub device: &'static device::Device,
     /// Number of antenna ports.
     pub antennas: u16,
     /// Frequency hopping (FCC) or a fixed channel list (ETSI).
@@ -84,10 +91,17 @@ impl ReaderProfile {
     /// The profile of reader `index` of a scenario.
     pub fn from_scenario(s: &Scenario, index: usize, model: &Model) -> Self {
         let r = &s.readers[index];
+        // The scenario checked the name; an unknown one cannot reach here.
+        let device = r
+            .device
+            .as_deref()
+            .and_then(device::Device::named)
+            .unwrap_or(device::DEFAULT);
         let mut id = vec![0x00, 0x16, 0x25, 0x00, 0x00];
         id.push(index as u8);
         ReaderProfile {
             name: r.name.clone(),
+            device,
             antennas: model.antenna_count(),
             hopping: r.region.hopping(),
             frequencies_khz: model.frequencies_khz().to_vec(),
@@ -96,7 +110,7 @@ impl ReaderProfile {
             default_power_index: r
                 .antennas
                 .iter()
-                .map(|a| caps::power_index(a.tx_power_dbm))
+                .map(|a| device.power.index(a.tx_power_dbm))
                 .collect(),
             antenna_gain_dbi: r.antennas.iter().map(|a| a.gain_dbi).collect(),
             reader_id: id,

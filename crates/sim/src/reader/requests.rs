@@ -41,6 +41,12 @@ impl Reader {
             out.push(reply.to(self.wrong_version(&msg.body)));
             return out;
         }
+        if !self.profile.device.impinj_extensions {
+            if let Some(answer) = super::vendor::refuse(&msg.body) {
+                out.push(reply.to(answer));
+                return out;
+            }
+        }
         self.specs.default_trigger = self.config.ro_report_spec.ro_report_trigger;
         let unhandled = self
             .session_request(msg.body, reply, &mut out)

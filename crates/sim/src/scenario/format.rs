@@ -214,6 +214,10 @@ pub struct ReaderSpec {
     /// The reader model whose defaults this reader's antennas took (else the scenario's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reader_model: Option<String>,
+    /// The reader device it presents itself as over LLRP (identity, tables, extensions;
+    /// [`super::device::DEVICES`]); none: the default, an Impinj Speedway R420.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<String>,
 }
 
 /// Orientation and position of an antenna or an antenna offset (metres, radians): the

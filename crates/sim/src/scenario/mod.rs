@@ -2,6 +2,7 @@
 //! move — read from JSON files and checked before use.
 
 mod defaults;
+pub mod device;
 mod format;
 mod hardware_checks;
 mod mount;

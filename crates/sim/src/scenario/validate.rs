@@ -268,7 +268,7 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
     for (a, antenna) in r.antennas.iter().enumerate() {
         validate_antenna(s, &format!("{p}.antennas[{a}]"), antenna, channels)?;
     }
-    Ok(())
+    super::device::validate(p, r)
 }
 
 /// Checks a custom region's hop table: 1 to 65535 distinct UHF RFID channels.

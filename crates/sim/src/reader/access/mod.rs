@@ -13,7 +13,7 @@ use llrp::StatusCode;
 
 use super::config::param_field_error;
 use super::memory::TagMemory;
-use super::{field_error, ReaderProfile, MAX_ACCESS_SPECS};
+use super::{field_error, ReaderProfile};
 use crate::physics::Model;
 
 /// The tag a read singulated, as the AccessSpecs see it.
@@ -75,7 +75,7 @@ impl AccessSpecs {
             e.error_description = format!("AccessSpec {} already exists", spec.access_spec_id);
             return e;
         }
-        if self.entries.len() >= MAX_ACCESS_SPECS as usize {
+        if self.entries.len() >= p.device.max_access_specs as usize {
             return LlrpStatus::new(StatusCode::M_OverflowParameter, "too many AccessSpecs");
         }
         for op in &spec.access_command.op_specs {

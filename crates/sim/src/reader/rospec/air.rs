@@ -4,7 +4,7 @@
 
 use llrp::params::{C1g2InventoryCommand, Custom, InventoryParameterSpec};
 
-use crate::physics::gen2::{Air, RfMode, Target};
+use crate::physics::gen2::{Air, Target};
 use crate::reader::config::ReaderConfig;
 
 /// ImpinjInventorySearchMode values (Impinj's LLRP extension definition).
@@ -41,7 +41,7 @@ pub(super) fn air_for(
         .collect();
     let mut air = Air::default();
     if let Some(rf) = commands.iter().find_map(|c| c.c1g2_rf_control.as_ref()) {
-        if let Some(mut mode) = RfMode::impinj(u32::from(rf.mode_index)) {
+        if let Some(mut mode) = config.device.mode(u32::from(rf.mode_index)).map(|m| m.link) {
             // A Tari the client chose (ns; 0 = the mode's own).
             if rf.tari > 0 {
                 mode.tari_us = f64::from(rf.tari) / 1e3;

@@ -25,7 +25,7 @@ use llrp::StatusCode;
 use super::access::AccessSpecs;
 use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
-use super::{field_error, ReaderProfile, MAX_ROSPECS};
+use super::{field_error, ReaderProfile};
 use crate::physics::lookahead::{Lookahead, Slice};
 use crate::physics::{Model, Read, Want};
 
@@ -284,10 +284,11 @@ impl Specs {
             s.error_description = format!("ROSpec {} already exists", spec.ro_spec_id);
             return s;
         }
-        if self.specs.len() >= MAX_ROSPECS as usize {
+        let max = p.device.max_rospecs;
+        if self.specs.len() >= max as usize {
             return LlrpStatus::new(
                 StatusCode::M_OverflowParameter,
-                format!("at most {MAX_ROSPECS} ROSpecs"),
+                format!("at most {max} ROSpecs"),
             );
         }
         self.specs.push(Spec {

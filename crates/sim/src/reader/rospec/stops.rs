@@ -18,7 +18,7 @@ pub(super) fn antenna_power(
             .iter()
             .find(|c| c.antenna_id == antenna || c.antenna_id == 0)
             .and_then(|c| c.rf_transmitter.as_ref())
-            .and_then(|tx| crate::reader::caps::power_dbm(tx.transmit_power))
+            .and_then(|tx| config.device.power.dbm(tx.transmit_power))
     })
     .or_else(|| config.tx_power_dbm(antenna))
 }

@@ -1,0 +1,36 @@
+//! The reader devices a scenario reader can present itself as (`"device"`): their names and
+//! antenna ports. The reader's `device` module holds what each one is; a unit test there
+//! keeps the two lists the same. A device is not a reader model (`"reader_model"`,
+//! [`super::profile`]): the model sets how the radio behaves, the device what the reader says
+//! it is and which LLRP tables and extensions it has.
+
+use super::validate::{invalid, Check};
+use super::ReaderSpec;
+
+/// Every device's name and antenna ports; the first is the default.
+pub const DEVICES: [(&str, usize); 3] =
+    [("impinj-r420", 4), ("impinj-r700", 4), ("zebra-fx9600", 8)];
+
+/// Checks a reader's `device`: a known name, with no more antennas than it has ports.
+pub(super) fn validate(p: &str, r: &ReaderSpec) -> Check {
+    let Some(name) = r.device.as_deref() else {
+        return Ok(());
+    };
+    let Some(&(_, ports)) = DEVICES.iter().find(|(n, _)| *n == name) else {
+        let known: Vec<&str> = DEVICES.iter().map(|(n, _)| *n).collect();
+        return Err(invalid(
+            format!("{p}.device"),
+            format!("unknown device `{name}`; known: {}", known.join(", ")),
+        ));
+    };
+    if r.antennas.len() > ports {
+        return Err(invalid(
+            format!("{p}.antennas"),
+            format!(
+                "the {name} has {ports} antenna ports, the reader lists {} antennas",
+                r.antennas.len()
+            ),
+        ));
+    }
+    Ok(())
+}
