@@ -409,3 +409,46 @@ async fn an_aispec_per_tag_rereads_one_tag_at_the_real_readers_pace() {
         "ideal: a read every {ideal} µs:\n{log}"
     );
 }
+
+/// Two tags before the first antenna of a reader presenting itself as a Zebra FX9600 (eight
+/// antenna ports, Zebra's tables, no Impinj extensions).
+fn zebra_scenario() -> Scenario {
+    let antenna = |x: f64| {
+        format!(r#"{{ "mount": {{ "type": "fixed", "pose": {{ "position": [{x}, 0, 1] }} }} }}"#)
+    };
+    let antennas: Vec<String> = (0..8).map(|k| antenna(-0.1 * f64::from(k))).collect();
+    let json = format!(
+        r#"{{
+      "name": "zebra", "seed": 7,
+      "world": {{ "min": [-2, -2, 0], "max": [3, 2, 2] }},
+      "tags": [{{ "epc": "E20000000000000000000001", "position": [1.0, 0, 1.0] }},
+               {{ "epc": "E20000000000000000000002", "position": [1.5, 0.2, 1.0] }}],
+      "readers": [{{ "name": "fx", "listen": "127.0.0.1:0", "region": "fcc",
+        "device": "zebra-fx9600", "antennas": [{}] }}]
+    }}"#,
+        antennas.join(",")
+    );
+    Scenario::from_json(&json).expect("Zebra scenario is valid")
+}
+
+/// A Zebra-targeted client's view: sllurp 2.0.1 without Impinj options inventories a
+/// simulated Zebra FX9600 (its power table from index 0 to 200, its RF modes, vendor 161) and
+/// gets the scenario's tags; asked for Impinj reports it stops, as against a real FX9600,
+/// because IMPINJ_ENABLE_EXTENSIONS is answered with an ERROR_MESSAGE.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn sllurp_inventories_a_zebra_fx9600() {
+    let (s, reports, log) = with_scenario(zebra_scenario(), &["-a", "0", "-n", "1"], 3).await;
+    assert!(reports.len() >= 2, "got {} reports:\n{log}", reports.len());
+    assert!(check_tags(&s, &reports, false) >= 2, "{log}");
+    let (_, reports, log) =
+        with_scenario(zebra_scenario(), &["--impinj-reports", "-a", "1"], 1).await;
+    assert!(
+        reports.is_empty(),
+        "no reads without the extensions:\n{log}"
+    );
+    assert!(
+        log.contains("unexpected response ERROR_MESSAGE while enabling Impinj"),
+        "sllurp says why it stopped:\n{log}"
+    );
+}
