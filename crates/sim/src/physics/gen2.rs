@@ -15,7 +15,12 @@
 //! collision, unchanged after a single reply; when round(Qfp) changes the reader sends a
 //! QueryAdjust and the tags not yet read draw new slots among 2^Q.
 
+use std::sync::Arc;
+
 use rand::{Rng, RngCore};
+
+mod selected;
+pub use selected::Selected;
 
 /// Bits of a Query command.
 pub const QUERY_BITS: u32 = 22;
@@ -67,8 +72,9 @@ pub enum Target {
     Single,
 }
 
-/// How the reader inventories on an antenna: RF mode, session and search target.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How the reader inventories on an antenna: RF mode, session, search target and the tags its
+/// Selects leave in the rounds.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Air {
     /// The RF mode's link parameters.
     pub mode: RfMode,
@@ -82,6 +88,9 @@ pub struct Air {
     /// The reader's pause after each inventory round before its next Query (µs): its own
     /// processing, which a real reader's continuous inventory of one tag shows.
     pub gap_us: f64,
+    /// The tags the reader's Select commands (LLRP C1G2Filters) leave taking part in the
+    /// rounds; `None`: every tag in the field.
+    pub select: Option<Arc<Selected>>,
 }
 
 impl Default for Air {
@@ -93,6 +102,7 @@ impl Default for Air {
             target: Target::Dual,
             anchor_us: None,
             gap_us: 0.0,
+            select: None,
         }
     }
 }

@@ -21,7 +21,7 @@ use super::pool::Pool;
 use super::{Model, Read, Want};
 
 /// One antenna's share of simulated time, as the running AISpec will ask for it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Slice {
     /// Antenna port, 1-based.
     pub antenna: u16,
@@ -181,9 +181,10 @@ impl Lookahead {
         let reads = match hit {
             Some(reads) => reads,
             None => {
+                let dwell_end = dwell.t1_us;
                 let mut plan = vec![dwell];
                 plan.extend(upcoming.by_ref().take(batch.saturating_sub(1)));
-                self.planned_until_us = plan.last().map_or(dwell.t1_us, |s| s.t1_us);
+                self.planned_until_us = plan.last().map_or(dwell_end, |s| s.t1_us);
                 self.fill(model, plan);
                 self.take(slice).unwrap_or_else(|| slice.compute(model))
             }
@@ -536,7 +537,7 @@ mod tests {
                 let piece = Slice {
                     t0_us: t0,
                     t1_us: t1,
-                    ..*s
+                    ..s.clone()
                 };
                 let got = p.take(&piece).expect("covered by the prefetch");
                 let direct = m.inventory_on(s.antenna, t0, t1, None, None);
@@ -550,7 +551,7 @@ mod tests {
         );
         let other_power = Slice {
             power_dbm: Some(20.0),
-            ..plan[31]
+            ..plan[31].clone()
         };
         assert!(
             p.take(&other_power).is_none(),

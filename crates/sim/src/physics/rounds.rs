@@ -417,13 +417,17 @@ impl Model {
         carry.reads
     }
 
-    /// Opens `antenna`'s field for the epoch starting at `start_us`: its tags into
-    /// `carry.field`, their levels not known yet.
+    /// Opens `antenna`'s field for the epoch starting at `start_us`: its tags that take part
+    /// ([`Air::select`]) into `carry.field`, their levels not known yet.
     fn open_epoch(&self, scope: &Scope<'_>, start_us: u64, carry: &mut Carry, bucket: &mut Bucket) {
         let ch = carry.clock.at(self, start_us);
         let (antenna, tx) = (scope.antenna, scope.tx_power_dbm);
         self.open_bucket(antenna, tx, start_us, ch, &mut carry.classified, bucket);
         self.field_of(bucket, &mut carry.field);
+        // Tags the reader's Selects leave out never answer: the rounds run among the rest.
+        if let Some(selected) = &scope.air.select {
+            carry.field.retain(|&tag| selected.contains(tag));
+        }
         carry.levels.clear();
         carry.levels.resize(carry.field.len(), f64::NAN);
     }

@@ -71,3 +71,45 @@ fn a_lone_antennas_window_split_anywhere_gives_the_same_reads() {
     assert_eq!(whole, split);
     assert!(whole.len() > 100, "{}", whole.len());
 }
+
+/// The reads per tag of 40 tags before one antenna over 2 s, with the rounds among `select`'s
+/// tags only when given.
+fn crowd_reads(select: Option<&gen2::Selected>, alone: bool) -> Vec<usize> {
+    let tags: Vec<[f64; 3]> = (0..40)
+        .map(|k| [1.5 + 0.01 * f64::from(k), -0.4 + 0.02 * f64::from(k), 1.0])
+        .collect();
+    let m = Model::new(&fixed_scenario(&tags, serde_json::json!({})), 0);
+    let air = gen2::Air {
+        anchor_us: alone.then_some(0),
+        select: select.map(|s| std::sync::Arc::new(s.clone())),
+        ..Default::default()
+    };
+    let mut per_tag = vec![0; tags.len()];
+    for r in m.inventory_with(1, 0, 2_000_000, None, None, Want::ALL, &air) {
+        per_tag[r.tag] += 1;
+    }
+    per_tag
+}
+
+#[test]
+fn tags_the_selects_leave_out_never_answer_and_the_others_get_their_slots() {
+    let chosen = gen2::Selected::from_fn(40, |t| t % 10 == 3);
+    for alone in [false, true] {
+        let all = crowd_reads(None, alone);
+        let some = crowd_reads(Some(&chosen), alone);
+        assert!(all.iter().all(|&n| n > 0), "every tag is read: {all:?}");
+        for tag in 0..40 {
+            if chosen.contains(tag) {
+                // Four tags share the rounds instead of forty: several times the reads.
+                assert!(
+                    some[tag] > 3 * all[tag],
+                    "tag {tag}: {} vs {}",
+                    some[tag],
+                    all[tag]
+                );
+            } else {
+                assert_eq!(some[tag], 0, "tag {tag} was left out");
+            }
+        }
+    }
+}

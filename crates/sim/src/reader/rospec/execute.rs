@@ -362,7 +362,7 @@ impl Specs {
                 run.slice_end_us
             }
             .max(slice.t1_us),
-            ..*slice
+            ..slice.clone()
         };
         let config = ctx.config;
         let gap_us = ctx.profile.round_gap_us as f64;

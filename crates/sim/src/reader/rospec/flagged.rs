@@ -48,7 +48,7 @@ impl Specs {
             .inventory_flagged(antenna, t, end, power, channel, want, air, ctx.flags);
         self.flagged[port] = Some(FlaggedEpoch {
             key,
-            air: *air,
+            air: air.clone(),
             reads,
             next: 0,
             none_in_a,
