@@ -46,7 +46,7 @@ pub struct Saver {
     path: PathBuf,
     model: Arc<Model>,
     memory: Arc<TagMemory>,
-    /// The memory's operation count when it was last written (or read).
+    /// The memory's generation when it was last written (or read).
     saved: AtomicU64,
 }
 
@@ -76,7 +76,7 @@ impl Saver {
                 })
             }
         }
-        let saved = AtomicU64::new(memory.operations());
+        let saved = AtomicU64::new(memory.generation());
         Ok(Saver {
             path: path.to_owned(),
             model,
@@ -85,9 +85,9 @@ impl Saver {
         })
     }
 
-    /// Writes the memory out if operations ran since the last write.
+    /// Writes the memory out if it may have changed since the last write.
     pub fn save_if_changed(&self) -> io::Result<()> {
-        let now = self.memory.operations();
+        let now = self.memory.generation();
         if now == self.saved.load(Ordering::Acquire) {
             return Ok(());
         }

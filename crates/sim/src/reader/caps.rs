@@ -143,11 +143,15 @@ fn regulatory(p: &ReaderProfile) -> RegulatoryCapabilities {
     }
 }
 
+/// MaxNumSelectFiltersPerQuery: C1G2Filters an inventory command may carry (an Impinj
+/// reader's two: sllurp's `llrp_proto.py` notes that more give an overflow error there).
+pub const MAX_SELECT_FILTERS: u16 = 2;
+
 fn c1g2_caps() -> C1g2LlrpCapabilities {
     C1g2LlrpCapabilities {
         can_support_block_erase: false,
         can_support_block_write: false,
-        max_num_select_filters_per_query: 2,
+        max_num_select_filters_per_query: MAX_SELECT_FILTERS,
         ..Default::default()
     }
 }

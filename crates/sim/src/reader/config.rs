@@ -409,6 +409,7 @@ pub fn validate_antenna_config(
         }
     }
     for cmd in &c.c1g2_inventory_command {
+        super::select::validate(cmd)?;
         for custom in &cmd.custom {
             if let Custom::ImpinjFixedFrequencyList(l) = custom {
                 let channels = p.frequencies_khz.len();

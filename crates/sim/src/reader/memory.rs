@@ -12,7 +12,7 @@
 //! writable.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use crate::physics::Model;
@@ -346,8 +346,8 @@ impl Chip {
 pub struct TagMemory {
     /// Whether any tag has been copied into `chips` (until then every read is the scenario's).
     touched: AtomicBool,
-    /// Operations run on tags so far (a saver writes the memory out when it changed).
-    operations: std::sync::atomic::AtomicU64,
+    /// Counts the operations that may have changed a tag (see [`TagMemory::generation`]).
+    generation: AtomicU64,
     chips: Mutex<HashMap<usize, Chip>>,
 }
 
@@ -387,14 +387,14 @@ impl TagMemory {
             .entry(tag)
             .or_insert_with(|| Chip::from_model(model, tag));
         self.touched.store(true, Ordering::Release);
-        self.operations.fetch_add(1, Ordering::Release);
+        self.generation.fetch_add(1, Ordering::AcqRel);
         f(chip)
     }
 
-    /// How many operations have run on tags so far: when it has not changed, neither has
-    /// the memory.
-    pub fn operations(&self) -> u64 {
-        self.operations.load(Ordering::Acquire)
+    /// A number that changes whenever an operation may have changed a tag's memory: what was
+    /// worked out from the memory (the tags a Select matches) still holds while it stays.
+    pub fn generation(&self) -> u64 {
+        self.generation.load(Ordering::Acquire)
     }
 
     /// Every tag an operation has touched, by scenario index, in index order.
@@ -412,7 +412,7 @@ impl TagMemory {
             held.insert(k, c);
         }
         self.touched.store(true, Ordering::Release);
-        self.operations.fetch_add(1, Ordering::Release);
+        self.generation.fetch_add(1, Ordering::AcqRel);
     }
 
     /// A copy of tag `tag`'s memory as it is now.

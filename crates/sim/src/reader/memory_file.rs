@@ -230,7 +230,7 @@ mod tests {
         assert_eq!(next.snapshot(), memory.snapshot());
         assert_eq!(next.epc(&model, 0), None, "killed stays killed");
         assert_eq!(next.chip(&model, 2).user[0], 0xBEEF);
-        assert!(next.operations() > 0);
+        assert!(next.generation() > 0);
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub mod memory_file;
 pub mod report;
 mod requests;
 mod rospec;
+pub mod select;
 pub mod session;
 #[cfg(test)]
 mod tests;

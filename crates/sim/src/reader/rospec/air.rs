@@ -1,11 +1,13 @@
 //! How the running AISpec inventories on an antenna: the RF mode (C1G2RFControl ModeIndex and
-//! Tari), the Gen2 session (C1G2SingulationControl) and Impinj's search mode
-//! (ImpinjInventorySearchMode), from the ROSpec's antenna configuration or else the reader's.
+//! Tari), the Gen2 session (C1G2SingulationControl), Impinj's search mode
+//! (ImpinjInventorySearchMode) and the Select filters (C1G2Filter, [`crate::reader::select`]),
+//! from the ROSpec's antenna configuration or else the reader's.
 
 use llrp::params::{C1g2InventoryCommand, Custom, InventoryParameterSpec};
 
 use crate::physics::gen2::{Air, Target};
 use crate::reader::config::ReaderConfig;
+use crate::reader::select::Query;
 
 /// ImpinjInventorySearchMode values (Impinj's LLRP extension definition).
 mod search_mode {
@@ -19,6 +21,47 @@ mod search_mode {
     pub const SINGLE_TARGET_WITH_SUPPRESSION: u16 = 3;
 }
 
+/// The inventory commands that apply to `antenna`: the InventoryParameterSpec's antenna
+/// configurations for it (or for all) first, then the reader's configuration of it.
+fn commands<'a>(
+    ips: Option<&'a InventoryParameterSpec>,
+    config: &'a ReaderConfig,
+    antenna: u16,
+) -> Vec<&'a C1g2InventoryCommand> {
+    let in_spec = ips.into_iter().flat_map(|p| {
+        p.antenna_configuration
+            .iter()
+            .filter(move |c| c.antenna_id == antenna || c.antenna_id == 0)
+    });
+    let in_config = config.antennas.get(usize::from(antenna).saturating_sub(1));
+    in_spec
+        .chain(in_config)
+        .flat_map(|c| c.c1g2_inventory_command.iter())
+        .collect()
+}
+
+/// The Select filters and Query of `antenna` inventoried under `air`: those of the first
+/// inventory command that has filters or is state-aware (the ROSpec's before the reader
+/// configuration's), with the first state-aware singulation action; `None` when none has.
+pub(super) fn select_query<'a>(
+    ips: Option<&'a InventoryParameterSpec>,
+    config: &'a ReaderConfig,
+    antenna: u16,
+    air: &Air,
+) -> Option<Query<'a>> {
+    let commands = commands(ips, config, antenna);
+    let cmd = commands
+        .iter()
+        .copied()
+        .find(|c| !c.c1g2_filter.is_empty() || c.tag_inventory_state_aware);
+    let singulation = commands.iter().find_map(|c| {
+        c.c1g2_singulation_control
+            .as_ref()
+            .and_then(|s| s.state_aware_singulation_action.as_ref())
+    });
+    Query::of(cmd, singulation, air)
+}
+
 /// The [`Air`] of `antenna` under InventoryParameterSpec `ips` and the reader configuration.
 ///
 /// Reader Selected (and no search mode at all) gives dual target: a session-2 inventory
@@ -29,16 +72,7 @@ pub(super) fn air_for(
     config: &ReaderConfig,
     antenna: u16,
 ) -> Air {
-    let in_spec = ips.into_iter().flat_map(|p| {
-        p.antenna_configuration
-            .iter()
-            .filter(move |c| c.antenna_id == antenna || c.antenna_id == 0)
-    });
-    let in_config = config.antennas.get(usize::from(antenna).saturating_sub(1));
-    let commands: Vec<&C1g2InventoryCommand> = in_spec
-        .chain(in_config)
-        .flat_map(|c| c.c1g2_inventory_command.iter())
-        .collect();
+    let commands = commands(ips, config, antenna);
     let mut air = Air::default();
     if let Some(rf) = commands.iter().find_map(|c| c.c1g2_rf_control.as_ref()) {
         if let Some(mut mode) = config.device.mode(u32::from(rf.mode_index)).map(|m| m.link) {

@@ -88,7 +88,7 @@ impl Specs {
             doppler: content.impinj.doppler,
         };
         let until = [ai_end, ro_end].into_iter().flatten().min();
-        let plan = Plan::new(ctx, &run, ai, want, t, end, until);
+        let plan = Plan::new(ctx, &run, ai, (want, t, end, until), &mut self.selections);
         let end = plan.slice.t1_us;
         let rep = Reporting::new(spec.ro_spec_id, plan.ips, &content, report_spec, trig, &obs);
         self.buffer.expect(rep.every_n);
@@ -367,6 +367,8 @@ impl Specs {
         let config = ctx.config;
         let gap_us = ctx.profile.round_gap_us as f64;
         let idle = &self.idle_antennas;
+        let selections = &mut self.selections;
+        let (model, memory) = (ctx.model, ctx.memory);
         // The antennas in turn from the one after this, a dwell each, except those whose
         // field was empty when last looked at: one empty round, then the next.
         let mut k = run.antenna_pos;
@@ -387,6 +389,8 @@ impl Specs {
                 if air.suppresses() {
                     return None;
                 }
+                let query = super::air::select_query(ips, config, antenna, &air);
+                air.select = selections.get(model, memory, query);
                 if idle.get(usize::from(antenna)).copied().unwrap_or(false) {
                     t0_us += air.empty_round_us();
                     continue;
@@ -481,10 +485,8 @@ impl<'s> Plan<'s> {
         ctx: &RunContext<'_>,
         run: &Run,
         ai: &'s AiSpec,
-        want: Want,
-        t: u64,
-        end: u64,
-        until: Option<u64>,
+        (want, t, end, until): (Want, u64, u64, Option<u64>),
+        selections: &mut Selections,
     ) -> Self {
         let antennas = ai_antennas(ai, ctx.profile.antennas);
         let antenna = antennas[run.antenna_pos % antennas.len().max(1)];
@@ -508,7 +510,7 @@ impl<'s> Plan<'s> {
             t0_us: t.max(ready),
             t1_us: end,
             want,
-            air: step_air(ctx, ips, antenna, anchor_us),
+            air: step_air(ctx, ips, antenna, anchor_us, selections),
         };
         Plan {
             slice,

@@ -25,6 +25,7 @@ use llrp::StatusCode;
 use super::access::AccessSpecs;
 use super::config::{param_field_error, validate_antenna_config, ReaderConfig};
 use super::report::{Content, ImpinjContent, Observation, ReportBuffer};
+use super::select::Selections;
 use super::{field_error, ReaderProfile};
 use crate::physics::lookahead::{Lookahead, Slice};
 use crate::physics::{Model, Read, Want};
@@ -212,6 +213,8 @@ pub struct Specs {
     idle_antennas: Vec<bool>,
     /// Per antenna port, the current epoch of a single-target inventory.
     flagged: Vec<Option<flagged::FlaggedEpoch>>,
+    /// The tags the Select filters in use leave in the rounds.
+    selections: Selections,
 }
 
 impl Specs {

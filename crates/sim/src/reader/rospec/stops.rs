@@ -174,15 +174,20 @@ pub(super) fn pinned_channel(
 }
 
 /// How the reader inventories on `antenna` in this step: the spec's air settings, the
-/// profile's pause between rounds and the anchor of an antenna it never leaves.
+/// profile's pause between rounds, the anchor of an antenna it never leaves and the tags its
+/// Select filters leave in the rounds (from `selections`, worked out again when the tags'
+/// memory has changed).
 pub(super) fn step_air(
     ctx: &RunContext<'_>,
     ips: Option<&InventoryParameterSpec>,
     antenna: u16,
     anchor_us: Option<u64>,
+    selections: &mut Selections,
 ) -> Air {
     let mut air = super::air::air_for(ips, ctx.config, antenna);
     air.gap_us = ctx.profile.round_gap_us as f64;
     air.anchor_us = anchor_us;
+    let query = super::air::select_query(ips, ctx.config, antenna, &air);
+    air.select = selections.get(ctx.model, ctx.memory, query);
     air
 }

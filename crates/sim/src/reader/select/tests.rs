@@ -1,0 +1,351 @@
+//! The Select semantics: masks on each bank, every action of both kinds, several filters in
+//! order, the Query's Sel and Target, and what validation refuses.
+
+use super::*;
+use crate::physics::gen2::Air;
+use crate::reader::memory::{Lock, EPC_MEMORY_WORDS, LOCK_FIELDS};
+
+/// An EPC-96 tag (3000 PC) whose EPC is E200 0000 … 00`last`, TID E280 1160 0000 00`last`, and
+/// four words of user memory 0xBEEF, 0, 0, `last`.
+fn chip(last: u8) -> Chip {
+    let mut epc = vec![0x3000, 0xE200, 0, 0, 0, 0, u16::from(last)];
+    epc.resize(1 + EPC_MEMORY_WORDS, 0);
+    Chip {
+        reserved: [0; 4],
+        epc,
+        tid: vec![0xE280, 0x1160, 0, u16::from(last)],
+        user: vec![0xBEEF, 0, 0, u16::from(last)],
+        locks: [Lock::default(); LOCK_FIELDS],
+        killed: false,
+    }
+}
+
+fn mask(mb: u8, pointer: u16, bytes: &[u8]) -> C1g2TagInventoryMask {
+    C1g2TagInventoryMask {
+        mb,
+        pointer,
+        tag_mask: BitVec::from_bytes(bytes),
+        ..Default::default()
+    }
+}
+
+/// A state-unaware filter with action `action` (`None`: no action parameter, as sllurp sends).
+fn unaware(m: C1g2TagInventoryMask, action: Option<u8>) -> C1g2Filter {
+    C1g2Filter {
+        c1g2_tag_inventory_mask: m,
+        state_unaware_action: action.map(|action| C1g2TagInventoryStateUnawareFilterAction {
+            action,
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+fn aware(m: C1g2TagInventoryMask, target: u8, action: u8) -> C1g2Filter {
+    C1g2Filter {
+        c1g2_tag_inventory_mask: m,
+        state_aware_action: Some(C1g2TagInventoryStateAwareFilterAction {
+            target,
+            action,
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// The EPC's last byte is `last` (bits 20h + 88 to 20h + 95 of the EPC bank).
+fn last_is(last: u8) -> C1g2TagInventoryMask {
+    mask(1, 0x20 + 88, &[last])
+}
+
+fn unaware_query(filters: &[C1g2Filter]) -> Query<'_> {
+    Query {
+        filters,
+        state_aware: false,
+        sel: None,
+        target_b: false,
+        session: 2,
+        dual: true,
+    }
+}
+
+#[test]
+fn masks_match_each_bank_at_its_bit_address() {
+    let c = chip(7);
+    // EPC bank: StoredCRC at 00h, PC at 10h, EPC from 20h.
+    let crc = c.bank(1)[0].to_be_bytes();
+    assert!(matches(&mask(1, 0x00, &crc), &c));
+    assert!(matches(&mask(1, 0x10, &[0x30, 0x00]), &c));
+    assert!(!matches(&mask(1, 0x10, &[0x34]), &c));
+    assert!(matches(&mask(1, 0x20, &[0xE2]), &c));
+    assert!(matches(&last_is(7), &c) && !matches(&last_is(8), &c));
+    // Not on a byte boundary: the four bits 0010 at 20h + 4.
+    let nibble = C1g2TagInventoryMask {
+        tag_mask: BitVec {
+            bits: 4,
+            bytes: vec![0x20],
+        },
+        ..mask(1, 0x24, &[])
+    };
+    assert!(matches(&nibble, &c));
+    // TID and user memory.
+    assert!(matches(&mask(2, 0, &[0xE2, 0x80, 0x11, 0x60]), &c));
+    assert!(matches(&mask(2, 48, &[0, 7]), &c) && !matches(&mask(2, 48, &[0, 8]), &c));
+    assert!(matches(&mask(3, 0, &[0xBE, 0xEF]), &c) && !matches(&mask(3, 0, &[0xBE, 0xEE]), &c));
+    // An empty mask matches every tag.
+    assert!(matches(&mask(3, 0, &[]), &c));
+}
+
+#[test]
+fn a_mask_running_past_the_end_of_the_bank_matches_no_tag() {
+    let c = chip(0);
+    // User memory is 64 bits of which the last 16 are 0: a mask over 48..64 matches, one
+    // over 56..72 (zeros as well, but past the end) does not, nor one beyond it.
+    assert!(matches(&mask(3, 48, &[0, 0]), &c));
+    assert!(!matches(&mask(3, 56, &[0, 0]), &c));
+    assert!(!matches(&mask(3, 1000, &[0]), &c));
+    assert!(!matches(&mask(2, u16::MAX, &[0]), &c));
+}
+
+#[test]
+fn state_unaware_actions_select_and_unselect_as_llrp_names_them() {
+    let (hit, miss) = (chip(1), chip(2));
+    // (action, matching tag takes part, non-matching tag takes part) from SL deasserted.
+    let table = [
+        (Some(0), true, false),
+        (None, true, false),
+        (Some(1), true, false),
+        (Some(2), false, false),
+        (Some(3), false, false),
+        (Some(4), false, true),
+        (Some(5), false, true),
+    ];
+    for (action, on_hit, on_miss) in table {
+        let filters = [unaware(last_is(1), action)];
+        let q = unaware_query(&filters);
+        assert_eq!(q.takes_part(&hit), on_hit, "action {action:?} on a match");
+        assert_eq!(
+            q.takes_part(&miss),
+            on_miss,
+            "action {action:?} on a non-match"
+        );
+    }
+}
+
+#[test]
+fn two_filters_act_in_order_and_combine_as_and_or_or() {
+    // Tags 1..=4; filter A: last byte has bit 0 set (1, 3); filter B: bit 1 set (2, 3).
+    let bit = |b: u8| C1g2TagInventoryMask {
+        tag_mask: BitVec {
+            bits: 1,
+            bytes: vec![0x80],
+        },
+        ..mask(1, 0x20 + 95 - u16::from(b), &[])
+    };
+    let taking = |filters: &[C1g2Filter]| -> Vec<u8> {
+        let q = unaware_query(filters);
+        (1..=4u8).filter(|&t| q.takes_part(&chip(t))).collect()
+    };
+    // Select/Unselect then DoNothing/Unselect: A and B (Octane's Filter1AndFilter2).
+    let and = [unaware(bit(0), Some(0)), unaware(bit(1), Some(2))];
+    assert_eq!(taking(&and), vec![3]);
+    // Select/Unselect then Select/DoNothing: A or B (Filter1OrFilter2).
+    let or = [unaware(bit(0), Some(0)), unaware(bit(1), Some(1))];
+    assert_eq!(taking(&or), vec![1, 2, 3]);
+    // Order matters: DoNothing/Unselect first acts on SL still deasserted.
+    let reversed = [unaware(bit(1), Some(2)), unaware(bit(0), Some(0))];
+    assert_eq!(taking(&reversed), vec![1, 3]);
+}
+
+#[test]
+fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
+    let (hit, miss) = (chip(1), chip(2));
+    // (action, SL of a matching tag, SL of a non-matching one) from SL deasserted.
+    let on_sl = [
+        (0, true, false),
+        (1, true, false),
+        (2, false, false),
+        (3, true, false),
+        (4, false, true),
+        (5, false, false),
+        (6, false, true),
+        (7, false, true),
+    ];
+    for (action, sl_hit, sl_miss) in on_sl {
+        let filters = [aware(last_is(1), 4, action)];
+        // Sel = SL (S = 0) in a state-aware inventory: the tags with SL asserted answer.
+        let q = Query {
+            state_aware: true,
+            sel: Some(true),
+            ..unaware_query(&filters)
+        };
+        assert_eq!(q.takes_part(&hit), sl_hit, "SL action {action}, match");
+        assert_eq!(
+            q.takes_part(&miss),
+            sl_miss,
+            "SL action {action}, non-match"
+        );
+        // Sel = not SL takes the others.
+        let not_sl = Query {
+            sel: Some(false),
+            ..q
+        };
+        assert_eq!(not_sl.takes_part(&hit), !sl_hit, "~SL action {action}");
+    }
+    // The same actions on S2's flag, which starts at A; single target A in session 2.
+    for action in 0..8u8 {
+        let filters = [aware(last_is(1), 2, action)];
+        let q = Query {
+            state_aware: true,
+            dual: false,
+            ..unaware_query(&filters)
+        };
+        // "Assert" is A: a tag left in A answers a Query for A; from A, negate gives B.
+        let a_hit = [true, true, true, false, false, false, true, true][usize::from(action)];
+        let a_miss = [false, true, false, true, true, true, true, false][usize::from(action)];
+        assert_eq!(q.takes_part(&hit), a_hit, "S2 action {action}, match");
+        assert_eq!(q.takes_part(&miss), a_miss, "S2 action {action}, non-match");
+        // Target B takes the others; dual target flips its target and takes everyone.
+        let b = Query {
+            target_b: true,
+            ..q
+        };
+        assert_eq!(b.takes_part(&hit), !a_hit, "S2 action {action}, target B");
+        let dual = Query { dual: true, ..q };
+        assert!(dual.takes_part(&hit) && dual.takes_part(&miss));
+        // Another session's flag does not matter to a session-2 Query.
+        let other = [aware(last_is(1), 1, action)];
+        let q1 = Query {
+            filters: &other,
+            ..q
+        };
+        assert!(q1.takes_part(&hit) && q1.takes_part(&miss));
+    }
+}
+
+#[test]
+fn a_state_aware_query_reads_from_the_singulation_action_and_the_air() {
+    let cmd = C1g2InventoryCommand {
+        tag_inventory_state_aware: true,
+        c1g2_filter: vec![aware(last_is(1), 4, 0)],
+        ..Default::default()
+    };
+    let sing = C1g2TagInventoryStateAwareSingulationAction {
+        i: true,
+        s: true,
+        ..Default::default()
+    };
+    let air = Air {
+        session: 1,
+        target: Target::Single,
+        ..Air::default()
+    };
+    let q = Query::of(Some(&cmd), Some(&sing), &air).expect("a query");
+    assert_eq!(
+        (q.sel, q.target_b, q.session, q.dual),
+        (Some(false), true, 1, false)
+    );
+    // Without a singulation action: Sel = All, target A.
+    let q = Query::of(Some(&cmd), None, &Air::default()).expect("a query");
+    assert_eq!((q.sel, q.target_b, q.dual), (None, false, true));
+    // A state-unaware command without filters selects nothing: everyone takes part.
+    assert!(Query::of(Some(&C1g2InventoryCommand::default()), None, &air).is_none());
+    assert!(Query::of(None, Some(&sing), &air).is_none());
+}
+
+#[test]
+fn a_killed_tag_takes_no_part() {
+    let mut c = chip(1);
+    c.killed = true;
+    let filters = [unaware(last_is(1), Some(0))];
+    assert!(!unaware_query(&filters).takes_part(&c));
+}
+
+/// The field error of a status: the innermost parameter type, its field and code.
+fn innermost(s: &LlrpStatus) -> (u16, StatusCode, Option<(u16, StatusCode)>) {
+    let mut p = s.parameter_error.as_ref().expect("a parameter error");
+    while let Some(inner) = p.parameter_error.as_deref() {
+        assert_eq!(p.error_code, StatusCode::P_ParameterError);
+        p = inner;
+    }
+    let field = p.field_error.as_ref().map(|f| (f.field_num, f.error_code));
+    (p.parameter_type, p.error_code, field)
+}
+
+fn refused(cmd: C1g2InventoryCommand) -> (u16, StatusCode, Option<(u16, StatusCode)>) {
+    let e = validate(&cmd).expect_err("refused");
+    assert_eq!(e.status_code, StatusCode::M_ParameterError);
+    assert_eq!(
+        e.parameter_error.as_ref().map(|p| p.parameter_type),
+        Some(330)
+    );
+    innermost(&e)
+}
+
+fn with(filters: Vec<C1g2Filter>) -> C1g2InventoryCommand {
+    C1g2InventoryCommand {
+        c1g2_filter: filters,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn validation_refuses_what_the_reader_cannot_send_naming_the_field() {
+    use StatusCode::*;
+    let good = unaware(last_is(1), Some(0));
+    assert!(validate(&with(vec![good.clone(), good.clone()])).is_ok());
+    // Past the end of every tag's bank: accepted (the tags do not match).
+    assert!(validate(&with(vec![unaware(mask(3, 60_000, &[1]), None)])).is_ok());
+    assert_eq!(
+        refused(with(vec![good.clone(); 3])),
+        (331, P_OverflowParameter, None)
+    );
+    let t = |t| C1g2Filter { t, ..good.clone() };
+    assert_eq!(
+        refused(with(vec![t(2)])),
+        (331, P_FieldError, Some((0, A_Invalid)))
+    );
+    assert_eq!(
+        refused(with(vec![t(3)])),
+        (331, P_FieldError, Some((0, A_OutOfRange)))
+    );
+    assert!(validate(&with(vec![t(1)])).is_ok());
+    let reserved = unaware(mask(0, 32, &[0]), None);
+    assert_eq!(
+        refused(with(vec![reserved])),
+        (332, P_FieldError, Some((0, A_Invalid)))
+    );
+    let long = unaware(mask(1, 32, &[0xAA; 32]), None);
+    assert_eq!(
+        refused(with(vec![long])),
+        (332, P_FieldError, Some((2, A_OutOfRange)))
+    );
+    let longest = C1g2TagInventoryMask {
+        tag_mask: BitVec {
+            bits: MAX_MASK_BITS,
+            bytes: vec![0; 32],
+        },
+        ..mask(1, 32, &[])
+    };
+    assert!(validate(&with(vec![unaware(longest, None)])).is_ok());
+    let action = unaware(last_is(1), Some(6));
+    assert_eq!(
+        refused(with(vec![action])),
+        (334, P_FieldError, Some((0, A_OutOfRange)))
+    );
+    let target = aware(last_is(1), 5, 0);
+    assert_eq!(
+        refused(with(vec![target])),
+        (333, P_FieldError, Some((0, A_OutOfRange)))
+    );
+    let action = aware(last_is(1), 4, 8);
+    assert_eq!(
+        refused(with(vec![action])),
+        (333, P_FieldError, Some((1, A_OutOfRange)))
+    );
+    let missing = C1g2InventoryCommand {
+        tag_inventory_state_aware: true,
+        ..with(vec![good])
+    };
+    assert_eq!(refused(missing), (333, P_MissingParameter, None));
+}
