@@ -3,7 +3,9 @@
 //! words back, and after `llrpkit write-epc` its own inventory reports the new EPC and no
 //! longer the old one. One tag in the field: llrpkit targets a tag with its EPC as both mask
 //! and data, so with several tags in the field any tag whose EPC has those bits set matches,
-//! on hardware as here. Needs llrpkit; `./scripts/test` installs it and sets `LLRP_LLRPKIT`.
+//! on hardware as here. Its `inventory --filter-epc` (a C1G2Filter, Select/Unselect or
+//! Unselect/Select) inventories only the tags it includes. Needs llrpkit; `./scripts/test`
+//! installs it and sets `LLRP_LLRPKIT`.
 
 mod common;
 
@@ -110,6 +112,14 @@ async fn read_user(
     .expect("join");
     sim.shutdown().await;
     read
+
+/// The EPCs (lower case) in an llrpkit reads file.
+fn epcs_in(path: &std::path::Path) -> std::collections::BTreeSet<String> {
+    let text = std::fs::read_to_string(path).expect("llrpkit's reads file");
+    text.lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["epc"].as_str().map(str::to_lowercase))
+        .collect()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -155,4 +165,46 @@ async fn a_tag_written_in_one_run_reads_so_in_the_next_with_tag_memory() {
     .err()
     .expect("refused");
     assert!(e.to_string().contains("tags[0].scenario_epc"), "{e}");
+
+async fn llrpkit_filter_epc_includes_or_excludes_the_matching_tags() {
+    let s = line_scenario(&[1.0, 1.3, 1.6]);
+    let epcs: Vec<String> = s.tags.iter().map(|t| t.epc.to_lowercase()).collect();
+    let sim = start(&s, Speed::Factor(1.0)).await;
+    let port = sim.addrs[0].port();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (inc, exc) = (dir.path().join("inc.jsonl"), dir.path().join("exc.jsonl"));
+    let args = |action: &'static str, out: &std::path::Path| {
+        let out = out.display().to_string();
+        move || {
+            llrpkit(
+                port,
+                &[
+                    "inventory",
+                    "--duration",
+                    "2",
+                    "--filter-epc",
+                    "E20000000000000000000002",
+                    "--filter-action",
+                    action,
+                    "--output",
+                    &out,
+                ],
+            )
+        }
+    };
+    let include = tokio::task::spawn_blocking(args("include", &inc))
+        .await
+        .expect("join");
+    let exclude = tokio::task::spawn_blocking(args("exclude", &exc))
+        .await
+        .expect("join");
+    sim.shutdown().await;
+    assert!(include.1, "{}", include.0);
+    assert!(exclude.1, "{}", exclude.0);
+    let (inc, exc) = (epcs_in(&inc), epcs_in(&exc));
+    assert_eq!(inc.into_iter().collect::<Vec<_>>(), [epcs[1].clone()]);
+    assert_eq!(
+        exc.into_iter().collect::<Vec<_>>(),
+        [epcs[0].clone(), epcs[2].clone()]
+    );
 }

@@ -451,4 +451,25 @@ async fn sllurp_inventories_a_zebra_fx9600() {
         log.contains("unexpected response ERROR_MESSAGE while enabling Impinj"),
         "sllurp says why it stopped:\n{log}"
     );
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
+async fn a_tag_filter_mask_reports_only_the_matching_tag() {
+    // `--tag-filter-mask` sends a C1G2Filter on the EPC bank from 20h with no action
+    // parameter (Select/Unselect): of three tags in the field only the masked one answers.
+    let s = line_scenario(&[1.5, 2.0, 2.5]);
+    let want = s.tags[1].epc.to_lowercase();
+    let (_, reports, log) = with_scenario(
+        s,
+        &["--tag-filter-mask", "E20000000000000000000002", "-a", "1"],
+        3,
+    )
+    .await;
+    let seen: std::collections::BTreeSet<String> = reports
+        .iter()
+        .flatten()
+        .map(|tag| tag["EPC-96"].as_str().expect("EPC-96").to_string())
+        .collect();
+    assert_eq!(seen.into_iter().collect::<Vec<_>>(), [want], "{log}");
+    assert!(reports.len() >= 3, "{log}");
 }
