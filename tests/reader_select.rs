@@ -218,8 +218,8 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
     // Unselect/Select: every tag but the matching one (llrpkit's "exclude").
     let exclude = command(vec![unaware(last_is(3), Some(4))]);
     assert_eq!(keys(run(&mut v, spec(500, Some(exclude)))), [1, 2, 4, 5]);
-    // Two filters: the EPC's last byte odd AND with bit 2 set, as Octane's Filter1AndFilter2
-    // sends them (Select/Unselect, then DoNothing/Unselect); OR: Select/DoNothing second.
+    // Two filters: the EPC's last byte odd AND with bit 2 set (Select/Unselect, then
+    // DoNothing/Unselect); OR: Select/DoNothing second.
     let bit = |b: u16| C1g2TagInventoryMask {
         tag_mask: BitVec {
             bits: 1,
@@ -299,7 +299,7 @@ fn the_reader_configurations_filter_applies_and_both_echo_it() {
     for a in &r.antenna_configuration {
         assert_eq!(
             a.c1g2_inventory_command,
-            [cmd.clone()],
+            std::slice::from_ref(&cmd),
             "antenna {}",
             a.antenna_id
         );
@@ -323,8 +323,11 @@ fn the_reader_configurations_filter_applies_and_both_echo_it() {
     assert_eq!(r.ro_specs, [added]);
 }
 
-/// The innermost ParameterError of a status: its type, status and field error.
-fn innermost(s: &LlrpStatus) -> (u16, StatusCode, Option<(u16, StatusCode)>) {
+/// A ParameterError's type, status and field error (its field number and code).
+type Fault = (u16, StatusCode, Option<(u16, StatusCode)>);
+
+/// The innermost ParameterError of a status.
+fn innermost(s: &LlrpStatus) -> Fault {
     let mut p = s.parameter_error.as_ref().expect("a parameter error");
     while let Some(inner) = p.parameter_error.as_deref() {
         p = inner;
@@ -338,10 +341,7 @@ fn bad_filters_get_the_status_a_reader_gives_and_change_nothing() {
     use StatusCode::*;
     let mut v = VirtualReader::new(&crowd(2));
     let good = unaware(last_is(1), Some(0));
-    let cases: Vec<(
-        C1g2InventoryCommand,
-        (u16, StatusCode, Option<(u16, StatusCode)>),
-    )> = vec![
+    let cases: Vec<(C1g2InventoryCommand, Fault)> = vec![
         (
             command(vec![good.clone(); 3]),
             (331, P_OverflowParameter, None),

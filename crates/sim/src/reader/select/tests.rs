@@ -146,10 +146,10 @@ fn two_filters_act_in_order_and_combine_as_and_or_or() {
         let q = unaware_query(filters);
         (1..=4u8).filter(|&t| q.takes_part(&chip(t))).collect()
     };
-    // Select/Unselect then DoNothing/Unselect: A and B (Octane's Filter1AndFilter2).
+    // Select/Unselect then DoNothing/Unselect: A and B.
     let and = [unaware(bit(0), Some(0)), unaware(bit(1), Some(2))];
     assert_eq!(taking(&and), vec![3]);
-    // Select/Unselect then Select/DoNothing: A or B (Filter1OrFilter2).
+    // Select/Unselect then Select/DoNothing: A or B.
     let or = [unaware(bit(0), Some(0)), unaware(bit(1), Some(1))];
     assert_eq!(taking(&or), vec![1, 2, 3]);
     // Order matters: DoNothing/Unselect first acts on SL still deasserted.
