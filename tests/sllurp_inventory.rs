@@ -451,6 +451,7 @@ async fn sllurp_inventories_a_zebra_fx9600() {
         log.contains("unexpected response ERROR_MESSAGE while enabling Impinj"),
         "sllurp says why it stopped:\n{log}"
     );
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "needs the sllurp venv; run by ./scripts/test"]
