@@ -118,6 +118,28 @@ impl RoSpecStartTrigger {
     pub fn null() -> RoSpecStartTrigger {
         RoSpecStartTrigger::default()
     }
+
+    /// Starts when GPI `port` moves to `event` (true: low to high).
+    pub fn gpi(port: u16, event: bool) -> RoSpecStartTrigger {
+        RoSpecStartTrigger {
+            ro_spec_start_trigger_type: RoSpecStartTriggerType::Gpi,
+            gpi_trigger_value: Some(GpiTriggerValue::new(port, event, 0)),
+            ..Default::default()
+        }
+    }
+}
+
+impl GpiTriggerValue {
+    /// GPI `port` moving to `event` (true: low to high), with a timeout of `timeout_ms` (0:
+    /// none; ignored in a start trigger).
+    pub fn new(port: u16, event: bool, timeout_ms: u32) -> GpiTriggerValue {
+        GpiTriggerValue {
+            gpi_port_num: port,
+            gpi_event: event,
+            timeout: timeout_ms,
+            ..Default::default()
+        }
+    }
 }
 
 impl RoSpecStopTrigger {
@@ -134,6 +156,16 @@ impl RoSpecStopTrigger {
             ..Default::default()
         }
     }
+
+    /// Ends when GPI `port` moves to `event` (true: low to high), or `timeout_ms` after it
+    /// started (0: no timeout).
+    pub fn gpi(port: u16, event: bool, timeout_ms: u32) -> RoSpecStopTrigger {
+        RoSpecStopTrigger {
+            ro_spec_stop_trigger_type: RoSpecStopTriggerType::GpiWithTimeout,
+            gpi_trigger_value: Some(GpiTriggerValue::new(port, event, timeout_ms)),
+            ..Default::default()
+        }
+    }
 }
 
 impl AiSpecStopTrigger {
@@ -147,6 +179,16 @@ impl AiSpecStopTrigger {
         AiSpecStopTrigger {
             ai_spec_stop_trigger_type: AiSpecStopTriggerType::Duration,
             duration_trigger: ms,
+            ..Default::default()
+        }
+    }
+
+    /// Ends when GPI `port` moves to `event` (true: low to high), or `timeout_ms` after it
+    /// started (0: no timeout).
+    pub fn gpi(port: u16, event: bool, timeout_ms: u32) -> AiSpecStopTrigger {
+        AiSpecStopTrigger {
+            ai_spec_stop_trigger_type: AiSpecStopTriggerType::GpiWithTimeout,
+            gpi_trigger_value: Some(GpiTriggerValue::new(port, event, timeout_ms)),
             ..Default::default()
         }
     }

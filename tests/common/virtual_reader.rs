@@ -153,6 +153,18 @@ impl VirtualReader {
         assert_eq!(self.status(enable), StatusCode::M_Success);
     }
 
+    /// Sets GPI `port` to `high` now, as the HTTP API does (through the reader's GPIO
+    /// panel), and lets the reader take it.
+    pub fn set_gpi(&mut self, port: u16, high: bool) {
+        self.session
+            .reader()
+            .gpio_panel()
+            .send(llrp_gateway::reader::gpio::Command::Set { port, high })
+            .expect("a GPI port the reader has");
+        self.session.advance(self.now);
+        self.collect();
+    }
+
     /// Lets `us` of simulated time pass (wall clock alike), running the reader at each of
     /// its deadlines on the way, as the socket layer does.
     pub fn run_for(&mut self, us: u64) {

@@ -40,8 +40,8 @@ fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
             })
             .collect(),
         gpio_capabilities: GpioCapabilities {
-            num_gpis: p.device.gpis,
-            num_gpos: p.device.gpos,
+            num_gpis: p.gpis,
+            num_gpos: p.gpos,
             ..Default::default()
         },
         per_antenna_air_protocol: (1..=p.antennas)

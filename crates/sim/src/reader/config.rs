@@ -32,6 +32,10 @@ pub struct ReaderConfig {
     pub events_and_reports: EventsAndReports,
     /// Opaque configuration-state value the client may compare.
     pub state_value: u32,
+    /// Per GPI port (index = port − 1): whether it is enabled (GPIPortCurrentState.Config).
+    pub gpi_enabled: Vec<bool>,
+    /// Per GPO port (index = port − 1): the level last written (GPOWriteData.GPOData).
+    pub gpos: Vec<bool>,
 }
 
 impl ReaderConfig {
@@ -102,7 +106,16 @@ impl ReaderConfig {
             },
             events_and_reports: EventsAndReports::default(),
             state_value: 0,
+            // Enabled: the LLRP leaves the factory state to the reader (a client enables the
+            // ports its triggers use, LLRP 1.0.1 §12.2.6.3); outputs low.
+            gpi_enabled: vec![true; usize::from(p.gpis)],
+            gpos: vec![false; usize::from(p.gpos)],
         }
+    }
+
+    /// Whether GPI `port` is enabled (false for a port the reader lacks).
+    pub fn gpi_enabled(&self, port: u16) -> bool {
+        (self.gpi_enabled.get(usize::from(port).wrapping_sub(1))).is_some_and(|&e| e)
     }
 
     /// Keepalive period in ms, when periodic keepalives are on.
@@ -128,12 +141,13 @@ impl ReaderConfig {
             .dbm(a.rf_transmitter.as_ref()?.transmit_power)
     }
 
-    /// GET_READER_CONFIG_RESPONSE for a request.
+    /// GET_READER_CONFIG_RESPONSE for a request; `levels` are the GPI lines' (index = port
+    /// − 1, true: high).
     pub fn get(
         &self,
         p: &ReaderProfile,
         m: &GetReaderConfig,
-        now_us: u64,
+        levels: &[bool],
     ) -> GetReaderConfigResponse {
         let mut r = GetReaderConfigResponse {
             llrp_status: LlrpStatus::success(),
@@ -183,16 +197,50 @@ impl ReaderConfig {
             r.keepalive_spec = Some(self.keepalive.clone());
         }
         if want(ConfigRequest::GpiPortCurrentState) {
-            r.gpi_port_current_state = gpi_port_states(m.gpi_port_num);
+            r.gpi_port_current_state = self.gpi_port_states(m.gpi_port_num, levels);
         }
         if want(ConfigRequest::GpoWriteData) {
-            r.gpo_write_data = gpo_write_data(m.gpo_port_num);
+            r.gpo_write_data = self.gpo_write_data(m.gpo_port_num);
         }
         if want(ConfigRequest::EventsAndReports) {
             r.events_and_reports = Some(self.events_and_reports.clone());
         }
-        let _ = now_us;
         r
+    }
+
+    /// The state of GPI port `port` (0: of every port): its Config, and its level if it is
+    /// enabled (2, unknown, if not: a disabled input is not watched).
+    fn gpi_port_states(&self, port: u16, levels: &[bool]) -> Vec<GpiPortCurrentState> {
+        (1..=self.gpi_enabled.len() as u16)
+            .filter(|&g| port == 0 || port == g)
+            .map(|g| {
+                let enabled = self.gpi_enabled(g);
+                let high = levels.get(usize::from(g - 1)).is_some_and(|&h| h);
+                GpiPortCurrentState {
+                    gpi_port_num: g,
+                    config: enabled,
+                    state: match (enabled, high) {
+                        (false, _) => 2,
+                        (true, false) => 0,
+                        (true, true) => 1,
+                    },
+                    ..Default::default()
+                }
+            })
+            .collect()
+    }
+
+    /// The data last written to GPO port `port` (0: to every port).
+    fn gpo_write_data(&self, port: u16) -> Vec<GpoWriteData> {
+        (self.gpos.iter().enumerate())
+            .map(|(i, &level)| (i as u16 + 1, level))
+            .filter(|&(g, _)| port == 0 || port == g)
+            .map(|(g, level)| GpoWriteData {
+                gpo_port_number: g,
+                gpo_data: level,
+                ..Default::default()
+            })
+            .collect()
     }
 
     /// The notification state of the event types GET_READER_CONFIG reports.
@@ -260,7 +308,14 @@ impl ReaderConfig {
             }
             self.keepalive = k.clone();
         }
-        check_gpio(m)?;
+        check_gpio(p, m)?;
+        for g in &m.gpi_port_current_state {
+            // The State field is ignored on a set (LLRP 1.0.1 §12.2.6.3).
+            self.gpi_enabled[usize::from(g.gpi_port_num - 1)] = g.config;
+        }
+        for g in &m.gpo_write_data {
+            self.gpos[usize::from(g.gpo_port_number - 1)] = g.gpo_data;
+        }
         if let Some(e) = &m.events_and_reports {
             self.events_and_reports = e.clone();
         }
@@ -316,10 +371,11 @@ fn get_error(p: &ReaderProfile, m: &GetReaderConfig) -> Option<LlrpStatus> {
     if m.antenna_id > p.antennas {
         return Some(field_error(0, StatusCode::A_OutOfRange, "AntennaID"));
     }
-    if (m.gpi_port_num > 4 || m.gpo_port_num > 4)
-        && (want(ConfigRequest::GpiPortCurrentState) || want(ConfigRequest::GpoWriteData))
-    {
-        return Some(field_error(2, StatusCode::A_OutOfRange, "GPI/GPO port"));
+    if m.gpi_port_num > p.gpis && want(ConfigRequest::GpiPortCurrentState) {
+        return Some(field_error(2, StatusCode::A_OutOfRange, "GPIPortNum"));
+    }
+    if m.gpo_port_num > p.gpos && want(ConfigRequest::GpoWriteData) {
+        return Some(field_error(3, StatusCode::A_OutOfRange, "GPOPortNum"));
     }
     None
 }
@@ -344,41 +400,28 @@ fn antenna_properties(
         .collect()
 }
 
-/// The state of GPI port `port` (0: of all four).
-fn gpi_port_states(port: u16) -> Vec<GpiPortCurrentState> {
-    (1..=4)
-        .filter(|&g| port == 0 || port == g)
-        .map(|g| GpiPortCurrentState {
-            gpi_port_num: g,
-            config: true,
-            state: 0,
-            ..Default::default()
-        })
-        .collect()
-}
-
-/// The data written to GPO port `port` (0: to all four).
-fn gpo_write_data(port: u16) -> Vec<GpoWriteData> {
-    (1..=4)
-        .filter(|&g| port == 0 || port == g)
-        .map(|g| GpoWriteData {
-            gpo_port_number: g,
-            gpo_data: false,
-            ..Default::default()
-        })
-        .collect()
-}
-
-/// Checks the GPO data and GPI states of a SET_READER_CONFIG name ports 1–4.
-fn check_gpio(m: &SetReaderConfig) -> Result<(), LlrpStatus> {
+/// Checks the GPO data and GPI states of a SET_READER_CONFIG name ports the reader has
+/// (M_ParameterError, the parameter's field 0 A_OutOfRange; a reader without GPOs or GPIs
+/// refuses any, LLRP 1.0.1 §12.2.6.3, §12.2.3).
+fn check_gpio(p: &ReaderProfile, m: &SetReaderConfig) -> Result<(), LlrpStatus> {
     for g in &m.gpo_write_data {
-        if g.gpo_port_number == 0 || g.gpo_port_number > 4 {
-            return Err(param_field_error(219, 0, 0, StatusCode::A_OutOfRange));
+        if g.gpo_port_number == 0 || g.gpo_port_number > p.gpos {
+            let mut e = param_field_error(219, 0, 0, StatusCode::A_OutOfRange);
+            e.error_description = format!(
+                "GPOPortNumber {}: the reader has GPO ports 1..={}",
+                g.gpo_port_number, p.gpos
+            );
+            return Err(e);
         }
     }
     for g in &m.gpi_port_current_state {
-        if g.gpi_port_num == 0 || g.gpi_port_num > 4 {
-            return Err(param_field_error(225, 0, 0, StatusCode::A_OutOfRange));
+        if g.gpi_port_num == 0 || g.gpi_port_num > p.gpis {
+            let mut e = param_field_error(225, 0, 0, StatusCode::A_OutOfRange);
+            e.error_description = format!(
+                "GPIPortNum {}: the reader has GPI ports 1..={}",
+                g.gpi_port_num, p.gpis
+            );
+            return Err(e);
         }
     }
     Ok(())

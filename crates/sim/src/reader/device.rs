@@ -368,6 +368,17 @@ mod tests {
     }
 
     #[test]
+    fn every_device_has_the_gpio_a_scenario_reader_gets_by_default() {
+        // A scenario reader that does not set `gpio.gpis` / `gpio.gpos` gets four of each,
+        // what every device here has; a device with other counts needs the scenario's
+        // default to come from it.
+        let default = crate::scenario::gpio::GpioSpec::default();
+        for d in DEVICES {
+            assert_eq!((d.gpis, d.gpos), (default.gpis, default.gpos), "{}", d.name);
+        }
+    }
+
+    #[test]
     fn zebra_links_run_at_bdr_times_miller() {
         let m = ZEBRA_FX9600.mode(4).expect("mode 4");
         assert_eq!((m.link.miller, m.link.blf_khz), (2, 240.0));

@@ -16,6 +16,8 @@ mod config;
 pub mod device;
 #[cfg(test)]
 mod device_tests;
+pub mod gpio;
+mod inputs;
 pub mod memory;
 pub mod memory_file;
 pub mod report;
@@ -86,6 +88,12 @@ pub struct ReaderProfile {
     pub aispec_setup_us: u64,
     /// The reader's pause after each inventory round before the next, µs.
     pub round_gap_us: u64,
+    /// Number of GPI ports (GPIOCapabilities.NumGPIs).
+    pub gpis: u16,
+    /// Number of GPO ports (GPIOCapabilities.NumGPOs).
+    pub gpos: u16,
+    /// What changes the GPI lines over simulated time.
+    pub gpi_schedule: gpio::GpiSchedule,
 }
 
 impl ReaderProfile {
@@ -120,6 +128,9 @@ impl ReaderProfile {
             aispec_setup_us: (r.aispec_setup_ms * 1000.0).round() as u64,
             // Validated finite and in [0, 1 s].
             round_gap_us: (r.round_gap_ms * 1000.0).round() as u64,
+            gpis: r.gpio.gpis,
+            gpos: r.gpio.gpos,
+            gpi_schedule: gpio::GpiSchedule::from_spec(&r.gpio),
         }
     }
 }
@@ -162,6 +173,8 @@ pub struct Reader {
     /// Wall-clock ms of the next keepalive, and how many went unanswered.
     keepalive_due_ms: Option<u64>,
     keepalive_unanswered: u32,
+    /// The GPI lines and what changes them.
+    lines: gpio::Lines,
 }
 
 impl Reader {
@@ -169,7 +182,10 @@ impl Reader {
     pub fn new(profile: ReaderProfile, model: Arc<Model>, utc_epoch_us: u64) -> Self {
         let config = ReaderConfig::factory(&profile);
         let flags = model.new_flags();
+        let lines = gpio::Lines::new(profile.gpis, profile.gpi_schedule.clone());
+        lines.publish(&config.gpi_enabled, &config.gpos);
         Reader {
+            lines,
             flags,
             profile,
             model,
@@ -210,6 +226,11 @@ impl Reader {
     /// The physics model behind the reader.
     pub fn model(&self) -> &Model {
         &self.model
+    }
+
+    /// The reader's GPIO as seen from outside: toggle its inputs, read its state.
+    pub fn gpio_panel(&self) -> &Arc<gpio::GpioPanel> {
+        self.lines.panel()
     }
 
     /// Simulated time the reader has run up to, µs.
@@ -326,6 +347,7 @@ impl Reader {
     /// While no client is connected the reader does not inventory; ROSpecs and configuration
     /// persist across connections as on a real reader, and time spent disconnected is skipped.
     pub fn connect(&mut self, now_us: u64, wall_ms: u64) -> Vec<Output> {
+        self.idle_inputs(now_us);
         self.now_us = self.now_us.max(now_us);
         self.specs.skip_to(self.now_us);
         self.connected = true;
@@ -398,29 +420,10 @@ impl Reader {
     pub fn advance(&mut self, now_us: u64, wall_ms: u64) -> Vec<Output> {
         let mut out = Vec::new();
         if !self.connected {
+            self.idle_inputs(now_us);
             return out;
         }
-        if now_us > self.now_us {
-            let ctx = rospec::RunContext {
-                model: &self.model,
-                profile: &self.profile,
-                config: &self.config,
-                access: &mut self.access,
-                memory: &self.memory,
-                version: self.version,
-                flags: &mut self.flags,
-                utc_epoch_us: self.utc_epoch_us,
-                impinj: self.impinj,
-            };
-            let produced = self.specs.run(ctx, self.now_us, now_us);
-            self.now_us = now_us;
-            for p in produced {
-                match p {
-                    rospec::Produced::Reports(r) => self.send_reports(r, &mut out, false),
-                    rospec::Produced::Event(e) => self.emit(vec![e], &mut out),
-                }
-            }
-        }
+        self.run_until(now_us, &mut out);
         if let Some(due) = self.keepalive_due_ms {
             if wall_ms >= due {
                 if self.keepalive_unanswered >= KEEPALIVE_MISSES {
@@ -440,10 +443,19 @@ impl Reader {
         out
     }
 
-    /// Simulated time at which something is next due (a trigger or the end of a slice), if
-    /// anything is running.
+    /// Simulated time at which something is next due (a trigger, the end of a slice or a
+    /// GPI change), if anything is.
     pub fn next_deadline_us(&self) -> Option<u64> {
-        self.specs.next_deadline(self.now_us)
+        let gpi = self.next_gpi_us();
+        match (self.specs.next_deadline(self.now_us), gpi) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Simulated time of the next scheduled GPI change, if any.
+    pub fn next_gpi_us(&self) -> Option<u64> {
+        self.lines.next_at()
     }
 
     /// Wall-clock ms at which the next keepalive is due.

@@ -255,7 +255,7 @@ impl Reader {
     /// GET_READER_CONFIG_RESPONSE, with the Impinj configuration asked for once the
     /// extensions are on.
     fn configuration(&self, m: &GetReaderConfig) -> GetReaderConfigResponse {
-        let mut body = self.config.get(&self.profile, m, self.now_us);
+        let mut body = self.config.get(&self.profile, m, self.lines.levels());
         if body.llrp_status.is_success() && self.impinj {
             for r in impinj_requested(&m.custom) {
                 body.custom
@@ -267,9 +267,12 @@ impl Reader {
 
     /// SET_READER_CONFIG: all of it or nothing; a new keepalive period starts now.
     fn set_configuration(&mut self, m: SetReaderConfig, wall_ms: u64) -> LlrpStatus {
+        let gpos = self.config.gpos.clone();
         let status = self.config.set(&self.profile, m);
         if status.is_success() {
             self.keepalive_due_ms = self.config.keepalive_period_ms().map(|p| wall_ms + p);
+            self.log_gpo_writes(&gpos);
+            self.publish_gpio();
         }
         status
     }

@@ -173,9 +173,14 @@ impl ServerSession for Session {
         }
     }
 
-    /// Runs the reader up to `now`: inventory, reports, events and keepalives that fall due.
+    /// Runs the reader up to `now`: inventory, reports, events, GPI changes and keepalives
+    /// that fall due (without a client, the GPI lines alone).
     fn advance(&mut self, now: Now) {
-        if self.client.is_none() || self.close {
+        if self.client.is_none() {
+            self.reader.advance(now.sim_us, now.wall_ms);
+            return;
+        }
+        if self.close {
             return;
         }
         let outputs = self.reader.advance(now.sim_us, now.wall_ms);
@@ -211,10 +216,18 @@ impl ServerSession for Session {
 
     /// When the session next needs [`ServerSession::advance`], if nothing arrives before: the next
     /// trigger or antenna slice while an ROSpec runs (at most [`REPORT_LATENCY_US`] ahead),
-    /// the next keepalive, or never.
+    /// the next GPI change, the next keepalive, or never (without a client: the next GPI
+    /// change, so the lines' state stays current).
     fn deadline(&self) -> Deadline {
-        if self.client.is_none() || self.close {
+        if self.close {
             return Deadline::default();
+        }
+        if self.client.is_none() {
+            let after = self.reader.now_us().max(self.ran_to_us) + 1;
+            return Deadline {
+                sim_us: self.reader.next_gpi_us().map(|t| t.max(after)),
+                wall_ms: None,
+            };
         }
         let mut sim = self.reader.next_deadline_us();
         if self.reader.inventorying() {

@@ -218,6 +218,9 @@ pub struct ReaderSpec {
     /// [`super::device::DEVICES`]); none: the default, an Impinj Speedway R420.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub device: Option<String>,
+    /// GPI and GPO ports, and what drives the inputs (default: four of each, idle).
+    #[serde(default)]
+    pub gpio: super::gpio::GpioSpec,
 }
 
 /// Orientation and position of an antenna or an antenna offset (metres, radians): the

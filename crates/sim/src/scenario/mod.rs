@@ -4,6 +4,7 @@
 mod defaults;
 pub mod device;
 mod format;
+pub mod gpio;
 mod hardware_checks;
 mod mount;
 pub mod profile;

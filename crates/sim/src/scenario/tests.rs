@@ -486,3 +486,60 @@ fn hardware_fields_out_of_range_name_the_field() {
     v["reader_model"] = "acme".into();
     assert!(error_of(&v).starts_with("reader_model: unknown reader model `acme`; known: ideal"));
 }
+
+#[test]
+fn gpio_defaults_to_the_r420s_four_and_four_and_errors_name_the_field() {
+    let s = Scenario::from_json(&base().to_string()).expect("base is valid");
+    assert_eq!((s.readers[0].gpio.gpis, s.readers[0].gpio.gpos), (4, 4));
+    let mut v = base();
+    v["readers"][0]["gpio"] = serde_json::json!({
+        "gpis": 2,
+        "gpi_timeline": [ { "t_ms": 500, "port": 1, "state": "high" },
+                          { "t_ms": 900, "port": 1, "state": "low" } ],
+        "photo_eyes": [ { "port": 2, "period_ms": 1000, "width_ms": 200, "count": 3 } ]
+    });
+    let s = Scenario::from_json(&v.to_string()).expect("a conveyor's GPIO is valid");
+    assert_eq!(s.readers[0].gpio.photo_eyes[0].active, gpio::Level::High);
+    let cases = [
+        (
+            serde_json::json!({ "gpis": 65 }),
+            "readers[0].gpio.gpis: at most 64 ports, got 65",
+        ),
+        (
+            serde_json::json!({ "gpis": 2, "gpi_timeline": [ { "t_ms": 1, "port": 3, "state": "high" } ] }),
+            "readers[0].gpio.gpi_timeline[0].port: must be a GPI port in [1, 2]",
+        ),
+        (
+            serde_json::json!({ "gpi_timeline": [ { "t_ms": 9, "port": 1, "state": "high" },
+                                                  { "t_ms": 5, "port": 1, "state": "low" } ] }),
+            "readers[0].gpio.gpi_timeline[1].t_ms: the timeline must be in time order",
+        ),
+        (
+            serde_json::json!({ "photo_eyes": [ { "port": 1, "period_ms": 100, "width_ms": 100 } ] }),
+            "readers[0].gpio.photo_eyes[0].width_ms: must be at least 1 ms and less than period_ms",
+        ),
+        (
+            serde_json::json!({ "photo_eyes": [ { "port": 1, "period_ms": 0, "width_ms": 1 } ] }),
+            "readers[0].gpio.photo_eyes[0].period_ms: must be in [1, ",
+        ),
+        (
+            serde_json::json!({ "gpi_timeline": [ { "t_ms": 1, "port": 1, "state": "low" } ],
+                                "photo_eyes": [ { "port": 1, "period_ms": 10, "width_ms": 1 } ] }),
+            "readers[0].gpio.photo_eyes[0].port: GPI 1 is already driven",
+        ),
+    ];
+    for (gpio, expected) in cases {
+        let mut v = base();
+        v["readers"][0]["gpio"] = gpio;
+        let e = error_of(&v);
+        assert!(e.starts_with(expected), "{e}");
+    }
+    let mut v = base();
+    v["readers"][0]["gpio"] =
+        serde_json::json!({ "gpi_timeline": [ { "t_ms": 1, "port": 1, "state": "up" } ] });
+    assert!(
+        error_of(&v).contains("unknown variant `up`"),
+        "{}",
+        error_of(&v)
+    );
+}

@@ -268,7 +268,8 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
     for (a, antenna) in r.antennas.iter().enumerate() {
         validate_antenna(s, &format!("{p}.antennas[{a}]"), antenna, channels)?;
     }
-    super::device::validate(p, r)
+    super::device::validate(p, r)?;
+    super::gpio::validate_gpio(p, &r.gpio)
 }
 
 /// Checks a custom region's hop table: 1 to 65535 distinct UHF RFID channels.

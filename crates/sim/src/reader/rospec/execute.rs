@@ -310,7 +310,13 @@ impl Specs {
 
     /// Ends the current AISpec of active spec `a` at `at` and moves to its next (ending the
     /// ROSpec after its last).
-    fn next_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+    pub(super) fn next_ai(
+        &mut self,
+        a: usize,
+        at: u64,
+        report: &RoReportSpec,
+        out: &mut Vec<Produced>,
+    ) {
         self.end_ai(a, at, report, out);
         let s = &mut self.specs[a];
         let run = s
@@ -411,7 +417,13 @@ impl Specs {
         self.prefetch.reads(ctx.model, slice, dwell, upcoming)
     }
 
-    fn end_ai(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+    pub(super) fn end_ai(
+        &mut self,
+        a: usize,
+        at: u64,
+        report: &RoReportSpec,
+        out: &mut Vec<Produced>,
+    ) {
         let s = &self.specs[a];
         let idx = s.run.as_ref().map_or(0, |r| r.spec_idx);
         if report.ro_report_trigger == RoReportTriggerType::UponNTagsOrEndOfAiSpec
@@ -428,7 +440,13 @@ impl Specs {
         }));
     }
 
-    fn finish_ro(&mut self, a: usize, at: u64, report: &RoReportSpec, out: &mut Vec<Produced>) {
+    pub(super) fn finish_ro(
+        &mut self,
+        a: usize,
+        at: u64,
+        report: &RoReportSpec,
+        out: &mut Vec<Produced>,
+    ) {
         if ends_report(report.ro_report_trigger) && !self.buffer.is_empty() {
             out.push(Produced::Reports(self.buffer.take()));
         }

@@ -8,6 +8,7 @@
 mod air;
 mod execute;
 mod flagged;
+mod gpi;
 mod schedule;
 mod stops;
 mod validate;

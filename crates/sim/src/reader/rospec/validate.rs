@@ -31,6 +31,12 @@ pub(super) fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(),
     {
         return Err(missing(178, 182, 181));
     }
+    if st.ro_spec_start_trigger_type == RoSpecStartTriggerType::Gpi {
+        gpi_port(p, st.gpi_trigger_value.as_ref(), &[177, 178, 179, 181])?;
+    }
+    if sp.ro_spec_stop_trigger_type == RoSpecStopTriggerType::GpiWithTimeout {
+        gpi_port(p, sp.gpi_trigger_value.as_ref(), &[177, 178, 182, 181])?;
+    }
     for spec in &s.specs {
         match spec {
             SpecParameter::AiSpec(ai) => validate_ai(p, ai)?,
@@ -107,10 +113,11 @@ fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
             _ => {}
         }
     }
-    if t.ai_spec_stop_trigger_type == AiSpecStopTriggerType::GpiWithTimeout
-        && t.gpi_trigger_value.is_none()
-    {
-        return Err(missing(183, 184, 181));
+    if t.ai_spec_stop_trigger_type == AiSpecStopTriggerType::GpiWithTimeout {
+        if t.gpi_trigger_value.is_none() {
+            return Err(missing(183, 184, 181));
+        }
+        gpi_port(p, t.gpi_trigger_value.as_ref(), &[177, 183, 184, 181])?;
     }
     if ai.inventory_parameter_specs.len() > 1 {
         return Err(LlrpStatus::new(
@@ -139,6 +146,27 @@ fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
                 e
             })?;
         }
+    }
+    Ok(())
+}
+
+/// A GPITriggerValue (at `path`) must name a GPI port the reader has: GPIPortNum 0 is
+/// invalid, and a reader with no GPIs refuses any GPI trigger (LLRP 1.0.1 §10.2.1.1.1.2).
+fn gpi_port(
+    p: &ReaderProfile,
+    g: Option<&GpiTriggerValue>,
+    path: &[u16],
+) -> Result<(), LlrpStatus> {
+    let Some(g) = g else {
+        return Ok(());
+    };
+    if g.gpi_port_num == 0 || g.gpi_port_num > p.gpis {
+        let mut e = nested_field_error(path, 0, StatusCode::A_OutOfRange);
+        e.error_description = format!(
+            "GPITriggerValue: GPIPortNum {} (the reader has GPI ports 1..={})",
+            g.gpi_port_num, p.gpis
+        );
+        return Err(e);
     }
     Ok(())
 }
