@@ -342,6 +342,7 @@ fn live_latency(run: &Run, speed: f64) -> Result<crate::eval::live::Latency, Str
             publish: &crate::fleet::args::PublishConfig::default(),
             references: Default::default(),
             headless: false,
+            gpio: None,
         })
         .await
         .map_err(|e| e.to_string())?;

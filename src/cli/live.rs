@@ -95,6 +95,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, Si
         publish: &publish,
         references,
         headless: false,
+        gpio: None,
     })
     .await?)
 }

@@ -42,6 +42,8 @@ pub struct Plan<'a> {
     /// Run the localizer even where its API is not served (the MQTT worker, which publishes
     /// its estimates to the broker).
     pub headless: bool,
+    /// The simulated readers' GPIO, for the API (`sim`); `None`: no simulated readers.
+    pub gpio: Option<Arc<dyn crate::http::gpio::GpioControl>>,
 }
 
 /// Why the consumers could not be started.
@@ -195,6 +197,7 @@ async fn localizer(
         live.shared.clone(),
         live.tap.clone(),
         metrics.clone(),
+        plan.gpio.clone(),
     )
     .await
     .map_err(ConsumersError::Http)?;

@@ -109,6 +109,7 @@ pub fn run(
         // The localizer and its HTTP API (the simulator only feeds a localizer someone can
         // ask: with --no-http neither runs); the MQTT publisher takes a copy of everything
         // the localizer is offered (with --no-http, of what it would be offered).
+        let gpio = std::sync::Arc::new(super::gpio::SimGpio::default());
         let consumers = Consumers::start(Plan {
             command: "sim",
             http: http.address(Some("127.0.0.1:8080")),
@@ -119,9 +120,18 @@ pub fn run(
             publish: &publish,
             references: scenario_references(&scenario),
             headless: false,
+            gpio: Some(gpio.clone()),
         })
         .await?;
         opts.frames_in = consumers.frames_in();
+        let changes = gpio.changes();
+        consumers.metrics().register(|r| {
+            r.register(
+                "gpi_changes",
+                "GPI changes handed to the simulated readers through the HTTP API",
+                changes,
+            )
+        });
         opts.localize = consumers.tap().map(|tap| sim::LocalizeFeed {
             tap,
             poses: localize.poses,
@@ -131,6 +141,7 @@ pub fn run(
         let running = sim::start(&scenario, &opts)
             .await
             .map_err(SimCommandError::Start)?;
+        gpio.attach(&running.names, &running.gpio);
         let tls = if opts.tls.is_some() { " (TLS)" } else { "" };
         for (name, addr) in running.names.iter().zip(&running.addrs) {
             eprintln!(

@@ -214,6 +214,7 @@ async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandErro
         publish: &PublishConfig::default(),
         references: Default::default(),
         headless: true,
+        gpio: None,
     })
     .await?;
     // A headless plan always runs its localizer (`root::localizer` returns one for it on

@@ -121,6 +121,7 @@ pub async fn launch(
     shared: Arc<Shared>,
     tap: Tap,
     metrics: Arc<Metrics>,
+    gpio: Option<Arc<dyn super::gpio::GpioControl>>,
 ) -> Result<Option<Launched>, LaunchError> {
     let listener = match tokio::net::TcpListener::bind(addr).await {
         Ok(l) => l,
@@ -149,6 +150,7 @@ pub async fn launch(
         limits: ServerLimits::default(),
         browser: args.browser(&bound),
         metrics: Some(metrics),
+        gpio,
     };
     let limits = options.limits;
     let app = router(shared, tap, options);
@@ -201,6 +203,7 @@ mod tests {
             live.shared.clone(),
             live.tap.clone(),
             crate::metrics::Metrics::of_localizer(&live.shared),
+            None,
         )
         .await
         .expect("a taken default is no error");
@@ -213,6 +216,7 @@ mod tests {
             live.shared.clone(),
             live.tap.clone(),
             crate::metrics::Metrics::of_localizer(&live.shared),
+            None,
         )
         .await
         .err()

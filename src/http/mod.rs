@@ -26,6 +26,7 @@ use crate::metrics::Metrics;
 use crate::secret::Secret;
 
 mod events;
+pub mod gpio;
 pub mod guard;
 mod handlers;
 pub mod launch;
@@ -57,6 +58,9 @@ pub struct HttpOptions {
     pub browser: BrowserRules,
     /// The process's metrics, served by `GET /metrics`; `None`: the localizer's alone.
     pub metrics: Option<Arc<Metrics>>,
+    /// The simulated readers' GPIO (`GET /api/gpio`, `POST /api/readers/{reader}/gpi/{port}`;
+    /// 404 without).
+    pub gpio: Option<Arc<dyn gpio::GpioControl>>,
 }
 
 impl Default for HttpOptions {
@@ -72,6 +76,7 @@ impl Default for HttpOptions {
                 ..BrowserRules::default()
             },
             metrics: None,
+            gpio: None,
         }
     }
 }
@@ -124,6 +129,8 @@ pub fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(handlers::truth))
         .routes(routes!(events::events))
         .routes(routes!(handlers::post_poses))
+        .routes(routes!(gpio::get_gpio))
+        .routes(routes!(gpio::post_gpi))
 }
 
 /// The OpenAPI 3 document of [`api`].

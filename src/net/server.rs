@@ -50,18 +50,29 @@ pub struct SimReader {
     /// Where the reader's CPU-bound work (inventory physics, reports) runs.
     pool: Arc<Pool>,
     live: Option<LiveHook>,
+    /// Woken when the reader's GPI lines are toggled from outside.
+    nudge: Arc<tokio::sync::Notify>,
 }
 
 impl SimReader {
     /// Wraps a reader's session and its clock; `observer` sees the reader after every step.
     /// Its inventory runs on the process's readers' pool.
     pub fn new(session: Session, clock: Arc<Clock>, observer: Option<Observer>) -> Self {
+        let nudge = Arc::new(tokio::sync::Notify::new());
+        let wake = Arc::clone(&nudge);
+        // A toggle queued on the reader's GPIO panel wakes its serve loop (notify_one keeps
+        // a permit, so one that comes while the loop is busy is not lost).
+        session
+            .reader()
+            .gpio_panel()
+            .on_change(move || wake.notify_one());
         SimReader {
             session,
             clock,
             observer,
             pool: Pool::readers(),
             live: None,
+            nudge,
         }
     }
 
@@ -131,6 +142,10 @@ impl Host for SimReader {
 
     fn report_buffer(&self) -> Option<usize> {
         Some(REPORT_BUFFER_BYTES)
+    }
+
+    fn nudge(&self) -> Option<Arc<tokio::sync::Notify>> {
+        Some(Arc::clone(&self.nudge))
     }
 
     fn buffer_events(&mut self, warn: Option<u8>, overflow: bool, out: &mut BytesMut) {

@@ -19,6 +19,7 @@ use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve_tls, LiveHook, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
 use crate::physics::{AntennaPose, Model, World};
+use crate::reader::gpio::GpioPanel;
 use crate::reader::memory::TagMemory;
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
@@ -142,6 +143,9 @@ pub struct RunningSim {
     pub addrs: Vec<SocketAddr>,
     /// Names of the readers, in scenario order.
     pub names: Vec<ReaderName>,
+    /// Each reader's GPIO as seen from outside (toggle its inputs, read its state), in
+    /// scenario order.
+    pub gpio: Vec<Arc<GpioPanel>>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
@@ -331,6 +335,7 @@ struct Start<'a> {
 /// One reader started: its serving task and what runs beside it.
 struct Started {
     addr: SocketAddr,
+    gpio: Arc<GpioPanel>,
     task: JoinHandle<io::Result<()>>,
     recording: Option<RecorderTask>,
     own: Vec<JoinHandle<()>>,
@@ -380,6 +385,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     let mut running = RunningSim {
         addrs: Vec::new(),
         names: Vec::new(),
+        gpio: Vec::new(),
         shutdown,
         tasks: Vec::new(),
         truth: s.truth.clone(),
@@ -394,6 +400,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         let started = s.reader(i, spec).await?;
         running.addrs.push(started.addr);
         running.names.push(spec.name.clone());
+        running.gpio.push(started.gpio);
         running.tasks.push(started.task);
         running.recordings.extend(started.recording);
         running.own.extend(started.own);
@@ -416,6 +423,7 @@ impl Start<'_> {
         let profile = ReaderProfile::from_scenario(self.scenario, i, &model);
         let reader =
             Reader::new(profile.clone(), model.clone(), self.utc0).with_memory(self.memory.clone());
+        let gpio = Arc::clone(reader.gpio_panel());
         let mut own = Vec::new();
         let mut observer = self.truth_observer(spec, &model, &mut own);
         let mut hook = None;
@@ -439,6 +447,7 @@ impl Start<'_> {
         ));
         Ok(Started {
             addr: bound,
+            gpio,
             task,
             recording,
             own,

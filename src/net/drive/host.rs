@@ -69,6 +69,11 @@ pub trait Host: Send + 'static {
     fn backlog(&self) -> Option<usize> {
         None
     }
+    /// Notified when something outside the session gave it work (a GPI line toggled through
+    /// the HTTP API): the loop then runs it at once. `None`: nothing outside does.
+    fn nudge(&self) -> Option<Arc<tokio::sync::Notify>> {
+        None
+    }
 }
 
 /// The live localizer's view of a served session.

@@ -75,6 +75,8 @@ struct Driver<H: Host> {
     refusal_slots: Arc<Semaphore>,
     /// What the live feed was told last: (connected, inventorying).
     told: Option<(bool, bool)>,
+    /// Notified when the session has work from outside ([`Host::nudge`]).
+    nudge: Option<Arc<tokio::sync::Notify>>,
 }
 
 /// Serves `host`'s session on `listener` until `shutdown` asks to stop; over TLS when `tls`
@@ -88,7 +90,9 @@ pub async fn drive<H: Host>(
     mut shutdown: watch::Receiver<bool>,
 ) -> io::Result<()> {
     let offload = host.offload();
+    let nudge = host.nudge();
     let mut d = Driver {
+        nudge,
         here: Some(Box::new(host)),
         away: None,
         offload,
@@ -172,6 +176,14 @@ impl<H: Host> Driver<H> {
                 Some(_) = self.refusals.join_next(), if !self.refusals.is_empty() => {}
                 _ = sleep_until(self.accept_after), if !may_accept && here => {
                     self.accept_after = None;
+                }
+                _ = nudged(&self.nudge), if here && self.nudge.is_some() => {
+                    self.step(|h| {
+                        let now = h.now();
+                        h.session_mut().advance(now);
+                        h.stepped();
+                    })
+                    .await?;
                 }
                 _ = sleep_until(wake), if wake.is_some() && !may_turn && !backlogged => {
                     self.step(|h| {
@@ -489,6 +501,14 @@ async fn returned<H>(away: &mut Option<oneshot::Receiver<Box<H>>>) -> io::Result
         Some(rx) => rx
             .await
             .map_err(|_| io::Error::other("the served session was lost in its work")),
+        None => std::future::pending().await,
+    }
+}
+
+/// The next notification of `nudge`; pending forever without one.
+async fn nudged(nudge: &Option<Arc<tokio::sync::Notify>>) {
+    match nudge {
+        Some(n) => n.notified().await,
         None => std::future::pending().await,
     }
 }
