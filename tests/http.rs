@@ -453,7 +453,24 @@ fn unknown_routes_and_methods_are_json_errors() {
     assert!(r.error().contains("/api/tags"), "{}", r.text());
 }
 
-/// Every route of issue 18, with its method.
+#[test]
+fn gpio_is_404_outside_a_simulation() {
+    let server = open();
+    let r = server.get("/api/gpio");
+    assert_eq!(r.status, 404);
+    assert!(r.error().contains("not a simulation"), "{}", r.text());
+    let r = request(
+        server.addr,
+        "POST",
+        "/api/readers/r/gpi/1",
+        &[("Content-Type", "application/json")],
+        br#"{"state": "high"}"#,
+    );
+    assert_eq!(r.status, 404);
+    assert!(r.error().contains("not a simulation"), "{}", r.text());
+}
+
+/// Every route of issue 18 (and issue 43's GPIO), with its method.
 const ROUTES: &[(&str, &str)] = &[
     ("get", "/"),
     ("get", "/healthz"),
@@ -465,6 +482,8 @@ const ROUTES: &[(&str, &str)] = &[
     ("get", "/api/truth"),
     ("get", "/api/events"),
     ("post", "/api/poses"),
+    ("get", "/api/gpio"),
+    ("post", "/api/readers/{reader}/gpi/{port}"),
 ];
 
 #[test]
@@ -493,7 +512,10 @@ fn openapi_lists_every_route_and_the_router_serves_every_listed_one() {
         if path == "/api/events" {
             continue; // A stream: tests/http.rs opens it in its own test.
         }
-        let concrete = path.replace("{epc}", "ABCD");
+        let concrete = path
+            .replace("{epc}", "ABCD")
+            .replace("{reader}", "r")
+            .replace("{port}", "1");
         let r = request(
             server.addr,
             &method.to_ascii_uppercase(),

@@ -4,7 +4,7 @@
 //!
 //! A change is an edge on the reader's simulated clock: the reader runs its ROSpecs up to it,
 //! then applies it (GPIEvent, GPI start and stop triggers), and the session wakes for the
-//! next one ([`Lines::next_at`]). What the reader last knew (levels, whether each input is
+//! next one (`Lines::next_at`). What the reader last knew (levels, whether each input is
 //! enabled, the outputs) is published to the panel, which answers without the reader.
 
 use std::sync::{Arc, Mutex};
@@ -58,7 +58,7 @@ impl Eye {
             return None;
         }
         let lead = self.start_us.checked_add(k.checked_mul(self.period_us)?)?;
-        let (at_us, high) = if j % 2 == 0 {
+        let (at_us, high) = if j.is_multiple_of(2) {
             (lead, self.active_high)
         } else {
             (lead.checked_add(self.width_us)?, !self.active_high)
