@@ -154,7 +154,11 @@ async fn a_tag_written_in_one_run_reads_so_in_the_next_with_tag_memory() {
         fresh.0
     );
     // A file that is not a tag memory of this scenario is refused, naming the field.
-    std::fs::write(&file, saved.replace("\"scenario_epc\": \"E2", "\"scenario_epc\": \"AB")).expect("written");
+    std::fs::write(
+        &file,
+        saved.replace("\"scenario_epc\": \"E2", "\"scenario_epc\": \"AB"),
+    )
+    .expect("written");
     let e = llrp_gateway::sim::start(
         &s,
         &llrp_gateway::sim::SimOptions {
