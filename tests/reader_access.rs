@@ -496,3 +496,83 @@ fn access_results_are_reported_at_once_with_end_of_accessspec() {
     // The AccessSpec's own spec wins over the reader's.
     assert!(unasked_reports(Some(WheneverRoReportIsGenerated), EndOfAccessSpec).is_empty());
 }
+
+/// Reads of the tag whose EPC ends in `last` in two simulated seconds of ROSpec 1 on
+/// antenna 1 (a report per read).
+fn reads_in_two_seconds(v: &mut VirtualReader, last: u8) -> usize {
+    let spec = rospec(
+        1,
+        vec![1],
+        ro_null(),
+        ai_null(),
+        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
+    );
+    let add = llrp::message::AddRospec {
+        ro_spec: spec,
+        ..Default::default()
+    };
+    assert_eq!(v.status(add), StatusCode::M_Success);
+    let enable = llrp::message::EnableRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(enable), StatusCode::M_Success);
+    let (tags, _) = v.collect_reports(2_000_000, |_| false);
+    let delete = llrp::message::DeleteRospec {
+        ro_spec_id: 1,
+        ..Default::default()
+    };
+    assert_eq!(v.status(delete), StatusCode::M_Success);
+    v.take();
+    tags.iter()
+        .filter(|t| t.epc_bytes().last() == Some(&last))
+        .count()
+}
+
+#[test]
+fn killed_tags_spend_no_air_time_so_the_rest_are_read_more_often() {
+    let distances: Vec<f64> = (0..12).map(|i| 1.0 + 0.05 * f64::from(i)).collect();
+    let mut s = line_scenario(&distances);
+    for t in &mut s.tags {
+        t.kill_password = Some("12345678".into());
+    }
+    let mut v = VirtualReader::new(&s);
+    let crowded = reads_in_two_seconds(&mut v, 1);
+    // Kill the other eleven: an AccessSpec on every tag but the first, eleven times.
+    let mut others = last_byte_is(1);
+    others.c1g2_target_tag[0].is_match = false;
+    v.add_access_spec(AccessSpec {
+        access_spec_id: 7,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
+        access_spec_stop_trigger: AccessSpecStopTrigger {
+            access_spec_stop_trigger_type: AccessSpecStopTriggerType::OperationCount,
+            operation_count_value: 11,
+            ..Default::default()
+        },
+        access_command: AccessCommand {
+            c1g2_tag_spec: others,
+            op_specs: vec![OpSpec::C1g2Kill(C1g2Kill {
+                op_spec_id: 1,
+                kill_password: 0x1234_5678,
+                ..Default::default()
+            })],
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    let mut killed = 0;
+    inventory(&mut v, |t| {
+        killed = t
+            .iter()
+            .flat_map(|t| outcomes(&t.op_spec_results))
+            .filter(|o| o == "kill 0")
+            .count();
+        killed >= 11
+    });
+    assert_eq!(killed, 11);
+    let alone = reads_in_two_seconds(&mut v, 1);
+    assert!(
+        alone * 10 > crowded * 15,
+        "the last live tag: {crowded} reads among 12, {alone} once the rest are killed"
+    );
+}

@@ -149,8 +149,9 @@ pub const MAX_SELECT_FILTERS: u16 = 2;
 
 fn c1g2_caps() -> C1g2LlrpCapabilities {
     C1g2LlrpCapabilities {
-        can_support_block_erase: false,
-        can_support_block_write: false,
+        // Both are supported (`access::ops`).
+        can_support_block_erase: true,
+        can_support_block_write: true,
         max_num_select_filters_per_query: MAX_SELECT_FILTERS,
         ..Default::default()
     }

@@ -397,6 +397,11 @@ impl TagMemory {
         self.generation.load(Ordering::Acquire)
     }
 
+    /// Whether any tag has been killed.
+    pub fn any_killed(&self) -> bool {
+        self.touched.load(Ordering::Acquire) && self.chips().values().any(|c| c.killed)
+    }
+
     /// Every tag an operation has touched, by scenario index, in index order.
     pub fn snapshot(&self) -> Vec<(usize, Chip)> {
         let mut all: Vec<(usize, Chip)> =

@@ -209,6 +209,9 @@ fn mask_bit(v: &BitVec, i: usize) -> bool {
 #[derive(Debug, Default)]
 pub struct Selections {
     entries: Vec<Entry>,
+    /// Without a filter: the tags not killed, for the memory generation it holds for (`None`
+    /// inside while no tag is killed: every tag takes part).
+    unfiltered: Option<(u64, Option<Arc<Selected>>)>,
 }
 
 #[derive(Debug)]
@@ -230,7 +233,9 @@ impl Selections {
         memory: &TagMemory,
         query: Option<Query<'_>>,
     ) -> Option<Arc<Selected>> {
-        let q = query?;
+        let Some(q) = query else {
+            return self.unfiltered(model, memory);
+        };
         let key = (q.state_aware, q.sel, q.target_b, q.session, q.dual);
         let generation = memory.generation();
         if let Some(e) = self
@@ -258,6 +263,26 @@ impl Selections {
             selected: Arc::clone(&selected),
         });
         Some(selected)
+    }
+}
+
+impl Selections {
+    /// The tags that take part without a filter: all but the killed ones (a killed tag does
+    /// not answer a Query, so it spends no slot); `None` while no tag is killed.
+    fn unfiltered(&mut self, model: &Model, memory: &TagMemory) -> Option<Arc<Selected>> {
+        let generation = memory.generation();
+        if let Some((g, selected)) = &self.unfiltered {
+            if *g == generation {
+                return selected.clone();
+            }
+        }
+        let selected = memory.any_killed().then(|| {
+            Arc::new(Selected::from_fn(model.tag_count(), |tag| {
+                memory.epc(model, tag).is_some()
+            }))
+        });
+        self.unfiltered = Some((generation, selected.clone()));
+        selected
     }
 }
 
