@@ -420,6 +420,17 @@ impl TagMemory {
         self.generation.fetch_add(1, Ordering::AcqRel);
     }
 
+    /// `f` of tag `tag`'s memory as it is now, without copying a tag an operation touched
+    /// (the memory is locked while `f` runs: `f` must not use it).
+    pub fn inspect<R>(&self, model: &Model, tag: usize, f: impl FnOnce(&Chip) -> R) -> R {
+        if self.touched.load(Ordering::Acquire) {
+            if let Some(c) = self.chips().get(&tag) {
+                return f(c);
+            }
+        }
+        f(&Chip::from_model(model, tag))
+    }
+
     /// A copy of tag `tag`'s memory as it is now.
     pub fn chip(&self, model: &Model, tag: usize) -> Chip {
         if self.touched.load(Ordering::Acquire) {

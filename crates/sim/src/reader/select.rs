@@ -248,7 +248,7 @@ impl Selections {
             }
         }
         let selected = Selected::from_fn(model.tag_count(), |tag| {
-            q.takes_part(&memory.chip(model, tag))
+            memory.inspect(model, tag, |chip| q.takes_part(chip))
         });
         let selected = Arc::new(selected);
         self.entries

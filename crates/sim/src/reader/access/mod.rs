@@ -215,7 +215,12 @@ pub struct Applied {
 
 /// Whether a tag satisfies a C1G2TagSpec (first target tag; the second, if any, must too).
 fn tag_matches(spec: &C1g2TagSpec, tag: &Tag<'_>) -> bool {
-    let chip = tag.memory.chip(tag.model, tag.tag);
+    tag.memory
+        .inspect(tag.model, tag.tag, |chip| spec_matches(spec, chip))
+}
+
+/// Whether `chip` satisfies every target tag of `spec`.
+fn spec_matches(spec: &C1g2TagSpec, chip: &super::memory::Chip) -> bool {
     spec.c1g2_target_tag.iter().all(|t| {
         let words = chip.bank(t.mb);
         let bits: Vec<bool> = words
