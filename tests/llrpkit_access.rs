@@ -97,21 +97,20 @@ async fn sim_with_memory(
     .expect("simulator starts")
 }
 
-/// `llrpkit read` of three words of user memory on a simulator of `s` keeping its memory in
-/// `file`; then the simulator stops.
-async fn read_user(
+/// `llrpkit ARGS` against a simulator of `s` keeping its memory in `file`; then the
+/// simulator stops (and writes the memory out).
+async fn llrpkit_on(
     s: &llrp_gateway::scenario::Scenario,
     file: Option<&std::path::Path>,
+    args: &'static [&'static str],
 ) -> (String, bool) {
     let sim = sim_with_memory(s, file).await;
     let port = sim.addrs[0].port();
-    let read = tokio::task::spawn_blocking(move || {
-        llrpkit(port, &["read", "--words", "3", "--bank", "user"])
-    })
-    .await
-    .expect("join");
+    let out = tokio::task::spawn_blocking(move || llrpkit(port, args))
+        .await
+        .expect("join");
     sim.shutdown().await;
-    read
+    out
 }
 
 /// The EPCs (lower case) in an llrpkit reads file.
@@ -129,14 +128,8 @@ async fn a_tag_written_in_one_run_reads_so_in_the_next_with_tag_memory() {
     let s = line_scenario(&[1.0]);
     let dir = tempfile::tempdir().expect("temp dir");
     let file = dir.path().join("memory.json");
-    let sim = sim_with_memory(&s, Some(&file)).await;
-    let port = sim.addrs[0].port();
-    let write = tokio::task::spawn_blocking(move || {
-        llrpkit(port, &["write", "--data", "BEEFCAFE", "--bank", "user"])
-    })
-    .await
-    .expect("join");
-    sim.shutdown().await;
+    const WRITE: &[&str] = &["write", "--data", "BEEFCAFE", "--bank", "user"];
+    let write = llrpkit_on(&s, Some(&file), WRITE).await;
     assert!(
         write.1 && write.0.contains("2 word(s) written"),
         "{}",
@@ -145,9 +138,10 @@ async fn a_tag_written_in_one_run_reads_so_in_the_next_with_tag_memory() {
     let saved = std::fs::read_to_string(&file).expect("the memory was written out");
     assert!(saved.contains("\"user\": \"BEEFCAFE"), "{saved}");
     // The next run starts from the file; one without it from the scenario.
-    let read = read_user(&s, Some(&file)).await;
+    const READ: &[&str] = &["read", "--words", "3", "--bank", "user"];
+    let read = llrpkit_on(&s, Some(&file), READ).await;
     assert!(read.1 && read.0.contains("data beefcafe0000"), "{}", read.0);
-    let fresh = read_user(&s, None).await;
+    let fresh = llrpkit_on(&s, None, READ).await;
     assert!(
         fresh.1 && fresh.0.contains("data 000000000000"),
         "{}",

@@ -68,24 +68,7 @@ fn inventory(
         ..Default::default()
     }];
     let spec = rospec(1, vec![1], ro_null(), ai_null(), report);
-    let add = llrp::message::AddRospec {
-        ro_spec: spec,
-        ..Default::default()
-    };
-    assert_eq!(v.status(add), StatusCode::M_Success);
-    let enable = llrp::message::EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(enable), StatusCode::M_Success);
-    let (tags, _) = v.collect_reports(10_000_000, done);
-    let delete = llrp::message::DeleteRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(delete), StatusCode::M_Success);
-    v.take();
-    tags
+    v.run_rospec(spec, 10_000_000, done)
 }
 
 /// Two tags 1 and 1.2 m in front of the antenna (EPCs ending 01 and 02); the first with kill
@@ -456,24 +439,12 @@ fn unasked_reports(
         }),
         ..Default::default()
     });
-    let spec = rospec(
-        1,
-        vec![1],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::None, 0),
-    );
-    let add = llrp::message::AddRospec {
-        ro_spec: spec,
-        ..Default::default()
-    };
-    assert_eq!(v.status(add), StatusCode::M_Success);
-    let enable = llrp::message::EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(enable), StatusCode::M_Success);
-    v.collect_reports(1_000_000, |_| false).0
+    let report = full_report(RoReportTriggerType::None, 0);
+    v.run_rospec(
+        rospec(1, vec![1], ro_null(), ai_null(), report),
+        1_000_000,
+        |_| false,
+    )
 }
 
 #[test]
@@ -500,31 +471,10 @@ fn access_results_are_reported_at_once_with_end_of_accessspec() {
 /// Reads of the tag whose EPC ends in `last` in two simulated seconds of ROSpec 1 on
 /// antenna 1 (a report per read).
 fn reads_in_two_seconds(v: &mut VirtualReader, last: u8) -> usize {
-    let spec = rospec(
-        1,
-        vec![1],
-        ro_null(),
-        ai_null(),
-        full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1),
-    );
-    let add = llrp::message::AddRospec {
-        ro_spec: spec,
-        ..Default::default()
-    };
-    assert_eq!(v.status(add), StatusCode::M_Success);
-    let enable = llrp::message::EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(enable), StatusCode::M_Success);
-    let (tags, _) = v.collect_reports(2_000_000, |_| false);
-    let delete = llrp::message::DeleteRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(delete), StatusCode::M_Success);
-    v.take();
-    tags.iter()
+    let report = full_report(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1);
+    let spec = rospec(1, vec![1], ro_null(), ai_null(), report);
+    v.run_rospec(spec, 2_000_000, |_| false)
+        .iter()
         .filter(|t| t.epc_bytes().last() == Some(&last))
         .count()
 }

@@ -93,24 +93,9 @@ fn spec(ms: u32, cmd: Option<C1g2InventoryCommand>) -> RoSpec {
 
 /// Adds and enables `spec`, runs it once and deletes it: the reads per EPC's last byte.
 fn run(v: &mut VirtualReader, spec: RoSpec) -> BTreeMap<u8, u32> {
-    let add = AddRospec {
-        ro_spec: spec,
-        ..Default::default()
-    };
-    assert_eq!(v.status(add), StatusCode::M_Success);
-    let enable = EnableRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(enable), StatusCode::M_Success);
-    // The ROSpec's end report comes at its end; it restarts at once (Immediate), so delete it.
-    let (tags, _) = v.collect_reports(5_000_000, |t| !t.is_empty());
-    let delete = DeleteRospec {
-        ro_spec_id: 1,
-        ..Default::default()
-    };
-    assert_eq!(v.status(delete), StatusCode::M_Success);
-    v.take();
+    // The ROSpec's end report comes at its end; it restarts at once (Immediate), so it is
+    // deleted after its first report.
+    let tags = v.run_rospec(spec, 5_000_000, |t| !t.is_empty());
     let mut counts = BTreeMap::new();
     for t in &tags {
         let last = t.epc_bytes().last().copied().unwrap_or(0);

@@ -138,6 +138,36 @@ impl VirtualReader {
             .status_code
     }
 
+    /// Adds and enables `spec` (its ID must be free), collects its tag reports until `done`
+    /// or `limit_us` of simulated time, then deletes it and drops what else arrived.
+    #[allow(dead_code)] // not every test binary runs ROSpecs this way
+    pub fn run_rospec(
+        &mut self,
+        spec: llrp::params::RoSpec,
+        limit_us: u64,
+        done: impl FnMut(&[TagReportData]) -> bool,
+    ) -> Vec<TagReportData> {
+        let id = spec.ro_spec_id;
+        let add = llrp::message::AddRospec {
+            ro_spec: spec,
+            ..Default::default()
+        };
+        assert_eq!(self.status(add), StatusCode::M_Success);
+        let enable = llrp::message::EnableRospec {
+            ro_spec_id: id,
+            ..Default::default()
+        };
+        assert_eq!(self.status(enable), StatusCode::M_Success);
+        let (tags, _) = self.collect_reports(limit_us, done);
+        let delete = llrp::message::DeleteRospec {
+            ro_spec_id: id,
+            ..Default::default()
+        };
+        assert_eq!(self.status(delete), StatusCode::M_Success);
+        self.take();
+        tags
+    }
+
     /// ADD_ACCESSSPEC then ENABLE_ACCESSSPEC of `access`, each of which must succeed.
     pub fn add_access_spec(&mut self, access: llrp::params::AccessSpec) {
         let id = access.access_spec_id;
