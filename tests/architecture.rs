@@ -4,6 +4,9 @@
 //! The uses still there from before the rules are listed in [`KNOWN`], each to be removed: a
 //! new one fails the test, and so does a listed one that is gone (so the list only shrinks).
 
+#[path = "common/cargo_metadata.rs"]
+mod cargo_metadata;
+
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -530,27 +533,7 @@ fn the_simulator_crate_depends_on_no_async_crate_localizer_or_application() {
 /// build before the tests fetched every crate): per package name, its normal (not dev, not
 /// build) dependencies' names.
 fn crate_graph() -> std::collections::BTreeMap<String, BTreeSet<String>> {
-    // This machine's platform only: the others' crates (Windows', …) are not downloaded.
-    let rustc = std::process::Command::new("rustc")
-        .arg("-vV")
-        .output()
-        .expect("rustc runs");
-    let host = String::from_utf8_lossy(&rustc.stdout)
-        .lines()
-        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
-        .expect("rustc names its host");
-    let out = std::process::Command::new(env!("CARGO"))
-        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
-        .args(["--filter-platform", &host])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("cargo metadata runs");
-    assert!(
-        out.status.success(),
-        "cargo metadata: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let meta = cargo_metadata::metadata();
     let name_of: std::collections::BTreeMap<&str, &str> = meta["packages"]
         .as_array()
         .expect("packages")

@@ -21,30 +21,9 @@ fn parse(version: &str) -> (u64, u64, u64) {
     (major, minor, patch)
 }
 
-/// `cargo metadata` of the workspace for this machine's platform, offline and locked (the
-/// build before the tests fetched every crate).
-fn metadata() -> serde_json::Value {
-    let rustc = std::process::Command::new("rustc")
-        .arg("-vV")
-        .output()
-        .expect("rustc runs");
-    let host = String::from_utf8_lossy(&rustc.stdout)
-        .lines()
-        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
-        .expect("rustc names its host");
-    let out = std::process::Command::new(env!("CARGO"))
-        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
-        .args(["--filter-platform", &host])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("cargo metadata runs");
-    assert!(
-        out.status.success(),
-        "cargo metadata: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("JSON")
-}
+#[path = "common/cargo_metadata.rs"]
+mod cargo_metadata;
+use cargo_metadata::metadata;
 
 #[test]
 fn the_workspace_rust_version_is_the_highest_its_dependencies_declare() {
