@@ -20,25 +20,6 @@ fn s1_with(gpio: GpioSpec) -> Scenario {
     s
 }
 
-/// Turns on the notifications of `types`.
-fn enable_events(v: &mut VirtualReader, types: &[NotificationEventType]) {
-    let set = SetReaderConfig {
-        reader_event_notification_spec: Some(ReaderEventNotificationSpec {
-            event_notification_state: types
-                .iter()
-                .map(|&t| EventNotificationState {
-                    event_type: t,
-                    notification_state: true,
-                    ..Default::default()
-                })
-                .collect(),
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    assert_eq!(v.status(set), StatusCode::M_Success);
-}
-
 /// ADD_ROSPEC then ENABLE_ROSPEC, both of which must succeed.
 fn add_and_enable(v: &mut VirtualReader, spec: RoSpec) {
     let id = spec.ro_spec_id;
@@ -114,7 +95,7 @@ const EVENTS: &[NotificationEventType] = &[
 #[test]
 fn a_gpi_start_trigger_starts_the_rospec_on_its_event_only() {
     let mut v = VirtualReader::new(&Scenario::default_s1());
-    enable_events(&mut v, EVENTS);
+    v.enable_events(EVENTS);
     // Starts on GPI 1 falling (event false); rising is the other edge.
     let spec = RoSpec::immediate(1, vec![0]).with_start(RoSpecStartTrigger::gpi(1, false));
     add_and_enable(&mut v, spec);
@@ -140,7 +121,7 @@ fn a_gpi_start_trigger_starts_the_rospec_on_its_event_only() {
 #[test]
 fn a_gpi_stop_trigger_ends_the_rospec_on_its_event_and_the_start_trigger_rearms() {
     let mut v = VirtualReader::new(&Scenario::default_s1());
-    enable_events(&mut v, EVENTS);
+    v.enable_events(EVENTS);
     add_and_enable(&mut v, gated(1, 0));
     v.set_gpi(1, true);
     v.run_for(700_000);
@@ -165,7 +146,7 @@ fn a_gpi_stop_trigger_ends_the_rospec_on_its_event_and_the_start_trigger_rearms(
 #[test]
 fn a_gpi_stop_trigger_times_out_and_a_start_triggers_timeout_is_ignored() {
     let mut v = VirtualReader::new(&Scenario::default_s1());
-    enable_events(&mut v, EVENTS);
+    v.enable_events(EVENTS);
     // The start trigger's 100 ms timeout is ignored (LLRP 1.0.1 §10.2.1.1.1.2): no start.
     let mut spec = gated(1, 400);
     if let Some(g) = &mut spec
@@ -194,7 +175,7 @@ fn a_gpi_stop_trigger_times_out_and_a_start_triggers_timeout_is_ignored() {
 #[test]
 fn an_aispec_gpi_stop_trigger_moves_on_to_the_next_aispec() {
     let mut v = VirtualReader::new(&Scenario::default_s1());
-    enable_events(&mut v, &[NotificationEventType::AiSpecEvent]);
+    v.enable_events(&[NotificationEventType::AiSpecEvent]);
     let mut spec = RoSpec::immediate(1, vec![0]).with_start(RoSpecStartTrigger::null());
     let second = spec.specs[0].clone();
     spec.specs.push(second);
@@ -223,7 +204,7 @@ fn an_aispec_gpi_stop_trigger_moves_on_to_the_next_aispec() {
 #[test]
 fn a_disabled_port_raises_no_event_and_fires_no_trigger_and_reads_unknown() {
     let mut v = VirtualReader::new(&Scenario::default_s1());
-    enable_events(&mut v, EVENTS);
+    v.enable_events(EVENTS);
     add_and_enable(&mut v, gated(1, 0));
     let disable = SetReaderConfig {
         gpi_port_current_state: vec![GpiPortCurrentState {
@@ -412,7 +393,7 @@ fn the_scenario_timeline_starts_and_stops_a_gated_rospec_at_its_times() {
         gpi_timeline: vec![change(200, Level::High), change(700, Level::Low)],
         ..GpioSpec::default()
     }));
-    enable_events(&mut v, EVENTS);
+    v.enable_events(EVENTS);
     add_and_enable(&mut v, gated(1, 0));
     v.run_for(1_000_000);
     assert_eq!(
@@ -439,7 +420,7 @@ fn a_photo_eye_gates_one_run_per_pulse() {
         }],
         ..GpioSpec::default()
     }));
-    enable_events(&mut v, &[NotificationEventType::RoSpecEvent]);
+    v.enable_events(&[NotificationEventType::RoSpecEvent]);
     add_and_enable(&mut v, gated(1, 0));
     v.run_for(5_000_000);
     assert_eq!(

@@ -10,25 +10,6 @@ use llrp::message::*;
 use llrp::params::*;
 use llrp::Message;
 
-/// Turns ROSpecEvent (and AISpecEvent) notifications on.
-fn enable_events(v: &mut VirtualReader, types: &[NotificationEventType]) {
-    let set = SetReaderConfig {
-        reader_event_notification_spec: Some(ReaderEventNotificationSpec {
-            event_notification_state: types
-                .iter()
-                .map(|&t| EventNotificationState {
-                    event_type: t,
-                    notification_state: true,
-                    ..Default::default()
-                })
-                .collect(),
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    assert_eq!(v.status(set), StatusCode::M_Success);
-}
-
 /// (event type, ROSpec, preempting ROSpec, UTC µs) of a ROSpecEvent.
 fn rospec_event(m: &Message) -> Option<(RoSpecEventType, u32, u32, u64)> {
     let MessageBody::ReaderEventNotification(n) = &m.body else {
@@ -85,7 +66,7 @@ fn last_seen(report: &[TagReportData]) -> u64 {
 #[test]
 fn periodic_start_with_duration_stop() {
     let mut v = VirtualReader::new(&s1());
-    enable_events(&mut v, &[NotificationEventType::RoSpecEvent]);
+    v.enable_events(&[NotificationEventType::RoSpecEvent]);
     let spec = rospec(
         5,
         vec![1],
@@ -117,7 +98,7 @@ fn periodic_start_with_duration_stop() {
 #[test]
 fn higher_priority_preempts_and_immediate_resumes() {
     let mut v = VirtualReader::new(&s1());
-    enable_events(&mut v, &[NotificationEventType::RoSpecEvent]);
+    v.enable_events(&[NotificationEventType::RoSpecEvent]);
     let low = rospec(
         1,
         vec![1],

@@ -168,6 +168,27 @@ impl VirtualReader {
         tags
     }
 
+    /// Turns on the event notifications of `types` (SET_READER_CONFIG, which must succeed).
+    #[allow(dead_code)] // not every test binary asks for events
+    pub fn enable_events(&mut self, types: &[llrp::enums::NotificationEventType]) {
+        use llrp::params::{EventNotificationState, ReaderEventNotificationSpec};
+        let set = llrp::message::SetReaderConfig {
+            reader_event_notification_spec: Some(ReaderEventNotificationSpec {
+                event_notification_state: types
+                    .iter()
+                    .map(|&t| EventNotificationState {
+                        event_type: t,
+                        notification_state: true,
+                        ..Default::default()
+                    })
+                    .collect(),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(self.status(set), StatusCode::M_Success);
+    }
+
     /// ADD_ACCESSSPEC then ENABLE_ACCESSSPEC of `access`, each of which must succeed.
     pub fn add_access_spec(&mut self, access: llrp::params::AccessSpec) {
         let id = access.access_spec_id;

@@ -120,7 +120,18 @@ impl Chip {
                 .map(|c| u16::from_be_bytes([c[0], c[1]])),
         );
         words.resize(1 + epc.words().max(EPC_MEMORY_WORDS), 0);
-        let (kill, access) = model.tag_passwords(tag);
+        Chip::shipped(
+            model.tag_passwords(tag),
+            words,
+            model.tag_tid(tag),
+            model.tag_user(tag),
+        )
+    }
+
+    /// A tag as manufacturers ship it: the (kill, access) passwords, EPC memory from the PC
+    /// word, TID and User memory, the TID permalocked.
+    pub fn shipped(passwords: (u32, u32), epc: Vec<u16>, tid: Vec<u16>, user: Vec<u16>) -> Chip {
+        let (kill, access) = passwords;
         let mut locks = [Lock::default(); LOCK_FIELDS];
         locks[3] = Lock {
             locked: true,
@@ -133,9 +144,9 @@ impl Chip {
                 (access >> 16) as u16,
                 access as u16,
             ],
-            epc: words,
-            tid: model.tag_tid(tag),
-            user: model.tag_user(tag),
+            epc,
+            tid,
+            user,
             locks,
             killed: false,
         }
@@ -450,24 +461,8 @@ mod tests {
     fn chip(kill: u32, access: u32) -> Chip {
         let mut epc = vec![0x3000, 0x3008, 0x33B2, 0xDDD9, 0x0140, 0, 1];
         epc.resize(1 + EPC_MEMORY_WORDS, 0);
-        let mut locks = [Lock::default(); LOCK_FIELDS];
-        locks[3] = Lock {
-            locked: true,
-            perma: true,
-        };
-        Chip {
-            reserved: [
-                (kill >> 16) as u16,
-                kill as u16,
-                (access >> 16) as u16,
-                access as u16,
-            ],
-            epc,
-            tid: vec![0xE280, 0x1160, 1, 2, 3, 4],
-            user: vec![0; 4],
-            locks,
-            killed: false,
-        }
+        let tid = vec![0xE280, 0x1160, 1, 2, 3, 4];
+        Chip::shipped((kill, access), epc, tid, vec![0; 4])
     }
 
     #[test]
