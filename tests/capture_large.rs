@@ -6,13 +6,15 @@
 //! Heavy: 2 GiB written and read back (about 35 s in a debug build on two cores; 23 MB
 //! peak measured), so it is `#[ignore]`d in a plain `cargo test`; `./scripts/test` runs it.
 
+#[path = "common/reports.rs"]
+mod reports;
+
 use std::io::{BufWriter, Read, Write};
 use std::net::Ipv4Addr;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
 use llrp::message::*;
-use llrp::params::*;
 use llrp::Message;
 use llrp_gateway::record::pcapng::packet::{ethernet_ipv4_tcp, OutSegment, ACK, FIN, PSH, SYN};
 
@@ -82,28 +84,7 @@ fn segment(from_reader: bool, seq: u32, ack: u32, flags: u8, payload: &[u8]) -> 
 
 /// A report of about 58 KB: one segment each.
 fn report() -> Vec<u8> {
-    let read = |n: u32| TagReportData {
-        epc: Epc::Epc96(Epc96([
-            0x30,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            (n >> 8) as u8,
-            n as u8,
-        ])),
-        antenna_id: Some(AntennaId(1)),
-        ..Default::default()
-    };
-    let report = RoAccessReport {
-        tag_report_data: (0..2900).map(read).collect(),
-        ..Default::default()
-    };
+    let report = reports::many_reads(2900);
     let frame = Message::new(1, report).to_bytes().to_vec();
     assert!(
         (50_000..65_000).contains(&frame.len()),

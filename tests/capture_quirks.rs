@@ -3,13 +3,15 @@
 //! IPv6 with an Authentication Header between it and TCP, and IP fragments (reassembled,
 //! counted and reported; those of a packet never completed dropped, and reported).
 
+#[path = "common/reports.rs"]
+mod reports;
+
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
 use std::process::Command;
 
 use bytes::Bytes;
 use etherparse::PacketBuilder;
 use llrp::message::*;
-use llrp::params::*;
 use llrp::Message;
 use llrp_gateway::record::pcapng;
 use llrp_gateway::record::{Direction, Entry, Event, Recording};
@@ -93,28 +95,7 @@ impl Session {
 
 /// The session's frames: a request, a report far larger than an MSS, a keepalive.
 fn frames() -> Vec<(Direction, Bytes)> {
-    let read = |n: u32| TagReportData {
-        epc: Epc::Epc96(Epc96([
-            0x30,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            (n >> 8) as u8,
-            n as u8,
-        ])),
-        antenna_id: Some(AntennaId(1)),
-        ..Default::default()
-    };
-    let report = RoAccessReport {
-        tag_report_data: (0..1000).map(read).collect(),
-        ..Default::default()
-    };
+    let report = reports::many_reads(1000);
     vec![
         (
             Direction::ToReader,

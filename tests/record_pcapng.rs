@@ -6,6 +6,9 @@
 //! `--include-ignored` after `scripts/install-tshark`); they fail, naming the command to
 //! run, if tshark is missing.
 
+#[path = "common/reports.rs"]
+mod reports;
+
 mod common;
 
 use std::path::{Path, PathBuf};
@@ -607,28 +610,7 @@ async fn tshark_dissects_every_exported_frame_as_llrp_with_only_the_known_faults
 /// larger than any MSS, then bytes that are not LLRP both ways.
 fn add_synthetic(r: &mut Recording) {
     let at = r.entries.last().map(Entry::at).unwrap_or_default();
-    let read = |n: u32| TagReportData {
-        epc: Epc::Epc96(Epc96([
-            0x30,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            0,
-            (n >> 8) as u8,
-            n as u8,
-        ])),
-        antenna_id: Some(AntennaId(1)),
-        ..Default::default()
-    };
-    let report = RoAccessReport {
-        tag_report_data: (0..5000).map(read).collect(),
-        ..Default::default()
-    };
+    let report = reports::many_reads(5000);
     let frames = [
         (
             Direction::ToReader,
