@@ -1,24 +1,31 @@
-//! `llrp-gateway export` (a recording as a pcapng capture that Wireshark dissects as LLRP) and
-//! `llrp-gateway import` (the LLRP streams of a pcap or pcapng capture as a recording): their
-//! arguments and runners. The conversions themselves: [`crate::record::pcapng`].
+//! `llrp-gateway export` (a recording as a pcapng capture that Wireshark dissects as LLRP, and
+//! as an MCAP file of ROS 2 messages) and `llrp-gateway import` (the LLRP streams of a pcap or
+//! pcapng capture as a recording): their arguments and runners. The conversions themselves:
+//! [`crate::record::pcapng`], [`crate::record::mcap`].
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::files::{Output, OutputError};
+use crate::record::mcap::{self as mcap_out, McapError};
 use crate::record::pcapng::{
     export, import_into, ExportError, ExportOptions, ImportError, JsonLines, DEFAULT_MSS,
 };
 use crate::record::{RecordError, Recording};
 
-/// `llrp-gateway export`: a recording as a pcapng capture.
+/// `llrp-gateway export`: a recording as a pcapng capture, an MCAP file, or both.
 #[derive(Clone, Debug, clap::Args)]
+#[command(group = clap::ArgGroup::new("out").required(true).multiple(true).args(["pcapng", "mcap"]))]
 pub struct ExportArgs {
     /// The recording (JSON Lines) to export.
     pub file: PathBuf,
     /// The pcapng capture to write.
     #[arg(long, value_name = "OUT")]
-    pub pcapng: PathBuf,
+    pub pcapng: Option<PathBuf>,
+    /// The MCAP file to write (ROS 2 messages: frames, tag reads, reader events;
+    /// docs/robotics.md).
+    #[arg(long, value_name = "OUT")]
+    pub mcap: Option<PathBuf>,
     /// Largest TCP payload of a packet; longer frames are split into several segments.
     #[arg(long, default_value_t = DEFAULT_MSS,
           value_parser = crate::cli::options::parser::<u16>("mss"))]
@@ -72,6 +79,14 @@ pub enum ExportCommandError {
         /// Why.
         source: std::io::Error,
     },
+    /// The MCAP file could not be written.
+    #[error("{}: {source}", out.display())]
+    Mcap {
+        /// The MCAP file.
+        out: PathBuf,
+        /// Why.
+        source: McapError,
+    },
 }
 
 /// Why `import` failed.
@@ -117,18 +132,40 @@ pub enum ImportCommandError {
 
 /// Runs `llrp-gateway export`; warnings and a summary go to standard error.
 pub fn run_export(args: &ExportArgs) -> Result<(), ExportCommandError> {
-    // The output is checked (not the input, not an existing file) before anything is read.
-    let mut output = Output::create(&args.pcapng, &[&args.file], args.force)?;
+    // The outputs are checked (not the input, not an existing file) before anything is read.
+    let pcapng = match &args.pcapng {
+        Some(p) => Some((p, Output::create(p, &[&args.file], args.force)?)),
+        None => None,
+    };
+    let mcap = match &args.mcap {
+        Some(p) => Some((p, Output::create(p, &[&args.file], args.force)?)),
+        None => None,
+    };
     let recording = open_recording(&args.file)?;
-    let summary =
-        export(&recording, &ExportOptions { mss: args.mss }, &mut output).map_err(|source| {
-            ExportCommandError::Export {
-                out: args.pcapng.clone(),
-                source,
-            }
-        })?;
+    if let Some((path, output)) = pcapng {
+        export_pcapng(&recording, args.mss, path, output)?;
+    }
+    if let Some((path, output)) = mcap {
+        export_mcap(&recording, path, output)?;
+    }
+    Ok(())
+}
+
+/// The recording as a pcapng capture at `path`.
+fn export_pcapng(
+    recording: &Recording,
+    mss: u16,
+    path: &Path,
+    mut output: Output,
+) -> Result<(), ExportCommandError> {
+    let summary = export(recording, &ExportOptions { mss }, &mut output).map_err(|source| {
+        ExportCommandError::Export {
+            out: path.to_owned(),
+            source,
+        }
+    })?;
     output.flush().map_err(|source| ExportCommandError::Write {
-        out: args.pcapng.clone(),
+        out: path.to_owned(),
         source,
     })?;
     output.commit()?;
@@ -138,8 +175,44 @@ pub fn run_export(args: &ExportArgs) -> Result<(), ExportCommandError> {
         summary.frames,
         summary.bytes_entries,
         summary.packets,
-        args.pcapng.display()
+        path.display()
     );
+    Ok(())
+}
+
+/// The recording as an MCAP file at `path`.
+fn export_mcap(
+    recording: &Recording,
+    path: &Path,
+    output: Output,
+) -> Result<(), ExportCommandError> {
+    let mcap_error = |source| ExportCommandError::Mcap {
+        out: path.to_owned(),
+        source,
+    };
+    let (summary, mut output) = mcap_out::export(recording, output).map_err(mcap_error)?;
+    output.flush().map_err(|source| ExportCommandError::Write {
+        out: path.to_owned(),
+        source,
+    })?;
+    output.commit()?;
+    eprintln!(
+        "llrp-gateway export: {} frames, {} tag reads, {} reader events: {} messages on {} \
+         channels in {}",
+        summary.frames,
+        summary.reads,
+        summary.events,
+        summary.messages,
+        summary.channels,
+        path.display()
+    );
+    if summary.undecodable_reports > 0 {
+        eprintln!(
+            "llrp-gateway export: warning: {} RO_ACCESS_REPORTs did not decode (kept as frames, \
+             no reads from them)",
+            summary.undecodable_reports
+        );
+    }
     Ok(())
 }
 

@@ -45,6 +45,9 @@ pub struct InventoryArgs {
     /// The output's format, when its name does not say it (or to override what it says).
     #[arg(long, value_enum, requires = "output")]
     pub format: Option<Format>,
+    /// Write the tag reads to this MCAP file too (ROS 2 messages; docs/robotics.md).
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// Replace an existing output file (without it, an existing file is refused).
     #[arg(long)]
     pub force: bool,
@@ -234,6 +237,7 @@ impl InventoryArgs {
             },
             seconds: self.seconds,
             output,
+            mcap: self.mcap.clone(),
             force: self.force,
             retries: self.retries,
             backoff_ms: self.backoff_ms,
@@ -253,8 +257,9 @@ pub fn run(args: InventoryArgs) -> Result<(), InventoryCommandError> {
     runtime.block_on(async move {
         let inventory = Inventory::open(options)?;
         let sinks = start_sinks(&args.live, "inventory").await?;
-        let ended = inventory.run(sinks.tap()).await?;
+        let mut ended = inventory.run(sinks.tap()).await?;
         sinks.stop().await;
+        ended.finish_mcap().await?;
         Ok(ended.report()?)
     })
 }

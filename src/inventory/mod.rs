@@ -23,6 +23,7 @@ use crate::localize::live::{Input, Tap};
 use crate::net::client::{Backoff, Client, ClientError, ReadStream};
 use crate::net::tls;
 use crate::reads::Read;
+use crate::record::mcap::{McapError, McapItem, McapThread};
 
 mod display;
 mod options;
@@ -68,6 +69,14 @@ pub enum InventoryError {
     /// The run ended (time, or a stop signal) before any connection was made.
     #[error("no connection to {0} before the end of the run")]
     NeverConnected(String),
+    /// The MCAP file could not be written.
+    #[error("writing the reads to {}: {source}", path.display())]
+    Mcap {
+        /// The MCAP file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: McapError,
+    },
     /// The output could not be written.
     #[error("writing the reads to {path}: {source}")]
     Output {
@@ -124,10 +133,13 @@ async fn pause(d: Duration, deadline: Option<Instant>, stop: &AtomicBool) -> boo
 pub struct Inventory {
     opts: InventoryOptions,
     sink: Sink,
+    mcap: Option<McapThread>,
 }
 
 /// An inventory that ran to its end: what its summary is made of.
 pub struct Ended {
+    /// The MCAP file's writer, still to be finished ([`Ended::finish_mcap`]).
+    mcap: Option<(std::path::PathBuf, McapThread)>,
     addr: String,
     stats: Stats,
     screen: Screen,
@@ -157,6 +169,7 @@ struct Run {
     opts: InventoryOptions,
     addr: String,
     sink: Sink,
+    mcap: Option<McapThread>,
     tap: Option<Tap>,
     stop: Arc<AtomicBool>,
     deadline: Option<Instant>,
@@ -175,7 +188,11 @@ impl Inventory {
     pub fn open(opts: InventoryOptions) -> Result<Inventory, InventoryError> {
         let sink =
             Sink::open(&opts.output, opts.force).map_err(|source| output_error(&opts, source))?;
-        Ok(Inventory { opts, sink })
+        let mcap = match &opts.mcap {
+            None => None,
+            Some(path) => Some(open_mcap(path, opts.force)?),
+        };
+        Ok(Inventory { opts, sink, mcap })
     }
 
     /// Connects (and reconnects) until the end of the run, writing the reads and offering
@@ -196,6 +213,7 @@ impl Inventory {
         }
         run.sink.flush().map_err(|e| run.output_error(e))?;
         Ok(Ended {
+            mcap: run.opts.mcap.clone().zip(run.mcap),
             to_stdout: run.opts.output == Some(Output::Stdout),
             addr: run.addr,
             stats: run.stats,
@@ -205,6 +223,19 @@ impl Inventory {
 }
 
 impl Ended {
+    /// Finishes the MCAP file, if any (on a blocking thread: it waits for the writer).
+    pub async fn finish_mcap(&mut self) -> Result<(), InventoryError> {
+        let Some((path, mcap)) = self.mcap.take() else {
+            return Ok(());
+        };
+        let finished = tokio::task::spawn_blocking(move || mcap.finish())
+            .await
+            .unwrap_or(Err(McapError::ThreadGone));
+        finished
+            .map(|_| ())
+            .map_err(|source| InventoryError::Mcap { path, source })
+    }
+
     /// Clears the live lines and prints the summary (on standard error when the reads went to
     /// standard output); an error if no connection was ever made.
     pub fn report(mut self) -> Result<(), InventoryError> {
@@ -223,6 +254,18 @@ impl Ended {
     }
 }
 
+/// Opens the MCAP file at `path` (an existing file is refused unless `force`) and starts
+/// its writer.
+fn open_mcap(path: &std::path::Path, force: bool) -> Result<McapThread, InventoryError> {
+    let mcap_error = |source| InventoryError::Mcap {
+        path: path.to_owned(),
+        source,
+    };
+    let file = crate::files::create_stream(path, &[], force)
+        .map_err(|e| mcap_error(McapError::Mcap(e.into_io().into())))?;
+    McapThread::start(io::BufWriter::new(file)).map_err(mcap_error)
+}
+
 /// The output's I/O error, naming the output.
 fn output_error(opts: &InventoryOptions, source: io::Error) -> InventoryError {
     InventoryError::Output {
@@ -233,7 +276,7 @@ fn output_error(opts: &InventoryOptions, source: io::Error) -> InventoryError {
 
 impl Run {
     fn new(inventory: Inventory, tap: Option<Tap>) -> Run {
-        let Inventory { opts, sink } = inventory;
+        let Inventory { opts, sink, mcap } = inventory;
         let addr = if opts.tls.is_some() {
             reader_address_on(&opts.reader, tls::LLRP_TLS_PORT)
         } else {
@@ -252,6 +295,7 @@ impl Run {
         Run {
             addr,
             sink,
+            mcap,
             tap,
             stop: watch_stop_signals(),
             deadline: opts
@@ -377,7 +421,7 @@ impl Run {
                 keepalives = stream.keepalives_answered();
                 last_heard = Instant::now();
             }
-            self.drain()?;
+            self.drain().await?;
             let now = Instant::now();
             if let Some(why) = self.silent(now, last_heard) {
                 self.count(&stream);
@@ -410,7 +454,7 @@ impl Run {
     async fn close(&mut self, stream: ReadStream) -> Result<(), InventoryError> {
         self.count(&stream);
         let closed = stream.finish(CLOSE_TIMEOUT, &mut self.batch).await;
-        self.drain()?;
+        self.drain().await?;
         if let Err(e) = closed {
             self.screen.log(&format!("closing the connection: {e}"));
         }
@@ -424,11 +468,23 @@ impl Run {
         self.stats.foreign_reads += stream.foreign_reads();
     }
 
-    /// The batch's reads to the localizer and the MQTT publisher (if any), then to the
-    /// output and the statistics.
-    fn drain(&mut self) -> Result<(), InventoryError> {
+    /// The batch's reads to the localizer and the MQTT publisher (if any), the MCAP file's
+    /// writer (if any), then to the output and the statistics.
+    async fn drain(&mut self) -> Result<(), InventoryError> {
         if let (Some(t), false) = (&self.tap, self.batch.is_empty()) {
             t.offer(Input::Reads(self.batch.to_vec()));
+        }
+        if let (Some(m), false) = (&self.mcap, self.batch.is_empty()) {
+            let item = McapItem::Reads {
+                received_us: crate::utc::now_us(),
+                reads: self.batch.to_vec(),
+            };
+            if let Err(source) = m.send(item).await {
+                return Err(InventoryError::Mcap {
+                    path: self.opts.mcap.clone().unwrap_or_default(),
+                    source,
+                });
+            }
         }
         for r in self.batch.drain(..) {
             if let Err(e) = self.sink.write(&r) {

@@ -24,6 +24,8 @@ pub struct InventoryOptions {
     pub seconds: Option<f64>,
     /// Where the reads go, its format settled (not [`Output::Unnamed`]).
     pub output: Option<Output>,
+    /// Write the reads to this MCAP file too (ROS 2 messages; `docs/robotics.md`).
+    pub mcap: Option<PathBuf>,
     /// Replace an existing output file.
     pub force: bool,
     /// Retries after failed connection attempts in a row.

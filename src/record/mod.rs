@@ -2,6 +2,7 @@
 //! proxy and the simulated reader record through, on a thread of its own ([`mod@writer`]).
 
 pub mod format;
+pub mod mcap;
 pub mod pcapng;
 pub mod replay;
 pub mod writer;

@@ -1,0 +1,146 @@
+#!/usr/bin/env python3
+"""Reads an MCAP file of llrp-gateway with two independent readers and prints what it holds.
+
+Usage: mcap_check.py FILE.mcap
+
+1. Foxglove's `mcap` 1.6.0 with `mcap-ros2-support` 0.6.0: the header, every schema and
+   channel (topic, schema name and encoding, message encoding, offered QoS), the summary's
+   message count per channel, and every message decoded from the schemas in the file.
+2. `rosbags` 0.11.9 (rosbags.highlevel.AnyReader over an EMPTY typestore, so every type comes
+   from the definitions the file carries): the connections and every message deserialized
+   from CDR.
+
+Prints ONE JSON object:
+
+  {"header": {"profile", "library"},
+   "channels": [{"topic", "schema", "schema_encoding", "message_encoding", "count",
+                 "qos"}],
+   "mcap_ros2": DECODED, "rosbags": DECODED}
+
+where DECODED is {"reads": [...], "frames": {topic: hex of the data concatenated},
+"frame_count": {topic: n}, "events": [...], "logs": [...], "count": n}. A read is the reads
+file's fields (epc, reader, antenna, t_us from the header stamp, last_seen_us, phase_rad,
+rssi_dbm, channel_index, channel_frequency_hz, doppler_hz; null for the message set's NaN
+and 0 "none" values) plus frame_id, topic, log_time and publish_time (ns; rosbags gives only
+the log time). Exits 1 with a message on standard error when a reader fails.
+"""
+
+import json
+import math
+import sys
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+READ = "llrp_gateway_msgs/msg/TagRead"
+FRAME = "llrp_gateway_msgs/msg/LlrpFrame"
+EVENT = "llrp_gateway_msgs/msg/ReaderEvent"
+LOG = "foxglove_msgs/msg/Log"
+
+
+def ns(t):
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def none_if(v, empty):
+    if isinstance(v, float) and math.isnan(v):
+        return None
+    return None if v == empty else v
+
+
+def read_of(m, topic, log_time, publish_time):
+    last = ns(m.last_seen)
+    return {
+        "epc": m.epc,
+        "reader": m.reader,
+        "antenna": m.antenna,
+        "t_us": ns(m.header.stamp) // 1000,
+        "last_seen_us": None if last == 0 else last // 1000,
+        "phase_rad": none_if(m.phase_rad, None),
+        "rssi_dbm": none_if(m.rssi_dbm, None),
+        "channel_index": none_if(m.channel_index, 0),
+        "channel_frequency_hz": none_if(m.channel_frequency_hz, 0),
+        "doppler_hz": none_if(m.doppler_hz, None),
+        "frame_id": m.header.frame_id,
+        "topic": topic,
+        "log_time": log_time,
+        "publish_time": publish_time,
+    }
+
+
+class Decoded:
+    def __init__(self):
+        self.reads, self.frames, self.frame_count = [], {}, {}
+        self.events, self.logs, self.count = [], [], 0
+
+    def add(self, schema, topic, m, log_time, publish_time):
+        self.count += 1
+        if schema == READ:
+            self.reads.append(read_of(m, topic, log_time, publish_time))
+        elif schema == FRAME:
+            self.frames[topic] = self.frames.get(topic, "") + bytes(m.data).hex()
+            self.frame_count[topic] = self.frame_count.get(topic, 0) + 1
+        elif schema == EVENT:
+            self.events.append({
+                "topic": topic, "reader": m.reader, "connection": m.connection,
+                "kind": m.kind, "detail": m.detail, "stamp_ns": ns(m.header.stamp),
+                "frame_id": m.header.frame_id, "log_time": log_time,
+                "publish_time": publish_time,
+            })
+        elif schema == LOG:
+            self.logs.append({"name": m.name, "level": m.level, "message": m.message,
+                              "stamp_ns": ns(m.timestamp), "log_time": log_time})
+
+    def json(self):
+        return {"reads": self.reads, "frames": self.frames, "frame_count": self.frame_count,
+                "events": self.events, "logs": self.logs, "count": self.count}
+
+
+def with_mcap(path):
+    out = Decoded()
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        header = reader.get_header()
+        summary = reader.get_summary()
+        counts = summary.statistics.channel_message_counts
+        channels = []
+        for c in sorted(summary.channels.values(), key=lambda c: c.id):
+            s = summary.schemas[c.schema_id]
+            channels.append({
+                "topic": c.topic, "schema": s.name, "schema_encoding": s.encoding,
+                "message_encoding": c.message_encoding, "count": counts.get(c.id, 0),
+                "qos": c.metadata.get("offered_qos_profiles", ""),
+            })
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                log_time_order=False):
+            out.add(schema.name, channel.topic, decoded, message.log_time,
+                    message.publish_time)
+    return {"profile": header.profile, "library": header.library}, channels, out
+
+
+def with_rosbags(path):
+    from pathlib import Path
+    out = Decoded()
+    with AnyReader([Path(path)], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        for conn, timestamp, raw in reader.messages():
+            m = reader.deserialize(raw, conn.msgtype)
+            out.add(conn.msgtype, conn.topic, m, timestamp, None)
+    return out
+
+
+def main():
+    path = sys.argv[1]
+    try:
+        header, channels, mine = with_mcap(path)
+        theirs = with_rosbags(path)
+    except Exception as e:  # noqa: BLE001 - any failure of a reader is the answer
+        print(f"mcap_check.py: {type(e).__name__}: {e}", file=sys.stderr)
+        sys.exit(1)
+    print(json.dumps({"header": header, "channels": channels, "mcap_ros2": mine.json(),
+                      "rosbags": theirs.json()}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+//! MCAP out: LLRP sessions, tag reads and reader events as an MCAP file of ROS 2 messages
+//! (profile `ros2`, `ros2msg` schemas, CDR messages), which Foxglove, `ros2 bag play` and ROS 2
+//! bag readers read. See `docs/robotics.md`.
+//!
+//! * [`McapOut`]: the file being written, from frames (each connection and direction its own
+//!   channel, byte for byte; the reads and reader events decoded from them), reads and events;
+//! * [`export()`]: a recording ([`crate::record::Recording`]) as an MCAP file;
+//! * [`McapThread`]: an [`McapOut`] on a thread of its own, which running commands hand their
+//!   data to (file IO never on an async worker);
+//! * the message set ([`msgs`]) and its CDR encoder ([`cdr`]).
+//!
+//! Times are UTC nanoseconds since the Unix epoch throughout: an MCAP message's log time is
+//! when the gateway received it, its publish time the reader's own timestamp where it has one
+//! (a read's first-seen time, a notification's UTCTimestamp), else the log time.
+
+pub mod cdr;
+mod export;
+pub mod msgs;
+mod thread;
+mod writer;
+
+pub use export::export;
+pub use thread::{McapItem, McapThread};
+pub use writer::McapOut;
+
+/// Why an MCAP file could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum McapError {
+    /// The MCAP writer failed (an IO error of the file, a record it refused).
+    #[error("MCAP: {0}")]
+    Mcap(#[from] ::mcap::McapError),
+    /// The writer's thread is gone (it failed earlier, or panicked).
+    #[error("the MCAP writer's thread ended early")]
+    ThreadGone,
+}
+
+/// What an MCAP file holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Summary {
+    /// Messages of every kind.
+    pub messages: u64,
+    /// Channels.
+    pub channels: usize,
+    /// LLRP frames (and non-frame byte runs).
+    pub frames: u64,
+    /// Tag reads.
+    pub reads: u64,
+    /// Reader events.
+    pub events: u64,
+    /// RO_ACCESS_REPORTs that did not decode (kept as frames, no reads from them).
+    pub undecodable_reports: u64,
+}
+
+/// A reader's name as a ROS 2 topic name token (and frame id): letters, digits and single
+/// underscores, not starting with a digit; every other run of characters becomes one `_`.
+/// `127.0.0.1:5084` is `r_127_0_0_1_5084`, `dock 1` is `dock_1`, an empty name `reader`.
+pub fn topic_token(name: &str) -> String {
+    let mut t = String::with_capacity(name.len() + 2);
+    for c in name.chars() {
+        if c.is_ascii_alphanumeric() {
+            t.push(c);
+        } else if !t.is_empty() && !t.ends_with('_') {
+            t.push('_');
+        }
+    }
+    while t.ends_with('_') {
+        t.pop();
+    }
+    if t.is_empty() {
+        return "reader".into();
+    }
+    if t.starts_with(|c: char| c.is_ascii_digit()) {
+        t.insert_str(0, "r_");
+    }
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::topic_token;
+
+    #[test]
+    fn a_reader_name_becomes_a_valid_topic_token() {
+        assert_eq!(topic_token("127.0.0.1:5084"), "r_127_0_0_1_5084");
+        assert_eq!(topic_token("dock 1"), "dock_1");
+        assert_eq!(topic_token("s1-reader"), "s1_reader");
+        assert_eq!(topic_token("__a__b__"), "a_b");
+        assert_eq!(topic_token(""), "reader");
+        assert_eq!(topic_token("€"), "reader");
+    }
+}
