@@ -21,12 +21,14 @@ where DECODED is {"reads": [...], "frames": {topic: hex of the data concatenated
 "frame_count": {topic: n}, "events": [...], "logs": [...], "count": n}. A read is the reads
 file's fields (epc, reader, antenna, t_us from the header stamp, last_seen_us, phase_rad,
 rssi_dbm, channel_index, channel_frequency_hz, doppler_hz; null for the message set's NaN
-and 0 "none" values) plus frame_id, topic, log_time and publish_time (ns; rosbags gives only
+and 0 "none" values; the float64 fields as their IEEE 754 bits, an integer, so that no
+decimal conversion stands between the file and the comparison) plus frame_id, topic, log_time and publish_time (ns; rosbags gives only
 the log time). Exits 1 with a message on standard error when a reader fails.
 """
 
 import json
 import math
+import struct
 import sys
 
 from mcap.reader import make_reader
@@ -45,9 +47,14 @@ def ns(t):
 
 
 def none_if(v, empty):
-    if isinstance(v, float) and math.isnan(v):
-        return None
     return None if v == empty else v
+
+
+def bits(v):
+    """A float64 as its IEEE 754 bits (an integer, which JSON carries exactly); None for NaN."""
+    if math.isnan(v):
+        return None
+    return struct.unpack("<Q", struct.pack("<d", v))[0]
 
 
 def read_of(m, topic, log_time, publish_time):
@@ -58,11 +65,11 @@ def read_of(m, topic, log_time, publish_time):
         "antenna": m.antenna,
         "t_us": ns(m.header.stamp) // 1000,
         "last_seen_us": None if last == 0 else last // 1000,
-        "phase_rad": none_if(m.phase_rad, None),
-        "rssi_dbm": none_if(m.rssi_dbm, None),
+        "phase_rad": bits(m.phase_rad),
+        "rssi_dbm": bits(m.rssi_dbm),
         "channel_index": none_if(m.channel_index, 0),
         "channel_frequency_hz": none_if(m.channel_frequency_hz, 0),
-        "doppler_hz": none_if(m.doppler_hz, None),
+        "doppler_hz": bits(m.doppler_hz),
         "frame_id": m.header.frame_id,
         "topic": topic,
         "log_time": log_time,
