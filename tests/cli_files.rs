@@ -49,8 +49,8 @@ fn export_onto_its_own_recording_is_refused_and_the_recording_kept() {
     // By the same name, and by another name for the same file.
     let alias = dir.path().join(".").join("session.jsonl");
     for out in [&rec, &alias] {
-        for force in [false, true] {
-            let mut args = vec![p("export"), &rec, p("--pcapng"), out];
+        for (force, flag) in [(false, "--pcapng"), (true, "--pcapng"), (false, "--mcap")] {
+            let mut args = vec![p("export"), &rec, p(flag), out];
             if force {
                 args.push(p("--force"));
             }
@@ -75,7 +75,11 @@ fn import_and_export_refuse_an_existing_file_without_force_and_replace_it_with_f
     assert!(o.status.success(), "{err}");
     let existing = dir.path().join("existing.jsonl");
     std::fs::write(&existing, "keep me\n").expect("writes");
-    for (cmd, input, flag) in [("import", &cap, "--output"), ("export", &rec, "--pcapng")] {
+    for (cmd, input, flag) in [
+        ("import", &cap, "--output"),
+        ("export", &rec, "--pcapng"),
+        ("export", &rec, "--mcap"),
+    ] {
         let (o, err) = run(&[p(cmd), input, p(flag), &existing]);
         assert!(!o.status.success(), "{cmd}: {err}");
         assert!(

@@ -69,6 +69,9 @@ pub enum InventoryError {
     /// The run ended (time, or a stop signal) before any connection was made.
     #[error("no connection to {0} before the end of the run")]
     NeverConnected(String),
+    /// The MCAP file cannot be written there (it exists, or the file system refused).
+    #[error("{0}")]
+    McapFile(crate::files::OutputError),
     /// The MCAP file could not be written.
     #[error("writing the reads to {}: {source}", path.display())]
     Mcap {
@@ -261,8 +264,7 @@ fn open_mcap(path: &std::path::Path, force: bool) -> Result<McapThread, Inventor
         path: path.to_owned(),
         source,
     };
-    let file = crate::files::create_stream(path, &[], force)
-        .map_err(|e| mcap_error(McapError::Mcap(e.into_io().into())))?;
+    let file = crate::files::create_stream(path, &[], force).map_err(InventoryError::McapFile)?;
     McapThread::start(io::BufWriter::new(file)).map_err(mcap_error)
 }
 

@@ -27,11 +27,22 @@ pub use writer::McapOut;
 #[derive(Debug, thiserror::Error)]
 pub enum McapError {
     /// The MCAP writer failed (an IO error of the file, a record it refused).
-    #[error("MCAP: {0}")]
-    Mcap(#[from] ::mcap::McapError),
+    #[error("MCAP: {error}{}", cause(error))]
+    Mcap {
+        /// The writer's error.
+        #[from]
+        error: ::mcap::McapError,
+    },
     /// The writer's thread is gone (it failed earlier, or panicked).
     #[error("the MCAP writer's thread ended early")]
     ThreadGone,
+}
+
+/// `: CAUSE` when the writer's error wraps one (its IO errors say only "I/O error").
+fn cause(e: &::mcap::McapError) -> String {
+    std::error::Error::source(e)
+        .map(|s| format!(": {s}"))
+        .unwrap_or_default()
 }
 
 /// What an MCAP file holds.

@@ -55,7 +55,7 @@ impl McapThread {
         let handle = std::thread::Builder::new()
             .name("mcap-writer".into())
             .spawn(move || write_all(mcap, rx))
-            .map_err(|e| McapError::Mcap(e.into()))?;
+            .map_err(|e| McapError::Mcap { error: e.into() })?;
         Ok(McapThread { tx, handle })
     }
 

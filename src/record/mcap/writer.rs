@@ -156,13 +156,13 @@ impl<W: Write> McapOut<W> {
         self.write(&topic, MsgType::LlrpFrame, received_ns, received_ns, &bytes)?;
         self.summary.frames += 1;
         if dir == Direction::FromReader && whole_frame {
-            self.from_reader(reader, conn, received_ns, data)?;
+            self.reader_frame(reader, conn, received_ns, data)?;
         }
         Ok(())
     }
 
     /// The reads and the event notification of a frame from the reader.
-    fn from_reader(
+    fn reader_frame(
         &mut self,
         reader: &str,
         conn: u32,
