@@ -24,6 +24,8 @@ pub struct VirtualReader {
     client: Option<ClientId>,
     inbox: VecDeque<Message>,
     closed: bool,
+    /// Whether the reader's last close was a reset (the connection dropped).
+    reset: bool,
     next_id: u32,
     /// The LLRP version the client's messages carry (1 = 1.0.1, 2 = 1.1).
     version: u8,
@@ -41,6 +43,7 @@ impl VirtualReader {
             client: None,
             inbox: VecDeque::new(),
             closed: false,
+            reset: false,
             next_id: 1,
             version: 1,
         };
@@ -60,11 +63,41 @@ impl VirtualReader {
 
     /// A client connects (after a disconnect).
     pub fn connect(&mut self) {
+        assert!(self.try_connect(), "a client is already connected");
+    }
+
+    /// A client tries to connect: whether the session took it (a refusal's bytes, if any,
+    /// are dropped).
+    pub fn try_connect(&mut self) -> bool {
         match self.session.connect(self.now) {
             Accepted::Client(id) => self.client = Some(id),
-            Accepted::Refused(_) => panic!("a client is already connected"),
+            Accepted::Refused(_) => return false,
         }
         self.closed = false;
+        self.reset = false;
+        self.collect();
+        true
+    }
+
+    /// Whether the reader accepts connections now (not while it reboots).
+    pub fn listening(&self) -> bool {
+        self.session.listening()
+    }
+
+    /// Whether the reader's last close was a reset: the connection dropped, nothing more
+    /// sent.
+    pub fn was_reset(&self) -> bool {
+        self.reset
+    }
+
+    /// Injects `fault` now, as the HTTP API does (through the session's fault panel), and
+    /// lets the reader take it.
+    pub fn inject(&mut self, fault: llrp_gateway::reader::faults::Fault) {
+        self.session
+            .fault_panel()
+            .send(fault)
+            .expect("a fault that fits the reader");
+        self.session.advance(self.now);
         self.collect();
     }
 
@@ -238,6 +271,31 @@ impl VirtualReader {
         }
     }
 
+    /// Lets `us` of simulated time pass (wall clock alike) without a client, running the
+    /// reader at each of its deadlines (a reboot's end, the fault timeline, GPI changes).
+    pub fn idle_for(&mut self, us: u64) {
+        assert!(
+            self.client.is_none(),
+            "idle_for is for a reader without a client"
+        );
+        let target = self.now.sim_us + us;
+        while self.now.sim_us < target {
+            let d = self.session.deadline();
+            let wall = d.wall_ms.map(|ms| ms * 1000);
+            let next = [d.sim_us, wall, Some(target)]
+                .into_iter()
+                .flatten()
+                .min()
+                .unwrap_or(target)
+                .clamp(self.now.sim_us + 1, target);
+            self.now = Now {
+                sim_us: next,
+                wall_ms: next / 1000,
+            };
+            self.session.advance(self.now);
+        }
+    }
+
     /// Runs (at most `limit_us` of simulated time) until a message satisfying `pred` is in the
     /// inbox, and takes it; other messages stay.
     pub fn run_until(&mut self, limit_us: u64, pred: impl Fn(&Message) -> bool) -> Option<Message> {
@@ -311,12 +369,14 @@ impl VirtualReader {
         d.buffer_mut().extend_from_slice(t.bytes);
         t.bytes.clear();
         let close = t.close;
+        let reset = self.session.abrupt();
         while let Some(Inbound::Frame(f)) = d.next_frame() {
             self.inbox
                 .push_back(Message::decode(&f).expect("the reader sends valid LLRP"));
         }
         if close {
             self.closed = true;
+            self.reset = reset;
             if let Some(id) = self.client.take() {
                 self.session.disconnect(id);
             }

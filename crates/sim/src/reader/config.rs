@@ -142,12 +142,13 @@ impl ReaderConfig {
     }
 
     /// GET_READER_CONFIG_RESPONSE for a request; `levels` are the GPI lines' (index = port
-    /// − 1, true: high).
+    /// − 1, true: high), `connected` the antenna ports' (index = port − 1).
     pub fn get(
         &self,
         p: &ReaderProfile,
         m: &GetReaderConfig,
         levels: &[bool],
+        connected: &[bool],
     ) -> GetReaderConfigResponse {
         let mut r = GetReaderConfigResponse {
             llrp_status: LlrpStatus::success(),
@@ -168,7 +169,7 @@ impl ReaderConfig {
             });
         }
         if want(ConfigRequest::AntennaProperties) {
-            r.antenna_properties = antenna_properties(p, antenna_ok);
+            r.antenna_properties = antenna_properties(p, antenna_ok, connected);
         }
         if want(ConfigRequest::AntennaConfiguration) {
             r.antenna_configuration = self
@@ -380,15 +381,17 @@ fn get_error(p: &ReaderProfile, m: &GetReaderConfig) -> Option<LlrpStatus> {
     None
 }
 
-/// The AntennaProperties of the reader's antennas that `antenna_ok` selects.
+/// The AntennaProperties of the reader's antennas that `antenna_ok` selects; `connected`
+/// per port (index = port − 1; a port it does not list is connected).
 fn antenna_properties(
     p: &ReaderProfile,
     antenna_ok: impl Fn(u16) -> bool,
+    connected: &[bool],
 ) -> Vec<AntennaProperties> {
     (1..=p.antennas)
         .filter(|&a| antenna_ok(a))
         .map(|a| AntennaProperties {
-            antenna_connected: true,
+            antenna_connected: connected.get(usize::from(a - 1)).copied().unwrap_or(true),
             antenna_id: a,
             antenna_gain: p
                 .antenna_gain_dbi

@@ -45,6 +45,7 @@ impl Reader {
             flags: &mut self.flags,
             utc_epoch_us: self.utc_epoch_us,
             impinj: self.impinj,
+            faults: &self.faults,
         };
         let produced = self.specs.run(ctx, self.now_us, to_us);
         self.now_us = to_us;

@@ -16,6 +16,7 @@ mod config;
 pub mod device;
 #[cfg(test)]
 mod device_tests;
+pub mod faults;
 pub mod gpio;
 mod inputs;
 pub mod memory;
@@ -94,6 +95,10 @@ pub struct ReaderProfile {
     pub gpos: u16,
     /// What changes the GPI lines over simulated time.
     pub gpi_schedule: gpio::GpiSchedule,
+    /// Faults injected over simulated time (the scenario reader's `faults`).
+    pub faults: Vec<faults::ScheduledFault>,
+    /// Whether the state survives a reboot (the scenario reader's `persist_state`).
+    pub persist_state: bool,
 }
 
 impl ReaderProfile {
@@ -131,6 +136,8 @@ impl ReaderProfile {
             gpis: r.gpio.gpis,
             gpos: r.gpio.gpos,
             gpi_schedule: gpio::GpiSchedule::from_spec(&r.gpio),
+            faults: r.faults.clone(),
+            persist_state: r.persist_state,
         }
     }
 }
@@ -175,6 +182,8 @@ pub struct Reader {
     keepalive_unanswered: u32,
     /// The GPI lines and what changes them.
     lines: gpio::Lines,
+    /// The faults in force on the reader's side.
+    faults: faults::State,
 }
 
 impl Reader {
@@ -203,6 +212,7 @@ impl Reader {
             memory: Arc::new(memory::TagMemory::new()),
             keepalive_due_ms: None,
             keepalive_unanswered: 0,
+            faults: faults::State::default(),
         }
     }
 
@@ -432,9 +442,11 @@ impl Reader {
                     out.push(Output::Close);
                     self.keepalive_due_ms = None;
                 } else {
-                    let m = self.message(Keepalive::default());
-                    out.push(Output::Send(m));
-                    self.keepalive_unanswered += 1;
+                    if !self.keepalive_lost() {
+                        let m = self.message(Keepalive::default());
+                        out.push(Output::Send(m));
+                        self.keepalive_unanswered += 1;
+                    }
                     let period = self.config.keepalive_period_ms().unwrap_or(u64::MAX / 2);
                     self.keepalive_due_ms = Some(due.saturating_add(period).max(wall_ms));
                 }

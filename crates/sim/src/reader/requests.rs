@@ -255,7 +255,12 @@ impl Reader {
     /// GET_READER_CONFIG_RESPONSE, with the Impinj configuration asked for once the
     /// extensions are on.
     fn configuration(&self, m: &GetReaderConfig) -> GetReaderConfigResponse {
-        let mut body = self.config.get(&self.profile, m, self.lines.levels());
+        let mut body = self.config.get(
+            &self.profile,
+            m,
+            self.lines.levels(),
+            &self.faults.connected_ports(self.profile.antennas),
+        );
         if body.llrp_status.is_success() && self.impinj {
             for r in impinj_requested(&m.custom) {
                 body.custom

@@ -17,6 +17,8 @@ use llrp::enums::ConnectionAttemptStatus;
 
 use super::{Output, Reader};
 
+mod faults;
+
 pub use llrp_gateway_vocab::session::{Accepted, ClientId, ServerSession, Transmit};
 
 /// While an ROSpec runs, the longest a session lets simulated time pass without running the
@@ -51,12 +53,17 @@ pub struct Session {
     close: bool,
     /// Simulated time the reader last ran to while an ROSpec was active.
     ran_to_us: u64,
+    /// The faults in force on the session's side, and those to come.
+    faults: faults::Faults,
 }
 
 impl Session {
     /// A session for `reader`, no client connected.
     pub fn new(reader: Reader) -> Self {
+        let timeline = super::faults::Timeline::new(&reader.profile().faults);
+        let faults = faults::Faults::new(timeline, usize::from(reader.profile().antennas));
         Session {
+            faults,
             reader,
             client: None,
             next_client: ClientId::FIRST,
@@ -108,6 +115,39 @@ impl Session {
         self.push(outputs);
     }
 
+    /// Pushes `outputs` for the client, if one is connected and not being closed.
+    fn push_live(&mut self, outputs: Vec<Output>) {
+        if self.client.is_some() && !self.close {
+            self.push(outputs);
+        }
+    }
+
+    /// What the client sent, taken now.
+    fn take(&mut self, inbound: Inbound, now: Now) {
+        match inbound {
+            Inbound::Frame(frame) => self.frame(&frame, now),
+            Inbound::Unsynced(e) => {
+                tracing::info!("unrecoverable framing error: {e}");
+                bad_length(&e).encode(&mut self.out);
+                self.close = true;
+            }
+        }
+    }
+
+    /// Runs the reader up to `now` (without a client, its GPI lines alone).
+    fn run_reader(&mut self, now: Now) {
+        if self.client.is_none() {
+            self.reader.advance(now.sim_us, now.wall_ms);
+            return;
+        }
+        if self.close {
+            return;
+        }
+        let outputs = self.reader.advance(now.sim_us, now.wall_ms);
+        self.ran_to_us = self.reader.now_us();
+        self.push(outputs);
+    }
+
     fn push(&mut self, outputs: Vec<Output>) {
         for o in outputs {
             match o {
@@ -127,6 +167,10 @@ impl ServerSession for Session {
 
     /// A connection arrived at `now`.
     fn connect(&mut self, now: Now) -> Accepted {
+        if !self.listening() {
+            // Rebooting: nothing answers (the server stops listening meanwhile).
+            return Accepted::Refused(BytesMut::new());
+        }
         if self.client.is_some() {
             let refusal = self
                 .reader
@@ -154,6 +198,7 @@ impl ServerSession for Session {
             self.client = None;
             self.out.clear();
             self.close = false;
+            self.faults.disconnected();
             self.reader.disconnect();
         }
     }
@@ -163,29 +208,18 @@ impl ServerSession for Session {
         if self.client != Some(id) || self.close {
             return;
         }
-        match inbound {
-            Inbound::Frame(frame) => self.frame(&frame, now),
-            Inbound::Unsynced(e) => {
-                tracing::info!("unrecoverable framing error: {e}");
-                bad_length(&e).encode(&mut self.out);
-                self.close = true;
-            }
+        if self.delaying(now) {
+            self.hold(inbound, now);
+        } else {
+            self.take(inbound, now);
         }
     }
 
-    /// Runs the reader up to `now`: inventory, reports, events, GPI changes and keepalives
-    /// that fall due (without a client, the GPI lines alone).
+    /// Runs the reader up to `now`: faults, inventory, reports, events, GPI changes and
+    /// keepalives that fall due (without a client, the faults and GPI lines alone).
     fn advance(&mut self, now: Now) {
-        if self.client.is_none() {
-            self.reader.advance(now.sim_us, now.wall_ms);
-            return;
-        }
-        if self.close {
-            return;
-        }
-        let outputs = self.reader.advance(now.sim_us, now.wall_ms);
-        self.ran_to_us = self.reader.now_us();
-        self.push(outputs);
+        self.run_faults(now);
+        self.run_reader(now);
     }
 
     /// The reader is shutting down: the client is told (ConnectionCloseEvent) and closed.
@@ -222,14 +256,15 @@ impl ServerSession for Session {
         if self.close {
             return Deadline::default();
         }
+        let fault = self.faults.timeline.next_at();
         if self.client.is_none() {
             let after = self.reader.now_us().max(self.ran_to_us) + 1;
             return Deadline {
-                sim_us: self.reader.next_gpi_us().map(|t| t.max(after)),
-                wall_ms: None,
+                sim_us: earliest(self.reader.next_gpi_us(), fault).map(|t| t.max(after)),
+                wall_ms: self.faults.wall_deadline(),
             };
         }
-        let mut sim = self.reader.next_deadline_us();
+        let mut sim = earliest(self.reader.next_deadline_us(), fault);
         if self.reader.inventorying() {
             let soon = self.ran_to_us + REPORT_LATENCY_US;
             sim = Some(sim.map_or(soon, |t| t.min(soon)));
@@ -238,8 +273,16 @@ impl ServerSession for Session {
             // Never at or before the time already run to (that would wake the driver for
             // nothing, over and over).
             sim_us: sim.map(|t| t.max(self.ran_to_us + 1)),
-            wall_ms: self.reader.next_keepalive_ms(),
+            wall_ms: earliest(self.reader.next_keepalive_ms(), self.faults.wall_deadline()),
         }
+    }
+}
+
+/// The earlier of two times, either of which may be none.
+fn earliest(a: Option<u64>, b: Option<u64>) -> Option<u64> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
     }
 }
 

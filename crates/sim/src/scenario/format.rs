@@ -221,6 +221,14 @@ pub struct ReaderSpec {
     /// GPI and GPO ports, and what drives the inputs (default: four of each, idle).
     #[serde(default)]
     pub gpio: super::gpio::GpioSpec,
+    /// Faults injected on a timeline of simulated time (docs/simulator.md, "Fault
+    /// injection").
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<super::faults::ScheduledFault>,
+    /// Whether ROSpecs, AccessSpecs and the configuration survive a reboot (false: lost, as
+    /// on an Impinj reader whose settings were not saved with IMPINJ_SAVE_SETTINGS).
+    #[serde(default)]
+    pub persist_state: bool,
 }
 
 /// Orientation and position of an antenna or an antenna offset (metres, radians): the

@@ -3,6 +3,7 @@
 
 mod defaults;
 pub mod device;
+pub mod faults;
 mod format;
 pub mod gpio;
 mod hardware_checks;

@@ -132,8 +132,9 @@ impl Specs {
             run.slice_idle = true;
             return ((t + idle).min(end), false);
         }
-        // The rest of an empty round, or nothing to run before the AISpec's setup is over.
-        if run.slice_idle || end <= slice.t0_us {
+        // The rest of an empty round, nothing to run before the AISpec's setup is over, or an
+        // unplugged port (its dwell passes, no tag answers).
+        if run.slice_idle || end <= slice.t0_us || !ctx.faults.connected(slice.antenna) {
             return (end, false);
         }
         let reads = match plan.channel {

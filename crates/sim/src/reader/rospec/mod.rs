@@ -134,6 +134,8 @@ pub struct RunContext<'a> {
     pub utc_epoch_us: u64,
     /// Impinj extensions enabled on the connection.
     pub impinj: bool,
+    /// The faults in force (antenna ports unplugged).
+    pub faults: &'a super::faults::State,
 }
 
 /// One ROSpec and its execution state.
