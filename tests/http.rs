@@ -470,7 +470,21 @@ fn gpio_is_404_outside_a_simulation() {
     assert!(r.error().contains("not a simulation"), "{}", r.text());
 }
 
-/// Every route of issue 18 (and issue 43's GPIO), with its method.
+#[test]
+fn faults_are_404_outside_a_simulation() {
+    let server = open();
+    let r = request(
+        server.addr,
+        "POST",
+        "/api/readers/r/faults",
+        &[("Content-Type", "application/json")],
+        br#"{"fault": "reboot"}"#,
+    );
+    assert_eq!(r.status, 404);
+    assert!(r.error().contains("not a simulation"), "{}", r.text());
+}
+
+/// Every route of issue 18 (and issue 43's GPIO and faults), with its method.
 const ROUTES: &[(&str, &str)] = &[
     ("get", "/"),
     ("get", "/healthz"),
@@ -484,6 +498,7 @@ const ROUTES: &[(&str, &str)] = &[
     ("post", "/api/poses"),
     ("get", "/api/gpio"),
     ("post", "/api/readers/{reader}/gpi/{port}"),
+    ("post", "/api/readers/{reader}/faults"),
 ];
 
 #[test]

@@ -343,6 +343,7 @@ fn live_latency(run: &Run, speed: f64) -> Result<crate::eval::live::Latency, Str
             references: Default::default(),
             headless: false,
             gpio: None,
+            faults: None,
         })
         .await
         .map_err(|e| e.to_string())?;

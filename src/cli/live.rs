@@ -96,6 +96,7 @@ pub async fn start_sinks(args: &LiveArgs, command: &str) -> Result<Consumers, Si
         references,
         headless: false,
         gpio: None,
+        faults: None,
     })
     .await?)
 }

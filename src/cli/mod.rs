@@ -24,6 +24,7 @@ pub mod args;
 pub mod bench;
 pub mod capture;
 pub mod decode;
+pub mod faults;
 pub mod gpio;
 pub mod inventory;
 pub mod live;

@@ -44,6 +44,8 @@ pub struct Plan<'a> {
     pub headless: bool,
     /// The simulated readers' GPIO, for the API (`sim`); `None`: no simulated readers.
     pub gpio: Option<Arc<dyn crate::http::gpio::GpioControl>>,
+    /// The simulated readers' faults, for the API (`sim`); `None`: no simulated readers.
+    pub faults: Option<Arc<dyn crate::http::faults::FaultControl>>,
 }
 
 /// Why the consumers could not be started.
@@ -198,6 +200,7 @@ async fn localizer(
         live.tap.clone(),
         metrics.clone(),
         plan.gpio.clone(),
+        plan.faults.clone(),
     )
     .await
     .map_err(ConsumersError::Http)?;

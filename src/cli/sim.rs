@@ -110,6 +110,7 @@ pub fn run(
         // ask: with --no-http neither runs); the MQTT publisher takes a copy of everything
         // the localizer is offered (with --no-http, of what it would be offered).
         let gpio = std::sync::Arc::new(super::gpio::SimGpio::default());
+        let faults = std::sync::Arc::new(super::faults::SimFaults::default());
         let consumers = Consumers::start(Plan {
             command: "sim",
             http: http.address(Some("127.0.0.1:8080")),
@@ -121,17 +122,26 @@ pub fn run(
             references: scenario_references(&scenario),
             headless: false,
             gpio: Some(gpio.clone()),
+            faults: Some(faults.clone()),
         })
         .await?;
         opts.frames_in = consumers.frames_in();
         let changes = gpio.changes();
+        let fault_counts = sim::FaultCounts::default();
         consumers.metrics().register(|r| {
             r.register(
                 "gpi_changes",
                 "GPI changes handed to the simulated readers through the HTTP API",
                 changes,
-            )
+            );
+            r.register(
+                "faults",
+                "Faults the simulated readers applied (the scenario's and the HTTP API's), \
+                 by reader and fault",
+                fault_counts.clone(),
+            );
         });
+        opts.fault_counts = Some(fault_counts);
         opts.localize = consumers.tap().map(|tap| sim::LocalizeFeed {
             tap,
             poses: localize.poses,
@@ -142,6 +152,7 @@ pub fn run(
             .await
             .map_err(SimCommandError::Start)?;
         gpio.attach(&running.names, &running.gpio);
+        faults.attach(&running.names, &running.faults);
         let tls = if opts.tls.is_some() { " (TLS)" } else { "" };
         for (name, addr) in running.names.iter().zip(&running.addrs) {
             eprintln!(

@@ -215,6 +215,7 @@ async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandErro
         references: Default::default(),
         headless: true,
         gpio: None,
+        faults: None,
     })
     .await?;
     // A headless plan always runs its localizer (`root::localizer` returns one for it on

@@ -122,6 +122,7 @@ pub async fn launch(
     tap: Tap,
     metrics: Arc<Metrics>,
     gpio: Option<Arc<dyn super::gpio::GpioControl>>,
+    faults: Option<Arc<dyn super::faults::FaultControl>>,
 ) -> Result<Option<Launched>, LaunchError> {
     let listener = match tokio::net::TcpListener::bind(addr).await {
         Ok(l) => l,
@@ -151,6 +152,7 @@ pub async fn launch(
         browser: args.browser(&bound),
         metrics: Some(metrics),
         gpio,
+        faults,
     };
     let limits = options.limits;
     let app = router(shared, tap, options);
@@ -204,6 +206,7 @@ mod tests {
             live.tap.clone(),
             crate::metrics::Metrics::of_localizer(&live.shared),
             None,
+            None,
         )
         .await
         .expect("a taken default is no error");
@@ -216,6 +219,7 @@ mod tests {
             live.shared.clone(),
             live.tap.clone(),
             crate::metrics::Metrics::of_localizer(&live.shared),
+            None,
             None,
         )
         .await

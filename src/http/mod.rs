@@ -26,6 +26,7 @@ use crate::metrics::Metrics;
 use crate::secret::Secret;
 
 mod events;
+pub mod faults;
 pub mod gpio;
 pub mod guard;
 mod handlers;
@@ -61,6 +62,8 @@ pub struct HttpOptions {
     /// The simulated readers' GPIO (`GET /api/gpio`, `POST /api/readers/{reader}/gpi/{port}`;
     /// 404 without).
     pub gpio: Option<Arc<dyn gpio::GpioControl>>,
+    /// The simulated readers' faults (`POST /api/readers/{reader}/faults`; 404 without).
+    pub faults: Option<Arc<dyn faults::FaultControl>>,
 }
 
 impl Default for HttpOptions {
@@ -77,6 +80,7 @@ impl Default for HttpOptions {
             },
             metrics: None,
             gpio: None,
+            faults: None,
         }
     }
 }
@@ -131,6 +135,7 @@ pub fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(handlers::post_poses))
         .routes(routes!(gpio::get_gpio))
         .routes(routes!(gpio::post_gpi))
+        .routes(routes!(faults::post_fault))
 }
 
 /// The OpenAPI 3 document of [`api`].

@@ -240,6 +240,14 @@ impl Connection {
         self.flush().await
     }
 
+    /// Drops the connection at once: what is queued is lost, and the peer gets a TCP reset
+    /// (SO_LINGER 0) rather than an orderly end.
+    pub fn reset(self) {
+        // Best effort: without it the peer gets an orderly end of stream instead.
+        let _ = self.stream.tcp().set_zero_linger();
+        drop(self);
+    }
+
     /// Sends what is queued, then closes the sending side (over TLS with a close_notify
     /// first).
     pub async fn shutdown(&mut self) -> io::Result<()> {

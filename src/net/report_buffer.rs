@@ -54,8 +54,15 @@ impl ReportBuffer {
         }
     }
 
-    /// The frames of `out` that go out, with `queued` bytes already waiting for the client.
-    pub fn admit(&mut self, queued: usize, out: BytesMut) -> Admitted {
+    /// The frames of `out` that go out, with `queued` bytes already waiting for the client;
+    /// `held_full`: the buffer counts as full whatever is queued (the fill_report_buffer
+    /// fault: as if the client had stopped reading).
+    pub fn admit(&mut self, queued: usize, out: BytesMut, held_full: bool) -> Admitted {
+        let queued = if held_full {
+            queued.max(self.limit)
+        } else {
+            queued
+        };
         let mut a = Admitted::default();
         if queued * 100 < self.limit * REARM_PERCENT {
             self.warned = false;
@@ -146,7 +153,7 @@ mod tests {
         out.extend_from_slice(&one);
         out.extend_from_slice(&one);
         out.extend_from_slice(&keepalive);
-        let a = b.admit(8 * one.len(), BytesMut::from(&out[..]));
+        let a = b.admit(8 * one.len(), BytesMut::from(&out[..]), false);
         let mut want = Vec::new();
         want.extend_from_slice(&one);
         want.extend_from_slice(&one);
@@ -161,12 +168,12 @@ mod tests {
         assert!(a.overflow);
         assert!(a.warn.is_some(), "full is past the warning level");
         // Still full: dropped again, but the overflow was told once.
-        let again = b.admit(10 * one.len(), BytesMut::from(&one[..]));
+        let again = b.admit(10 * one.len(), BytesMut::from(&one[..]), false);
         assert!(again.bytes.is_empty() && !again.overflow && again.warn.is_none());
         // Drained under half: a report goes out, and the next overflow is told again.
-        let later = b.admit(one.len(), BytesMut::from(&one[..]));
+        let later = b.admit(one.len(), BytesMut::from(&one[..]), false);
         assert_eq!(&later.bytes[..], &one[..]);
-        let full = b.admit(10 * one.len(), BytesMut::from(&one[..]));
+        let full = b.admit(10 * one.len(), BytesMut::from(&one[..]), false);
         assert!(full.overflow && full.bytes.is_empty());
     }
 
@@ -174,22 +181,50 @@ mod tests {
     fn the_warning_comes_once_past_three_quarters() {
         let one = report(1);
         let mut b = ReportBuffer::new(100 * one.len());
-        assert_eq!(b.admit(70 * one.len(), BytesMut::from(&one[..])).warn, None);
-        let w = b.admit(75 * one.len(), BytesMut::from(&one[..])).warn;
+        assert_eq!(
+            b.admit(70 * one.len(), BytesMut::from(&one[..]), false)
+                .warn,
+            None
+        );
+        let w = b
+            .admit(75 * one.len(), BytesMut::from(&one[..]), false)
+            .warn;
         assert_eq!(w, Some(76));
         assert_eq!(
-            b.admit(80 * one.len(), BytesMut::from(&one[..])).warn,
+            b.admit(80 * one.len(), BytesMut::from(&one[..]), false)
+                .warn,
             None,
             "once"
         );
         assert_eq!(
-            b.admit(10 * one.len(), BytesMut::from(&one[..])).warn,
+            b.admit(10 * one.len(), BytesMut::from(&one[..]), false)
+                .warn,
             None,
             "drained: re-armed"
         );
         assert_eq!(
-            b.admit(90 * one.len(), BytesMut::from(&one[..])).warn,
+            b.admit(90 * one.len(), BytesMut::from(&one[..]), false)
+                .warn,
             Some(91)
         );
+    }
+
+    #[test]
+    fn a_buffer_held_full_warns_drops_reports_and_recovers_once_released() {
+        let one = report(1);
+        let mut b = ReportBuffer::new(100 * one.len());
+        let answer = Message::new(2, GetReaderCapabilitiesResponse::default())
+            .to_bytes()
+            .to_vec();
+        let mut out = one.clone();
+        out.extend_from_slice(&answer);
+        // Nothing queued, but held full: the report is dropped, the answer goes.
+        let a = b.admit(0, BytesMut::from(&out[..]), true);
+        assert_eq!(&a.bytes[..], &answer[..]);
+        assert_eq!((a.warn, a.overflow, a.dropped), (Some(100), true, (1, 1)));
+        // Released: it reads again.
+        let later = b.admit(0, BytesMut::from(&one[..]), false);
+        assert_eq!(&later.bytes[..], &one[..]);
+        assert!(!later.overflow && later.warn.is_none());
     }
 }

@@ -50,7 +50,7 @@ pub struct SimReader {
     /// Where the reader's CPU-bound work (inventory physics, reports) runs.
     pool: Arc<Pool>,
     live: Option<LiveHook>,
-    /// Woken when the reader's GPI lines are toggled from outside.
+    /// Woken when the reader's GPI lines are toggled or a fault is injected from outside.
     nudge: Arc<tokio::sync::Notify>,
 }
 
@@ -66,6 +66,9 @@ impl SimReader {
             .reader()
             .gpio_panel()
             .on_change(move || wake.notify_one());
+        // So does a fault injected.
+        let wake = Arc::clone(&nudge);
+        session.fault_panel().on_change(move || wake.notify_one());
         SimReader {
             session,
             clock,
@@ -146,6 +149,18 @@ impl Host for SimReader {
 
     fn nudge(&self) -> Option<Arc<tokio::sync::Notify>> {
         Some(Arc::clone(&self.nudge))
+    }
+
+    fn report_buffer_held_full(&self) -> bool {
+        (self.session.reader()).report_buffer_held_full(self.clock.wall_ms())
+    }
+
+    fn abrupt(&self) -> bool {
+        self.session.abrupt()
+    }
+
+    fn listening(&self) -> bool {
+        self.session.listening()
     }
 
     fn buffer_events(&mut self, warn: Option<u8>, overflow: bool, out: &mut BytesMut) {

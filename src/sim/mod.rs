@@ -2,23 +2,21 @@
 //! LLRP address and writes ground truth (tag positions, antenna poses over time) as JSONL.
 
 use crate::reads::ReaderName;
-use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, BufWriter};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use crate::localize::live::{Input, Tap};
-use crate::localize::poses::PoseSample;
 use crate::net::clock::{Clock, Speed};
 use crate::net::server::{serve_tls, LiveHook, Observer, SimReader};
 use crate::net::tls::{ServerFiles, TlsError};
-use crate::physics::{AntennaPose, Model, World};
+use crate::physics::{Model, World};
+use crate::reader::faults::FaultPanel;
 use crate::reader::gpio::GpioPanel;
 use crate::reader::memory::TagMemory;
 use crate::reader::session::Session;
@@ -26,12 +24,18 @@ use crate::reader::{Reader, ReaderProfile};
 use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::{ReaderSpec, Scenario};
 use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
 
 pub mod feed;
 pub mod own;
 pub mod tag_memory;
+mod truth;
 
 pub use feed::PoseSource;
+use truth::{truth_by_clock, truth_writer, Truth};
+
+/// Faults the readers applied, by reader and fault (`/metrics`' `faults`).
+pub type FaultCounts = Family<Vec<(String, String)>, Counter>;
 
 /// Longest a shutdown waits for the readers' tasks (each gives its client at most half a
 /// second to take the ConnectionCloseEvent).
@@ -68,6 +72,8 @@ pub struct SimOptions {
     /// The tags' memory is read from this file (when it exists) and written back to it
     /// ([`tag_memory`]).
     pub tag_memory: Option<PathBuf>,
+    /// Counts each fault a reader applies, labelled `reader` and `fault`.
+    pub fault_counts: Option<FaultCounts>,
 }
 
 /// What the simulator feeds the live localizer.
@@ -96,6 +102,7 @@ impl Default for SimOptions {
             localize: None,
             frames_in: Counter::default(),
             tag_memory: None,
+            fault_counts: None,
         }
     }
 }
@@ -146,6 +153,8 @@ pub struct RunningSim {
     /// Each reader's GPIO as seen from outside (toggle its inputs, read its state), in
     /// scenario order.
     pub gpio: Vec<Arc<GpioPanel>>,
+    /// Each reader's faults as seen from outside (inject them), in scenario order.
+    pub faults: Vec<Arc<FaultPanel>>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
@@ -192,129 +201,6 @@ impl RunningSim {
     }
 }
 
-/// Ground-truth writer shared by the readers.
-struct Truth {
-    out: Mutex<BufWriter<File>>,
-}
-
-impl Truth {
-    /// Appends one line (buffered; a full disk must not stop the reader, so errors are
-    /// dropped).
-    fn line(&self, value: &serde_json::Value) {
-        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
-        if serde_json::to_writer(&mut *out, value).is_ok() {
-            let _ = out.write_all(b"\n");
-        }
-    }
-
-    fn flush(&self) {
-        let _ = self.out.lock().unwrap_or_else(|e| e.into_inner()).flush();
-    }
-}
-
-fn hex(epc: &[u8]) -> String {
-    epc.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// `pose` of antenna `antenna` of reader `reader` at `t_us` as a pose-file record (keys
-/// `t_us, reader, antenna, x, y, z, yaw_deg, pitch_deg`).
-fn pose_record(
-    t_us: u64,
-    reader: &ReaderName,
-    antenna: u16,
-    pose: &AntennaPose,
-) -> serde_json::Value {
-    serde_json::json!(PoseSample {
-        t_us,
-        reader: Some(reader.clone()),
-        antenna,
-        pose: *pose,
-    })
-}
-
-/// `pose` as the truth file's `pose` and `odometry` keys have it, in SI units (keys
-/// `position, yaw_rad, pitch_rad`).
-fn si_pose(pose: &AntennaPose) -> serde_json::Value {
-    serde_json::json!({
-        "position": pose.position,
-        "yaw_rad": pose.yaw_rad,
-        "pitch_rad": pose.pitch_rad,
-    })
-}
-
-/// Writes reader `name`'s antenna poses (true, estimated and odometry) and the tags'
-/// positions every [`TRUTH_INTERVAL_US`] of simulated time, up to the time it is called with.
-fn truth_writer(
-    truth: Arc<Truth>,
-    name: ReaderName,
-    moving: Vec<usize>,
-    utc0: u64,
-    m: Arc<Model>,
-) -> impl FnMut(u64) + Send {
-    let mut next = 0u64;
-    move |now_us: u64| {
-        while next <= now_us {
-            let t = next;
-            let antennas: Vec<_> = (1..=m.antenna_count())
-                .map(|a| {
-                    let true_pose = m.antenna_pose(a, t);
-                    serde_json::json!({
-                        "antenna": a,
-                        "true": pose_record(t, &name, a, &true_pose),
-                        "estimated": pose_record(t, &name, a, &m.estimated_pose(a, t)),
-                        "pose": si_pose(&true_pose),
-                        "odometry": si_pose(&m.odometry_pose(a, t)),
-                    })
-                })
-                .collect();
-            let tags: Vec<usize> = if t == 0 {
-                (0..m.tag_count()).collect()
-            } else {
-                moving.clone()
-            };
-            let tags: Vec<_> = tags
-                .into_iter()
-                .map(|k| serde_json::json!({"epc": hex(m.tag_epc(k).as_bytes()), "position": m.tag_position(k, t)}))
-                .collect();
-            truth.line(&serde_json::json!({
-                "reader": name,
-                "t_us": t,
-                "utc_us": utc0 + t,
-                "antennas": antennas,
-                "tags": tags,
-            }));
-            next += TRUTH_INTERVAL_US;
-        }
-    }
-}
-
-/// Writes the truth by the clock (real-time speeds), whoever drives the inventory: a client,
-/// the own inventory or nobody. Ends at `shutdown`, after writing up to that moment.
-async fn truth_by_clock(
-    mut write: impl FnMut(u64) + Send,
-    clock: Arc<Clock>,
-    mut shutdown: watch::Receiver<bool>,
-) {
-    let Speed::Factor(f) = clock.speed() else {
-        return;
-    };
-    // One line's worth of simulated time, but not more often than every 10 ms.
-    let every =
-        Duration::from_secs_f64(TRUTH_INTERVAL_US as f64 / 1e6 / f).max(Duration::from_millis(10));
-    let mut tick = tokio::time::interval(every);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    loop {
-        write(clock.now_us());
-        tokio::select! {
-            _ = tick.tick() => {}
-            _ = shutdown.changed() => {
-                write(clock.now_us());
-                return;
-            }
-        }
-    }
-}
-
 /// What every reader of one simulation shares while it is started.
 struct Start<'a> {
     scenario: &'a Scenario,
@@ -336,6 +222,7 @@ struct Start<'a> {
 struct Started {
     addr: SocketAddr,
     gpio: Arc<GpioPanel>,
+    faults: Arc<FaultPanel>,
     task: JoinHandle<io::Result<()>>,
     recording: Option<RecorderTask>,
     own: Vec<JoinHandle<()>>,
@@ -386,6 +273,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         addrs: Vec::new(),
         names: Vec::new(),
         gpio: Vec::new(),
+        faults: Vec::new(),
         shutdown,
         tasks: Vec::new(),
         truth: s.truth.clone(),
@@ -401,6 +289,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         running.addrs.push(started.addr);
         running.names.push(spec.name.clone());
         running.gpio.push(started.gpio);
+        running.faults.push(started.faults);
         running.tasks.push(started.task);
         running.recordings.extend(started.recording);
         running.own.extend(started.own);
@@ -432,7 +321,19 @@ impl Start<'_> {
             observer = Some(both(observer, feed_observer));
             hook = Some(h);
         }
-        let mut sim = SimReader::new(Session::new(reader), self.clock.clone(), observer);
+        let session = Session::new(reader);
+        let faults = Arc::clone(session.fault_panel());
+        if let Some(counts) = self.opts.fault_counts.clone() {
+            let name = spec.name.to_string();
+            faults.on_applied(move |fault| {
+                let labels = vec![
+                    ("reader".into(), name.clone()),
+                    ("fault".into(), fault.into()),
+                ];
+                counts.get_or_create(&labels).inc();
+            });
+        }
+        let mut sim = SimReader::new(session, self.clock.clone(), observer);
         if let Some(h) = hook {
             sim = sim.with_live(h);
         }
@@ -448,6 +349,7 @@ impl Start<'_> {
         Ok(Started {
             addr: bound,
             gpio,
+            faults,
             task,
             recording,
             own,

@@ -74,6 +74,21 @@ pub trait Host: Send + 'static {
     fn nudge(&self) -> Option<Arc<tokio::sync::Notify>> {
         None
     }
+    /// Whether the report buffer counts as full now, whatever is queued (a fault injected:
+    /// as if the client had stopped reading).
+    fn report_buffer_held_full(&self) -> bool {
+        false
+    }
+    /// Whether the close the session asks for is a reset: the connection is dropped at once
+    /// (TCP RST), what waits to be sent is lost.
+    fn abrupt(&self) -> bool {
+        false
+    }
+    /// Whether the server listens now: while not (a simulated reader rebooting), the loop
+    /// closes its listener, so connections are refused, and binds it again after.
+    fn listening(&self) -> bool {
+        true
+    }
 }
 
 /// The live localizer's view of a served session.

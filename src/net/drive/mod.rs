@@ -108,7 +108,7 @@ pub async fn drive<H: Host>(
         refusal_slots: Arc::new(Semaphore::new(limits.refusals.max(1))),
         told: None,
     };
-    let result = d.run(&listener, tls.as_ref(), &mut shutdown).await;
+    let result = d.run(listener, tls.as_ref(), &mut shutdown).await;
     d.drain().await;
     result
 }
@@ -116,15 +116,18 @@ pub async fn drive<H: Host>(
 impl<H: Host> Driver<H> {
     async fn run(
         &mut self,
-        listener: &TcpListener,
+        listener: TcpListener,
         tls: Option<&tls::Acceptor>,
         shutdown: &mut watch::Receiver<bool>,
     ) -> io::Result<()> {
+        let addr = listener.local_addr()?;
+        let mut listener = Some(listener);
         loop {
             self.deliver().await?;
             // After the session's output, which may have closed the client: told before
             // waiting, not when something next wakes the loop.
             self.tell_live();
+            self.sync_listener(&mut listener, addr).await;
             let (wake, streaming) = match self.here.as_deref() {
                 Some(h) => (
                     h.wake_at().map(tokio::time::Instant::from_std),
@@ -165,7 +168,7 @@ impl<H: Host> Driver<H> {
                     self.here = Some(back?);
                 }
                 r = client_io(&mut self.client, flush_now) => self.client_io(r).await?,
-                accepted = listener.accept(), if may_accept => self.accepted(accepted, tls).await,
+                accepted = accept(&listener), if may_accept => self.accepted(accepted, tls).await,
                 Some(done) = self.handshakes.join_next(), if here && !self.handshakes.is_empty() => {
                     match done {
                         Ok((peer, Ok(stream))) => self.admit(stream, peer).await,
@@ -247,7 +250,8 @@ impl<H: Host> Driver<H> {
         let mut bytes = match &mut c.buffer {
             // Reports past the report buffer are dropped, and the client told.
             Some(buffer) => {
-                let admitted = buffer.admit(c.conn.queued(), raw);
+                let held_full = h.report_buffer_held_full();
+                let admitted = buffer.admit(c.conn.queued(), raw, held_full);
                 let mut bytes = admitted.bytes;
                 if admitted.warn.is_some() || admitted.overflow {
                     h.buffer_events(admitted.warn, admitted.overflow, &mut bytes);
@@ -257,6 +261,18 @@ impl<H: Host> Driver<H> {
             None => raw,
         };
         record_sent(&self.wire.recorder, c.rec, &bytes[..]).await;
+        if close && h.abrupt() {
+            // The connection dropped (a fault injected): a reset, nothing more sent.
+            h.session_mut().disconnect(c.id);
+            tracing::info!(peer = %c.peer, "connection dropped by the reader (reset)");
+            let rec = c.rec;
+            if let Some(c) = self.client.take() {
+                c.conn.reset();
+            }
+            let reason = "the reader dropped the connection (reset)".to_string();
+            record_marker(&self.wire.recorder, rec, Event::Disconnect, reason).await;
+            return Ok(());
+        }
         if let (Some(l), false) = (&self.wire.live, bytes.is_empty()) {
             l.tap.offer(Input::Frames {
                 reader: l.name.clone(),
@@ -276,6 +292,31 @@ impl<H: Host> Driver<H> {
             record_marker(&self.wire.recorder, rec, Event::Disconnect, reason).await;
         }
         Ok(())
+    }
+
+    /// Closes the listener while the session does not listen (a reader rebooting: connections
+    /// are refused), and binds its address again once it does (retried while that fails).
+    async fn sync_listener(&mut self, listener: &mut Option<TcpListener>, addr: SocketAddr) {
+        let Some(h) = self.here.as_deref() else {
+            return;
+        };
+        let listening = h.listening();
+        if !listening && listener.is_some() {
+            *listener = None;
+            tracing::info!(%addr, "not listening: connections are refused");
+        } else if listening && listener.is_none() && self.accept_after.is_none() {
+            match TcpListener::bind(addr).await {
+                Ok(l) => {
+                    *listener = Some(l);
+                    tracing::info!(%addr, "listening again");
+                }
+                Err(e) => {
+                    let pause = self.backoff.failed();
+                    tracing::warn!(%addr, "cannot listen again: {e}; retrying in {pause:?}");
+                    self.accept_after = Some(tokio::time::Instant::now() + pause);
+                }
+            }
+        }
     }
 
     /// The stop: the client is told as the session says, and closed.
@@ -501,6 +542,14 @@ async fn returned<H>(away: &mut Option<oneshot::Receiver<Box<H>>>) -> io::Result
         Some(rx) => rx
             .await
             .map_err(|_| io::Error::other("the served session was lost in its work")),
+        None => std::future::pending().await,
+    }
+}
+
+/// The next connection on `listener`; pending forever while there is none (not listening).
+async fn accept(listener: &Option<TcpListener>) -> io::Result<(tokio::net::TcpStream, SocketAddr)> {
+    match listener {
+        Some(l) => l.accept().await,
         None => std::future::pending().await,
     }
 }
