@@ -35,6 +35,7 @@ use llrp_gateway_vocab::feed::{Input, Inventory};
 use llrp_gateway_vocab::session::{Accepted, ClientId, ServerSession};
 
 mod host;
+mod listen;
 
 pub use host::{Host, Job, Limits, LiveHook, NowOf, Offload, Wire};
 
@@ -168,7 +169,7 @@ impl<H: Host> Driver<H> {
                     self.here = Some(back?);
                 }
                 r = client_io(&mut self.client, flush_now) => self.client_io(r).await?,
-                accepted = accept(&listener), if may_accept => self.accepted(accepted, tls).await,
+                accepted = listen::accept(&listener), if may_accept => self.accepted(accepted, tls).await,
                 Some(done) = self.handshakes.join_next(), if here && !self.handshakes.is_empty() => {
                     match done {
                         Ok((peer, Ok(stream))) => self.admit(stream, peer).await,
@@ -292,31 +293,6 @@ impl<H: Host> Driver<H> {
             record_marker(&self.wire.recorder, rec, Event::Disconnect, reason).await;
         }
         Ok(())
-    }
-
-    /// Closes the listener while the session does not listen (a reader rebooting: connections
-    /// are refused), and binds its address again once it does (retried while that fails).
-    async fn sync_listener(&mut self, listener: &mut Option<TcpListener>, addr: SocketAddr) {
-        let Some(h) = self.here.as_deref() else {
-            return;
-        };
-        let listening = h.listening();
-        if !listening && listener.is_some() {
-            *listener = None;
-            tracing::info!(%addr, "not listening: connections are refused");
-        } else if listening && listener.is_none() && self.accept_after.is_none() {
-            match TcpListener::bind(addr).await {
-                Ok(l) => {
-                    *listener = Some(l);
-                    tracing::info!(%addr, "listening again");
-                }
-                Err(e) => {
-                    let pause = self.backoff.failed();
-                    tracing::warn!(%addr, "cannot listen again: {e}; retrying in {pause:?}");
-                    self.accept_after = Some(tokio::time::Instant::now() + pause);
-                }
-            }
-        }
     }
 
     /// The stop: the client is told as the session says, and closed.
@@ -542,14 +518,6 @@ async fn returned<H>(away: &mut Option<oneshot::Receiver<Box<H>>>) -> io::Result
         Some(rx) => rx
             .await
             .map_err(|_| io::Error::other("the served session was lost in its work")),
-        None => std::future::pending().await,
-    }
-}
-
-/// The next connection on `listener`; pending forever while there is none (not listening).
-async fn accept(listener: &Option<TcpListener>) -> io::Result<(tokio::net::TcpStream, SocketAddr)> {
-    match listener {
-        Some(l) => l.accept().await,
         None => std::future::pending().await,
     }
 }
