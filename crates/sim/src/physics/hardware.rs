@@ -94,11 +94,30 @@ pub fn in_antenna_frame(u: Vec3, b: Vec3) -> Vec3 {
     [dot(u, right), dot(u, up), dot(u, b)]
 }
 
+/// The angle off boresight (degrees) beyond which the phase error stops growing: the real
+/// rail's reads reach 55° (docs/measurement.md "Angle-dependent phase error"); past 60° the
+/// growth is held rather than extrapolated.
+pub const PATTERN_GROWTH_HELD_DEG: f64 = 60.0;
+
+/// How many times the angle-dependent phase error's boresight RMS it has at `off_axis_rad`
+/// off the antenna's boresight: 1 + (θ/`growth_rad`)², θ held at
+/// [`PATTERN_GROWTH_HELD_DEG`]; 1 everywhere when `growth_rad` is 0 (no growth).
+pub fn pattern_growth(off_axis_rad: f64, growth_rad: f64) -> f64 {
+    if growth_rad <= 0.0 || !growth_rad.is_finite() || !off_axis_rad.is_finite() {
+        return 1.0;
+    }
+    let theta = off_axis_rad.abs().min(PATTERN_GROWTH_HELD_DEG.to_radians());
+    1.0 + (theta / growth_rad).powi(2)
+}
+
 /// An antenna's share of what hardware adds, prepared once per model.
 #[derive(Clone, Debug, Default)]
 pub struct AntennaHardware {
     /// The antenna's angle-dependent phase error, if any.
     pub phase_field: Option<SmoothField>,
+    /// Angle (rad) off boresight at which the angle-dependent phase error (the antenna's and
+    /// the tags') has doubled its boresight RMS ([`pattern_growth`]); 0: the same everywhere.
+    pub pattern_growth_rad: f64,
     /// RSSI offset per channel (index 0 = channel 1) from the band tilt; empty: none.
     pub band_db: Vec<f64>,
     /// Seed prefix of the fixed per-(tag, channel) draws.
@@ -263,6 +282,21 @@ mod tests {
             (step2 / n).sqrt()
         );
         assert!(SmoothField::new(&[1], 0.0, 0.5).is_none());
+    }
+
+    #[test]
+    fn the_phase_error_grows_off_boresight_and_is_held_past_sixty_degrees() {
+        let w = 25f64.to_radians();
+        assert_eq!(pattern_growth(0.0, w), 1.0);
+        // At the growth angle it has doubled; either side of boresight alike.
+        assert!((pattern_growth(w, w) - 2.0).abs() < 1e-12);
+        assert!((pattern_growth(-w, w) - 2.0).abs() < 1e-12);
+        let g = |deg: f64| pattern_growth(deg.to_radians(), w);
+        assert!(g(10.0) < g(30.0) && g(30.0) < g(50.0));
+        assert!((g(60.0) - g(80.0)).abs() < 1e-12 && (g(60.0) - g(170.0)).abs() < 1e-12);
+        // No growth angle: the same everywhere, as before the growth existed.
+        assert_eq!(pattern_growth(1.2, 0.0), 1.0);
+        assert_eq!(pattern_growth(f64::NAN, w), 1.0);
     }
 
     #[test]

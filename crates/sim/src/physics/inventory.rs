@@ -347,7 +347,7 @@ impl Model {
 
     /// The smooth angle-dependent phase error (rad) of `tag` read by `antenna` at `t_us`:
     /// the antenna's pattern in its own frame plus the tag's against the direction it is read
-    /// from (0 when neither has one).
+    /// from, both grown by the angle off the antenna's boresight (0 when neither has one).
     fn pattern_phase(&self, antenna: u16, tag: usize, t_us: u64) -> f64 {
         let a = &self.antennas[usize::from(antenna) - 1];
         let radio = &self.tags[tag].radio;
@@ -356,18 +356,18 @@ impl Model {
         }
         let pose = self.antenna_pose(antenna, t_us);
         let at = self.tag_position(tag, t_us);
+        let b = super::geometry::boresight(pose.yaw_rad, pose.pitch_rad);
+        let seen = hardware::in_antenna_frame(hardware::direction(pose.position, at), b);
         let mut sum = 0.0;
         if let Some(f) = &a.hardware.phase_field {
-            let b = super::geometry::boresight(pose.yaw_rad, pose.pitch_rad);
-            sum += f.at(hardware::in_antenna_frame(
-                hardware::direction(pose.position, at),
-                b,
-            ));
+            sum += f.at(seen);
         }
         if let Some(f) = &radio.phase_field {
             sum += f.at(hardware::direction(at, pose.position));
         }
-        sum
+        // Both grow off the antenna's boresight (seen[2] is the cosine of that angle).
+        let off_axis = seen[2].clamp(-1.0, 1.0).acos();
+        sum * hardware::pattern_growth(off_axis, a.hardware.pattern_growth_rad)
     }
 
     /// Doppler shift (Hz) of `tag` seen by `antenna` at `t_us`, from the radial velocity

@@ -330,6 +330,7 @@ fn antenna_hardware(
             a.phase_pattern_rad,
             a.phase_pattern_deg.to_radians(),
         ),
+        pattern_growth_rad: a.phase_pattern_growth_deg.to_radians(),
         band_db: hardware::band_offsets(table, a.rssi_tilt_db_per_mhz),
         prefix: seed::mix(&[
             scenario.seed,

@@ -1,5 +1,6 @@
 //! Model-level tests of the measurement model: structured phase offsets, the π ambiguity,
-//! tag orientation and per-tag sensitivity, each against its closed form.
+//! tag orientation, per-tag sensitivity and the growth of the angle-dependent phase error off
+//! boresight, each against its closed form.
 
 use std::f64::consts::{PI, TAU};
 
@@ -163,4 +164,48 @@ fn less_sensitive_tags_drop_out_first() {
         last_count = read.len();
     }
     assert!(last_count < 10);
+}
+
+#[test]
+fn the_angle_dependent_phase_error_grows_off_the_antennas_boresight() {
+    // Tags 2 m from an antenna facing +x, every 10° from −70° to +70°; noise-free reads.
+    let tags: Vec<serde_json::Value> = (0..15u32)
+        .map(|i| {
+            let a = (f64::from(i) * 10.0 - 70.0).to_radians();
+            tag(i, [2.0 * a.cos(), 2.0 * a.sin(), 1.0])
+        })
+        .collect();
+    let phase_of = |pattern: f64, growth_deg: f64| -> Vec<f64> {
+        let a = serde_json::json!({
+            "phase_noise_rad": 0.0, "phase_resolution_bits": 16, "beamwidth_deg": 170.0,
+            "phase_pattern_rad": pattern, "phase_pattern_growth_deg": growth_deg
+        });
+        let m = scene(serde_json::json!(tags), a, 0.0);
+        let reads = m.inventory_on(1, 0, 2_000_000, None, Some(1));
+        (0..tags.len())
+            .map(|t| match reads.iter().find(|r| r.tag == t) {
+                Some(r) => r.phase_rad,
+                None => panic!("tag {t} was not read"),
+            })
+            .collect()
+    };
+    let wrap = |x: f64| (x + PI).rem_euclid(TAU) - PI;
+    let (none, flat, grown) = (phase_of(0.0, 0.0), phase_of(0.3, 0.0), phase_of(0.3, 25.0));
+    let mut checked = 0;
+    for t in 0..tags.len() {
+        // The same seeded pattern, with and without the growth.
+        let p = wrap(flat[t] - none[t]);
+        let g = wrap(grown[t] - none[t]);
+        let theta = (f64::from(t as u32) * 10.0 - 70.0).to_radians();
+        let expected = hardware::pattern_growth(theta, 25f64.to_radians());
+        if p.abs() > 0.02 && (p * expected).abs() < PI {
+            assert!(
+                (g / p - expected).abs() < 1e-3,
+                "tag {t}: {} vs {expected}",
+                g / p
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 8, "{checked}");
 }

@@ -542,6 +542,11 @@ pub struct AntennaSpec {
     /// Angle (degrees) over which that phase error decorrelates.
     #[serde(default = "default_pattern_deg")]
     pub phase_pattern_deg: f64,
+    /// Angle (degrees) off boresight at which the angle-dependent phase error (this
+    /// antenna's and that of the tags it reads) has doubled its boresight RMS: it grows as
+    /// 1 + (θ/angle)², held past 60°; 0: the same at every angle.
+    #[serde(default)]
+    pub phase_pattern_growth_deg: f64,
 }
 
 /// \[G\] Table 1's RSS noise, the default of `rssi_noise`.

@@ -91,5 +91,11 @@ pub(super) fn antenna(p: &str, a: &AntennaSpec) -> Check {
         &format!("{p}.phase_pattern_deg"),
         a.phase_pattern_deg,
         360.0,
+    )?;
+    in_range(
+        &format!("{p}.phase_pattern_growth_deg"),
+        a.phase_pattern_growth_deg,
+        0.0,
+        180.0,
     )
 }

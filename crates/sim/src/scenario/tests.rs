@@ -451,7 +451,7 @@ fn a_reader_model_sets_defaults_the_file_can_override() {
 
 #[test]
 fn hardware_fields_out_of_range_name_the_field() {
-    let cases: [(&str, serde_json::Value, &str); 5] = [
+    let cases: [(&str, serde_json::Value, &str); 6] = [
         (
             "phase_noise_dof",
             1.5.into(),
@@ -469,6 +469,11 @@ fn hardware_fields_out_of_range_name_the_field() {
             "must be in [0, 0.5], got -0.1",
         ),
         ("phase_pattern_deg", 0.into(), "must be in (0, 360], got 0"),
+        (
+            "phase_pattern_growth_deg",
+            (-5.0).into(),
+            "must be in [0, 180], got -5",
+        ),
     ];
     for (field, value, reason) in cases {
         let mut v = base();
