@@ -95,7 +95,7 @@ pub fn in_antenna_frame(u: Vec3, b: Vec3) -> Vec3 {
 }
 
 /// The angle off boresight (degrees) beyond which the phase error stops growing: the real
-/// rail's reads reach 55° (docs/measurement.md "Angle-dependent phase error"); past 60° the
+/// rail's reads reach 55° (docs/measurement.md "Where the model still differs"); past 60° the
 /// growth is held rather than extrapolated.
 pub const PATTERN_GROWTH_HELD_DEG: f64 = 60.0;
 

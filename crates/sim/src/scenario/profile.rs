@@ -46,14 +46,13 @@ fn defaults(model: &str) -> Option<Defaults> {
                 "backscatter_compression": 0.95,
                 "compression_knee_db": 3.0,
                 "rssi_tilt_db_per_mhz": 0.17,
-                "phase_pattern_rad": 0.08,
-                "phase_pattern_deg": 4.0,
-                "phase_pattern_growth_deg": 25.0
+                "phase_pattern_rad": 0.2,
+                "phase_pattern_deg": 6.0
             }),
             json!({
                 "backscatter_sigma_db": 2.8,
-                "phase_pattern_rad": 0.17,
-                "phase_pattern_deg": 4.0,
+                "phase_pattern_rad": 0.45,
+                "phase_pattern_deg": 6.0,
                 "delay_sigma_ns": 1.8,
                 "channel_phase_sigma_rad": 0.014,
                 "channel_rssi_sigma_db": 0.2
