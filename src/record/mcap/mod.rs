@@ -14,8 +14,11 @@
 //! (a read's first-seen time, a notification's UTCTimestamp), else the log time.
 
 pub mod cdr;
+pub mod cdr_read;
 mod export;
 pub mod msgs;
+pub mod read;
+pub mod ros_in;
 mod thread;
 mod writer;
 
