@@ -16,14 +16,28 @@ const PROGRESS_FROM: usize = 100_000;
 /// `llrp-gateway localize`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct LocalizeArgs {
-    /// A recording (docs/recordings.md) or a reads file (one JSON read a line, as
-    /// `inventory --output` writes).
+    /// A recording (docs/recordings.md), a reads file (one JSON read a line, as
+    /// `inventory --output` writes), or an MCAP file of this project's TagRead messages
+    /// (docs/robotics.md).
     #[arg(required_unless_present = "subscribe", conflicts_with = "subscribe")]
     pub input: Option<PathBuf>,
     /// Antenna poses: JSON Lines or CSV with `t_us, reader, antenna, x, y, z, yaw_deg,
-    /// pitch_deg` (reads with their own `antenna_pose` need none).
+    /// pitch_deg` (reads with their own `antenna_pose` need none), or a robot's ROS 2 bag
+    /// (MCAP file or rosbag2 directory) with `--pose-topic`.
     #[arg(long)]
     pub poses: Option<PathBuf>,
+    /// The robot's poses in the `--poses` bag: a PoseStamped, PoseWithCovarianceStamped
+    /// (`/amcl_pose`) or Odometry topic, or `/tf` with `--frames`.
+    #[arg(long, default_value = "/amcl_pose")]
+    pub pose_topic: String,
+    /// The frame chain from the map to the robot on `/tf` (`map,odom,base_link`).
+    #[arg(long, value_delimiter = ',')]
+    pub frames: Vec<String>,
+    /// An antenna's offset in the robot frame for bag poses: `[ANTENNA=]X,Y,Z,YAW_DEG` (m and
+    /// degrees; without ANTENNA= for every antenna); repeatable; adds to the settings'
+    /// `antenna_offsets`.
+    #[arg(long, value_parser = crate::cli::localize_bag::parse_offset)]
+    pub antenna_offset: Vec<crate::localize::offline::AntennaOffset>,
     /// The estimator (docs/localize.md).
     #[arg(long, default_value = "relock")]
     pub estimator: Estimator,
@@ -66,6 +80,9 @@ pub enum LocalizeCommandError {
         /// Why.
         source: crate::localize::poses::PoseFileError,
     },
+    /// An MCAP file could not be used (the message names the file, the topic and why).
+    #[error("{0}")]
+    Bag(#[from] crate::record::mcap::read::BagError),
     /// INPUT or `--output` is missing (clap requires both without `--subscribe`).
     #[error("INPUT and --output are needed (or --subscribe)")]
     Missing,
@@ -103,13 +120,6 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         })?,
         None => SettingsFile::default(),
     };
-    let poses = match &args.poses {
-        Some(p) => Poses::load(p).map_err(|source| E::Poses {
-            path: p.clone(),
-            source,
-        })?,
-        None => Poses::new(),
-    };
     // clap requires both without --subscribe.
     let (Some(input), Some(output)) = (&args.input, &args.output) else {
         return Err(E::Missing);
@@ -127,7 +137,24 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         inputs.extend(args.settings.as_deref());
         Some(crate::files::Output::create(output, &inputs, args.force).map_err(output_error)?)
     };
-    let reads = load_reads(input)?;
+    let reads = if crate::record::mcap::read::is_mcap(input) {
+        crate::cli::localize_bag::bag_reads(input)?
+    } else {
+        load_reads(input)?
+    };
+    let poses = match &args.poses {
+        Some(p) if crate::record::mcap::read::is_mcap(p) => {
+            let mut offsets = settings.antenna_offsets.clone();
+            offsets.extend(args.antenna_offset.iter().cloned());
+            let topic = &args.pose_topic;
+            crate::cli::localize_bag::bag_poses(p, topic, &args.frames, &offsets, &reads)?
+        }
+        Some(p) => Poses::load(p).map_err(|source| E::Poses {
+            path: p.clone(),
+            source,
+        })?,
+        None => Poses::new(),
+    };
     let outcome = localize_with_progress(reads, poses, &settings, args.estimator);
     let json = serde_json::to_string_pretty(&outcome.tags).map_err(E::Json)?;
     match out.take() {

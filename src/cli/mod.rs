@@ -29,6 +29,7 @@ pub mod gpio;
 pub mod inventory;
 pub mod live;
 pub mod localize;
+pub mod localize_bag;
 pub mod options;
 pub mod proxy;
 pub mod replay;

@@ -17,7 +17,7 @@ use crate::refine::refined_poses;
 use crate::series::Ambiguity;
 use crate::settings::PoseErrorModel;
 pub use crate::settings::{
-    PoseErrorSettings, ReaderSettings, ReferenceTag, SettingsError, SettingsFile,
+    AntennaOffset, PoseErrorSettings, ReaderSettings, ReferenceTag, SettingsError, SettingsFile,
 };
 use crate::shared::{TagJson, TagsJson};
 use llrp_gateway_vocab::reads::Read;

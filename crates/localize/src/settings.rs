@@ -132,12 +132,39 @@ pub struct SettingsFile {
     /// Per reader, reader time − robot time of the pose file (µs).
     #[serde(default)]
     pub clock_offsets_us: BTreeMap<ReaderName, i64>,
+    /// Where the antennas sit on the robot, for poses taken from a robot's bag (the robot's
+    /// pose ⊕ the offset is the antenna's pose).
+    #[serde(default)]
+    pub antenna_offsets: Vec<AntennaOffset>,
     /// Per reader name, its own phase sign and facing (the keys above for the others).
     #[serde(default)]
     pub readers: BTreeMap<ReaderName, ReaderSettings>,
     /// The robot's pose error, where its poses come from a localization stack: the poses
     /// are then refined from the tags' phases ([`crate::refine`]).
     pub pose_error: Option<PoseErrorSettings>,
+}
+
+/// An antenna's offset in the robot frame (x forward, y left, z up; the settings file's
+/// `antenna_offsets`, or `localize --antenna-offset`).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AntennaOffset {
+    /// The reader it is of (`None`: every reader).
+    #[serde(default)]
+    pub reader: Option<ReaderName>,
+    /// The antenna port (`None`: every antenna without an offset of its own).
+    #[serde(default)]
+    pub antenna: Option<u16>,
+    /// Forward of the robot's origin (m).
+    pub x: f64,
+    /// Left of it (m).
+    pub y: f64,
+    /// Above it (m).
+    #[serde(default)]
+    pub z: f64,
+    /// The boresight's yaw from the robot's heading (degrees, counter-clockwise).
+    #[serde(default)]
+    pub yaw_deg: f64,
 }
 
 /// The pose error of the settings file's `pose_error`.

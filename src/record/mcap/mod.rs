@@ -17,6 +17,7 @@ pub mod cdr;
 pub mod cdr_read;
 mod export;
 pub mod msgs;
+pub mod poses_in;
 pub mod read;
 pub mod ros_in;
 mod thread;
