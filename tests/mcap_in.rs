@@ -282,3 +282,96 @@ fn an_exported_recording_localizes_from_its_mcap_file_as_from_the_recording() {
     assert!(ok, "{err}");
     assert_same_estimates(&want, &got.expect("estimates"), "localize s1.mcap");
 }
+
+/// `inventory` for 3 s against `replay FILE --speed max`: its reads.
+fn inventory_of_replay(file: &Path, out: &Path) -> Vec<llrp_gateway::reads::Read> {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .arg("replay")
+        .arg(file)
+        .args(["--listen", "127.0.0.1:0", "--speed", "max"])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("runs");
+    let stderr = child.stderr.take().expect("piped");
+    let mut lines = BufReader::new(stderr).lines();
+    let addr = lines.by_ref().map_while(Result::ok).find_map(|l| {
+        l.split("listening on ")
+            .nth(1)
+            .map(|a| a.trim().to_string())
+    });
+    // Drain the rest so the replay never blocks on a full pipe.
+    std::thread::spawn(move || lines.for_each(drop));
+    let Some(addr) = addr else {
+        let _ = child.kill();
+        panic!("{}: no listening line", file.display());
+    };
+    let status = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .args([
+            "inventory",
+            &addr,
+            "--name",
+            "dock",
+            "--seconds",
+            "3",
+            "--impinj",
+        ])
+        .arg("--output")
+        .arg(out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .expect("inventory runs");
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(status.success(), "inventory against {}", file.display());
+    llrp_gateway::reads::read_jsonl(BufReader::new(std::fs::File::open(out).expect("reads")))
+        .expect("parses")
+}
+
+#[test]
+fn a_replay_of_an_exported_mcap_file_gives_the_inventory_the_recording_s_reads() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rec =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/sessions/dock-door-inventory.jsonl");
+    let mcap = dir.path().join("dock.mcap");
+    let export = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .arg("export")
+        .arg(&rec)
+        .arg("--mcap")
+        .arg(&mcap)
+        .output()
+        .expect("runs");
+    assert!(
+        export.status.success(),
+        "{}",
+        String::from_utf8_lossy(&export.stderr)
+    );
+    let want = inventory_of_replay(&rec, &dir.path().join("jsonl.jsonl"));
+    let got = inventory_of_replay(&mcap, &dir.path().join("mcap.jsonl"));
+    assert!(!want.is_empty());
+    assert_eq!(want.len(), got.len(), "reads");
+    if let Some(i) = (0..want.len()).find(|&i| want[i] != got[i]) {
+        panic!(
+            "read {i}: {:?} from the JSON Lines, {:?} from the MCAP",
+            want[i], got[i]
+        );
+    }
+}
+
+#[test]
+fn an_mcap_file_cut_after_its_magic_is_not_replayed_and_is_named() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mcap = dir.path().join("cut.mcap");
+    std::fs::write(&mcap, b"\x89MCAP0\r\n").expect("written");
+    let out = Command::new(env!("CARGO_BIN_EXE_llrp-gateway"))
+        .arg("replay")
+        .arg(&mcap)
+        .args(["--listen", "127.0.0.1:0"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains(s(&mcap)) && err.contains("MCAP"), "{err}");
+}

@@ -17,7 +17,8 @@ use crate::stop::StopSignal;
 /// Arguments of `llrp-gateway replay`.
 #[derive(clap::Args, Debug)]
 pub struct ReplayArgs {
-    /// The recording (JSON Lines, docs/recordings.md).
+    /// The recording (JSON Lines, docs/recordings.md), or an MCAP file of its LLRP frames
+    /// (`export --mcap`; docs/robotics.md).
     pub file: PathBuf,
     /// Where clients connect.
     #[arg(long, default_value = "0.0.0.0:5084")]
@@ -50,6 +51,9 @@ pub struct ReplayArgs {
 /// Why `replay` failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayCommandError {
+    /// The MCAP file cannot be replayed (the message names the file and why).
+    #[error("{0}")]
+    Mcap(#[from] crate::record::mcap::read::BagError),
     /// The recording cannot be read.
     #[error("{}: {source}", path.display())]
     Recording {
@@ -108,6 +112,9 @@ pub fn run(args: ReplayArgs) -> Result<(), ReplayCommandError> {
 
 /// The recording at `path`, its warnings said on standard error.
 fn open(path: &Path) -> Result<Recording, ReplayCommandError> {
+    if crate::record::mcap::read::is_mcap(path) {
+        return Ok(crate::record::mcap::recording_in::recording(path)?);
+    }
     let recording = Recording::open(path).map_err(|source| ReplayCommandError::Recording {
         path: path.to_owned(),
         source,

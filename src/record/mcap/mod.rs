@@ -19,6 +19,7 @@ mod export;
 pub mod msgs;
 pub mod poses_in;
 pub mod read;
+pub mod recording_in;
 pub mod ros_in;
 mod thread;
 mod writer;
