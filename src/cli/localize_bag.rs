@@ -6,10 +6,10 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
+use crate::cli::bag_poses::{antenna_samples, robot_track};
 use crate::localize::offline::AntennaOffset;
 use crate::localize::poses::Poses;
 use crate::reads::{Read, ReaderName};
-use crate::record::mcap::poses_in::{antenna_samples, robot_track};
 use crate::record::mcap::read::{topics_in_words, Bag, BagError};
 use crate::record::mcap::ros_in;
 

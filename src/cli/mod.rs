@@ -21,6 +21,7 @@ use crate::net::clock::Speed;
 use crate::sim::SimOptions;
 
 pub mod args;
+pub mod bag_poses;
 pub mod bench;
 pub mod capture;
 pub mod decode;

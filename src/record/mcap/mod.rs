@@ -17,7 +17,6 @@ pub mod cdr;
 pub mod cdr_read;
 mod export;
 pub mod msgs;
-pub mod poses_in;
 pub mod read;
 pub mod recording_in;
 pub mod ros_in;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 /// Why an MCAP file's messages could not be had.
 #[derive(Debug, thiserror::Error)]
-#[error("{}{}: {reason}", path.display(), topic.as_ref().map(|t| format!(": topic {t}")).unwrap_or_default())]
+#[error("{}{}: {reason}", path.display(), in_topic(topic))]
 pub struct BagError {
     /// The file.
     pub path: PathBuf,
@@ -15,6 +15,14 @@ pub struct BagError {
     pub topic: Option<String>,
     /// Why.
     pub reason: String,
+}
+
+/// `: topic TOPIC`, or nothing.
+fn in_topic(topic: &Option<String>) -> String {
+    topic
+        .as_ref()
+        .map(|t| format!(": topic {t}"))
+        .unwrap_or_default()
 }
 
 impl BagError {
@@ -40,6 +48,9 @@ pub struct BagMessage {
     /// Its serialized data.
     pub data: Vec<u8>,
 }
+
+/// Every topic of a file with its schema name, in the order first seen.
+pub type Topics = Vec<(String, String)>;
 
 /// An MCAP file (or rosbag2 directory of them) read whole.
 #[derive(Debug)]
@@ -103,7 +114,7 @@ impl Bag {
     pub fn messages(
         &self,
         keep: impl Fn(&str) -> bool,
-    ) -> Result<(Vec<BagMessage>, Vec<(String, String)>), BagError> {
+    ) -> Result<(Vec<BagMessage>, Topics), BagError> {
         let mut out = Vec::new();
         let mut topics: Vec<(String, String)> = Vec::new();
         for (name, bytes) in &self.files {

@@ -1,18 +1,18 @@
-//! A robot's poses out of its own bag, as the localizer's antenna pose samples: the poses of
-//! one topic (`geometry_msgs/msg/PoseStamped`, `PoseWithCovarianceStamped` as amcl's
-//! `/amcl_pose`, `nav_msgs/msg/Odometry`), or of a chain of frames on `/tf` (with
-//! `/tf_static`), each composed with each antenna's offset in the robot frame. A sample's
-//! time is its header's stamp, on the robot's clock (the settings' `clock_offsets_us` give
-//! reader time − robot time, as for a pose file).
+//! `localize --poses BAG`: a robot's poses out of its own bag, as the localizer's antenna pose
+//! samples: the poses of one topic (`geometry_msgs/msg/PoseStamped`,
+//! `PoseWithCovarianceStamped` as amcl's `/amcl_pose`, `nav_msgs/msg/Odometry`), or of a chain
+//! of frames on `/tf` (with `/tf_static`), each composed with each antenna's offset in the
+//! robot frame. A sample's time is its header's stamp, on the robot's clock (the settings'
+//! `clock_offsets_us` give reader time − robot time, as for a pose file).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::read::{topics_in_words, Bag, BagError};
-use super::ros_in::{PoseType, RosPose, Stamped};
 use crate::localize::offline::AntennaOffset;
 use crate::localize::poses::{Pose, PoseSample};
 use crate::reads::ReaderName;
+use crate::record::mcap::read::{topics_in_words, Bag, BagError};
+use crate::record::mcap::ros_in::{PoseType, RosPose, Stamped};
 
 /// The robot's poses on `topic` in time order (stamp ns, pose). With `frames` (a chain
 /// `parent, ..., robot` of at least two), `topic` is a `tf2_msgs/msg/TFMessage` topic, and a
