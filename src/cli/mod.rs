@@ -222,6 +222,7 @@ pub fn main() -> ExitCode {
                     record,
                     record_options: crate::record::RecordOptions {
                         max_bytes: record_max_bytes,
+                        ..Default::default()
                     },
                     tls: tls_cert
                         .zip(tls_key)

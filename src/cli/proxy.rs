@@ -16,7 +16,8 @@ use crate::gateway::{live, log_stats, ConfigError, GatewayConfig, ProxyEntry, Re
 use crate::net::proxy::{Proxy, ProxyConfig};
 use crate::net::tls::{self, TlsError};
 use crate::net::{with_port_or, LLRP_PORT};
-use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
+use crate::record::mcap::{McapError, McapTee, McapThread};
+use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
 use crate::stop::StopSignal;
 
 /// Longest the proxy waits at a stop for its sessions to close.
@@ -34,6 +35,10 @@ pub struct ProxyArgs {
     /// Record every session to this file (JSON Lines, docs/recordings.md).
     #[arg(long)]
     pub record: Option<PathBuf>,
+    /// Write every proxy's sessions to this MCAP file too: frames, tag reads, reader events
+    /// (ROS 2 messages; docs/robotics.md). An existing file is refused.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// Start a numbered next recording file once a file would pass this many bytes.
     #[arg(long, value_name = "BYTES", value_parser = crate::cli::options::parser::<u64>("record-max-bytes"))]
     pub record_max_bytes: Option<u64>,
@@ -137,6 +142,9 @@ pub enum ProxyCommandError {
         /// Why.
         source: std::io::Error,
     },
+    /// The MCAP file cannot be created.
+    #[error("cannot write the MCAP file: {0}")]
+    Mcap(McapError),
     /// At the stop, recordings were not written whole (each failure, `; ` between them).
     #[error("{}", joined(.0))]
     Recordings(Vec<RecordingFailure>),
@@ -154,6 +162,9 @@ pub enum RecordingFailure {
     /// Its writer's task failed.
     #[error("the recording's writer failed: {0}")]
     Writer(tokio::task::JoinError),
+    /// The MCAP file was not written whole.
+    #[error("the MCAP file: {0}")]
+    Mcap(McapError),
 }
 
 /// The failures, `; ` between them.
@@ -202,6 +213,8 @@ fn entries(args: &ProxyArgs) -> Result<Vec<ProxyEntry>, ProxyCommandError> {
 struct Running {
     tasks: Vec<JoinHandle<std::io::Result<()>>>,
     writers: Vec<RecorderTask>,
+    /// The `--mcap` file's writer, which every recorder hands its entries to.
+    mcap: Option<(PathBuf, McapThread)>,
 }
 
 /// Starts the localizer and publisher and every proxy, and runs them until a stop signal.
@@ -210,6 +223,10 @@ async fn serve(args: ProxyArgs, entries: Vec<ProxyEntry>) -> Result<(), ProxyCom
     let sinks = start_sinks(&args.live, "proxy").await?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let mut running = Running::default();
+    if let Some(path) = &args.mcap {
+        let mcap = McapThread::create(path, false).map_err(ProxyCommandError::Mcap)?;
+        running.mcap = Some((path.clone(), mcap));
+    }
     for e in entries {
         start(&args, e, &sinks, &stop_rx, &mut running).await?;
     }
@@ -241,7 +258,8 @@ async fn start(
         LLRP_PORT
     };
     let upstream = with_port_or(&e.upstream, port);
-    let recorder = recorder(args, &e, &upstream, &mut running.writers)?;
+    let tee = running.mcap.as_ref().map(|(_, m)| m.tee(&upstream));
+    let recorder = recorder(args, &e, &upstream, tee, &mut running.writers)?;
     let (acceptor, connector) = match (e.acceptor(), e.connector()) {
         (Ok(a), Ok(c)) => (a, c),
         (Err(source), _) | (_, Err(source)) => {
@@ -294,26 +312,31 @@ async fn start(
     Ok(())
 }
 
-/// The recorder of the proxy `e` to `upstream`, if it records; its writer goes to `writers`.
+/// The recorder of the proxy `e` to `upstream`, if it records (to a file, or only to the
+/// MCAP file through `mcap`); its writer goes to `writers`.
 fn recorder(
     args: &ProxyArgs,
     e: &ProxyEntry,
     upstream: &str,
+    mcap: Option<McapTee>,
     writers: &mut Vec<RecorderTask>,
 ) -> Result<Option<Recorder>, ProxyCommandError> {
-    let Some(path) = &e.record else {
-        return Ok(None);
-    };
     let options = RecordOptions {
         max_bytes: args.record_max_bytes,
+        mcap,
     };
-    let (recorder, task) =
-        Recorder::create(path, Header::new(upstream, 0), options).map_err(|source| {
+    let header = Header::new(upstream, 0);
+    let (recorder, task) = match &e.record {
+        Some(path) => Recorder::create(path, header, options).map_err(|source| {
             ProxyCommandError::Recording {
                 path: path.clone(),
                 source,
             }
-        })?;
+        })?,
+        None if options.mcap.is_some() => Recorder::start(Discard, header, options)
+            .map_err(|e| ProxyCommandError::Mcap(McapError::Mcap { error: e.into() }))?,
+        None => return Ok(None),
+    };
     writers.push(task);
     Ok(Some(recorder))
 }
@@ -339,6 +362,18 @@ impl Running {
                 Ok(Ok(Ok(()))) => {}
                 Ok(Ok(Err(e))) => failures.push(RecordingFailure::Write(e)),
                 Ok(Err(e)) => failures.push(RecordingFailure::Writer(e)),
+            }
+        }
+        // The MCAP file ends once every recorder has handed on its last entries.
+        if let Some((path, mcap)) = self.mcap {
+            let end = deadline + Duration::from_secs(2);
+            let finished = tokio::time::timeout_at(end, mcap.finish_async()).await;
+            match finished.unwrap_or(Err(McapError::ThreadGone)) {
+                Ok(s) => eprintln!(
+                    "llrp-gateway proxy: {} frames, {} tag reads, {} reader events: {} messages on {} channels in {}",
+                    s.frames, s.reads, s.events, s.messages, s.channels, path.display()
+                ),
+                Err(e) => failures.push(RecordingFailure::Mcap(e)),
             }
         }
         failures

@@ -8,4 +8,4 @@ pub mod replay;
 pub mod writer;
 
 pub use format::{Direction, Entry, Event, Header, ReaderInfo, RecordError, Recording, Stamp};
-pub use writer::{Files, RecordOptions, Recorder, RecorderTask, Sink};
+pub use writer::{Discard, Files, RecordOptions, Recorder, RecorderTask, Sink};

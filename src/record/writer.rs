@@ -40,6 +40,29 @@ const FLUSH_BYTES: usize = 256 * 1024;
 pub struct RecordOptions {
     /// Rotate to the next numbered file once a file would grow past this many bytes.
     pub max_bytes: Option<u64>,
+    /// Hand every entry to this MCAP file too (on the recorder's thread; docs/robotics.md).
+    pub mcap: Option<super::mcap::McapTee>,
+}
+
+/// A recording that keeps nothing: the sink of a [`Recorder`] whose entries only go on to an
+/// MCAP file ([`RecordOptions::mcap`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Discard;
+
+impl Sink for Discard {
+    type Part = io::Sink;
+
+    fn open(&mut self, _part: u32) -> io::Result<io::Sink> {
+        Ok(io::sink())
+    }
+
+    fn sync(&mut self, _file: &mut io::Sink) -> io::Result<()> {
+        Ok(())
+    }
+
+    fn name(&self, _part: u32) -> String {
+        "(none)".into()
+    }
 }
 
 use crate::utc::now_us as utc_now_us;
@@ -148,6 +171,7 @@ impl Recorder {
             max_bytes: options.max_bytes,
             file: first,
             written: 0,
+            mcap: options.mcap,
         };
         // Unbounded as a channel, bounded in bytes by `room`.
         let (tx, rx) = std::sync::mpsc::channel::<Batch>();
@@ -284,6 +308,7 @@ fn write_loop<S: Sink>(mut files: FileSet<S>, rx: &Receiver<Batch>) -> io::Resul
             encode_entry(entry, &mut buf);
             files.rotate_if_full(&mut buf, before)?;
         }
+        files.tee(batch);
         if marker || buf.len() >= FLUSH_BYTES {
             files.write(&mut buf)?;
             due = None;
@@ -303,9 +328,22 @@ struct FileSet<S: Sink> {
     file: S::Part,
     /// Bytes in the current file (written or buffered) at the last rotation check.
     written: u64,
+    /// Where the entries go on to, until that writer is gone.
+    mcap: Option<super::mcap::McapTee>,
 }
 
 impl<S: Sink> FileSet<S> {
+    /// Hands `batch` on to the MCAP file, if any; once that writer is gone (it logged why),
+    /// the recording goes on without it.
+    fn tee(&mut self, batch: Vec<Entry>) {
+        if let Some(tee) = &self.mcap {
+            if !tee.send_blocking(batch) {
+                tracing::warn!(reader = %tee.reader, "the MCAP file is gone: the recording goes on without it");
+                self.mcap = None;
+            }
+        }
+    }
+
     fn write_header(&mut self) -> io::Result<()> {
         let mut line = Vec::new();
         encode_header(&self.header, &mut line);
@@ -471,6 +509,7 @@ mod tests {
         let path = dir.path().join("rec.jsonl");
         let options = RecordOptions {
             max_bytes: Some(600),
+            ..RecordOptions::default()
         };
         let (rec, task) = Recorder::create(&path, Header::new("up", 0), options).expect("create");
         for _ in 0..20 {

@@ -24,7 +24,7 @@ mod thread;
 mod writer;
 
 pub use export::export;
-pub use thread::{McapItem, McapThread};
+pub use thread::{McapItem, McapSender, McapTee, McapThread};
 pub use writer::McapOut;
 
 /// Why an MCAP file could not be written.
@@ -40,6 +40,9 @@ pub enum McapError {
     /// The writer's thread is gone (it failed earlier, or panicked).
     #[error("the MCAP writer's thread ended early")]
     ThreadGone,
+    /// The file cannot be created (the message names it).
+    #[error("{0}")]
+    File(#[from] crate::files::OutputError),
 }
 
 /// `: CAUSE` when the writer's error wraps one (its IO errors say only "I/O error").

@@ -10,7 +10,7 @@ use tokio::sync::mpsc;
 
 use super::{McapError, McapOut, Summary};
 use crate::reads::Read;
-use crate::record::Direction;
+use crate::record::{Direction, Entry};
 
 /// Items that may wait for the writer before senders wait.
 const QUEUE: usize = 1024;
@@ -38,6 +38,35 @@ pub enum McapItem {
         /// The frame.
         frame: Bytes,
     },
+    /// Entries of a recording of a reader's sessions, in order (what a [`crate::record::Recorder`]
+    /// with a [`McapTee`] hands on).
+    Entries {
+        /// The reader's name.
+        reader: String,
+        /// The entries.
+        entries: Vec<Entry>,
+    },
+}
+
+/// Where a recorder hands its entries on, besides its file: the MCAP writer's queue and the
+/// reader's name in the MCAP file. Its sends block (the recorder runs on a thread of its own).
+#[derive(Clone, Debug)]
+pub struct McapTee {
+    /// The reader's name (its topics' token, the messages' `reader`).
+    pub reader: String,
+    tx: mpsc::Sender<McapItem>,
+}
+
+impl McapTee {
+    /// Hands `entries` to the MCAP writer, waiting (blocking the calling thread, which must
+    /// not be an async worker) for room; false if the writer is gone.
+    pub fn send_blocking(&self, entries: Vec<Entry>) -> bool {
+        let item = McapItem::Entries {
+            reader: self.reader.clone(),
+            entries,
+        };
+        self.tx.blocking_send(item).is_ok()
+    }
 }
 
 /// The MCAP writer's thread and the queue to it.
@@ -59,9 +88,36 @@ impl McapThread {
         Ok(McapThread { tx, handle })
     }
 
+    /// Creates the file at `path` (an existing one is refused unless `force`) and starts its
+    /// writer. Opening the file is blocking IO: call it before the async work starts.
+    pub fn create(path: &std::path::Path, force: bool) -> Result<McapThread, McapError> {
+        let file = crate::files::create_stream(path, &[], force)?;
+        McapThread::start(std::io::BufWriter::new(file))
+    }
+
+    /// [`finish`](McapThread::finish) on a blocking thread, from async code.
+    pub async fn finish_async(self) -> Result<Summary, McapError> {
+        tokio::task::spawn_blocking(move || self.finish())
+            .await
+            .unwrap_or(Err(McapError::ThreadGone))
+    }
+
     /// Hands `item` to the writer, waiting for room in the queue.
     pub async fn send(&self, item: McapItem) -> Result<(), McapError> {
         self.tx.send(item).await.map_err(|_| McapError::ThreadGone)
+    }
+
+    /// A tee for a recorder of `reader`'s sessions into this file.
+    pub fn tee(&self, reader: &str) -> McapTee {
+        McapTee {
+            reader: reader.to_string(),
+            tx: self.tx.clone(),
+        }
+    }
+
+    /// A sender into the queue (for tasks that outlive a borrow of this thread).
+    pub fn sender(&self) -> McapSender {
+        McapSender(self.tx.clone())
     }
 
     /// Closes the queue and waits (blocking) for the file to be finished; what it holds.
@@ -72,33 +128,64 @@ impl McapThread {
     }
 }
 
-/// The thread: writes every item until the queue closes, then finishes the file.
+/// A handle on the MCAP writer's queue; cheap to clone.
+#[derive(Clone, Debug)]
+pub struct McapSender(mpsc::Sender<McapItem>);
+
+impl McapSender {
+    /// Hands `item` to the writer, waiting for room in the queue.
+    pub async fn send(&self, item: McapItem) -> Result<(), McapError> {
+        self.0.send(item).await.map_err(|_| McapError::ThreadGone)
+    }
+
+    /// Hands `item` to the writer if there is room; false if not (or the writer is gone).
+    pub fn try_send(&self, item: McapItem) -> bool {
+        self.0.try_send(item).is_ok()
+    }
+}
+
+/// The thread: writes every item until the queue closes, then finishes the file. A failed
+/// write is logged and ends the file (the senders see the writer gone).
 fn write_all<W: Write>(
     mut mcap: McapOut<W>,
     mut rx: mpsc::Receiver<McapItem>,
 ) -> Result<Summary, McapError> {
     while let Some(item) = rx.blocking_recv() {
-        match item {
-            McapItem::Reads { received_us, reads } => {
-                for r in &reads {
-                    mcap.read(received_us.saturating_mul(1000), r)?;
-                }
-            }
-            McapItem::Frame {
-                reader,
-                conn,
-                dir,
-                received_us,
-                frame,
-            } => mcap.frame(
-                &reader,
-                conn,
-                dir,
-                true,
-                received_us.saturating_mul(1000),
-                &frame,
-            )?,
+        if let Err(e) = write_item(&mut mcap, item) {
+            tracing::error!(error = %e, "the MCAP file has stopped: nothing more is written to it");
+            return Err(e);
         }
     }
     Ok(mcap.finish()?.0)
+}
+
+/// Writes one item.
+fn write_item<W: Write>(mcap: &mut McapOut<W>, item: McapItem) -> Result<(), McapError> {
+    match item {
+        McapItem::Reads { received_us, reads } => {
+            for r in &reads {
+                mcap.read(received_us.saturating_mul(1000), r)?;
+            }
+        }
+        McapItem::Frame {
+            reader,
+            conn,
+            dir,
+            received_us,
+            frame,
+        } => mcap.frame(
+            &reader,
+            conn,
+            dir,
+            true,
+            received_us.saturating_mul(1000),
+            &frame,
+        )?,
+        McapItem::Entries { reader, entries } => {
+            for e in &entries {
+                mcap.entry(&reader, e)?;
+            }
+        }
+    }
+    Ok(())
 }

@@ -14,7 +14,7 @@ use super::cdr::Cdr;
 use super::msgs::{self, EventMsg, FrameMsg, MsgType};
 use super::{topic_token, McapError, Summary};
 use crate::reads::{Read, ReadDecoder};
-use crate::record::Direction;
+use crate::record::{Direction, Entry, Event};
 
 /// The QoS profile each channel offers (the `offered_qos_profiles` the ROS 2 profile of MCAP
 /// requires): reliable, volatile, keep last 100, no deadline, lifespan or lease (0 = the
@@ -243,6 +243,35 @@ impl<W: Write> McapOut<W> {
         self.write("/log", MsgType::Log, received_ns, stamp_ns, &bytes)?;
         self.summary.events += 1;
         Ok(())
+    }
+
+    /// One entry of a recording of `reader`'s sessions, at its recorded UTC time: a frame or
+    /// non-frame byte run on its channel (with the reads and notification of a reader's
+    /// frame), a connect or disconnect marker as a reader event.
+    pub fn entry(&mut self, reader: &str, entry: &Entry) -> Result<(), McapError> {
+        let ns = entry.at().utc_us.saturating_mul(1000);
+        match entry {
+            Entry::Frame {
+                conn, dir, frame, ..
+            } => self.frame(reader, *conn, *dir, true, ns, frame),
+            Entry::Bytes {
+                conn, dir, bytes, ..
+            } => self.frame(reader, *conn, *dir, false, ns, bytes),
+            Entry::Marker {
+                conn,
+                event,
+                reason,
+                ..
+            } => {
+                let kind = match event {
+                    Event::Connect => "connect",
+                    Event::Disconnect => "disconnect",
+                };
+                self.event(reader, *conn, kind, reason, ns, ns)
+            }
+            // What was learnt of the reader is in its frames (capabilities, configuration).
+            Entry::Reader { .. } => Ok(()),
+        }
     }
 
     /// Writes the summary section and the footer; what was written, and the writer.
