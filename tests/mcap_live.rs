@@ -104,3 +104,62 @@ fn a_proxy_s_mcap_file_is_the_export_of_its_recording_and_holds_the_client_s_rea
     assert_eq!(kinds.get("connect"), Some(&1), "{kinds:?}");
     assert_eq!(kinds.get("disconnect"), Some(&1), "{kinds:?}");
 }
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_replay_s_mcap_file_holds_the_replayed_session_and_the_client_s_reads() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    // A recording of `inventory --impinj --report-every 1`, which the same client replays.
+    let fixture = root().join("fixtures/localize/s1-report-per-read.jsonl");
+    let (mut replay, addr) = spawn_listening(&[
+        "replay",
+        fixture.to_str().expect("utf-8"),
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+        "--mcap",
+        &path("replay.mcap"),
+    ]);
+    run(&[
+        "inventory",
+        &addr,
+        "--seconds",
+        "2",
+        "--impinj",
+        "--report-every",
+        "1",
+        "--output",
+        &path("reads.jsonl"),
+    ]);
+    terminate(&mut replay);
+    let v = check(Path::new(&path("replay.mcap")));
+    let recording = llrp_gateway::record::Recording::open(&fixture).expect("the fixture");
+    let reader = recording.header.upstream.trim_start_matches("sim:");
+    let token = llrp_gateway::record::mcap::topic_token(reader);
+    let ch = channels(&v);
+    for topic in ["reads", "events", "conn_1/to_reader", "conn_1/from_reader"] {
+        assert!(
+            ch.contains_key(&format!("/llrp/{token}/{topic}")),
+            "{topic}: {ch:?}"
+        );
+    }
+    let mut reads = reads_file(Path::new(&path("reads.jsonl")));
+    assert!(!reads.is_empty(), "the inventory read tags");
+    sort(&mut reads);
+    for decoder in ["mcap_ros2", "rosbags"] {
+        let mut got = decoded_reads(&v[decoder]);
+        for r in &mut got {
+            assert_eq!(r.reader.as_deref(), Some(reader));
+            r.reader = reads[0].reader.clone();
+            r.last_seen_us = None;
+        }
+        assert_eq!(got, reads, "{decoder}");
+        assert_eq!(
+            v[decoder]["count"].as_u64(),
+            Some(ch.values().map(|(_, n)| n).sum::<u64>()),
+            "{decoder}: every message the summary counts decodes"
+        );
+    }
+}

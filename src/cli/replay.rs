@@ -10,8 +10,11 @@ use tokio::sync::watch;
 use super::live::{start_sinks, LiveArgs, SinksError};
 use crate::net::clock::Speed;
 use crate::net::tls::{Acceptor, ServerFiles, TlsError};
+use crate::record::mcap::{McapError, McapThread};
 use crate::record::replay::{ReplayOptions, Script, ScriptError};
-use crate::record::{RecordError, Recording};
+use crate::record::{
+    Discard, Header, RecordError, RecordOptions, Recorder, RecorderTask, Recording,
+};
 use crate::stop::StopSignal;
 
 /// Arguments of `llrp-gateway replay`.
@@ -43,6 +46,10 @@ pub struct ReplayArgs {
     /// The private key (PEM) of `--tls-cert`.
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
+    /// Write the replayed sessions to this MCAP file: frames both ways, tag reads, reader
+    /// events (ROS 2 messages; docs/robotics.md). An existing file is refused.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// The live localizer and its HTTP API (`--http ADDR`), fed with what is replayed.
     #[command(flatten)]
     pub live: LiveArgs,
@@ -87,6 +94,14 @@ pub enum ReplayCommandError {
     /// The localizer, its API or the publisher could not be started.
     #[error("{0}")]
     Sinks(#[from] SinksError),
+    /// The MCAP file cannot be written (or was not written whole).
+    #[error("{}: {source}", path.display())]
+    Mcap {
+        /// `--mcap`.
+        path: PathBuf,
+        /// Why.
+        source: McapError,
+    },
 }
 
 /// Runs `llrp-gateway replay` (or, with `--list`, prints the recording's connections).
@@ -103,11 +118,62 @@ pub fn run(args: ReplayArgs) -> Result<(), ReplayCommandError> {
             source,
         })?;
     let tls = acceptor(&args)?;
+    let mcap =
+        match &args.mcap {
+            Some(path) => Some(McapThread::create(path, false).map_err(|source| {
+                ReplayCommandError::Mcap {
+                    path: path.clone(),
+                    source,
+                }
+            })?),
+            None => None,
+        };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .map_err(ReplayCommandError::Runtime)?;
-    runtime.block_on(serve(&args, &recording, Arc::new(script), tls))
+    runtime.block_on(serve(&args, &recording, Arc::new(script), tls, mcap))
+}
+
+/// A recorder that hands the replayed sessions to `mcap` (nothing kept otherwise), named as
+/// `export` names the recording's reader; none without `--mcap`.
+fn mcap_recorder(
+    recording: &Recording,
+    mcap: Option<&McapThread>,
+) -> std::io::Result<Option<(Recorder, RecorderTask)>> {
+    let Some(mcap) = mcap else {
+        return Ok(None);
+    };
+    let upstream = &recording.header.upstream;
+    let reader = upstream.strip_prefix("sim:").unwrap_or(upstream);
+    let options = RecordOptions {
+        max_bytes: None,
+        mcap: Some(mcap.tee(reader)),
+    };
+    Recorder::start(Discard, Header::new(upstream.clone(), 0), options).map(Some)
+}
+
+/// Finishes the MCAP file once its recorder has handed on everything; what it holds, said.
+async fn finish_mcap(
+    args: &ReplayArgs,
+    mcap: Option<(McapThread, RecorderTask)>,
+) -> Result<(), ReplayCommandError> {
+    let (Some(path), Some((mcap, task))) = (&args.mcap, mcap) else {
+        return Ok(());
+    };
+    let error = |source| ReplayCommandError::Mcap {
+        path: path.clone(),
+        source,
+    };
+    if let Ok(Err(e)) = task.await {
+        tracing::warn!(error = %e, "the replay's recorder failed");
+    }
+    let s = mcap.finish_async().await.map_err(error)?;
+    eprintln!(
+        "llrp-gateway replay: {} frames, {} tag reads, {} reader events: {} messages on {} channels in {}",
+        s.frames, s.reads, s.events, s.messages, s.channels, path.display()
+    );
+    Ok(())
 }
 
 /// The recording at `path`, its warnings said on standard error.
@@ -142,8 +208,15 @@ async fn serve(
     recording: &Recording,
     script: Arc<Script>,
     tls: Option<Acceptor>,
+    mcap: Option<McapThread>,
 ) -> Result<(), ReplayCommandError> {
     let stop = StopSignal::watch();
+    let recorder =
+        mcap_recorder(recording, mcap.as_ref()).map_err(|e| ReplayCommandError::Mcap {
+            path: args.mcap.clone().unwrap_or_default(),
+            source: McapError::Mcap { error: e.into() },
+        })?;
+    let (recorder, recorder_task) = recorder.unzip();
     let listener = tokio::net::TcpListener::bind(&args.listen)
         .await
         .map_err(|source| ReplayCommandError::Listen {
@@ -178,11 +251,12 @@ async fn serve(
     };
     let (tx, rx) = watch::channel(false);
     let task = tokio::spawn(crate::net::replay::serve_tapped(
-        listener, script, options, tls, rx, tap,
+        listener, script, options, tls, rx, tap, recorder,
     ));
     stop.wait().await;
     let _ = tx.send(true);
     let _ = task.await;
+    finish_mcap(args, mcap.zip(recorder_task)).await?;
     sinks.stop().await;
     eprintln!("llrp-gateway replay: stopped");
     Ok(())

@@ -14,6 +14,7 @@ use super::drive::{drive, Host, Limits, LiveHook, Wire};
 use super::tls::Acceptor;
 use crate::record::replay::server::{ReplayNow, ReplayServer, BACKLOG_BYTES};
 use crate::record::replay::{ReplayOptions, Script};
+use crate::record::Recorder;
 use crate::utc::now_us as utc_now_us;
 use llrp_gateway_vocab::feed::Tap;
 use llrp_gateway_vocab::session::ServerSession;
@@ -74,11 +75,11 @@ pub async fn serve(
     tls: Option<Acceptor>,
     shutdown: watch::Receiver<bool>,
 ) -> io::Result<()> {
-    serve_tapped(listener, script, options, tls, shutdown, None).await
+    serve_tapped(listener, script, options, tls, shutdown, None, None).await
 }
 
 /// [`serve()`], offering every frame sent to the client to the live localizer's `tap` under the
-/// reader name given with it.
+/// reader name given with it, and recording the sessions with `recorder`.
 pub async fn serve_tapped(
     listener: TcpListener,
     script: Arc<Script>,
@@ -86,6 +87,7 @@ pub async fn serve_tapped(
     tls: Option<Acceptor>,
     shutdown: watch::Receiver<bool>,
     tap: Option<(ReaderName, Tap)>,
+    recorder: Option<Recorder>,
 ) -> io::Result<()> {
     tracing::info!("replaying connection {} of the recording", script.conn());
     let host = ReplayHost {
@@ -93,7 +95,7 @@ pub async fn serve_tapped(
         start: Instant::now(),
     };
     let wire = Wire {
-        recorder: None,
+        recorder,
         live: tap.map(|(name, tap)| LiveHook {
             name,
             tap,
