@@ -163,3 +163,166 @@ fn a_replay_s_mcap_file_holds_the_replayed_session_and_the_client_s_reads() {
         );
     }
 }
+
+/// The values of `v`'s field `key` as `f64`.
+fn f(v: &serde_json::Value, key: &str) -> f64 {
+    v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"))
+}
+
+/// The boresight (+x of the antenna frame) of a message's quaternion.
+fn boresight(m: &serde_json::Value) -> [f64; 3] {
+    let (x, y, z, w) = (f(m, "qx"), f(m, "qy"), f(m, "qz"), f(m, "qw"));
+    [
+        1.0 - 2.0 * (y * y + z * z),
+        2.0 * (x * y + w * z),
+        2.0 * (x * z - w * y),
+    ]
+}
+
+/// Asserts that `m` (x, y, z and a quaternion) is `pose` of the truth file (`position`,
+/// `yaw_rad`, `pitch_rad`).
+fn assert_pose(m: &serde_json::Value, position: &serde_json::Value, yaw: f64, pitch: f64) {
+    for (i, k) in ["x", "y", "z"].iter().enumerate() {
+        let want = position[i].as_f64().expect("a coordinate");
+        assert!((f(m, k) - want).abs() < 1e-9, "{k}: {m} vs {position}");
+    }
+    let b = boresight(m);
+    let want = [
+        yaw.cos() * pitch.cos(),
+        yaw.sin() * pitch.cos(),
+        pitch.sin(),
+    ];
+    for (g, w) in b.iter().zip(want) {
+        assert!((g - w).abs() < 1e-9, "boresight {b:?} vs {want:?}: {m}");
+    }
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_simulation_s_mcap_file_holds_its_sessions_its_antenna_poses_and_its_ground_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    let (mut sim, addr) = spawn_listening(&[
+        "sim",
+        "--no-http",
+        "--listen",
+        "127.0.0.1:0",
+        "--record",
+        &path("sim.jsonl"),
+        "--truth",
+        &path("truth.jsonl"),
+        "--mcap",
+        &path("sim.mcap"),
+    ]);
+    run(&[
+        "inventory",
+        &addr,
+        "--seconds",
+        "2",
+        "--impinj",
+        "--output",
+        &path("reads.jsonl"),
+    ]);
+    terminate(&mut sim);
+    run(&["export", &path("sim.jsonl"), "--mcap", &path("export.mcap")]);
+    let v = check(Path::new(&path("sim.mcap")));
+    let exported = check(Path::new(&path("export.mcap")));
+
+    // The sessions: what the export of the simulator's recording holds.
+    let ch = channels(&v);
+    for (topic, c) in channels(&exported) {
+        assert_eq!(ch.get(&topic), Some(&c), "{topic}");
+    }
+    for key in ["reads", "frames", "events", "logs"] {
+        assert_eq!(v["mcap_ros2"][key], exported["mcap_ros2"][key], "{key}");
+    }
+    let mut reads = reads_file(Path::new(&path("reads.jsonl")));
+    assert!(reads.len() > 10, "the inventory read tags: {}", reads.len());
+    sort(&mut reads);
+    for decoder in ["mcap_ros2", "rosbags"] {
+        let mut got = decoded_reads(&v[decoder]);
+        for r in &mut got {
+            assert_eq!(r.reader.as_deref(), Some("s1-reader"));
+            r.reader = reads[0].reader.clone();
+            r.last_seen_us = None;
+        }
+        assert_eq!(got, reads, "{decoder}");
+        for key in ["poses", "tf", "tags"] {
+            assert_eq!(v[decoder][key], v["mcap_ros2"][key], "{decoder}: {key}");
+        }
+    }
+
+    // Poses and truth: one instant per line of the truth file, value for value.
+    let truth: Vec<serde_json::Value> = std::fs::read_to_string(path("truth.jsonl"))
+        .expect("the truth file")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a truth line"))
+        .collect();
+    assert!(truth.len() > 5, "truth lines: {}", truth.len());
+    let d = &v["mcap_ros2"];
+    let by_topic = |topic: &str| -> Vec<serde_json::Value> {
+        (d["poses"].as_array().expect("poses").iter())
+            .filter(|p| p["topic"] == topic)
+            .cloned()
+            .collect()
+    };
+    let tf = d["tf"].as_array().expect("tf");
+    let tags = d["tags"].as_array().expect("tags");
+    let antennas = truth[0]["antennas"].as_array().expect("antennas").len();
+    assert_eq!(tf.len(), truth.len() * antennas);
+    let tag_total: usize = truth
+        .iter()
+        .map(|l| l["tags"].as_array().expect("tags").len())
+        .sum();
+    assert_eq!(tags.len(), tag_total);
+    for a in 0..antennas {
+        let port = truth[0]["antennas"][a]["antenna"].as_u64().expect("a port");
+        let true_poses = by_topic(&format!("/truth/s1_reader/antenna_{port}/pose"));
+        let reported = by_topic(&format!("/llrp/s1_reader/antenna_{port}/pose"));
+        let frames: Vec<_> = (tf.iter())
+            .filter(|t| t["child"] == format!("s1_reader/antenna_{port}"))
+            .collect();
+        assert_eq!(true_poses.len(), truth.len(), "antenna {port}");
+        assert_eq!(reported.len(), truth.len(), "antenna {port}");
+        assert_eq!(frames.len(), truth.len(), "antenna {port}");
+        for (i, line) in truth.iter().enumerate() {
+            let ns = line["utc_us"].as_u64().expect("utc_us") * 1000;
+            let ant = &line["antennas"][a];
+            let p = &ant["pose"];
+            assert_eq!(true_poses[i]["stamp_ns"].as_u64(), Some(ns));
+            assert_eq!(true_poses[i]["frame_id"], "map");
+            assert_pose(
+                &true_poses[i],
+                &p["position"],
+                f(p, "yaw_rad"),
+                f(p, "pitch_rad"),
+            );
+            let e = &ant["estimated"];
+            let position = serde_json::json!([f(e, "x"), f(e, "y"), f(e, "z")]);
+            let (yaw, pitch) = (f(e, "yaw_deg").to_radians(), f(e, "pitch_deg").to_radians());
+            assert_pose(&reported[i], &position, yaw, pitch);
+            assert_eq!(frames[i]["parent"], "map");
+            assert_eq!(frames[i]["stamp_ns"].as_u64(), Some(ns));
+            assert_pose(frames[i], &position, yaw, pitch);
+        }
+    }
+    let first = &truth[0]["tags"][0];
+    let t0 = &tags[0];
+    assert_eq!(
+        t0["epc"].as_str().map(str::to_lowercase).as_deref(),
+        first["epc"].as_str()
+    );
+    assert_eq!(
+        t0["stamp_ns"].as_u64(),
+        truth[0]["utc_us"].as_u64().map(|u| u * 1000)
+    );
+    assert_pose_position(t0, &first["position"]);
+}
+
+/// Asserts that `m`'s x, y, z are `position`.
+fn assert_pose_position(m: &serde_json::Value, position: &serde_json::Value) {
+    for (i, k) in ["x", "y", "z"].iter().enumerate() {
+        let want = position[i].as_f64().expect("a coordinate");
+        assert!((f(m, k) - want).abs() < 1e-12, "{k}: {m} vs {position}");
+    }
+}

@@ -18,7 +18,10 @@ Prints ONE JSON object:
    "mcap_ros2": DECODED, "rosbags": DECODED}
 
 where DECODED is {"reads": [...], "frames": {topic: hex of the data concatenated},
-"frame_count": {topic: n}, "events": [...], "logs": [...], "count": n}. A read is the reads
+"frame_count": {topic: n}, "events": [...], "logs": [...], "count": n, "poses": [...],
+"tf": [...], "tags": [...]} (poses: PoseInFrame with topic, frame_id, stamp_ns and x, y, z,
+qx, qy, qz, qw; tf: every transform of every TFMessage, parent, child, stamp_ns and the same
+fields; tags: TagPosition's epc, frame_id, stamp_ns, x, y, z). A read is the reads
 file's fields (epc, reader, antenna, t_us from the header stamp, last_seen_us, phase_rad,
 rssi_dbm, channel_index, channel_frequency_hz, doppler_hz; null for the message set's NaN
 and 0 "none" values; the float64 fields as their IEEE 754 bits, an integer, so that no
@@ -40,6 +43,15 @@ READ = "llrp_gateway_msgs/msg/TagRead"
 FRAME = "llrp_gateway_msgs/msg/LlrpFrame"
 EVENT = "llrp_gateway_msgs/msg/ReaderEvent"
 LOG = "foxglove_msgs/msg/Log"
+POSE = "foxglove_msgs/msg/PoseInFrame"
+TF = "tf2_msgs/msg/TFMessage"
+TAG = "llrp_gateway_msgs/msg/TagPosition"
+
+
+def pose_of(p):
+    return {"x": p.position.x, "y": p.position.y, "z": p.position.z,
+            "qx": p.orientation.x, "qy": p.orientation.y, "qz": p.orientation.z,
+            "qw": p.orientation.w}
 
 
 def ns(t):
@@ -81,6 +93,7 @@ class Decoded:
     def __init__(self):
         self.reads, self.frames, self.frame_count = [], {}, {}
         self.events, self.logs, self.count = [], [], 0
+        self.poses, self.tf, self.tags = [], [], []
 
     def add(self, schema, topic, m, log_time, publish_time):
         self.count += 1
@@ -96,13 +109,28 @@ class Decoded:
                 "frame_id": m.header.frame_id, "log_time": log_time,
                 "publish_time": publish_time,
             })
+        elif schema == POSE:
+            self.poses.append({"topic": topic, "frame_id": m.frame_id,
+                               "stamp_ns": ns(m.timestamp), "log_time": log_time,
+                               **pose_of(m.pose)})
+        elif schema == TF:
+            for t in m.transforms:
+                r, v = t.transform.rotation, t.transform.translation
+                self.tf.append({"parent": t.header.frame_id, "child": t.child_frame_id,
+                                "stamp_ns": ns(t.header.stamp), "x": v.x, "y": v.y,
+                                "z": v.z, "qx": r.x, "qy": r.y, "qz": r.z, "qw": r.w})
+        elif schema == TAG:
+            self.tags.append({"epc": m.epc, "frame_id": m.header.frame_id,
+                              "stamp_ns": ns(m.header.stamp), "x": m.position.x,
+                              "y": m.position.y, "z": m.position.z})
         elif schema == LOG:
             self.logs.append({"name": m.name, "level": m.level, "message": m.message,
                               "stamp_ns": ns(m.timestamp), "log_time": log_time})
 
     def json(self):
         return {"reads": self.reads, "frames": self.frames, "frame_count": self.frame_count,
-                "events": self.events, "logs": self.logs, "count": self.count}
+                "events": self.events, "logs": self.logs, "count": self.count,
+                "poses": self.poses, "tf": self.tf, "tags": self.tags}
 
 
 def with_mcap(path):

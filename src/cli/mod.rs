@@ -78,8 +78,12 @@ pub enum Command {
         /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
         #[arg(long)]
         truth: Option<PathBuf>,
-        /// Replace an existing truth file (without it, an existing file is refused).
-        #[arg(long, requires = "truth")]
+        /// Write every reader's sessions (frames, tag reads, events), its antennas' poses and
+        /// the ground truth to this MCAP file (ROS 2 messages; docs/robotics.md).
+        #[arg(long, value_name = "FILE")]
+        mcap: Option<PathBuf>,
+        /// Replace an existing truth or MCAP file (without it, an existing file is refused).
+        #[arg(long)]
         force: bool,
         /// Keep the tags' memory (what clients wrote, locked and killed) in this file: read at
         /// the start when it exists, written back as it changes (docs/simulator.md).
@@ -189,6 +193,7 @@ pub fn main() -> ExitCode {
             listen,
             speed,
             truth,
+            mcap,
             force,
             tag_memory,
             record,
@@ -218,6 +223,7 @@ pub fn main() -> ExitCode {
                     listen,
                     speed,
                     truth,
+                    mcap,
                     force,
                     record,
                     record_options: crate::record::RecordOptions {

@@ -21,12 +21,13 @@ use crate::reader::gpio::GpioPanel;
 use crate::reader::memory::TagMemory;
 use crate::reader::session::Session;
 use crate::reader::{Reader, ReaderProfile};
-use crate::record::{Header, RecordOptions, Recorder, RecorderTask};
+use crate::record::{RecordOptions, RecorderTask};
 use crate::scenario::{ReaderSpec, Scenario};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 
 pub mod feed;
+mod mcap;
 pub mod own;
 pub mod tag_memory;
 mod truth;
@@ -53,6 +54,9 @@ pub struct SimOptions {
     pub speed: Speed,
     /// Where to write ground truth (JSONL), if anywhere.
     pub truth: Option<PathBuf>,
+    /// Where to write the readers' sessions, poses and ground truth as MCAP
+    /// (docs/robotics.md), if anywhere.
+    pub mcap: Option<PathBuf>,
     /// Replace an existing truth file (`--force`); without it an existing one is refused.
     pub force: bool,
     /// Record every reader's sessions (one file per reader when there are several:
@@ -95,6 +99,7 @@ impl Default for SimOptions {
             listen: Vec::new(),
             speed: Speed::Factor(1.0),
             truth: None,
+            mcap: None,
             force: false,
             record: None,
             record_options: RecordOptions::default(),
@@ -139,6 +144,9 @@ pub enum SimError {
     /// The truth file could not be created.
     #[error("cannot create the truth file {0}")]
     Truth(crate::files::OutputError),
+    /// The MCAP file could not be created.
+    #[error("cannot write the MCAP file: {0}")]
+    Mcap(crate::record::mcap::McapError),
     /// The tag memory file could not be read.
     #[error("{0}")]
     TagMemory(#[from] tag_memory::TagMemoryError),
@@ -159,6 +167,8 @@ pub struct RunningSim {
     tasks: Vec<JoinHandle<io::Result<()>>>,
     truth: Option<Arc<Truth>>,
     recordings: Vec<RecorderTask>,
+    /// The `--mcap` file's writer, finished last.
+    mcap: Option<crate::record::mcap::McapThread>,
     own: Vec<JoinHandle<()>>,
     /// Writes the tags' memory back to its file (`--tag-memory`).
     saver: Option<Arc<tag_memory::Saver>>,
@@ -194,6 +204,9 @@ impl RunningSim {
         if let Some(t) = &self.truth {
             t.flush();
         }
+        if let Some(m) = self.mcap {
+            mcap::finish(m).await;
+        }
         // The readers have stopped: what they wrote last is in the file.
         if let Some(saver) = &self.saver {
             saver.save().await;
@@ -205,6 +218,8 @@ impl RunningSim {
 struct Start<'a> {
     scenario: &'a Scenario,
     opts: &'a SimOptions,
+    /// The `--mcap` file's queue (each reader's recorder gets a tee of its own).
+    mcap: Option<crate::record::mcap::McapTee>,
     truth: Option<Arc<Truth>>,
     /// The tags that move (their truth is written at each line).
     moving: Vec<usize>,
@@ -233,18 +248,24 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
     if scenario.readers.is_empty() {
         return Err(SimError::NoReader);
     }
-    let truth = match &opts.truth {
-        Some(path) => Some(Arc::new(Truth {
-            out: Mutex::new(BufWriter::new(
-                crate::files::create_stream(path, &[], opts.force).map_err(SimError::Truth)?,
-            )),
-        })),
+    let out = match &opts.truth {
+        Some(path) => Some(Mutex::new(BufWriter::new(
+            crate::files::create_stream(path, &[], opts.force).map_err(SimError::Truth)?,
+        ))),
         None => None,
     };
+    let mcap = mcap::open(opts)?;
+    let truth = (out.is_some() || mcap.is_some()).then(|| {
+        Arc::new(Truth::new(
+            out,
+            mcap.as_ref().map(crate::record::mcap::McapThread::sender),
+        ))
+    });
     let (shutdown, rx) = watch::channel(false);
     let s = Start {
         scenario,
         opts,
+        mcap: mcap.as_ref().map(|m| m.tee("")),
         truth,
         moving: (scenario.tags.iter().enumerate())
             .filter(|(_, t)| t.path.is_some())
@@ -278,6 +299,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         tasks: Vec::new(),
         truth: s.truth.clone(),
         recordings: Vec::new(),
+        mcap,
         own: Vec::new(),
         saver: saver.clone(),
     };
@@ -445,27 +467,6 @@ impl Start<'_> {
             )));
         }
         (hook, feed(0))
-    }
-
-    /// The recorder of reader `spec`'s sessions (`--record`), and its writing task.
-    fn recorder(
-        &self,
-        spec: &ReaderSpec,
-    ) -> Result<(Option<Recorder>, Option<RecorderTask>), SimError> {
-        let Some(path) = &self.opts.record else {
-            return Ok((None, None));
-        };
-        let path = record_path(path, &spec.name, self.scenario.readers.len());
-        let mut header = Header::new(format!("sim:{}", spec.name), 0);
-        header.scenario = Some(self.scenario.name.clone());
-        let (r, task) = Recorder::create(&path, header, self.opts.record_options.clone()).map_err(
-            |source| SimError::Record {
-                reader: spec.name.clone(),
-                path: path.clone(),
-                source,
-            },
-        )?;
-        Ok((Some(r), Some(task)))
     }
 }
 

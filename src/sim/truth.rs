@@ -3,6 +3,7 @@
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -13,24 +14,58 @@ use crate::localize::poses::PoseSample;
 use crate::net::clock::{Clock, Speed};
 use crate::physics::{AntennaPose, Model};
 use crate::reads::ReaderName;
+use crate::record::mcap::geo::Truth as McapTruth;
+use crate::record::mcap::{McapItem, McapSender};
 
-/// Ground-truth writer shared by the readers.
+/// Ground-truth writer shared by the readers: to the truth file (`--truth`), to the MCAP
+/// file (`--mcap`), or both.
 pub(super) struct Truth {
-    pub(super) out: Mutex<BufWriter<File>>,
+    out: Option<Mutex<BufWriter<File>>>,
+    mcap: Option<McapSender>,
+    /// Instants the MCAP writer had no room for (dropped rather than stall the simulation).
+    mcap_dropped: AtomicU64,
 }
 
 impl Truth {
+    /// A writer to `out` and `mcap`.
+    pub(super) fn new(out: Option<Mutex<BufWriter<File>>>, mcap: Option<McapSender>) -> Truth {
+        Truth {
+            out,
+            mcap,
+            mcap_dropped: AtomicU64::new(0),
+        }
+    }
+
     /// Appends one line (buffered; a full disk must not stop the reader, so errors are
     /// dropped).
     pub(super) fn line(&self, value: &serde_json::Value) {
-        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(out) = &self.out else {
+            return;
+        };
+        let mut out = out.lock().unwrap_or_else(|e| e.into_inner());
         if serde_json::to_writer(&mut *out, value).is_ok() {
             let _ = out.write_all(b"\n");
         }
     }
 
+    /// Hands one instant to the MCAP writer if its queue has room (the writer runs on its
+    /// own thread; a sender here may be an async worker, which must not wait).
+    fn mcap(&self, t: McapTruth) {
+        if let Some(m) = &self.mcap {
+            if !m.try_send(McapItem::Truth(t))
+                && self.mcap_dropped.fetch_add(1, Ordering::Relaxed) == 0
+            {
+                tracing::warn!(
+                    "the MCAP writer is behind (or gone): poses and truth are dropped while it is"
+                );
+            }
+        }
+    }
+
     pub(super) fn flush(&self) {
-        let _ = self.out.lock().unwrap_or_else(|e| e.into_inner()).flush();
+        if let Some(out) = &self.out {
+            let _ = out.lock().unwrap_or_else(|e| e.into_inner()).flush();
+        }
     }
 }
 
@@ -77,15 +112,18 @@ pub(super) fn truth_writer(
     move |now_us: u64| {
         while next <= now_us {
             let t = next;
-            let antennas: Vec<_> = (1..=m.antenna_count())
-                .map(|a| {
-                    let true_pose = m.antenna_pose(a, t);
+            let poses: Vec<_> = (1..=m.antenna_count())
+                .map(|a| (a, m.antenna_pose(a, t), m.estimated_pose(a, t)))
+                .collect();
+            let antennas: Vec<_> = poses
+                .iter()
+                .map(|(a, true_pose, estimated)| {
                     serde_json::json!({
                         "antenna": a,
-                        "true": pose_record(t, &name, a, &true_pose),
-                        "estimated": pose_record(t, &name, a, &m.estimated_pose(a, t)),
-                        "pose": si_pose(&true_pose),
-                        "odometry": si_pose(&m.odometry_pose(a, t)),
+                        "true": pose_record(t, &name, *a, true_pose),
+                        "estimated": pose_record(t, &name, *a, estimated),
+                        "pose": si_pose(true_pose),
+                        "odometry": si_pose(&m.odometry_pose(*a, t)),
                     })
                 })
                 .collect();
@@ -96,14 +134,24 @@ pub(super) fn truth_writer(
             };
             let tags: Vec<_> = tags
                 .into_iter()
-                .map(|k| serde_json::json!({"epc": hex(m.tag_epc(k).as_bytes()), "position": m.tag_position(k, t)}))
+                .map(|k| (hex(m.tag_epc(k).as_bytes()), m.tag_position(k, t)))
                 .collect();
+            let tag_lines: Vec<_> = tags
+                .iter()
+                .map(|(epc, p)| serde_json::json!({"epc": epc, "position": p}))
+                .collect();
+            truth.mcap(McapTruth {
+                reader: name.to_string(),
+                utc_us: utc0 + t,
+                antennas: poses,
+                tags,
+            });
             truth.line(&serde_json::json!({
                 "reader": name,
                 "t_us": t,
                 "utc_us": utc0 + t,
                 "antennas": antennas,
-                "tags": tags,
+                "tags": tag_lines,
             }));
             next += TRUTH_INTERVAL_US;
         }

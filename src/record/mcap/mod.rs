@@ -16,6 +16,7 @@
 pub mod cdr;
 pub mod cdr_read;
 mod export;
+pub mod geo;
 pub mod msgs;
 pub mod read;
 pub mod recording_in;

@@ -8,6 +8,7 @@
 //! the foxglove_msgs package of foxglove/schemas), which Foxglove's Log panel shows.
 
 use super::cdr::Cdr;
+use super::geo;
 use crate::reads::Read;
 use crate::record::Direction;
 
@@ -22,6 +23,12 @@ pub enum MsgType {
     ReaderEvent,
     /// `foxglove_msgs/msg/Log`.
     Log,
+    /// `foxglove_msgs/msg/PoseInFrame`.
+    PoseInFrame,
+    /// `tf2_msgs/msg/TFMessage`.
+    TfMessage,
+    /// `llrp_gateway_msgs/msg/TagPosition`.
+    TagPosition,
 }
 
 const TIME: (&str, &str) = ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n");
@@ -47,11 +54,14 @@ uint32 line
 
 impl MsgType {
     /// Every type, in the order the schemas are written.
-    pub const ALL: [MsgType; 4] = [
+    pub const ALL: [MsgType; 7] = [
         MsgType::LlrpFrame,
         MsgType::TagRead,
         MsgType::ReaderEvent,
         MsgType::Log,
+        MsgType::PoseInFrame,
+        MsgType::TfMessage,
+        MsgType::TagPosition,
     ];
 
     /// The ROS 2 type name (the MCAP schema's name).
@@ -61,6 +71,9 @@ impl MsgType {
             MsgType::TagRead => "llrp_gateway_msgs/msg/TagRead",
             MsgType::ReaderEvent => "llrp_gateway_msgs/msg/ReaderEvent",
             MsgType::Log => "foxglove_msgs/msg/Log",
+            MsgType::PoseInFrame => "foxglove_msgs/msg/PoseInFrame",
+            MsgType::TfMessage => "tf2_msgs/msg/TFMessage",
+            MsgType::TagPosition => "llrp_gateway_msgs/msg/TagPosition",
         }
     }
 
@@ -75,6 +88,11 @@ impl MsgType {
                 include_str!("../../../ros2/llrp_gateway_msgs/msg/ReaderEvent.msg")
             }
             MsgType::Log => LOG,
+            MsgType::PoseInFrame => geo::POSE_IN_FRAME,
+            MsgType::TfMessage => geo::TF_MESSAGE,
+            MsgType::TagPosition => {
+                include_str!("../../../ros2/llrp_gateway_msgs/msg/TagPosition.msg")
+            }
         }
     }
 
@@ -83,6 +101,16 @@ impl MsgType {
         match self {
             MsgType::LlrpFrame | MsgType::TagRead | MsgType::ReaderEvent => &[HEADER, TIME],
             MsgType::Log => &[TIME],
+            MsgType::PoseInFrame => &[TIME, geo::POSE, geo::POINT, geo::QUATERNION],
+            MsgType::TfMessage => &[
+                geo::TRANSFORM_STAMPED,
+                HEADER,
+                TIME,
+                geo::TRANSFORM,
+                geo::VECTOR3,
+                geo::QUATERNION,
+            ],
+            MsgType::TagPosition => &[HEADER, TIME, geo::POINT],
         }
     }
 

@@ -46,6 +46,10 @@ pub enum McapItem {
         /// The entries.
         entries: Vec<Entry>,
     },
+    /// What a simulation knows of a reader at one instant: poses and ground truth.
+    Truth(super::geo::Truth),
+    /// Ends the file, whoever else still holds a sender ([`McapThread::finish`] sends it).
+    Close,
 }
 
 /// Where a recorder hands its entries on, besides its file: the MCAP writer's queue and the
@@ -58,6 +62,14 @@ pub struct McapTee {
 }
 
 impl McapTee {
+    /// The same queue, for reader `reader`.
+    pub fn named(&self, reader: &str) -> McapTee {
+        McapTee {
+            reader: reader.to_string(),
+            tx: self.tx.clone(),
+        }
+    }
+
     /// Hands `entries` to the MCAP writer, waiting (blocking the calling thread, which must
     /// not be an async worker) for room; false if the writer is gone.
     pub fn send_blocking(&self, entries: Vec<Entry>) -> bool {
@@ -123,6 +135,8 @@ impl McapThread {
     /// Closes the queue and waits (blocking) for the file to be finished; what it holds.
     /// Call it from outside the async runtime, or through `spawn_blocking`.
     pub fn finish(self) -> Result<Summary, McapError> {
+        // A sender left in a task that did not end must not keep the file open.
+        let _ = self.tx.blocking_send(McapItem::Close);
         drop(self.tx);
         self.handle.join().map_err(|_| McapError::ThreadGone)?
     }
@@ -151,6 +165,9 @@ fn write_all<W: Write>(
     mut rx: mpsc::Receiver<McapItem>,
 ) -> Result<Summary, McapError> {
     while let Some(item) = rx.blocking_recv() {
+        if matches!(item, McapItem::Close) {
+            break;
+        }
         if let Err(e) = write_item(&mut mcap, item) {
             tracing::error!(error = %e, "the MCAP file has stopped: nothing more is written to it");
             return Err(e);
@@ -186,6 +203,8 @@ fn write_item<W: Write>(mcap: &mut McapOut<W>, item: McapItem) -> Result<(), Mca
                 mcap.entry(&reader, e)?;
             }
         }
+        McapItem::Truth(t) => mcap.truth(&t)?,
+        McapItem::Close => {}
     }
     Ok(())
 }

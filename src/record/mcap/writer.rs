@@ -41,7 +41,7 @@ pub struct McapOut<W: Write> {
     tokens: HashMap<String, String>,
     /// One read decoder per reader and connection (each learns its connection's hop table).
     decoders: HashMap<(String, u32), ReadDecoder>,
-    cdr: Cdr,
+    pub(super) cdr: Cdr,
     reads: Vec<Read>,
     summary: Summary,
 }
@@ -69,7 +69,7 @@ impl<W: Write> McapOut<W> {
 
     /// The topic token of `reader` (unique in this file: a second name that cleans to the same
     /// token gets `_2`, `_3`, ...).
-    fn token(&mut self, reader: &str) -> String {
+    pub(super) fn token(&mut self, reader: &str) -> String {
         if let Some(t) = self.tokens.get(reader) {
             return t.clone();
         }
@@ -85,7 +85,7 @@ impl<W: Write> McapOut<W> {
     }
 
     /// Writes one message on `topic` (added with `ty`'s schema when new).
-    fn write(
+    pub(super) fn write(
         &mut self,
         topic: &str,
         ty: MsgType,

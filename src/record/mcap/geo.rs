@@ -1,0 +1,159 @@
+//! Poses and positions in an MCAP file: an antenna's pose as Foxglove's well-known
+//! `PoseInFrame` in its ROS 2 form (`foxglove_msgs/msg/PoseInFrame`), the antenna frames as
+//! `tf2_msgs/msg/TFMessage` (the ROS 2 type of Foxglove's `FrameTransform`s) and a tag's true
+//! position as `llrp_gateway_msgs/msg/TagPosition`; each with its `ros2msg` schema text (the
+//! field lists of the `foxglove_msgs`, `tf2_msgs` and `geometry_msgs` packages) and its CDR
+//! encoder.
+//!
+//! An antenna's frame: its origin at the antenna, +x its boresight (yaw about +z, then pitch
+//! up), +z up when the pitch is 0. The world frame is `map`.
+
+use std::io::Write;
+
+use super::cdr::Cdr;
+use super::msgs::MsgType;
+use super::{McapError, McapOut};
+use crate::physics::AntennaPose;
+
+/// The world frame every pose is given in.
+pub const WORLD: &str = "map";
+
+pub(super) const POSE_IN_FRAME: &str = "\
+# foxglove_msgs/msg/PoseInFrame: Foxglove's well-known PoseInFrame schema in its ROS 2 form.
+builtin_interfaces/Time timestamp
+string frame_id
+geometry_msgs/Pose pose
+";
+pub(super) const TF_MESSAGE: &str = "geometry_msgs/TransformStamped[] transforms\n";
+pub(super) const POSE: (&str, &str) = (
+    "geometry_msgs/msg/Pose",
+    "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
+);
+pub(super) const POINT: (&str, &str) = (
+    "geometry_msgs/msg/Point",
+    "float64 x\nfloat64 y\nfloat64 z\n",
+);
+pub(super) const QUATERNION: (&str, &str) = (
+    "geometry_msgs/msg/Quaternion",
+    "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+);
+pub(super) const TRANSFORM_STAMPED: (&str, &str) = (
+    "geometry_msgs/msg/TransformStamped",
+    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
+);
+pub(super) const TRANSFORM: (&str, &str) = (
+    "geometry_msgs/msg/Transform",
+    "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n",
+);
+pub(super) const VECTOR3: (&str, &str) = (
+    "geometry_msgs/msg/Vector3",
+    "float64 x\nfloat64 y\nfloat64 z\n",
+);
+
+/// The orientation `(x, y, z, w)` of an antenna's frame: a yaw about +z, then a pitch that
+/// raises the boresight (+x), a rotation of `-pitch` about the new +y.
+pub fn orientation(pose: &AntennaPose) -> [f64; 4] {
+    let (sy, cy) = (pose.yaw_rad / 2.0).sin_cos();
+    let (sp, cp) = (-pose.pitch_rad / 2.0).sin_cos();
+    // q_z(yaw) * q_y(-pitch)
+    [-sy * sp, cy * sp, sy * cp, cy * cp]
+}
+
+/// Appends a `geometry_msgs/Point` (or `Vector3`) and a `Quaternion`.
+fn pose_fields(cdr: &mut Cdr, pose: &AntennaPose) {
+    for v in pose.position.iter().chain(orientation(pose).iter()) {
+        cdr.f64(*v);
+    }
+}
+
+/// What the simulator knows of one reader at one instant.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    /// The reader's name.
+    pub reader: String,
+    /// The instant, UTC µs (the simulation's clock).
+    pub utc_us: u64,
+    /// Each antenna: its port, its true pose and the pose the robot reports.
+    pub antennas: Vec<(u16, AntennaPose, AntennaPose)>,
+    /// Tags and their true positions (every tag at the start, then the moving ones).
+    pub tags: Vec<(String, [f64; 3])>,
+}
+
+impl<W: Write> McapOut<W> {
+    /// One instant of a simulated reader: each antenna's reported pose on
+    /// `/llrp/READER/antenna_N/pose` and as a transform from `map` to `READER/antenna_N` on
+    /// `/tf`; its true pose on `/truth/READER/antenna_N/pose`; the tags on `/truth/tags`.
+    pub fn truth(&mut self, t: &Truth) -> Result<(), McapError> {
+        let token = self.token(&t.reader);
+        let ns = t.utc_us.saturating_mul(1000);
+        let mut tf = Cdr::new();
+        tf.u32(u32::try_from(t.antennas.len()).unwrap_or(u32::MAX));
+        for (port, true_pose, reported) in &t.antennas {
+            let frame = format!("{token}/antenna_{port}");
+            for (topic, pose) in [
+                (format!("/llrp/{token}/antenna_{port}/pose"), reported),
+                (format!("/truth/{token}/antenna_{port}/pose"), true_pose),
+            ] {
+                self.cdr.time(ns).string(WORLD);
+                pose_fields(&mut self.cdr, pose);
+                let bytes = self.cdr.finish();
+                self.write(&topic, MsgType::PoseInFrame, ns, ns, &bytes)?;
+            }
+            tf.header(ns, WORLD).string(&frame);
+            pose_fields(&mut tf, reported);
+        }
+        if !t.antennas.is_empty() {
+            self.write("/tf", MsgType::TfMessage, ns, ns, &tf.finish())?;
+        }
+        for (epc, p) in &t.tags {
+            self.cdr.header(ns, WORLD).string(&epc.to_uppercase());
+            for v in p {
+                self.cdr.f64(*v);
+            }
+            let bytes = self.cdr.finish();
+            self.write("/truth/tags", MsgType::TagPosition, ns, ns, &bytes)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+        let [x, y, z, w] = q;
+        // v' = q v q*, expanded.
+        let (vx, vy, vz) = (v[0], v[1], v[2]);
+        let tx = 2.0 * (y * vz - z * vy);
+        let ty = 2.0 * (z * vx - x * vz);
+        let tz = 2.0 * (x * vy - y * vx);
+        [
+            vx + w * tx + (y * tz - z * ty),
+            vy + w * ty + (z * tx - x * tz),
+            vz + w * tz + (x * ty - y * tx),
+        ]
+    }
+
+    #[test]
+    fn an_antenna_frame_s_x_axis_is_its_boresight() {
+        let yaw = 0.7_f64;
+        let pitch = 0.3_f64;
+        let pose = AntennaPose {
+            position: [1.0, 2.0, 3.0],
+            yaw_rad: yaw,
+            pitch_rad: pitch,
+        };
+        let b = rotate(orientation(&pose), [1.0, 0.0, 0.0]);
+        let want = [
+            yaw.cos() * pitch.cos(),
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+        ];
+        for (g, w) in b.iter().zip(want) {
+            assert!((g - w).abs() < 1e-12, "{b:?} vs {want:?}");
+        }
+        let n: f64 = orientation(&pose).iter().map(|c| c * c).sum();
+        assert!((n - 1.0).abs() < 1e-12);
+    }
+}

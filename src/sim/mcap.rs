@@ -1,0 +1,67 @@
+//! `sim --mcap FILE`: the simulated readers' sessions (each reader's recorder hands its
+//! entries on, as `proxy --mcap` does), their antennas' poses and the ground truth (from the
+//! truth writer, [`super::truth`]) in one MCAP file of ROS 2 messages (docs/robotics.md).
+//! The file is written on the MCAP writer's thread; a failed write is logged there and ends
+//! the file, not the simulation.
+
+use super::{record_path, SimError, SimOptions, Start};
+use crate::record::mcap::{McapError, McapThread};
+use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
+use crate::scenario::ReaderSpec;
+
+/// Creates the `--mcap` file (an existing one is refused unless `--force`) and starts its
+/// writer; none without `--mcap`.
+pub(super) fn open(opts: &SimOptions) -> Result<Option<McapThread>, SimError> {
+    match &opts.mcap {
+        Some(path) => McapThread::create(path, opts.force)
+            .map(Some)
+            .map_err(SimError::Mcap),
+        None => Ok(None),
+    }
+}
+
+/// Finishes the file once the readers and their recorders have stopped; what it holds is
+/// logged, and so is an error.
+pub(super) async fn finish(mcap: McapThread) {
+    match mcap.finish_async().await {
+        Ok(s) => tracing::info!(
+            frames = s.frames,
+            reads = s.reads,
+            events = s.events,
+            messages = s.messages,
+            channels = s.channels,
+            "the MCAP file is finished"
+        ),
+        Err(e) => tracing::error!(error = %e, "the MCAP file was not finished"),
+    }
+}
+
+impl Start<'_> {
+    /// The recorder of reader `spec`'s sessions (`--record`, `--mcap`: a file, the MCAP
+    /// file, or both), and its writing task.
+    pub(super) fn recorder(
+        &self,
+        spec: &ReaderSpec,
+    ) -> Result<(Option<Recorder>, Option<RecorderTask>), SimError> {
+        let options = RecordOptions {
+            mcap: self.mcap.as_ref().map(|t| t.named(spec.name.as_ref())),
+            ..self.opts.record_options.clone()
+        };
+        let mut header = Header::new(format!("sim:{}", spec.name), 0);
+        header.scenario = Some(self.scenario.name.clone());
+        let (r, task) = match &self.opts.record {
+            Some(path) => {
+                let path = record_path(path, &spec.name, self.scenario.readers.len());
+                Recorder::create(&path, header, options).map_err(|source| SimError::Record {
+                    reader: spec.name.clone(),
+                    path: path.clone(),
+                    source,
+                })?
+            }
+            None if options.mcap.is_some() => Recorder::start(Discard, header, options)
+                .map_err(|e| SimError::Mcap(McapError::Mcap { error: e.into() }))?,
+            None => return Ok((None, None)),
+        };
+        Ok((Some(r), Some(task)))
+    }
+}
