@@ -13,7 +13,7 @@ use std::io::Write;
 use super::cdr::Cdr;
 use super::msgs::MsgType;
 use super::{McapError, McapOut};
-use crate::physics::AntennaPose;
+use llrp_gateway_vocab::pose::Pose as AntennaPose;
 
 /// The world frame every pose is given in.
 pub const WORLD: &str = "map";
