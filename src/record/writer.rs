@@ -44,27 +44,6 @@ pub struct RecordOptions {
     pub mcap: Option<super::mcap::McapTee>,
 }
 
-/// A recording that keeps nothing: the sink of a [`Recorder`] whose entries only go on to an
-/// MCAP file ([`RecordOptions::mcap`]).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Discard;
-
-impl Sink for Discard {
-    type Part = io::Sink;
-
-    fn open(&mut self, _part: u32) -> io::Result<io::Sink> {
-        Ok(io::sink())
-    }
-
-    fn sync(&mut self, _file: &mut io::Sink) -> io::Result<()> {
-        Ok(())
-    }
-
-    fn name(&self, _part: u32) -> String {
-        "(none)".into()
-    }
-}
-
 use crate::utc::now_us as utc_now_us;
 
 /// Where a recording's bytes go: its [`Files`], or in tests any writer (one that stalls, to
