@@ -253,13 +253,18 @@ fn a_simulation_s_mcap_file_holds_its_sessions_its_antenna_poses_and_its_ground_
     }
 
     // Poses and truth: one instant per line of the truth file, value for value.
-    let truth: Vec<serde_json::Value> = std::fs::read_to_string(path("truth.jsonl"))
+    assert_truth(&v["mcap_ros2"], Path::new(&path("truth.jsonl")));
+}
+
+/// Asserts that the poses, transforms and tag positions `d` decoded are, instant for
+/// instant, those of the truth file at `truth`.
+fn assert_truth(d: &serde_json::Value, truth: &Path) {
+    let truth: Vec<serde_json::Value> = std::fs::read_to_string(truth)
         .expect("the truth file")
         .lines()
         .map(|l| serde_json::from_str(l).expect("a truth line"))
         .collect();
     assert!(truth.len() > 5, "truth lines: {}", truth.len());
-    let d = &v["mcap_ros2"];
     let by_topic = |topic: &str| -> Vec<serde_json::Value> {
         (d["poses"].as_array().expect("poses").iter())
             .filter(|p| p["topic"] == topic)
