@@ -60,7 +60,7 @@ pub struct ReplayArgs {
 pub enum ReplayCommandError {
     /// The MCAP file cannot be replayed (the message names the file and why).
     #[error("{0}")]
-    Mcap(#[from] crate::record::mcap::read::BagError),
+    McapIn(#[from] crate::record::mcap::read::BagError),
     /// The recording cannot be read.
     #[error("{}: {source}", path.display())]
     Recording {
@@ -96,7 +96,7 @@ pub enum ReplayCommandError {
     Sinks(#[from] SinksError),
     /// The MCAP file cannot be written (or was not written whole).
     #[error("{}: {source}", path.display())]
-    Mcap {
+    McapOut {
         /// `--mcap`.
         path: PathBuf,
         /// Why.
@@ -121,7 +121,7 @@ pub fn run(args: ReplayArgs) -> Result<(), ReplayCommandError> {
     let mcap =
         match &args.mcap {
             Some(path) => Some(McapThread::create(path, false).map_err(|source| {
-                ReplayCommandError::Mcap {
+                ReplayCommandError::McapOut {
                     path: path.clone(),
                     source,
                 }
@@ -161,7 +161,7 @@ async fn finish_mcap(
     let (Some(path), Some((mcap, task))) = (&args.mcap, mcap) else {
         return Ok(());
     };
-    let error = |source| ReplayCommandError::Mcap {
+    let error = |source| ReplayCommandError::McapOut {
         path: path.clone(),
         source,
     };
@@ -212,7 +212,7 @@ async fn serve(
 ) -> Result<(), ReplayCommandError> {
     let stop = StopSignal::watch();
     let recorder =
-        mcap_recorder(recording, mcap.as_ref()).map_err(|e| ReplayCommandError::Mcap {
+        mcap_recorder(recording, mcap.as_ref()).map_err(|e| ReplayCommandError::McapOut {
             path: args.mcap.clone().unwrap_or_default(),
             source: McapError::Mcap { error: e.into() },
         })?;
