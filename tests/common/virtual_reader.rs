@@ -249,24 +249,29 @@ impl VirtualReader {
         self.collect();
     }
 
+    /// Moves time to the reader's next deadline (at most `target`) and runs the reader there.
+    fn step_toward(&mut self, target: u64) {
+        let d = self.session.deadline();
+        let wall = d.wall_ms.map(|ms| ms * 1000);
+        let next = [d.sim_us, wall, Some(target)]
+            .into_iter()
+            .flatten()
+            .min()
+            .unwrap_or(target)
+            .clamp(self.now.sim_us + 1, target);
+        self.now = Now {
+            sim_us: next,
+            wall_ms: next / 1000,
+        };
+        self.session.advance(self.now);
+    }
+
     /// Lets `us` of simulated time pass (wall clock alike), running the reader at each of
     /// its deadlines on the way, as the socket layer does.
     pub fn run_for(&mut self, us: u64) {
         let target = self.now.sim_us + us;
         while self.now.sim_us < target && !self.closed {
-            let d = self.session.deadline();
-            let wall = d.wall_ms.map(|ms| ms * 1000);
-            let next = [d.sim_us, wall, Some(target)]
-                .into_iter()
-                .flatten()
-                .min()
-                .unwrap_or(target)
-                .clamp(self.now.sim_us + 1, target);
-            self.now = Now {
-                sim_us: next,
-                wall_ms: next / 1000,
-            };
-            self.session.advance(self.now);
+            self.step_toward(target);
             self.collect();
         }
     }
@@ -280,19 +285,7 @@ impl VirtualReader {
         );
         let target = self.now.sim_us + us;
         while self.now.sim_us < target {
-            let d = self.session.deadline();
-            let wall = d.wall_ms.map(|ms| ms * 1000);
-            let next = [d.sim_us, wall, Some(target)]
-                .into_iter()
-                .flatten()
-                .min()
-                .unwrap_or(target)
-                .clamp(self.now.sim_us + 1, target);
-            self.now = Now {
-                sim_us: next,
-                wall_ms: next / 1000,
-            };
-            self.session.advance(self.now);
+            self.step_toward(target);
         }
     }
 
