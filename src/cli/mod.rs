@@ -82,6 +82,10 @@ pub enum Command {
         /// the ground truth to this MCAP file (ROS 2 messages; docs/robotics.md).
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
+        /// Serve the same messages live to Foxglove on this address (its WebSocket protocol,
+        /// e.g. 127.0.0.1:8765; docs/robotics.md "Live in Foxglove").
+        #[arg(long, value_name = "ADDR")]
+        foxglove: Option<String>,
         /// Replace an existing truth or MCAP file (without it, an existing file is refused).
         #[arg(long)]
         force: bool,
@@ -194,6 +198,7 @@ pub fn main() -> ExitCode {
             speed,
             truth,
             mcap,
+            foxglove,
             force,
             tag_memory,
             record,
@@ -224,6 +229,7 @@ pub fn main() -> ExitCode {
                     speed,
                     truth,
                     mcap,
+                    foxglove,
                     force,
                     record,
                     record_options: crate::record::RecordOptions {
