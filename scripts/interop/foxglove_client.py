@@ -14,14 +14,14 @@ from the `ros2msg` schemas the server advertises); none of llrp-gateway's code.
 3. A well-behaved client: serverInfo, the advertised channels; prints the line `READY` once
    it has subscribed to every channel advertised so far (and subscribes to later ones as
    they come), then decodes every message until it holds READS tag reads and at least one
-   pose and one /tf message, or TIMEOUT_S pass.
+   pose, /tf, tag position and reader event message, or TIMEOUT_S pass.
 
 Prints ONE JSON object after READY:
   {"refused_status": n, "hostile_status": [{"level", "message"}],
    "server_info": {...}, "channels": [{"id", "topic", "encoding", "schemaName",
    "schemaEncoding"}], "counts": {topic: n},
    "reads": [{"topic", "epc", "reader", "antenna", "rssi_dbm", "log_time", "frame_id"}],
-   "poses": n, "tf": n, "bad_subscription_ids": n}
+   "poses": n, "tf": n, "tags": n, "events": n, "bad_subscription_ids": n}
 """
 
 import asyncio
@@ -37,6 +37,8 @@ SUBPROTOCOL = "foxglove.websocket.v1"
 READ = "llrp_gateway_msgs/msg/TagRead"
 POSE = "foxglove_msgs/msg/PoseInFrame"
 TF = "tf2_msgs/msg/TFMessage"
+TAG = "llrp_gateway_msgs/msg/TagPosition"
+EVENT = "llrp_gateway_msgs/msg/ReaderEvent"
 
 
 async def refused_status(url):
@@ -57,7 +59,8 @@ async def next_json(ws, timeout=10):
 
 async def hostile(url):
     """Misbehaves, collects the status replies; returns them and the open socket."""
-    ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None)
+    ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None,
+                                  close_timeout=1)
     info = await next_json(ws)
     assert info["op"] == "serverInfo", info
     adv = await next_json(ws)
@@ -79,7 +82,8 @@ async def hostile(url):
 
 
 async def good(url, want_reads, timeout):
-    out = {"counts": {}, "reads": [], "poses": 0, "tf": 0, "channels": [],
+    out = {"counts": {}, "reads": [], "poses": 0, "tf": 0, "tags": 0, "events": 0,
+           "channels": [],
            "bad_subscription_ids": 0}
     factory = DecoderFactory()
     channels, decoders, by_sub = {}, {}, {}
@@ -103,7 +107,8 @@ async def good(url, want_reads, timeout):
                 await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
         while loop.time() < until:
-            if (len(out["reads"]) >= want_reads and out["poses"] and out["tf"]):
+            if (len(out["reads"]) >= want_reads and out["poses"] and out["tf"]
+                    and out["tags"] and out["events"]):
                 break
             try:
                 m = await asyncio.wait_for(ws.recv(), max(0.1, until - loop.time()))
@@ -142,6 +147,10 @@ async def good(url, want_reads, timeout):
                 out["poses"] += 1
             elif c["schemaName"] == TF:
                 out["tf"] += 1
+            elif c["schemaName"] == TAG:
+                out["tags"] += len(msg.epc) > 0
+            elif c["schemaName"] == EVENT:
+                out["events"] += 1
     return out
 
 

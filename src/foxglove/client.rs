@@ -17,7 +17,7 @@ use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::WebSocketStream;
 
 use super::proto::{self, Level, SUBPROTOCOL};
-use super::{Event, Hub, LiveChannel, MAX_CLIENT_MESSAGE, SEND_TIMEOUT};
+use super::{Event, Hub, Latest, LiveChannel, MAX_CLIENT_MESSAGE, SEND_TIMEOUT};
 
 /// Why a client's session ended early.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +61,7 @@ pub(super) async fn serve(
         advertised: HashSet::new(),
         subscriptions: HashMap::new(),
         by_channel: HashMap::new(),
+        sent_up_to: HashMap::new(),
         skipped: 0,
     };
     match session.run(shutdown).await {
@@ -106,6 +107,8 @@ struct Session {
     subscriptions: HashMap<u32, u32>,
     /// Channel to subscription id.
     by_channel: HashMap<u32, u32>,
+    /// Each channel's latest message number when it was subscribed (sent then).
+    sent_up_to: HashMap<u32, u64>,
     /// Messages it skipped.
     skipped: u64,
 }
@@ -137,17 +140,25 @@ impl Session {
                 },
                 e = rx.recv() => match e {
                     Ok(Event::Advertise(c)) => self.advertise(&[c]).await?,
-                    Ok(Event::Message { channel, log_ns, data }) => {
-                        if let Some(sub) = self.by_channel.get(&channel) {
-                            let frame = proto::message_data(*sub, log_ns, &data);
-                            self.send(Message::binary(frame)).await?;
-                        }
-                    }
+                    Ok(Event::Message(m)) => self.message(&m).await?,
                     Err(RecvError::Lagged(n)) => self.lagged(n).await?,
                     Err(RecvError::Closed) => return Ok(()),
                 },
             }
         }
+    }
+
+    /// Sends message `m` if its channel is subscribed (and it was not sent as the latest
+    /// message on subscribing).
+    async fn message(&mut self, m: &Latest) -> Result<(), End> {
+        let Some(sub) = self.by_channel.get(&m.channel) else {
+            return Ok(());
+        };
+        if self.sent_up_to.get(&m.channel).is_some_and(|s| m.seq <= *s) {
+            return Ok(());
+        }
+        let frame = proto::message_data(*sub, m.log_ns, &m.data);
+        self.send(Message::binary(frame)).await
     }
 
     /// Sends `m`, dropping the client when it takes nothing for [`SEND_TIMEOUT`].
@@ -196,6 +207,10 @@ impl Session {
                 for s in subs {
                     if let Err(e) = self.subscribe(s) {
                         self.status(Level::Error, &e).await?;
+                    } else if let Some(m) = self.hub.latest(s.channel_id) {
+                        self.sent_up_to.insert(s.channel_id, m.seq);
+                        let frame = proto::message_data(s.id, m.log_ns, &m.data);
+                        self.send(Message::binary(frame)).await?;
                     }
                 }
                 Ok(())

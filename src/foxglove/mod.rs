@@ -2,7 +2,8 @@
 //! (`foxglove.websocket.v1`, [`proto`]) streams what the command's MCAP output holds, as it
 //! is written: the [`McapTap`] of its [`crate::record::mcap::McapOut`] hands every message to
 //! the [`Hub`], which advertises each new channel (topic, `ros2msg` schema, `cdr` encoding)
-//! to every client and sends each message to the clients subscribed to its channel.
+//! to every client and sends each message to the clients subscribed to its channel (a new
+//! subscriber first gets the channel's latest message, as a ROS 2 transient-local one would).
 //!
 //! A client that reads slower than messages come skips messages (it is told so, and they
 //! are counted), one that takes nothing for [`SEND_TIMEOUT`] is dropped, at most
@@ -67,12 +68,17 @@ pub struct LiveChannel {
 enum Event {
     /// A new channel.
     Advertise(Arc<LiveChannel>),
-    /// A message on channel `channel` logged at `log_ns`.
-    Message {
-        channel: u32,
-        log_ns: u64,
-        data: Bytes,
-    },
+    /// A message on a channel.
+    Message(Latest),
+}
+
+/// One message of a channel: its number in the channel, its log time and its data.
+#[derive(Clone, Debug)]
+struct Latest {
+    channel: u32,
+    seq: u64,
+    log_ns: u64,
+    data: Bytes,
 }
 
 /// Counts of what clients missed.
@@ -91,6 +97,9 @@ pub struct LiveStats {
 #[derive(Debug)]
 pub struct Hub {
     channels: Mutex<Vec<Arc<LiveChannel>>>,
+    /// Each channel's latest message, which a new subscriber gets first (so that what is
+    /// sent once, such as the still tags' positions, shows in a view opened later).
+    latest: Mutex<HashMap<u32, Latest>>,
     tx: broadcast::Sender<Event>,
     /// What clients missed.
     pub stats: LiveStats,
@@ -101,6 +110,7 @@ impl Hub {
     pub fn new(backlog: usize) -> Arc<Hub> {
         Arc::new(Hub {
             channels: Mutex::new(Vec::new()),
+            latest: Mutex::new(HashMap::new()),
             tx: broadcast::channel(backlog.max(1)).0,
             stats: LiveStats::default(),
         })
@@ -111,6 +121,7 @@ impl Hub {
         Box::new(HubTap {
             hub: self.clone(),
             ids: HashMap::new(),
+            seq: 0,
         })
     }
 
@@ -126,16 +137,23 @@ impl Hub {
         (channels.clone(), self.tx.subscribe())
     }
 
+    /// Channel `channel`'s latest message.
+    fn latest(&self, channel: u32) -> Option<Latest> {
+        let latest = self.latest.lock().unwrap_or_else(PoisonError::into_inner);
+        latest.get(&channel).cloned()
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Arc<LiveChannel>>> {
         // The list is only ever pushed to: one a panicking holder left is still whole.
         self.channels.lock().unwrap_or_else(PoisonError::into_inner)
     }
 }
 
-/// The tap into a [`Hub`]: channel ids by topic.
+/// The tap into a [`Hub`]: channel ids by topic, and the number of the next message.
 struct HubTap {
     hub: Arc<Hub>,
     ids: HashMap<String, Option<u32>>,
+    seq: u64,
 }
 
 impl McapTap for HubTap {
@@ -168,13 +186,22 @@ impl McapTap for HubTap {
             }
         };
         if let Some(channel) = id {
+            self.seq += 1;
+            let latest = Latest {
+                channel,
+                seq: self.seq,
+                log_ns: m.log_ns,
+                data: Bytes::copy_from_slice(m.data),
+            };
             if self.hub.tx.receiver_count() > 0 {
-                let _ = self.hub.tx.send(Event::Message {
-                    channel,
-                    log_ns: m.log_ns,
-                    data: Bytes::copy_from_slice(m.data),
-                });
+                let _ = self.hub.tx.send(Event::Message(latest.clone()));
             }
+            let mut all = self
+                .hub
+                .latest
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            all.insert(channel, latest);
         }
     }
 }
@@ -307,20 +334,23 @@ mod tests {
         }
         assert!(matches!(
             rx.try_recv(),
-            Ok(Event::Message {
+            Ok(Event::Message(Latest {
                 channel: 1,
                 log_ns: 2,
                 ..
-            })
+            }))
         ));
         assert!(matches!(
             rx.try_recv(),
-            Ok(Event::Message {
+            Ok(Event::Message(Latest {
                 channel: 2,
                 log_ns: 2,
                 ..
-            })
+            }))
         ));
+        // Each channel's latest message is kept for new subscribers.
+        assert_eq!(hub.latest(1).map(|l| (l.seq, l.log_ns)), Some((5, 2)));
+        assert_eq!(hub.latest(2).map(|l| l.seq), Some(6));
         // A client joining now gets both channels in the list, none twice.
         assert_eq!(hub.join().0.len(), 2);
     }
