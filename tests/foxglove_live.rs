@@ -7,17 +7,15 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{ChildStdout, Command, Stdio};
 use std::time::Instant;
 
 mod mcap_support;
 use mcap_support::*;
 
-/// `llrp-gateway sim ARGS`: it, its reader's LLRP address and its Foxglove address (from
-/// its log).
-fn spawn_sim(args: &[&str]) -> (Proc, String, String) {
+/// `llrp-gateway ARGS`: it, its LLRP address and its Foxglove address (from its log).
+fn spawn_live(args: &[&str]) -> (Proc, String, String) {
     let mut child = bin()
-        .arg("sim")
         .args(args)
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
@@ -27,7 +25,7 @@ fn spawn_sim(args: &[&str]) -> (Proc, String, String) {
     let until = Instant::now() + GUARD;
     let (mut llrp, mut ws) = (None, None);
     while llrp.is_none() || ws.is_none() {
-        assert!(Instant::now() < until, "sim {args:?} did not listen");
+        assert!(Instant::now() < until, "{args:?} did not listen");
         let line = lines.next().expect("a line").expect("utf-8");
         if let Some(rest) = line.split("listening on ").nth(1) {
             llrp = rest.split([' ', ',']).next().map(str::to_string);
@@ -38,6 +36,81 @@ fn spawn_sim(args: &[&str]) -> (Proc, String, String) {
     }
     std::thread::spawn(move || for _ in lines {});
     (Proc(child), llrp.expect("set"), ws.expect("set"))
+}
+
+/// `scripts/interop/foxglove_client.py WS 20 30 NEED` once it has subscribed (its first
+/// line, `READY`), and its output's next lines.
+fn live_client(ws: &str, need: &str) -> (Proc, std::io::Lines<BufReader<ChildStdout>>) {
+    let python = std::env::var("LLRP_MCAP_PYTHON").expect(
+        "LLRP_MCAP_PYTHON must name the python of scripts/venv-mcap.sh (set by ./scripts/test)",
+    );
+    let mut client = Command::new(python)
+        .arg(root().join("scripts/interop/foxglove_client.py"))
+        .args([ws, "20", "30", need])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("the client starts");
+    let mut out = BufReader::new(client.stdout.take().expect("piped")).lines();
+    let ready = out.next().expect("a line").expect("utf-8");
+    assert_eq!(ready, "READY", "the client subscribed");
+    (Proc(client), out)
+}
+
+/// The client's report (its line after `READY`).
+fn report(out: &mut std::io::Lines<BufReader<ChildStdout>>) -> serde_json::Value {
+    let line = out.next().expect("the client's report").expect("utf-8");
+    serde_json::from_str(&line).expect("JSON")
+}
+
+/// Asserts what every run's client saw: the refused handshake, an error status for each
+/// hostile request, server info; the channels (each `cdr`/`ros2msg`, once), by topic.
+fn assert_served(v: &serde_json::Value) -> BTreeMap<String, String> {
+    assert_eq!(v["refused_status"], 400);
+    let hostile = v["hostile_status"].as_array().expect("statuses");
+    let expected = ["not JSON", "setParameters", "no channel 999999", "binary"];
+    assert_eq!(hostile.len(), expected.len(), "{hostile:?}");
+    for (s, e) in hostile.iter().zip(expected) {
+        assert_eq!(s["level"], 2, "{s}");
+        assert!(s["message"].as_str().expect("a message").contains(e), "{s}");
+    }
+    assert_eq!(v["server_info"]["op"], "serverInfo");
+    assert!(v["server_info"]["capabilities"].is_array());
+    let mut live = BTreeMap::new();
+    for c in v["channels"].as_array().expect("channels") {
+        assert_eq!(c["encoding"], "cdr", "{c}");
+        assert_eq!(c["schemaEncoding"], "ros2msg", "{c}");
+        let topic = c["topic"].as_str().expect("topic").to_string();
+        let schema = c["schemaName"].as_str().expect("schema").to_string();
+        assert!(live.insert(topic, schema).is_none(), "advertised once");
+    }
+    assert_eq!(v["bad_subscription_ids"], 0);
+    live
+}
+
+/// Asserts that the client decoded at least 20 reads, each of a tag the inventory read
+/// (`reads`, its reads file), with a sane RSSI, reader `reader` and its antenna's frame;
+/// the reads' topics.
+fn assert_reads(v: &serde_json::Value, reads: &Path, reader: &str) -> BTreeSet<String> {
+    let epcs: BTreeSet<String> = reads_file(reads)
+        .iter()
+        .map(|r| r.epc.to_string())
+        .collect();
+    let decoded = v["reads"].as_array().expect("reads");
+    assert!(decoded.len() >= 20, "{} reads arrived", decoded.len());
+    let token = llrp_gateway::record::mcap::topic_token(reader);
+    let mut topics = BTreeSet::new();
+    for r in decoded {
+        let epc = r["epc"].as_str().expect("epc");
+        assert!(epcs.contains(epc), "{epc} is among {epcs:?}");
+        let rssi = r["rssi_dbm"].as_f64().expect("a number");
+        assert!((-100.0..=-20.0).contains(&rssi), "RSSI {rssi}");
+        assert_eq!(r["reader"], reader);
+        let antenna = r["antenna"].as_u64().expect("antenna");
+        assert_eq!(r["frame_id"], format!("{token}/antenna_{antenna}"));
+        assert!(r["log_time"].as_u64().expect("log time") > 0);
+        topics.insert(r["topic"].as_str().expect("topic").to_string());
+    }
+    topics
 }
 
 /// Every topic `docs/foxglove-layout.json` names: the 3D panel's topics, the plots' message
@@ -74,7 +147,8 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
 ) {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
-    let (mut sim, llrp, ws) = spawn_sim(&[
+    let (mut sim, llrp, ws) = spawn_live(&[
+        "sim",
         "--no-http",
         "--listen",
         "127.0.0.1:0",
@@ -83,18 +157,7 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
         "--mcap",
         &path("sim.mcap"),
     ]);
-    let python = std::env::var("LLRP_MCAP_PYTHON").expect(
-        "LLRP_MCAP_PYTHON must name the python of scripts/venv-mcap.sh (set by ./scripts/test)",
-    );
-    let mut client = Command::new(python)
-        .arg(root().join("scripts/interop/foxglove_client.py"))
-        .args([ws.as_str(), "20", "30"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("the client starts");
-    let mut out = BufReader::new(client.stdout.take().expect("piped")).lines();
-    let ready = out.next().expect("a line").expect("utf-8");
-    assert_eq!(ready, "READY", "the client subscribed");
+    let (client, mut out) = live_client(&ws, "poses,tf,tags,events");
     run(&[
         "inventory",
         &llrp,
@@ -104,39 +167,19 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
         "--output",
         &path("reads.jsonl"),
     ]);
-    let line = out.next().expect("the client's report").expect("utf-8");
-    let client = Proc(client);
-    let v: serde_json::Value = serde_json::from_str(&line).expect("JSON");
+    let v = report(&mut out);
     assert!(
         matches!(sim.0.try_wait(), Ok(None)),
         "the simulator still runs"
     );
     terminate(&mut sim);
     drop(client);
+    let live = assert_served(&v);
 
-    // The handshake without the subprotocol is refused; every hostile request gets an
-    // error status, and the clients after it are served.
-    assert_eq!(v["refused_status"], 400);
-    let hostile = v["hostile_status"].as_array().expect("statuses");
-    let expected = ["not JSON", "setParameters", "no channel 999999", "binary"];
-    assert_eq!(hostile.len(), expected.len(), "{hostile:?}");
-    for (s, e) in hostile.iter().zip(expected) {
-        assert_eq!(s["level"], 2, "{s}");
-        assert!(s["message"].as_str().expect("a message").contains(e), "{s}");
-    }
-    assert_eq!(v["server_info"]["op"], "serverInfo");
-    assert!(v["server_info"]["capabilities"].is_array());
-
-    // The channels: ROS 2 ones, each also in the MCAP file with the same schema.
+    // The channels, each also in the MCAP file with the same schema.
     let file = channels(&check(Path::new(&path("sim.mcap"))));
-    let mut live = BTreeMap::new();
-    for c in v["channels"].as_array().expect("channels") {
-        assert_eq!(c["encoding"], "cdr", "{c}");
-        assert_eq!(c["schemaEncoding"], "ros2msg", "{c}");
-        let topic = c["topic"].as_str().expect("topic").to_string();
-        let schema = c["schemaName"].as_str().expect("schema").to_string();
-        assert_eq!(file.get(&topic).map(|c| &c.0), Some(&schema), "{topic}");
-        assert!(live.insert(topic, schema).is_none(), "advertised once");
+    for (topic, schema) in &live {
+        assert_eq!(file.get(topic).map(|c| &c.0), Some(schema), "{topic}");
     }
     for (topic, schema) in [
         ("/llrp/s1_reader/reads", "llrp_gateway_msgs/msg/TagRead"),
@@ -159,26 +202,98 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
     }
 
     // The reads, decoded from CDR by the client: tags the inventory read, sane values.
-    let epcs: BTreeSet<String> = reads_file(Path::new(&path("reads.jsonl")))
-        .iter()
-        .map(|r| r.epc.to_string())
-        .collect();
-    let reads = v["reads"].as_array().expect("reads");
-    assert!(reads.len() >= 20, "{} reads arrived", reads.len());
-    for r in reads {
-        let epc = r["epc"].as_str().expect("epc");
-        assert!(epcs.contains(epc), "{epc} is among {epcs:?}");
-        let rssi = r["rssi_dbm"].as_f64().expect("a number");
-        assert!((-100.0..=-20.0).contains(&rssi), "RSSI {rssi}");
-        assert_eq!(r["reader"], "s1-reader");
-        let antenna = r["antenna"].as_u64().expect("antenna");
-        assert_eq!(r["frame_id"], format!("s1_reader/antenna_{antenna}"));
-        assert!(r["log_time"].as_u64().expect("log time") > 0);
-    }
+    let topics = assert_reads(&v, Path::new(&path("reads.jsonl")), "s1-reader");
+    assert_eq!(
+        topics,
+        BTreeSet::from(["/llrp/s1_reader/reads".to_string()])
+    );
     // The poses and transforms, the still tags' positions sent once at the start (a new
     // subscriber gets a channel's latest message), the reader's events.
     for key in ["poses", "tf", "tags", "events"] {
         assert!(v[key].as_u64().expect("a count") > 0, "{key}: {v}");
     }
-    assert_eq!(v["bad_subscription_ids"], 0);
+}
+
+#[test]
+#[ignore = "needs the Python client's venv (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_proxy_without_mcap_serves_the_relayed_reads_and_events_live() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    let (mut sim, sim_addr) = sim_recording(Path::new(&path("sim.jsonl")));
+    let (mut proxy, proxy_addr, ws) = spawn_live(&[
+        "proxy",
+        "--upstream",
+        &sim_addr,
+        "--listen",
+        "127.0.0.1:0",
+        "--foxglove",
+        "127.0.0.1:0",
+    ]);
+    let (client, mut out) = live_client(&ws, "events");
+    run(&[
+        "inventory",
+        &proxy_addr,
+        "--seconds",
+        "2",
+        "--impinj",
+        "--output",
+        &path("reads.jsonl"),
+    ]);
+    let v = report(&mut out);
+    terminate(&mut proxy);
+    terminate(&mut sim);
+    drop(client);
+    let live = assert_served(&v);
+    let token = llrp_gateway::record::mcap::topic_token(&sim_addr);
+    let reads = format!("/llrp/{token}/reads");
+    assert_eq!(
+        live.get(&reads).map(String::as_str),
+        Some("llrp_gateway_msgs/msg/TagRead")
+    );
+    assert_eq!(
+        assert_reads(&v, Path::new(&path("reads.jsonl")), &sim_addr),
+        BTreeSet::from([reads])
+    );
+    assert!(v["events"].as_u64().expect("a count") > 0, "{v}");
+}
+
+#[test]
+#[ignore = "needs the Python client's venv (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_replay_serves_the_replayed_session_s_reads_live() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    let fixture = root().join("fixtures/localize/s1-report-per-read.jsonl");
+    let (mut replay, addr, ws) = spawn_live(&[
+        "replay",
+        fixture.to_str().expect("utf-8"),
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+        "--foxglove",
+        "127.0.0.1:0",
+    ]);
+    let (client, mut out) = live_client(&ws, "");
+    run(&[
+        "inventory",
+        &addr,
+        "--seconds",
+        "2",
+        "--impinj",
+        "--report-every",
+        "1",
+        "--output",
+        &path("reads.jsonl"),
+    ]);
+    let v = report(&mut out);
+    terminate(&mut replay);
+    drop(client);
+    assert_served(&v);
+    let recording = llrp_gateway::record::Recording::open(&fixture).expect("the fixture");
+    let reader = recording.header.upstream.trim_start_matches("sim:");
+    let token = llrp_gateway::record::mcap::topic_token(reader);
+    assert_eq!(
+        assert_reads(&v, Path::new(&path("reads.jsonl")), reader),
+        BTreeSet::from([format!("/llrp/{token}/reads")])
+    );
 }

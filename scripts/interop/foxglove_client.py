@@ -2,7 +2,7 @@
 """An independent client of Foxglove's WebSocket protocol (foxglove.websocket.v1, spec:
 https://github.com/foxglove/ws-protocol/blob/main/docs/spec.md) for llrp-gateway's live view.
 
-Usage: foxglove_client.py ws://HOST:PORT READS TIMEOUT_S
+Usage: foxglove_client.py ws://HOST:PORT READS TIMEOUT_S [NEED]
 
 Built on `websockets` (17.4) and `mcap-ros2-support` (0.6.0, which decodes the CDR messages
 from the `ros2msg` schemas the server advertises); none of llrp-gateway's code.
@@ -14,7 +14,8 @@ from the `ros2msg` schemas the server advertises); none of llrp-gateway's code.
 3. A well-behaved client: serverInfo, the advertised channels; prints the line `READY` once
    it has subscribed to every channel advertised so far (and subscribes to later ones as
    they come), then decodes every message until it holds READS tag reads and at least one
-   pose, /tf, tag position and reader event message, or TIMEOUT_S pass.
+   message of each kind NEED names (comma-separated among poses, tf, tags, events; default
+   all four), or TIMEOUT_S pass.
 
 Prints ONE JSON object after READY:
   {"refused_status": n, "hostile_status": [{"level", "message"}],
@@ -81,7 +82,7 @@ async def hostile(url):
     return statuses, ws
 
 
-async def good(url, want_reads, timeout):
+async def good(url, want_reads, timeout, need):
     out = {"counts": {}, "reads": [], "poses": 0, "tf": 0, "tags": 0, "events": 0,
            "channels": [],
            "bad_subscription_ids": 0}
@@ -107,8 +108,7 @@ async def good(url, want_reads, timeout):
                 await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
         while loop.time() < until:
-            if (len(out["reads"]) >= want_reads and out["poses"] and out["tf"]
-                    and out["tags"] and out["events"]):
+            if len(out["reads"]) >= want_reads and all(out[k] for k in need):
                 break
             try:
                 m = await asyncio.wait_for(ws.recv(), max(0.1, until - loop.time()))
@@ -156,9 +156,11 @@ async def good(url, want_reads, timeout):
 
 async def main():
     url, want_reads, timeout = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    need = (sys.argv[4] if len(sys.argv) > 4 else "poses,tf,tags,events").split(",")
+    need = [k for k in need if k]
     status = await refused_status(url)
     statuses, stalled = await hostile(url)
-    out = await good(url, want_reads, timeout)
+    out = await good(url, want_reads, timeout, need)
     out["refused_status"] = status
     out["hostile_status"] = statuses
     await stalled.close()
