@@ -272,6 +272,8 @@ impl Specs {
             } else {
                 Vec::new()
             },
+            // A tag matching a truncating Select sent only part of its EPC.
+            truncated: slice.air.select.as_ref().and_then(|s| s.truncated(r.tag)),
         };
         if applied.at_once && applied.access_spec_id != 0 {
             // The access results go out now, in a report of their own with the ROSpec's
