@@ -222,7 +222,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
     assert_eq!(keys(run(&mut v, spec(500, Some(and)))), [5]);
     let or = command(vec![unaware(bit(0), Some(0)), unaware(bit(2), Some(1))]);
     assert_eq!(keys(run(&mut v, spec(500, Some(or)))), [1, 3, 4, 5]);
-    // State-aware on SL (target 4), Query Sel = SL from the singulation action.
+    // State-aware on SL (LLRP target 0), Query Sel = SL from the singulation action.
     let singulation = |s: bool, i: bool| C1g2SingulationControl {
         session: 2,
         state_aware_singulation_action: Some(C1g2TagInventoryStateAwareSingulationAction {
@@ -235,7 +235,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
     let sl = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
         c1g2_singulation_control: Some(singulation(false, false)),
-        ..command(vec![aware(last_is(2), 4, 0)])
+        ..command(vec![aware(last_is(2), 0, 0)])
     };
     assert_eq!(keys(run(&mut v, spec(500, Some(sl.clone())))), [2]);
     // Sel = not SL: the others.
@@ -244,7 +244,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
         ..sl
     };
     assert_eq!(keys(run(&mut v, spec(500, Some(not_sl)))), [1, 3, 4, 5]);
-    // On session 2's inventoried flag: the matching tag to B, the others to A (action 4), a
+    // On session 2's inventoried flag (LLRP target 3): the matching tag to B, the others to A (action 4), a
     // single-target Query for A in session 2 (Impinj search mode 1).
     let flag = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
@@ -255,7 +255,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
                 ..Default::default()
             },
         )],
-        ..command(vec![aware(last_is(4), 2, 4)])
+        ..command(vec![aware(last_is(4), 3, 4)])
     };
     // Sel = SL would take none (no tag's SL is asserted): Sel = All instead.
     let flag_all = C1g2InventoryCommand {

@@ -48,9 +48,11 @@ pub const TRUNCATE: u8 = 2;
 /// Bit address of the EPC in the EPC bank (after StoredCRC and PC).
 const EPC_START: u32 = 0x20;
 
-/// Whether a state-aware filter's Target names SL (the other values name S0–S3).
+/// Whether a state-aware filter's Target names SL: LLRP's C1G2StateAwareTarget is 0 SL, 1–4
+/// the inventoried flag of S0–S3 (LLRP 1.1 §16.2.1.2.1.1.2, the LTK's enumeration; Gen2's
+/// own Target field numbers them the other way, S0–S3 then SL).
 fn targets_sl(target: u8) -> bool {
-    target > 3
+    target == 0
 }
 
 /// LLRP parameter types the errors name.
@@ -123,7 +125,8 @@ impl<'a> Query<'a> {
                 let flag = if targets_sl(a.target) {
                     &mut sl
                 } else {
-                    &mut inventoried[usize::from(a.target)]
+                    // Validated 1–4: S0–S3.
+                    &mut inventoried[usize::from(a.target - 1).min(3)]
                 };
                 apply(flag, aware_effect(a.action, m));
             } else {

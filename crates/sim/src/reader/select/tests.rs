@@ -172,7 +172,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
         (7, false, true),
     ];
     for (action, sl_hit, sl_miss) in on_sl {
-        let filters = [aware(last_is(1), 4, action)];
+        let filters = [aware(last_is(1), 0, action)];
         // Sel = SL (S = 0) in a state-aware inventory: the tags with SL asserted answer.
         let q = Query {
             state_aware: true,
@@ -194,7 +194,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
     }
     // The same actions on S2's flag, which starts at A; single target A in session 2.
     for action in 0..8u8 {
-        let filters = [aware(last_is(1), 2, action)];
+        let filters = [aware(last_is(1), 3, action)];
         let q = Query {
             state_aware: true,
             dual: false,
@@ -214,7 +214,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
         let dual = Query { dual: true, ..q };
         assert!(dual.takes_part(&hit) && dual.takes_part(&miss));
         // Another session's flag does not matter to a session-2 Query.
-        let other = [aware(last_is(1), 1, action)];
+        let other = [aware(last_is(1), 2, action)];
         let q1 = Query {
             filters: &other,
             ..q
@@ -227,7 +227,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
 fn a_state_aware_query_reads_from_the_singulation_action_and_the_air() {
     let cmd = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
-        c1g2_filter: vec![aware(last_is(1), 4, 0)],
+        c1g2_filter: vec![aware(last_is(1), 0, 0)],
         ..Default::default()
     };
     let sing = C1g2TagInventoryStateAwareSingulationAction {
@@ -398,7 +398,7 @@ fn only_tags_matching_the_last_filter_truncate_and_only_under_sel_sl() {
     );
     assert_eq!(q.reply(&chip(3)), None);
     // State-aware on SL: truncated under Sel = SL, not under Sel = All (Gen2: Sel 10 or 11).
-    let aware_filters = [truncating(aware(last_is(2), 4, 0))];
+    let aware_filters = [truncating(aware(last_is(2), 0, 0))];
     let sl = Query {
         state_aware: true,
         sel: Some(true),
@@ -430,12 +430,38 @@ fn truncation_gen2_does_not_allow_is_refused_on_t() {
     // A state-aware filter on an inventoried flag (S2) rather than SL.
     let s2 = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
-        ..with(vec![truncating(aware(last_is(1), 2, 0))])
+        ..with(vec![truncating(aware(last_is(1), 3, 0))])
     };
     assert_eq!(refused(s2), on_t);
     let sl = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
-        ..with(vec![truncating(aware(last_is(1), 4, 0))])
+        ..with(vec![truncating(aware(last_is(1), 0, 0))])
     };
     assert!(validate(&sl).is_ok());
+}
+
+#[test]
+fn llrp_state_aware_targets_are_sl_0_then_the_sessions_flags_1_to_4() {
+    let (hit, miss) = (chip(1), chip(2));
+    // Action 4 (matching: deassert SL / B; others: assert SL / A), single target A.
+    let query = |filters: &[C1g2Filter], session: u8, sel: Option<bool>| {
+        let q = Query {
+            state_aware: true,
+            sel,
+            dual: false,
+            session,
+            ..unaware_query(filters)
+        };
+        (q.takes_part(&hit), q.takes_part(&miss))
+    };
+    // Target 0 is SL: under Sel = SL only the non-matching tag answers.
+    let sl = [aware(last_is(1), 0, 4)];
+    assert_eq!(query(&sl, 0, Some(true)), (false, true));
+    // Target 1 is S0's flag: under Sel = All in session 0, the matching tag is in B.
+    let s0 = [aware(last_is(1), 1, 4)];
+    assert_eq!(query(&s0, 0, None), (false, true));
+    // ... and it leaves session 3's flag alone, which target 4 sets.
+    assert_eq!(query(&s0, 3, None), (true, true));
+    let s3 = [aware(last_is(1), 4, 4)];
+    assert_eq!(query(&s3, 3, None), (false, true));
 }
