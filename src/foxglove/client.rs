@@ -17,7 +17,7 @@ use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::WebSocketStream;
 
 use super::proto::{self, Level, SUBPROTOCOL};
-use super::{Event, Hub, Latest, LiveChannel, MAX_CLIENT_MESSAGE, SEND_TIMEOUT};
+use super::{Event, Hub, Latest, LiveChannel, MAX_CLIENT_MESSAGE};
 
 /// Why a client's session ended early.
 #[derive(Debug, thiserror::Error)]
@@ -25,9 +25,9 @@ enum End {
     /// The WebSocket failed (the peer went away, sent a bad frame or too big a message).
     #[error("{0}")]
     Ws(#[from] tokio_tungstenite::tungstenite::Error),
-    /// It took nothing for [`SEND_TIMEOUT`].
-    #[error("it took nothing for {SEND_TIMEOUT:?}")]
-    Slow,
+    /// It took nothing for the send timeout.
+    #[error("it took nothing for {0:?}")]
+    Slow(std::time::Duration),
 }
 
 /// Serves one client until it leaves, fails or the server stops; `_permit` holds its slot.
@@ -43,14 +43,15 @@ pub(super) async fn serve(
         .max_frame_size(Some(MAX_CLIENT_MESSAGE));
     let handshake =
         tokio_tungstenite::accept_hdr_async_with_config(tcp, choose_subprotocol, Some(config));
-    let ws = match tokio::time::timeout(SEND_TIMEOUT, handshake).await {
+    let timeout = hub.limits.send_timeout;
+    let ws = match tokio::time::timeout(timeout, handshake).await {
         Ok(Ok(ws)) => ws,
         Ok(Err(e)) => {
             tracing::info!(%peer, error = %e, "Foxglove client refused at the handshake");
             return;
         }
         Err(_) => {
-            tracing::info!(%peer, "Foxglove client refused: no handshake within {SEND_TIMEOUT:?}");
+            tracing::info!(%peer, "Foxglove client refused: no handshake within {timeout:?}");
             return;
         }
     };
@@ -124,7 +125,8 @@ impl Session {
         loop {
             tokio::select! {
                 _ = shutdown.changed() => {
-                    let _ = tokio::time::timeout(SEND_TIMEOUT, self.ws.close(None)).await;
+                    let timeout = self.hub.limits.send_timeout;
+                    let _ = tokio::time::timeout(timeout, self.ws.close(None)).await;
                     return Ok(());
                 }
                 m = self.ws.next() => match m {
@@ -161,11 +163,12 @@ impl Session {
         self.send(Message::binary(frame)).await
     }
 
-    /// Sends `m`, dropping the client when it takes nothing for [`SEND_TIMEOUT`].
+    /// Sends `m`, dropping the client when it takes nothing for the send timeout.
     async fn send(&mut self, m: Message) -> Result<(), End> {
-        match tokio::time::timeout(SEND_TIMEOUT, self.ws.send(m)).await {
+        let timeout = self.hub.limits.send_timeout;
+        match tokio::time::timeout(timeout, self.ws.send(m)).await {
             Ok(r) => Ok(r?),
-            Err(_) => Err(End::Slow),
+            Err(_) => Err(End::Slow(timeout)),
         }
     }
 

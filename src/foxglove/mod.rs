@@ -36,6 +36,27 @@ pub const MAX_CLIENT_MESSAGE: usize = 64 * 1024;
 /// Channels advertised at most; messages on more are not streamed (the file has them).
 pub const MAX_CHANNELS: usize = 10_000;
 
+/// What the server allows its clients (the constants above by default).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Clients served at once.
+    pub max_clients: usize,
+    /// Messages a client may fall behind before it skips the oldest.
+    pub backlog: usize,
+    /// Longest a client may take to accept one message (or the handshake).
+    pub send_timeout: Duration,
+}
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            max_clients: MAX_CLIENTS,
+            backlog: BACKLOG,
+            send_timeout: SEND_TIMEOUT,
+        }
+    }
+}
+
 /// Why the live server could not start.
 #[derive(Debug, thiserror::Error)]
 #[error("Foxglove WebSocket server: cannot listen on {addr}: {source}")]
@@ -101,17 +122,20 @@ pub struct Hub {
     /// sent once, such as the still tags' positions, shows in a view opened later).
     latest: Mutex<HashMap<u32, Latest>>,
     tx: broadcast::Sender<Event>,
+    /// What clients are allowed.
+    pub limits: Limits,
     /// What clients missed.
     pub stats: LiveStats,
 }
 
 impl Hub {
-    /// A hub whose clients may each fall `backlog` messages behind.
-    pub fn new(backlog: usize) -> Arc<Hub> {
+    /// A hub whose clients have `limits`.
+    pub fn new(limits: Limits) -> Arc<Hub> {
         Arc::new(Hub {
             channels: Mutex::new(Vec::new()),
             latest: Mutex::new(HashMap::new()),
-            tx: broadcast::channel(backlog.max(1)).0,
+            tx: broadcast::channel(limits.backlog.max(1)).0,
+            limits,
             stats: LiveStats::default(),
         })
     }
@@ -217,13 +241,18 @@ pub struct LiveServer {
 impl LiveServer {
     /// Listens on `addr` and serves clients from the hub of a new [`LiveServer::tap`].
     pub async fn bind(addr: &str) -> Result<LiveServer, LiveError> {
+        LiveServer::bind_with(addr, Limits::default()).await
+    }
+
+    /// [`LiveServer::bind`] with other limits.
+    pub async fn bind_with(addr: &str, limits: Limits) -> Result<LiveServer, LiveError> {
         let err = |source| LiveError {
             addr: addr.to_string(),
             source,
         };
         let listener = TcpListener::bind(addr).await.map_err(err)?;
         let local = listener.local_addr().map_err(err)?;
-        let hub = Hub::new(BACKLOG);
+        let hub = Hub::new(limits);
         let (shutdown, rx) = watch::channel(false);
         let task = tokio::spawn(accept(listener, hub.clone(), rx));
         tracing::info!("Foxglove live view on ws://{local}");
@@ -266,7 +295,8 @@ impl LiveServer {
 
 /// The accepting task: one task per client, at most [`MAX_CLIENTS`].
 async fn accept(listener: TcpListener, hub: Arc<Hub>, mut shutdown: watch::Receiver<bool>) {
-    let slots = Arc::new(Semaphore::new(MAX_CLIENTS));
+    let max = hub.limits.max_clients;
+    let slots = Arc::new(Semaphore::new(max));
     loop {
         let (tcp, peer) = tokio::select! {
             _ = shutdown.changed() => return,
@@ -292,10 +322,10 @@ async fn accept(listener: TcpListener, hub: Arc<Hub>, mut shutdown: watch::Recei
             }
             Err(_) => {
                 hub.stats.refused.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(%peer, "Foxglove client refused: {MAX_CLIENTS} are served already");
+                tracing::warn!(%peer, "Foxglove client refused: {max} are served already");
                 // Written if the socket takes it at once (it has room: nothing was sent on
                 // it yet), never waited for.
-                let body = format!("too many Foxglove clients (at most {MAX_CLIENTS})\n");
+                let body = format!("too many Foxglove clients (at most {max})\n");
                 let reply = format!(
                     "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\n\
                      Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
@@ -308,50 +338,4 @@ async fn accept(listener: TcpListener, hub: Arc<Hub>, mut shutdown: watch::Recei
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::record::mcap::McapOut;
-
-    #[test]
-    fn a_channel_is_advertised_once_and_a_client_behind_the_backlog_skips_messages() {
-        let hub = Hub::new(2);
-        let (before, mut rx) = hub.join();
-        assert!(before.is_empty());
-        let mut out = McapOut::tap_only(hub.tap()).expect("starts");
-        for i in 0..3 {
-            out.event("r", 1, "connect", "", i, i).expect("written");
-        }
-        // Two channels (/llrp/r/events, /log), each advertised once, ids from 1.
-        let channels = hub.channels();
-        let topics: Vec<(u32, &str)> = channels.iter().map(|c| (c.id, c.topic.as_str())).collect();
-        assert_eq!(topics, [(1, "/llrp/r/events"), (2, "/log")]);
-        assert_eq!(channels[0].schema_name, "llrp_gateway_msgs/msg/ReaderEvent");
-        assert!(channels[0].schema.contains("MSG: std_msgs/msg/Header"));
-        // 2 adverts + 6 messages through a queue of 2: the receiver is told what it missed.
-        match rx.try_recv() {
-            Err(broadcast::error::TryRecvError::Lagged(n)) => assert_eq!(n, 6),
-            other => panic!("expected a lag, got {other:?}"),
-        }
-        assert!(matches!(
-            rx.try_recv(),
-            Ok(Event::Message(Latest {
-                channel: 1,
-                log_ns: 2,
-                ..
-            }))
-        ));
-        assert!(matches!(
-            rx.try_recv(),
-            Ok(Event::Message(Latest {
-                channel: 2,
-                log_ns: 2,
-                ..
-            }))
-        ));
-        // Each channel's latest message is kept for new subscribers.
-        assert_eq!(hub.latest(1).map(|l| (l.seq, l.log_ns)), Some((5, 2)));
-        assert_eq!(hub.latest(2).map(|l| l.seq), Some(6));
-        // A client joining now gets both channels in the list, none twice.
-        assert_eq!(hub.join().0.len(), 2);
-    }
-}
+mod tests;
