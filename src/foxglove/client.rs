@@ -75,7 +75,9 @@ pub(super) async fn serve(
 }
 
 /// The handshake's callback: takes the request only when it offers `foxglove.websocket.v1`,
-/// and answers with it.
+/// and answers with it. (Its signature is tungstenite's `Callback`, whose error is a whole
+/// HTTP response.)
+#[allow(clippy::result_large_err)]
 fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, ErrorResponse> {
     let offered = req
         .headers()

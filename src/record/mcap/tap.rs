@@ -79,8 +79,11 @@ mod tests {
 
     use super::*;
 
-    /// Keeps (topic, schema name, log time, data) of every message.
-    struct Keep(Arc<Mutex<Vec<(String, String, u64, Vec<u8>)>>>);
+    /// A message's topic, schema name, log time and data.
+    type Kept = (String, String, u64, Vec<u8>);
+
+    /// Keeps every message.
+    struct Keep(Arc<Mutex<Vec<Kept>>>);
 
     impl McapTap for Keep {
         fn message(&mut self, m: &TapMessage<'_>) {
@@ -106,7 +109,7 @@ mod tests {
             .expect("written");
         let (_, file) = out.finish().expect("finished");
 
-        let in_file: Vec<(String, String, u64, Vec<u8>)> = ::mcap::MessageStream::new(&file)
+        let in_file: Vec<Kept> = ::mcap::MessageStream::new(&file)
             .expect("a file")
             .map(|m| {
                 let m = m.expect("a message");
