@@ -297,3 +297,45 @@ fn a_replay_serves_the_replayed_session_s_reads_live() {
         BTreeSet::from([format!("/llrp/{token}/reads")])
     );
 }
+
+#[test]
+fn an_address_the_live_view_cannot_listen_on_is_said_and_nothing_is_written() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mcap = dir.path().join("out.mcap");
+    let mcap = mcap.to_str().expect("utf-8");
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("binds");
+    let taken = taken.local_addr().expect("an address").to_string();
+    let fixture = root().join("fixtures/localize/s1-report-per-read.jsonl");
+    let fixture = fixture.to_str().expect("utf-8");
+    let sim = ["sim", "--no-http", "--listen", "127.0.0.1:0"];
+    let proxy = [
+        "proxy",
+        "--upstream",
+        "127.0.0.1:9",
+        "--listen",
+        "127.0.0.1:0",
+    ];
+    let replay = ["replay", fixture, "--listen", "127.0.0.1:0"];
+    for command in [&sim[..], &proxy[..], &replay[..]] {
+        for (addr, why) in [
+            ("not-an-address", "invalid socket address"),
+            (taken.as_str(), "in use"),
+        ] {
+            let out = bin()
+                .args(command)
+                .args(["--foxglove", addr, "--mcap", mcap])
+                .output()
+                .expect("runs");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{command:?} {addr}: {err}");
+            let says = format!(
+                "llrp-gateway {}: Foxglove WebSocket server: cannot listen on {addr}: ",
+                command[0]
+            );
+            let last = err.lines().last().unwrap_or_default();
+            assert!(last.starts_with(&says), "{last}");
+            assert!(last.contains(why), "{last}");
+            assert!(!Path::new(mcap).exists(), "{command:?}: no MCAP file");
+        }
+    }
+}
