@@ -23,6 +23,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{broadcast, watch, Semaphore};
 use tokio::task::JoinHandle;
 
+use crate::record::mcap::msgs::MsgType;
 use crate::record::mcap::{McapTap, TapMessage, MESSAGE_ENCODING, SCHEMA_ENCODING};
 
 /// Clients served at once; one more is refused (HTTP 503).
@@ -78,8 +79,8 @@ pub struct LiveChannel {
     pub encoding: &'static str,
     /// The schema's name.
     pub schema_name: &'static str,
-    /// The schema's text.
-    pub schema: String,
+    /// The schema's text (one copy per type, shared by its channels).
+    pub schema: Arc<str>,
     /// The schema's encoding.
     pub schema_encoding: &'static str,
 }
@@ -145,6 +146,7 @@ impl Hub {
         Box::new(HubTap {
             hub: self.clone(),
             ids: HashMap::new(),
+            schemas: HashMap::new(),
             seq: 0,
         })
     }
@@ -173,10 +175,12 @@ impl Hub {
     }
 }
 
-/// The tap into a [`Hub`]: channel ids by topic, and the number of the next message.
+/// The tap into a [`Hub`]: channel ids by topic, schema texts by type, and the number of
+/// the last message.
 struct HubTap {
     hub: Arc<Hub>,
     ids: HashMap<String, Option<u32>>,
+    schemas: HashMap<MsgType, Arc<str>>,
     seq: u64,
 }
 
@@ -192,7 +196,9 @@ impl McapTap for HubTap {
                         topic: m.topic.to_string(),
                         encoding: MESSAGE_ENCODING,
                         schema_name: m.ty.name(),
-                        schema: m.ty.schema(),
+                        schema: (self.schemas.entry(m.ty))
+                            .or_insert_with(|| m.ty.schema().into())
+                            .clone(),
                         schema_encoding: SCHEMA_ENCODING,
                     });
                     channels.push(c.clone());

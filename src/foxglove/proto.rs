@@ -52,7 +52,7 @@ pub fn advertise<'a>(channels: impl IntoIterator<Item = &'a LiveChannel>) -> Str
                 "topic": c.topic,
                 "encoding": c.encoding,
                 "schemaName": c.schema_name,
-                "schema": c.schema,
+                "schema": &*c.schema,
                 "schemaEncoding": c.schema_encoding,
             })
         })
