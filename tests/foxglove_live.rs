@@ -177,7 +177,8 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
     let live = assert_served(&v);
 
     // The channels, each also in the MCAP file with the same schema.
-    let file = channels(&check(Path::new(&path("sim.mcap"))));
+    let in_file = check(Path::new(&path("sim.mcap")));
+    let file = channels(&in_file);
     for (topic, schema) in &live {
         assert_eq!(file.get(topic).map(|c| &c.0), Some(schema), "{topic}");
     }
@@ -207,6 +208,21 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
         topics,
         BTreeSet::from(["/llrp/s1_reader/reads".to_string()])
     );
+    // Each is a read of the file: the same EPC, RSSI and log time.
+    let key = |r: &serde_json::Value| {
+        let rssi = r["rssi_dbm"].as_f64().expect("an RSSI");
+        (r["epc"].to_string(), rssi.to_bits(), r["log_time"].as_u64())
+    };
+    let file_reads: BTreeSet<_> = (in_file["mcap_ros2"]["reads"].as_array().expect("reads"))
+        .iter()
+        .map(|r| {
+            let bits = r["rssi_dbm"].as_u64().expect("the RSSI's bits");
+            (r["epc"].to_string(), bits, r["log_time"].as_u64())
+        })
+        .collect();
+    for r in v["reads"].as_array().expect("reads") {
+        assert!(file_reads.contains(&key(r)), "{r} is in the MCAP file");
+    }
     // The poses and transforms, the still tags' positions sent once at the start (a new
     // subscriber gets a channel's latest message), the reader's events.
     for key in ["poses", "tf", "tags", "events"] {
