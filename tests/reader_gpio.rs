@@ -311,7 +311,7 @@ fn the_gpi_level_reads_back_in_get_reader_config() {
 #[test]
 fn gpi_triggers_on_ports_the_reader_lacks_are_refused() {
     let mut v = VirtualReader::new(&s1_with(GpioSpec {
-        gpis: 2,
+        gpis: Some(2),
         ..GpioSpec::default()
     }));
     let refused = |v: &mut VirtualReader, spec: RoSpec| {
@@ -358,8 +358,8 @@ fn gpi_triggers_on_ports_the_reader_lacks_are_refused() {
 #[test]
 fn the_capabilities_report_the_scenarios_port_counts() {
     let mut v = VirtualReader::new(&s1_with(GpioSpec {
-        gpis: 2,
-        gpos: 0,
+        gpis: Some(2),
+        gpos: Some(0),
         ..GpioSpec::default()
     }));
     let get = GetReaderCapabilities {

@@ -245,6 +245,10 @@ pub const IMPINJ_R700: Device = Device {
         impinj_entry(1004, AUTOSET, (20000, 25000)),
     ],
     default_mode: 1002,
+    // Two inputs, three outputs: Impinj, "Connecting GPIO Devices to Impinj R700 RAIN RFID
+    // Readers".
+    gpis: 2,
+    gpos: 3,
     ..IMPINJ_R420
 };
 
@@ -359,23 +363,27 @@ mod tests {
 
     #[test]
     fn the_scenario_knows_the_same_devices_with_their_ports() {
-        let here: Vec<(&str, usize)> = DEVICES
+        let here: Vec<(&str, usize, u16, u16)> = DEVICES
             .iter()
-            .map(|d| (d.name, usize::from(d.antenna_ports)))
+            .map(|d| (d.name, usize::from(d.antenna_ports), d.gpis, d.gpos))
             .collect();
         assert_eq!(here, crate::scenario::device::DEVICES.to_vec());
         assert_eq!(DEFAULT.name, crate::scenario::device::DEVICES[0].0);
     }
 
     #[test]
-    fn every_device_has_the_gpio_a_scenario_reader_gets_by_default() {
-        // A scenario reader that does not set `gpio.gpis` / `gpio.gpos` gets four of each,
-        // what every device here has; a device with other counts needs the scenario's
-        // default to come from it.
-        let default = crate::scenario::gpio::GpioSpec::default();
+    fn a_scenario_reader_without_gpio_counts_gets_its_devices() {
+        let none = crate::scenario::gpio::GpioSpec::default();
         for d in DEVICES {
-            assert_eq!((d.gpis, d.gpos), (default.gpis, default.gpos), "{}", d.name);
+            assert_eq!(none.ports(Some(d.name)), (d.gpis, d.gpos), "{}", d.name);
         }
+        assert_eq!(none.ports(None), (DEFAULT.gpis, DEFAULT.gpos));
+        assert_eq!(none.ports(Some("impinj-r700")), (2, 3));
+        let given = crate::scenario::gpio::GpioSpec {
+            gpis: Some(1),
+            ..none
+        };
+        assert_eq!(given.ports(Some("impinj-r700")), (1, 3));
     }
 
     #[test]

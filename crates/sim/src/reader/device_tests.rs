@@ -129,7 +129,7 @@ fn each_device_advertises_its_identity_and_tables() {
         (u16, i16),
         (u16, i16),
         Vec<u32>,
-        u16,
+        (u16, u16),
     );
     let rows: [Row; 3] = [
         (
@@ -140,7 +140,7 @@ fn each_device_advertises_its_identity_and_tables() {
             (1, 1000),
             (91, 3250),
             vec![0, 1, 2, 3, 1000],
-            4,
+            (4, 4),
         ),
         (
             "impinj-r700",
@@ -150,7 +150,7 @@ fn each_device_advertises_its_identity_and_tables() {
             (1, 1000),
             (93, 3300),
             vec![0, 1, 2, 3, 4, 5, 1002, 1003, 1004],
-            4,
+            (2, 3),
         ),
         (
             "zebra-fx9600",
@@ -160,7 +160,7 @@ fn each_device_advertises_its_identity_and_tables() {
             (0, 1000),
             (200, 3000),
             vec![23, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11],
-            4,
+            (4, 4),
         ),
     ];
     for (name, manufacturer, model, firmware, low, high, modes, gpio) in rows {
@@ -177,7 +177,8 @@ fn each_device_advertises_its_identity_and_tables() {
         );
         assert_eq!(
             (g.gpio_capabilities.num_gpis, g.gpio_capabilities.num_gpos),
-            (gpio, gpio)
+            gpio,
+            "{name}"
         );
         let band = c
             .regulatory_capabilities

@@ -139,8 +139,8 @@ impl ReaderProfile {
             aispec_setup_us: (r.aispec_setup_ms * 1000.0).round() as u64,
             // Validated finite and in [0, 1 s].
             round_gap_us: (r.round_gap_ms * 1000.0).round() as u64,
-            gpis: r.gpio.gpis,
-            gpos: r.gpio.gpos,
+            gpis: r.gpio.ports(r.device.as_deref()).0,
+            gpos: r.gpio.ports(r.device.as_deref()).1,
             gpi_schedule: gpio::GpiSchedule::from_spec(&r.gpio),
             faults: r.faults.clone(),
             persist_state: r.persist_state,

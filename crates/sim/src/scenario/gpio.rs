@@ -2,17 +2,17 @@
 //! and what its inputs do over simulated time (a list of level changes, and photo-eyes that
 //! pulse at a period, as an object on a conveyor breaks the beam).
 //!
-//! The port counts default to the Impinj Speedway Revolution R420's: four opto-isolated
-//! inputs and four outputs (Speedway Revolution Installation and Operations Guide, Octane
-//! 4.8, Appendix B "GPIO Details").
+//! The port counts default to the reader's device's ([`super::device::DEVICES`]): the default
+//! Impinj Speedway Revolution R420 has four opto-isolated inputs and four outputs (Speedway
+//! Revolution Installation and Operations Guide, Octane 4.8, Appendix B "GPIO Details").
 
 use serde::{Deserialize, Serialize};
 
 use super::validate::{invalid, Check};
 
-/// GPI ports of a reader unless the scenario says otherwise (the R420's four).
+/// GPI ports of the default device (the R420's four).
 pub const DEFAULT_GPIS: u16 = 4;
-/// GPO ports of a reader unless the scenario says otherwise (the R420's four).
+/// GPO ports of the default device (the R420's four).
 pub const DEFAULT_GPOS: u16 = 4;
 /// Most GPI or GPO ports a scenario reader may have.
 pub const MAX_PORTS: u16 = 64;
@@ -37,15 +37,15 @@ impl Level {
 }
 
 /// A reader's GPIO: port counts and what drives its inputs.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GpioSpec {
-    /// Number of GPI ports (0: none; GPIOCapabilities.NumGPIs).
-    #[serde(default = "default_gpis")]
-    pub gpis: u16,
-    /// Number of GPO ports (0: none; GPIOCapabilities.NumGPOs).
-    #[serde(default = "default_gpos")]
-    pub gpos: u16,
+    /// Number of GPI ports (0: none; GPIOCapabilities.NumGPIs); absent: the device's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpis: Option<u16>,
+    /// Number of GPO ports (0: none; GPIOCapabilities.NumGPOs); absent: the device's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpos: Option<u16>,
     /// Level changes of the inputs, in time order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub gpi_timeline: Vec<GpiChange>,
@@ -54,22 +54,13 @@ pub struct GpioSpec {
     pub photo_eyes: Vec<PhotoEye>,
 }
 
-impl Default for GpioSpec {
-    fn default() -> Self {
-        GpioSpec {
-            gpis: DEFAULT_GPIS,
-            gpos: DEFAULT_GPOS,
-            gpi_timeline: Vec::new(),
-            photo_eyes: Vec::new(),
-        }
+impl GpioSpec {
+    /// The (GPI, GPO) port counts of a reader presenting `device` (`None` or an unknown name:
+    /// the default device): the scenario's where it gives them, else the device's.
+    pub fn ports(&self, device: Option<&str>) -> (u16, u16) {
+        let (gpis, gpos) = super::device::gpio(device);
+        (self.gpis.unwrap_or(gpis), self.gpos.unwrap_or(gpos))
     }
-}
-
-fn default_gpis() -> u16 {
-    DEFAULT_GPIS
-}
-fn default_gpos() -> u16 {
-    DEFAULT_GPOS
 }
 
 /// One level change of a GPI line at a simulated time.
@@ -110,10 +101,11 @@ fn default_active() -> Level {
     Level::High
 }
 
-/// Checks a reader's GPIO (`p` is the reader's path): port counts, ports in range, times in
-/// order, pulses shorter than their period, and one source per port.
-pub(super) fn validate_gpio(p: &str, g: &GpioSpec) -> Check {
-    for (name, n) in [("gpis", g.gpis), ("gpos", g.gpos)] {
+/// Checks a reader's GPIO (`p` is the reader's path, `device` its device): port counts,
+/// ports in range, times in order, pulses shorter than their period, and one source per port.
+pub(super) fn validate_gpio(p: &str, g: &GpioSpec, device: Option<&str>) -> Check {
+    let (gpis, gpos) = g.ports(device);
+    for (name, n) in [("gpis", gpis), ("gpos", gpos)] {
         if n > MAX_PORTS {
             return Err(invalid(
                 format!("{p}.gpio.{name}"),
@@ -122,13 +114,10 @@ pub(super) fn validate_gpio(p: &str, g: &GpioSpec) -> Check {
         }
     }
     let port_ok = |path: String, port: u16| -> Check {
-        if port == 0 || port > g.gpis {
+        if port == 0 || port > gpis {
             return Err(invalid(
                 path,
-                format!(
-                    "must be a GPI port in [1, {}] (gpio.gpis), got {port}",
-                    g.gpis
-                ),
+                format!("must be a GPI port in [1, {gpis}] (gpio.gpis), got {port}"),
             ));
         }
         Ok(())

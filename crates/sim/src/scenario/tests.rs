@@ -493,9 +493,25 @@ fn hardware_fields_out_of_range_name_the_field() {
 }
 
 #[test]
-fn gpio_defaults_to_the_r420s_four_and_four_and_errors_name_the_field() {
+fn gpio_defaults_to_the_devices_ports_and_errors_name_the_field() {
     let s = Scenario::from_json(&base().to_string()).expect("base is valid");
-    assert_eq!((s.readers[0].gpio.gpis, s.readers[0].gpio.gpos), (4, 4));
+    assert_eq!(
+        s.readers[0].gpio.ports(s.readers[0].device.as_deref()),
+        (4, 4)
+    );
+    // An R700 has two inputs: a timeline on input 3 is refused, on input 2 accepted.
+    let mut r700 = base();
+    r700["readers"][0]["device"] = "impinj-r700".into();
+    r700["readers"][0]["gpio"] =
+        serde_json::json!({ "gpi_timeline": [ { "t_ms": 1, "port": 3, "state": "high" } ] });
+    assert!(error_of(&r700)
+        .starts_with("readers[0].gpio.gpi_timeline[0].port: must be a GPI port in [1, 2]"));
+    r700["readers"][0]["gpio"]["gpi_timeline"][0]["port"] = 2.into();
+    let s = Scenario::from_json(&r700.to_string()).expect("input 2 of an R700");
+    assert_eq!(
+        s.readers[0].gpio.ports(s.readers[0].device.as_deref()),
+        (2, 3)
+    );
     let mut v = base();
     v["readers"][0]["gpio"] = serde_json::json!({
         "gpis": 2,

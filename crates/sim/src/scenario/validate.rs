@@ -269,7 +269,7 @@ fn validate_reader(s: &Scenario, p: &str, r: &ReaderSpec) -> Check {
         validate_antenna(s, &format!("{p}.antennas[{a}]"), antenna, channels)?;
     }
     super::device::validate(p, r)?;
-    super::gpio::validate_gpio(p, &r.gpio)?;
+    super::gpio::validate_gpio(p, &r.gpio, r.device.as_deref())?;
     super::faults::validate_faults(p, &r.faults, r.antennas.len())
 }
 
