@@ -77,6 +77,7 @@ fn drop_connection(http: SocketAddr) {
 }
 
 #[test]
+#[ignore = "needs the sllurp venv; run by ./scripts/test"]
 fn sllurp_reconnects_by_itself_after_the_reader_drops_it_and_reads_again() {
     let (mut sim, http) = Proc::sim(&[]);
     let llrp = sim.address("listening on ");
