@@ -467,6 +467,26 @@ fn a_truncating_filter_reports_the_epc_bits_after_the_mask_in_epcdata() {
 }
 
 #[test]
+fn exactly_96_truncated_bits_are_reported_as_epc_96() {
+    // A 128-bit EPC truncated after its first 32 bits leaves 96 (LLRP 1.1 §17.2.7.3: EPC-96
+    // for a 96-bit EPC).
+    let mut s = crowd(1);
+    s.tags[0].epc = "E2000000DEADBEEF0000000000000001".into();
+    let mut v = VirtualReader::new(&s);
+    let filter = command(vec![truncating(unaware(
+        epc_prefix(&[0xE2, 0, 0, 0], 32),
+        Some(0),
+    ))]);
+    let tags = v.run_rospec(spec_with_pc(filter), 5_000_000, |t| !t.is_empty());
+    assert!(!tags.is_empty());
+    let want = [0xDE, 0xAD, 0xBE, 0xEF, 0, 0, 0, 0, 0, 0, 0, 1];
+    for t in &tags {
+        assert_eq!(t.epc, Epc::Epc96(Epc96(want)), "{:?}", t.epc);
+        assert!(t.air_protocol_tag_data.is_empty());
+    }
+}
+
+#[test]
 fn truncated_replies_are_shorter_so_the_same_time_gives_more_reads() {
     let s = crowd(6);
     let prefix = || unaware(epc_prefix(&[0xE2, 0x00], 16), Some(0));

@@ -308,11 +308,18 @@ impl ReportBuffer {
 pub fn build(o: &Observation, c: &Content) -> TagReportData {
     let s = &c.selector;
     let epc = match o.truncated {
-        // The bits the tag sent, in EPCData with their length (never EPC-96).
-        Some(skip) => Epc::EpcData(EpcData {
-            epc: super::select::truncated_epc(&o.epc, skip),
-            ..Default::default()
-        }),
+        // The bits the tag sent: EPCData with their length, EPC-96 if exactly 96 remain
+        // (LLRP 1.1 §17.2.7.3: EPC-96 for a 96-bit EPC, EPCData for any other).
+        Some(skip) => {
+            let bits = super::select::truncated_epc(&o.epc, skip);
+            match <[u8; 12]>::try_from(bits.bytes.as_slice()) {
+                Ok(b) if bits.bits == 96 => Epc::Epc96(Epc96(b)),
+                _ => Epc::EpcData(EpcData {
+                    epc: bits,
+                    ..Default::default()
+                }),
+            }
+        }
         None => epc_parameter(&o.epc),
     };
     let mut t = TagReportData {

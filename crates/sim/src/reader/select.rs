@@ -18,7 +18,8 @@
 //! memory is not kept either (ours). The masks compare the tag's memory as it is now
 //! ([`TagMemory`]), so an EPC written earlier filters as written.
 //!
-//! Truncation (C1G2Filter T = 2) sets the Select's Truncate bit. Gen2 lets an interrogator
+//! Truncation (C1G2Filter T = 2) sets the Select's Truncate bit; LLRP 1.1 §16.2.1.2.1.1 has
+//! it "set only in the last filter-spec" and names no error. Gen2 lets an interrogator
 //! assert it only in the last Select before the Query, only on the EPC bank, only with target
 //! SL and only with a mask that ends in the EPC (§6.3.2.12.1.1); a filter that breaks one of
 //! those is refused (A_Invalid on T), as the reader cannot send it. A tag that takes part and
