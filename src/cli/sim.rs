@@ -151,6 +151,9 @@ pub fn run(
         let running = sim::start(&scenario, &opts)
             .await
             .map_err(SimCommandError::Start)?;
+        if let Some(live) = consumers.live() {
+            running.estimates_to_mcap(&live.shared);
+        }
         gpio.attach(&running.names, &running.gpio);
         faults.attach(&running.names, &running.faults);
         let tls = if opts.tls.is_some() { " (TLS)" } else { "" };

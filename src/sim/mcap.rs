@@ -1,11 +1,17 @@
 //! `sim --mcap FILE`: the simulated readers' sessions (each reader's recorder hands its
 //! entries on, as `proxy --mcap` does), their antennas' poses and the ground truth (from the
-//! truth writer, [`super::truth`]) in one MCAP file of ROS 2 messages (docs/robotics.md).
+//! truth writer, [`super::truth`]) and the live localizer's estimates in one MCAP file of
+//! ROS 2 messages (docs/robotics.md).
 //! The file is written on the MCAP writer's thread; a failed write is logged there and ends
 //! the file, not the simulation.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
 use super::{record_path, SimError, SimOptions, Start};
-use crate::record::mcap::{McapError, McapThread};
+use crate::localize::shared::Shared;
+use crate::record::mcap::estimates::EstimateItem;
+use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::ReaderSpec;
 
@@ -63,5 +69,32 @@ impl Start<'_> {
             None => return Ok((None, None)),
         };
         Ok((Some(r), Some(task)))
+    }
+}
+
+impl super::RunningSim {
+    /// Hands every estimate `shared` publishes from now on to the `--mcap` file (none
+    /// without `--mcap`), logged at the simulation's clock. The localizer's thread offers
+    /// them without waiting: an estimate with no room in the queue is dropped, with a warning.
+    pub fn estimates_to_mcap(&self, shared: &Shared) {
+        let Some(mcap) = &self.mcap else {
+            return;
+        };
+        let sender = mcap.sender();
+        let (clock, utc0) = (self.clock.clone(), self.utc0);
+        let dropped = AtomicU64::new(0);
+        shared.on_publish(move |tag| {
+            let item = EstimateItem {
+                logged_us: utc0.saturating_add(clock.now_us()),
+                tag: Arc::clone(tag),
+            };
+            if !sender.try_send(McapItem::Estimate(item))
+                && dropped.fetch_add(1, Ordering::Relaxed) == 0
+            {
+                tracing::warn!(
+                    "the MCAP writer is behind (or finished): estimates are dropped while it is"
+                );
+            }
+        });
     }
 }

@@ -172,6 +172,9 @@ pub struct RunningSim {
     own: Vec<JoinHandle<()>>,
     /// Writes the tags' memory back to its file (`--tag-memory`).
     saver: Option<Arc<tag_memory::Saver>>,
+    /// The simulation's clock and its UTC time 0 (µs), which stamp what is logged.
+    clock: Arc<Clock>,
+    utc0: u64,
 }
 
 impl RunningSim {
@@ -302,6 +305,8 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         mcap,
         own: Vec::new(),
         saver: saver.clone(),
+        clock: s.clock.clone(),
+        utc0: s.utc0,
     };
     if let Some(saver) = &saver {
         running.own.push(saver.spawn(s.shutdown.clone()));

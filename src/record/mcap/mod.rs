@@ -15,6 +15,7 @@
 
 pub mod cdr;
 pub mod cdr_read;
+pub mod estimates;
 mod export;
 pub mod geo;
 pub mod msgs;

@@ -29,6 +29,8 @@ pub enum MsgType {
     TfMessage,
     /// `llrp_gateway_msgs/msg/TagPosition`.
     TagPosition,
+    /// `llrp_gateway_msgs/msg/TagEstimate`.
+    TagEstimate,
 }
 
 const TIME: (&str, &str) = ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n");
@@ -54,7 +56,7 @@ uint32 line
 
 impl MsgType {
     /// Every type, in the order the schemas are written.
-    pub const ALL: [MsgType; 7] = [
+    pub const ALL: [MsgType; 8] = [
         MsgType::LlrpFrame,
         MsgType::TagRead,
         MsgType::ReaderEvent,
@@ -62,6 +64,7 @@ impl MsgType {
         MsgType::PoseInFrame,
         MsgType::TfMessage,
         MsgType::TagPosition,
+        MsgType::TagEstimate,
     ];
 
     /// The ROS 2 type name (the MCAP schema's name).
@@ -74,6 +77,7 @@ impl MsgType {
             MsgType::PoseInFrame => "foxglove_msgs/msg/PoseInFrame",
             MsgType::TfMessage => "tf2_msgs/msg/TFMessage",
             MsgType::TagPosition => "llrp_gateway_msgs/msg/TagPosition",
+            MsgType::TagEstimate => "llrp_gateway_msgs/msg/TagEstimate",
         }
     }
 
@@ -93,6 +97,9 @@ impl MsgType {
             MsgType::TagPosition => {
                 include_str!("../../../ros2/llrp_gateway_msgs/msg/TagPosition.msg")
             }
+            MsgType::TagEstimate => {
+                include_str!("../../../ros2/llrp_gateway_msgs/msg/TagEstimate.msg")
+            }
         }
     }
 
@@ -111,6 +118,7 @@ impl MsgType {
                 geo::QUATERNION,
             ],
             MsgType::TagPosition => &[HEADER, TIME, geo::POINT],
+            MsgType::TagEstimate => &[HEADER, TIME, geo::POINT],
         }
     }
 

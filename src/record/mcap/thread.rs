@@ -48,6 +48,8 @@ pub enum McapItem {
     },
     /// What a simulation knows of a reader at one instant: poses and ground truth.
     Truth(super::geo::Truth),
+    /// One estimate the live localizer published.
+    Estimate(super::estimates::EstimateItem),
     /// Ends the file, whoever else still holds a sender ([`McapThread::finish`] sends it).
     Close,
 }
@@ -204,6 +206,7 @@ fn write_item<W: Write>(mcap: &mut McapOut<W>, item: McapItem) -> Result<(), Mca
             }
         }
         McapItem::Truth(t) => mcap.truth(&t)?,
+        McapItem::Estimate(e) => mcap.estimate(&e)?,
         McapItem::Close => {}
     }
     Ok(())
