@@ -11,18 +11,39 @@ use std::sync::Arc;
 use super::{record_path, SimError, SimOptions, Start};
 use crate::localize::shared::Shared;
 use crate::record::mcap::estimates::EstimateItem;
+use crate::record::mcap::scene::SceneWorld;
 use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
-use crate::scenario::ReaderSpec;
+use crate::scenario::{ReaderSpec, Scenario};
 
-/// Creates the `--mcap` file (an existing one is refused unless `--force`) and starts its
-/// writer; none without `--mcap`.
-pub(super) fn open(opts: &SimOptions) -> Result<Option<McapThread>, SimError> {
-    match &opts.mcap {
-        Some(path) => McapThread::create(path, opts.force)
-            .map(Some)
-            .map_err(SimError::Mcap),
-        None => Ok(None),
+/// Creates the `--mcap` file (an existing one is refused unless `--force`), starts its
+/// writer and hands it the scene's world (`scenario`'s bounds, reflectors and antenna
+/// beamwidths); none without `--mcap`.
+pub(super) fn open(opts: &SimOptions, scenario: &Scenario) -> Result<Option<McapThread>, SimError> {
+    let Some(path) = &opts.mcap else {
+        return Ok(None);
+    };
+    let mcap = McapThread::create(path, opts.force).map_err(SimError::Mcap)?;
+    // The queue is new and empty: there is room.
+    mcap.sender()
+        .try_send(McapItem::SceneWorld(scene_world(scenario)));
+    Ok(Some(mcap))
+}
+
+/// What the scene shows of `scenario`'s world that does not move.
+fn scene_world(scenario: &Scenario) -> SceneWorld {
+    let beamwidths = (scenario.readers.iter())
+        .flat_map(|r| {
+            (r.antennas.iter().zip(1u16..))
+                .map(|(a, port)| (r.name.to_string(), port, a.beamwidth_deg))
+        })
+        .collect();
+    SceneWorld {
+        bounds: Some((scenario.world.min, scenario.world.max)),
+        reflectors: (scenario.reflectors.iter())
+            .map(|r| (r.name.clone(), r.point, r.normal))
+            .collect(),
+        beamwidths,
     }
 }
 

@@ -257,7 +257,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         ))),
         None => None,
     };
-    let mcap = mcap::open(opts)?;
+    let mcap = mcap::open(opts, scenario)?;
     let truth = (out.is_some() || mcap.is_some()).then(|| {
         Arc::new(Truth::new(
             out,

@@ -65,6 +65,7 @@ impl<W: Write> McapOut<W> {
             0 => log_ns,
             us => us.saturating_mul(1000),
         };
+        self.scene.estimate(&item.tag);
         let bytes = tag_estimate(&mut self.cdr, &item.tag);
         self.write(TOPIC, MsgType::TagEstimate, log_ns, publish_ns, &bytes)
     }

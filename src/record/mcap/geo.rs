@@ -59,6 +59,13 @@ pub fn orientation(pose: &AntennaPose) -> [f64; 4] {
     [-sy * sp, cy * sp, sy * cp, cy * cp]
 }
 
+/// The unit vector of an antenna's boresight (its frame's +x) in the world frame.
+pub fn boresight(pose: &AntennaPose) -> [f64; 3] {
+    let (sy, cy) = pose.yaw_rad.sin_cos();
+    let (sp, cp) = pose.pitch_rad.sin_cos();
+    [cy * cp, sy * cp, sp]
+}
+
 /// Appends a `geometry_msgs/Point` (or `Vector3`) and a `Quaternion`.
 fn pose_fields(cdr: &mut Cdr, pose: &AntennaPose) {
     for v in pose.position.iter().chain(orientation(pose).iter()) {
@@ -82,7 +89,8 @@ pub struct Truth {
 impl<W: Write> McapOut<W> {
     /// One instant of a simulated reader: each antenna's reported pose on
     /// `/llrp/READER/antenna_N/pose` and as a transform from `map` to `READER/antenna_N` on
-    /// `/tf`; its true pose on `/truth/READER/antenna_N/pose`; the tags on `/truth/tags`.
+    /// `/tf`; its true pose on `/truth/READER/antenna_N/pose`; the tags on `/truth/tags`;
+    /// and, when one is due, the scene ([`super::scene`]).
     pub fn truth(&mut self, t: &Truth) -> Result<(), McapError> {
         let token = self.token(&t.reader);
         let ns = t.utc_us.saturating_mul(1000);
@@ -113,7 +121,7 @@ impl<W: Write> McapOut<W> {
             let bytes = self.cdr.finish();
             self.write("/truth/tags", MsgType::TagPosition, ns, ns, &bytes)?;
         }
-        Ok(())
+        self.scene_truth(&token, t)
     }
 }
 

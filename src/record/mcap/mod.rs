@@ -22,6 +22,8 @@ pub mod msgs;
 pub mod read;
 pub mod recording_in;
 pub mod ros_in;
+pub mod scene;
+pub mod scene_msgs;
 mod thread;
 mod writer;
 

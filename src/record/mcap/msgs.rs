@@ -8,7 +8,7 @@
 //! the foxglove_msgs package of foxglove/schemas), which Foxglove's Log panel shows.
 
 use super::cdr::Cdr;
-use super::geo;
+use super::{geo, scene_msgs};
 use crate::reads::Read;
 use crate::record::Direction;
 
@@ -31,6 +31,8 @@ pub enum MsgType {
     TagPosition,
     /// `llrp_gateway_msgs/msg/TagEstimate`.
     TagEstimate,
+    /// `foxglove_msgs/msg/SceneUpdate`.
+    SceneUpdate,
 }
 
 const TIME: (&str, &str) = ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n");
@@ -56,7 +58,7 @@ uint32 line
 
 impl MsgType {
     /// Every type, in the order the schemas are written.
-    pub const ALL: [MsgType; 8] = [
+    pub const ALL: [MsgType; 9] = [
         MsgType::LlrpFrame,
         MsgType::TagRead,
         MsgType::ReaderEvent,
@@ -65,6 +67,7 @@ impl MsgType {
         MsgType::TfMessage,
         MsgType::TagPosition,
         MsgType::TagEstimate,
+        MsgType::SceneUpdate,
     ];
 
     /// The ROS 2 type name (the MCAP schema's name).
@@ -78,6 +81,7 @@ impl MsgType {
             MsgType::TfMessage => "tf2_msgs/msg/TFMessage",
             MsgType::TagPosition => "llrp_gateway_msgs/msg/TagPosition",
             MsgType::TagEstimate => "llrp_gateway_msgs/msg/TagEstimate",
+            MsgType::SceneUpdate => "foxglove_msgs/msg/SceneUpdate",
         }
     }
 
@@ -100,6 +104,7 @@ impl MsgType {
             MsgType::TagEstimate => {
                 include_str!("../../../ros2/llrp_gateway_msgs/msg/TagEstimate.msg")
             }
+            MsgType::SceneUpdate => scene_msgs::SCENE_UPDATE,
         }
     }
 
@@ -119,6 +124,26 @@ impl MsgType {
             ],
             MsgType::TagPosition => &[HEADER, TIME, geo::POINT],
             MsgType::TagEstimate => &[HEADER, TIME, geo::POINT],
+            MsgType::SceneUpdate => &[
+                scene_msgs::SCENE_ENTITY_DELETION,
+                TIME,
+                scene_msgs::SCENE_ENTITY,
+                scene_msgs::DURATION,
+                scene_msgs::KEY_VALUE_PAIR,
+                scene_msgs::ARROW,
+                geo::POSE,
+                geo::POINT,
+                geo::QUATERNION,
+                scene_msgs::COLOR,
+                scene_msgs::CUBE,
+                geo::VECTOR3,
+                scene_msgs::SPHERE,
+                scene_msgs::CYLINDER,
+                scene_msgs::LINE,
+                scene_msgs::TRIANGLES,
+                scene_msgs::TEXT,
+                scene_msgs::MODEL,
+            ],
         }
     }
 

@@ -50,6 +50,8 @@ pub enum McapItem {
     Truth(super::geo::Truth),
     /// One estimate the live localizer published.
     Estimate(super::estimates::EstimateItem),
+    /// What the scene shows of the world that does not move.
+    SceneWorld(super::scene::SceneWorld),
     /// Ends the file, whoever else still holds a sender ([`McapThread::finish`] sends it).
     Close,
 }
@@ -207,6 +209,7 @@ fn write_item<W: Write>(mcap: &mut McapOut<W>, item: McapItem) -> Result<(), Mca
         }
         McapItem::Truth(t) => mcap.truth(&t)?,
         McapItem::Estimate(e) => mcap.estimate(&e)?,
+        McapItem::SceneWorld(w) => mcap.scene_world(&w),
         McapItem::Close => {}
     }
     Ok(())

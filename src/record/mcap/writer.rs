@@ -42,6 +42,8 @@ pub struct McapOut<W: Write> {
     /// One read decoder per reader and connection (each learns its connection's hop table).
     decoders: HashMap<(String, u32), ReadDecoder>,
     pub(super) cdr: Cdr,
+    /// What the `/scene` topic shows.
+    pub(super) scene: super::scene::Scene,
     reads: Vec<Read>,
     summary: Summary,
 }
@@ -62,6 +64,7 @@ impl<W: Write> McapOut<W> {
             tokens: HashMap::new(),
             decoders: HashMap::new(),
             cdr: Cdr::new(),
+            scene: Default::default(),
             reads: Vec::new(),
             summary: Summary::default(),
         })
