@@ -21,7 +21,11 @@ where DECODED is {"reads": [...], "frames": {topic: hex of the data concatenated
 "frame_count": {topic: n}, "events": [...], "logs": [...], "count": n, "poses": [...],
 "tf": [...], "tags": [...]} (poses: PoseInFrame with topic, frame_id, stamp_ns and x, y, z,
 qx, qy, qz, qw; tf: every transform of every TFMessage, parent, child, stamp_ns and the same
-fields; tags: TagPosition's epc, frame_id, stamp_ns, x, y, z). A read is the reads
+fields; tags: TagPosition's epc, frame_id, stamp_ns, x, y, z; estimates: TagEstimate's
+fields, position [x, y, z] and covariance with null for NaN; scenes: each SceneUpdate's
+log_time, deleted ids and entities: id, frame_id, stamp_ns, metadata, arrows (position,
+orientation, shaft_length), cubes, spheres and cylinders (position, orientation, size, color),
+lines (type, points), texts). A read is the reads
 file's fields (epc, reader, antenna, t_us from the header stamp, last_seen_us, phase_rad,
 rssi_dbm, channel_index, channel_frequency_hz, doppler_hz; null for the message set's NaN
 and 0 "none" values; the float64 fields as their IEEE 754 bits, an integer, so that no
@@ -46,6 +50,8 @@ LOG = "foxglove_msgs/msg/Log"
 POSE = "foxglove_msgs/msg/PoseInFrame"
 TF = "tf2_msgs/msg/TFMessage"
 TAG = "llrp_gateway_msgs/msg/TagPosition"
+ESTIMATE = "llrp_gateway_msgs/msg/TagEstimate"
+SCENE = "foxglove_msgs/msg/SceneUpdate"
 
 
 def pose_of(p):
@@ -67,6 +73,46 @@ def bits(v):
     if math.isnan(v):
         return None
     return struct.unpack("<Q", struct.pack("<d", v))[0]
+
+
+def num(v):
+    """A float, None for NaN (JSON has no NaN)."""
+    return None if math.isnan(v) else v
+
+
+def point(p):
+    return [num(p.x), num(p.y), num(p.z)]
+
+
+def quat(q):
+    return [q.x, q.y, q.z, q.w]
+
+
+def solid(s):
+    return {"position": point(s.pose.position), "orientation": quat(s.pose.orientation),
+            "size": point(s.size), "color": [s.color.r, s.color.g, s.color.b, s.color.a]}
+
+
+def estimate_of(m, log_time):
+    return {"epc": m.epc, "estimator": m.estimator, "state": m.state,
+            "frame_id": m.header.frame_id, "stamp_ns": ns(m.header.stamp),
+            "log_time": log_time, "position": point(m.position),
+            "covariance": [num(v) for v in m.covariance], "samples": m.samples,
+            "reads": m.reads, "pose_sigma_m": num(m.pose_sigma_m), "reason": m.reason}
+
+
+def entity_of(e):
+    return {"id": e.id, "frame_id": e.frame_id, "stamp_ns": ns(e.timestamp),
+            "metadata": {kv.key: kv.value for kv in e.metadata},
+            "arrows": [{"position": point(a.pose.position),
+                        "orientation": quat(a.pose.orientation),
+                        "shaft_length": a.shaft_length} for a in e.arrows],
+            "cubes": [solid(c) for c in e.cubes],
+            "spheres": [solid(c) for c in e.spheres],
+            "cylinders": [solid(c) for c in e.cylinders],
+            "lines": [{"type": ln.type, "points": [point(p) for p in ln.points]}
+                      for ln in e.lines],
+            "texts": [t.text for t in e.texts]}
 
 
 def read_of(m, topic, log_time, publish_time):
@@ -94,6 +140,7 @@ class Decoded:
         self.reads, self.frames, self.frame_count = [], {}, {}
         self.events, self.logs, self.count = [], [], 0
         self.poses, self.tf, self.tags = [], [], []
+        self.estimates, self.scenes = [], []
 
     def add(self, schema, topic, m, log_time, publish_time):
         self.count += 1
@@ -123,6 +170,12 @@ class Decoded:
             self.tags.append({"epc": m.epc, "frame_id": m.header.frame_id,
                               "stamp_ns": ns(m.header.stamp), "x": m.position.x,
                               "y": m.position.y, "z": m.position.z})
+        elif schema == ESTIMATE:
+            self.estimates.append(estimate_of(m, log_time))
+        elif schema == SCENE:
+            self.scenes.append({"log_time": log_time,
+                                "deletions": [d.id for d in m.deletions],
+                                "entities": [entity_of(e) for e in m.entities]})
         elif schema == LOG:
             self.logs.append({"name": m.name, "level": m.level, "message": m.message,
                               "stamp_ns": ns(m.timestamp), "log_time": log_time})
@@ -130,7 +183,8 @@ class Decoded:
     def json(self):
         return {"reads": self.reads, "frames": self.frames, "frame_count": self.frame_count,
                 "events": self.events, "logs": self.logs, "count": self.count,
-                "poses": self.poses, "tf": self.tf, "tags": self.tags}
+                "poses": self.poses, "tf": self.tf, "tags": self.tags,
+                "estimates": self.estimates, "scenes": self.scenes}
 
 
 def with_mcap(path):

@@ -1,0 +1,287 @@
+//! `sim --mcap FILE` with the live localizer (docs/robotics.md): its estimates on
+//! `/estimates/tags` (`llrp_gateway_msgs/msg/TagEstimate`) and its scene on `/scene`
+//! (`foxglove_msgs/msg/SceneUpdate`), read by the independent readers of
+//! `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`) and compared with the simulator's
+//! ground truth file.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde_json::Value;
+
+mod mcap_support;
+use mcap_support::*;
+
+/// The 95 % quantile of χ² with 3 degrees of freedom.
+const CHI2_95_3DOF: f64 = 7.814_727_903_251_178;
+
+/// Tags whose estimate must be this sure (σ along the worse axis, m) before the run stops.
+const SURE_M: f64 = 0.1;
+
+/// `sim` at ten times real time with its localizer and HTTP API on free loopback ports,
+/// writing `mcap` and the truth file `truth`; it and its HTTP address.
+fn sim(mcap: &Path, truth: &Path) -> (Proc, String) {
+    let mut child = bin()
+        .args(["sim", "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0"])
+        .args(["--speed", "10", "--mcap"])
+        .arg(mcap)
+        .arg("--truth")
+        .arg(truth)
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("it starts");
+    let mut lines = BufReader::new(child.stderr.take().expect("piped")).lines();
+    let until = Instant::now() + GUARD;
+    let (mut http, mut reader) = (None, false);
+    while http.is_none() || !reader {
+        assert!(Instant::now() < until, "sim did not listen");
+        let line = lines.next().expect("a line").expect("utf-8");
+        if let Some(rest) = line.split("live map on http://").nth(1) {
+            http = Some(rest.trim_end_matches('/').to_string());
+        }
+        reader |= line.contains("listening on");
+    }
+    std::thread::spawn(move || for _ in lines {});
+    (Proc(child), http.expect("an HTTP address"))
+}
+
+/// `GET path` of the HTTP API at `addr`: the JSON body.
+fn get(addr: &str, path: &str) -> Value {
+    let mut s = TcpStream::connect(addr).expect("connects");
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .expect("request");
+    let mut text = String::new();
+    s.read_to_string(&mut text).expect("response");
+    let body = text.split("\r\n\r\n").nth(1).expect("a body");
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
+}
+
+/// σ along the worse axis of a 3×3 covariance (JSON numbers or nulls), m.
+fn worse_sigma(c: &Value) -> Option<f64> {
+    let c: Vec<f64> = c
+        .as_array()?
+        .iter()
+        .map(Value::as_f64)
+        .collect::<Option<_>>()?;
+    Some(c[0].max(c[4]).max(c[8]).sqrt())
+}
+
+/// Waits (a hang guard, not a measurement) until the localizer is sure of three tags.
+fn wait_for_sure_estimates(http: &str) {
+    let until = Instant::now() + 3 * GUARD;
+    loop {
+        let tags = get(http, "/api/tags");
+        let sure = (tags["tags"].as_array().expect("tags").iter())
+            .filter(|t| worse_sigma(&t["covariance"]).is_some_and(|s| s <= SURE_M))
+            .count();
+        if sure >= 3 {
+            return;
+        }
+        assert!(Instant::now() < until, "the localizer is not sure: {tags}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("a number: {v}"))
+}
+
+fn vec3(v: &Value) -> [f64; 3] {
+    [f(&v[0]), f(&v[1]), f(&v[2])]
+}
+
+fn covariance(v: &Value) -> Option<Matrix3<f64>> {
+    let c: Vec<f64> = v
+        .as_array()?
+        .iter()
+        .map(Value::as_f64)
+        .collect::<Option<_>>()?;
+    Some(Matrix3::from_row_slice(&c))
+}
+
+/// The unit vector `axis` (0: x, ...) of the frame rotated by `q` (x, y, z, w).
+fn axis_of(q: &Value, axis: usize) -> Vector3<f64> {
+    let [x, y, z, w] = [f(&q[0]), f(&q[1]), f(&q[2]), f(&q[3])];
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+    q * Vector3::ith(axis, 1.0)
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_simulation_s_scene_and_estimates_decode_and_the_sure_estimates_lie_near_the_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (mcap, truth) = (dir.path().join("sim.mcap"), dir.path().join("truth.jsonl"));
+    let (mut sim, http) = sim(&mcap, &truth);
+    wait_for_sure_estimates(&http);
+    terminate(&mut sim);
+    let v = check(&mcap);
+    let truth: Vec<Value> = std::fs::read_to_string(&truth)
+        .expect("the truth file")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a truth line"))
+        .collect();
+
+    let ch = channels(&v);
+    assert_eq!(ch["/scene"].0, "foxglove_msgs/msg/SceneUpdate");
+    assert_eq!(ch["/estimates/tags"].0, "llrp_gateway_msgs/msg/TagEstimate");
+    for decoder in ["mcap_ros2", "rosbags"] {
+        assert_eq!(v[decoder]["scenes"], v["mcap_ros2"]["scenes"], "{decoder}");
+        assert_eq!(
+            v[decoder]["estimates"], v["mcap_ros2"]["estimates"],
+            "{decoder}"
+        );
+    }
+    let estimates = v["mcap_ros2"]["estimates"].as_array().expect("estimates");
+    assert_estimates(estimates, &truth[0]);
+    let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
+    assert_scenes(scenes, &truth, estimates);
+}
+
+/// Every estimate is in `map`, with a position exactly when its state has one and a
+/// symmetric positive semi-definite covariance; the newest of each tag the localizer is sure
+/// of lies within 30 cm of the truth (`first`, the truth file's first line), for three tags
+/// at least.
+fn assert_estimates(estimates: &[Value], first: &Value) {
+    assert!(!estimates.is_empty());
+    let mut newest = BTreeMap::new();
+    for e in estimates {
+        assert_eq!(e["frame_id"], "map", "{e}");
+        let has_position = e["position"][0].is_number();
+        assert_eq!(has_position, e["state"] != 2, "{e}");
+        if let Some(c) = covariance(&e["covariance"]) {
+            let scale = c.abs().max().max(1e-12);
+            assert!((c - c.transpose()).abs().max() <= 1e-9 * scale, "{e}");
+            let min = c.symmetric_eigen().eigenvalues.min();
+            assert!(min >= -1e-9 * scale, "eigenvalue {min}: {e}");
+        } else {
+            assert!(!has_position, "a position without covariance: {e}");
+        }
+        newest.insert(e["epc"].as_str().expect("epc").to_string(), e);
+    }
+    let truth: BTreeMap<String, [f64; 3]> = (first["tags"].as_array().expect("tags").iter())
+        .map(|t| {
+            (
+                t["epc"].as_str().expect("epc").to_uppercase(),
+                vec3(&t["position"]),
+            )
+        })
+        .collect();
+    let mut sure = 0;
+    for (epc, e) in newest {
+        if !worse_sigma(&e["covariance"]).is_some_and(|s| s <= SURE_M) {
+            continue;
+        }
+        let (p, t) = (vec3(&e["position"]), truth[&epc]);
+        let off = (p[0] - t[0]).hypot(p[1] - t[1]);
+        assert!(off < 0.3, "{epc}: {off} m from the truth: {e}");
+        sure += 1;
+    }
+    assert!(sure >= 3, "tags the localizer is sure of: {sure}");
+}
+
+/// Every scene holds the world's bounds, each tag's truth and each antenna under ids that
+/// stay the same, 500 ms of simulated time apart at least; the last one's tags and antennas
+/// are the truth file's at its instant, and its estimates an estimate of the file each, with
+/// the 95 % ellipsoid of its covariance.
+fn assert_scenes(scenes: &[Value], truth: &[Value], estimates: &[Value]) {
+    assert!(scenes.len() >= 2, "scenes: {}", scenes.len());
+    let first = &truth[0];
+    let mut want: BTreeSet<String> = (first["tags"].as_array().expect("tags").iter())
+        .map(|t| {
+            format!(
+                "truth/tag/{}",
+                t["epc"].as_str().expect("epc").to_uppercase()
+            )
+        })
+        .collect();
+    for a in first["antennas"].as_array().expect("antennas") {
+        want.insert(format!("antenna/s1_reader/antenna_{}", a["antenna"]));
+    }
+    want.insert("world/bounds".into());
+    let stamp = |s: &Value| s["entities"][0]["stamp_ns"].as_u64().expect("a stamp");
+    for pair in scenes.windows(2) {
+        assert!(stamp(&pair[1]) >= stamp(&pair[0]) + 500_000_000);
+    }
+    for s in scenes {
+        let ids: Vec<&str> = (s["entities"].as_array().expect("entities").iter())
+            .map(|e| e["id"].as_str().expect("an id"))
+            .collect();
+        let unique: BTreeSet<String> = ids.iter().map(|s| s.to_string()).collect();
+        assert_eq!(unique.len(), ids.len(), "ids repeat: {ids:?}");
+        assert!(unique.is_superset(&want), "{ids:?}");
+    }
+    let last = scenes.last().expect("a scene");
+    let line = (truth.iter())
+        .find(|l| l["utc_us"].as_u64().map(|u| u * 1000) == Some(stamp(last)))
+        .expect("the truth at the last scene's instant");
+    let by_id: BTreeMap<&str, &Value> = (last["entities"].as_array().expect("entities").iter())
+        .map(|e| (e["id"].as_str().expect("an id"), e))
+        .collect();
+    for t in first["tags"].as_array().expect("tags") {
+        let id = format!(
+            "truth/tag/{}",
+            t["epc"].as_str().expect("epc").to_uppercase()
+        );
+        assert_eq!(
+            vec3(&by_id[id.as_str()]["cubes"][0]["position"]),
+            vec3(&t["position"])
+        );
+    }
+    for a in line["antennas"].as_array().expect("antennas") {
+        let arrow =
+            &by_id[format!("antenna/s1_reader/antenna_{}", a["antenna"]).as_str()]["arrows"][0];
+        assert_eq!(vec3(&arrow["position"]), vec3(&a["pose"]["position"]));
+        let (yaw, pitch) = (f(&a["pose"]["yaw_rad"]), f(&a["pose"]["pitch_rad"]));
+        let want = Vector3::new(
+            yaw.cos() * pitch.cos(),
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+        );
+        assert!((axis_of(&arrow["orientation"], 0) - want).norm() < 1e-9);
+    }
+    let mut drawn = 0;
+    for (id, e) in by_id.iter().filter(|(id, _)| id.starts_with("estimate/")) {
+        let epc = &id["estimate/".len()..];
+        let center = &e["spheres"][0]["position"];
+        let m = (estimates.iter())
+            .filter(|m| m["epc"] == epc && m["position"] == *center)
+            .next_back()
+            .unwrap_or_else(|| panic!("{id}: no estimate at {center}"));
+        assert_ellipsoid(
+            &e["spheres"][1],
+            &covariance(&m["covariance"]).expect("one"),
+        );
+        drawn += 1;
+    }
+    assert!(drawn >= 3, "estimates drawn: {drawn}");
+}
+
+/// `sphere`'s axes (its orientation's x, y, z) have the half-sizes `sqrt(χ² uᵀ Σ u)` of
+/// covariance `c` (a flat axis drawn 1 cm), and are `c`'s principal axes (uᵢᵀ Σ uⱼ = 0).
+fn assert_ellipsoid(sphere: &Value, c: &Matrix3<f64>) {
+    let scale = c.abs().max();
+    for i in 0..3 {
+        let u = axis_of(&sphere["orientation"], i);
+        let half = (CHI2_95_3DOF * (u.transpose() * c * u)[(0, 0)])
+            .max(0.0)
+            .sqrt();
+        let size = f(&sphere["size"][i]);
+        assert!(
+            (size - (2.0 * half).max(0.01)).abs() < 1e-6,
+            "axis {i}: size {size}, 2 × {half}"
+        );
+        for j in 0..i {
+            let w = axis_of(&sphere["orientation"], j);
+            assert!((u.transpose() * c * w)[(0, 0)].abs() < 1e-9 * scale.max(1e-12));
+        }
+    }
+}
