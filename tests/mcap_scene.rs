@@ -253,8 +253,7 @@ fn assert_scenes(scenes: &[Value], truth: &[Value], estimates: &[Value]) {
         let epc = &id["estimate/".len()..];
         let center = &e["spheres"][0]["position"];
         let m = (estimates.iter())
-            .filter(|m| m["epc"] == epc && m["position"] == *center)
-            .next_back()
+            .rfind(|m| m["epc"] == epc && m["position"] == *center)
             .unwrap_or_else(|| panic!("{id}: no estimate at {center}"));
         assert_ellipsoid(
             &e["spheres"][1],

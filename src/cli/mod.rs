@@ -78,8 +78,9 @@ pub enum Command {
         /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
         #[arg(long)]
         truth: Option<PathBuf>,
-        /// Write every reader's sessions (frames, tag reads, events), its antennas' poses and
-        /// the ground truth to this MCAP file (ROS 2 messages; docs/robotics.md).
+        /// Write every reader's sessions (frames, tag reads, events), its antennas' poses, the
+        /// ground truth, the live localizer's estimates and the 3D scene to this MCAP file
+        /// (ROS 2 messages; docs/robotics.md).
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
         /// Replace an existing truth or MCAP file (without it, an existing file is refused).

@@ -6,11 +6,11 @@
 //! the file, not the simulation.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
 
 use super::{record_path, SimError, SimOptions, Start};
-use crate::localize::shared::Shared;
-use crate::record::mcap::estimates::EstimateItem;
+use crate::localize::estimate::State;
+use crate::localize::shared::{reason, Shared, TagView};
+use crate::record::mcap::estimates::{EstimateItem, EstimateState};
 use crate::record::mcap::scene::SceneWorld;
 use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
@@ -105,10 +105,7 @@ impl super::RunningSim {
         let (clock, utc0) = (self.clock.clone(), self.utc0);
         let dropped = AtomicU64::new(0);
         shared.on_publish(move |tag| {
-            let item = EstimateItem {
-                logged_us: utc0.saturating_add(clock.now_us()),
-                tag: Arc::clone(tag),
-            };
+            let item = estimate_item(utc0.saturating_add(clock.now_us()), tag);
             if !sender.try_send(McapItem::Estimate(item))
                 && dropped.fetch_add(1, Ordering::Relaxed) == 0
             {
@@ -117,5 +114,29 @@ impl super::RunningSim {
                 );
             }
         });
+    }
+}
+
+/// The MCAP file's estimate of `tag`, published at `logged_us`.
+fn estimate_item(logged_us: u64, tag: &TagView) -> EstimateItem {
+    let e = &tag.estimate;
+    EstimateItem {
+        logged_us,
+        epc: e.epc.to_uppercase(),
+        estimator: e.estimator.to_string(),
+        state: match e.state {
+            State::Converging => EstimateState::Converging,
+            State::Converged => EstimateState::Converged,
+            State::InsufficientGeometry => EstimateState::InsufficientGeometry,
+        },
+        position: e.estimate,
+        covariance: e.covariance,
+        pose_sigma_m: e.pose_sigma_m,
+        samples: u32::try_from(e.samples).unwrap_or(u32::MAX),
+        newest_phase_us: e.last_update_us,
+        reads: tag.reads,
+        reads_per_s: tag.reads_per_s,
+        last_seen_us: tag.last_seen_us,
+        reason: reason(e).unwrap_or_default(),
     }
 }

@@ -7,18 +7,16 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
-use std::sync::Arc;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
+use super::estimates::{EstimateItem, EstimateState};
 use super::geo::{orientation, Truth, WORLD};
 use super::msgs::MsgType;
 use super::scene_msgs::{
     scene_update, Arrow, Color, Cylinder, Entity, Line, LineType, Pose, Solid, Text,
 };
 use super::{McapError, McapOut};
-use crate::localize::estimate::State;
-use crate::localize::shared::TagView;
 use llrp_gateway_vocab::pose::Pose as AntennaPose;
 
 /// The topic of the scene.
@@ -92,6 +90,9 @@ pub fn ellipsoid(covariance: &[f64; 9]) -> Option<Ellipsoid> {
     })
 }
 
+/// An antenna's newest true pose and the positions it has been at.
+type Tracked = (AntennaPose, Vec<[f64; 3]>);
+
 /// What the scene shows, as the file's items come.
 #[derive(Debug, Default)]
 pub(super) struct Scene {
@@ -99,20 +100,19 @@ pub(super) struct Scene {
     /// When the next update is due (UTC µs); none before the first instant.
     next_us: Option<u64>,
     /// Each antenna's true pose and path, by reader token and port.
-    antennas: BTreeMap<(String, u16), (AntennaPose, Vec<[f64; 3]>)>,
+    antennas: BTreeMap<(String, u16), Tracked>,
     /// Each tag's true position, by EPC (upper-case).
     tags: BTreeMap<String, [f64; 3]>,
     /// Each tag's newest estimate, by EPC.
-    estimates: BTreeMap<String, Arc<TagView>>,
+    estimates: BTreeMap<String, EstimateItem>,
     /// The estimates drawn in the last update (to be deleted once they have no position).
     drawn: BTreeSet<String>,
 }
 
 impl Scene {
-    /// Takes tag `tag`'s new estimate.
-    pub(super) fn estimate(&mut self, tag: &Arc<TagView>) {
-        let epc = tag.estimate.epc.to_uppercase();
-        self.estimates.insert(epc, Arc::clone(tag));
+    /// Takes a tag's new estimate.
+    pub(super) fn estimate(&mut self, e: &EstimateItem) {
+        self.estimates.insert(e.epc.to_uppercase(), e.clone());
     }
 }
 
@@ -278,13 +278,12 @@ impl Scene {
     /// converged, orange while converging; the ids of those drawn before that now have none.
     fn estimate_entities(&mut self, out: &mut Vec<Entity>) -> Vec<String> {
         let mut drawn = BTreeSet::new();
-        for (epc, tag) in &self.estimates {
-            let e = &tag.estimate;
-            let Some(p) = e.estimate else {
+        for (epc, e) in &self.estimates {
+            let Some(p) = e.position else {
                 continue;
             };
             let color = match e.state {
-                State::Converged => CONVERGED,
+                EstimateState::Converged => CONVERGED,
                 _ => CONVERGING,
             };
             let id = format!("estimate/{epc}");
@@ -303,17 +302,12 @@ impl Scene {
                     color: [color[0], color[1], color[2], 0.25],
                 });
             }
-            let state = match e.state {
-                State::Converged => "converged",
-                State::Converging => "converging",
-                State::InsufficientGeometry => "insufficient_geometry",
-            };
             out.push(Entity {
                 id: id.clone(),
                 metadata: vec![
                     ("epc".into(), epc.clone()),
-                    ("estimator".into(), e.estimator.into()),
-                    ("state".into(), state.into()),
+                    ("estimator".into(), e.estimator.clone()),
+                    ("state".into(), e.state.name().into()),
                     ("samples".into(), e.samples.to_string()),
                 ],
                 spheres,
