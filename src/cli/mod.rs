@@ -31,6 +31,7 @@ pub mod inventory;
 pub mod live;
 pub mod localize;
 pub mod localize_bag;
+pub mod localize_mcap;
 pub mod options;
 pub mod proxy;
 pub mod replay;

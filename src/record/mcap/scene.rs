@@ -365,12 +365,17 @@ impl<W: Write> McapOut<W> {
             return Ok(());
         }
         self.scene.next_us = Some(t.utc_us.saturating_add(SCENE_INTERVAL_US));
+        self.scene_at(t.utc_us)
+    }
+
+    /// Writes the scene as it stands, stamped `utc_us` (UTC µs).
+    pub fn scene_at(&mut self, utc_us: u64) -> Result<(), McapError> {
         let mut entities = Vec::new();
         self.scene.world_entities(&mut entities);
         self.scene.antenna_entities(&mut entities);
         self.scene.tag_entities(&mut entities);
         let gone = self.scene.estimate_entities(&mut entities);
-        let ns = t.utc_us.saturating_mul(1000);
+        let ns = utc_us.saturating_mul(1000);
         let bytes = scene_update(&mut self.cdr, ns, WORLD, &gone, &entities);
         self.write(TOPIC, MsgType::SceneUpdate, ns, ns, &bytes)
     }
