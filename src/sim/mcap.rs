@@ -96,7 +96,8 @@ impl Start<'_> {
 impl super::RunningSim {
     /// Hands every estimate `shared` publishes from now on to the `--mcap` file (none
     /// without `--mcap`), logged at the simulation's clock. The localizer's thread offers
-    /// them without waiting: an estimate with no room in the queue is dropped, with a warning.
+    /// them without waiting: an estimate with no room in the queue is dropped, with a warning
+    /// (those published once the file is finished, silently).
     pub fn estimates_to_mcap(&self, shared: &Shared) {
         let Some(mcap) = &self.mcap else {
             return;
@@ -107,11 +108,10 @@ impl super::RunningSim {
         shared.on_publish(move |tag| {
             let item = estimate_item(utc0.saturating_add(clock.now_us()), tag);
             if !sender.try_send(McapItem::Estimate(item))
+                && !sender.is_closed()
                 && dropped.fetch_add(1, Ordering::Relaxed) == 0
             {
-                tracing::warn!(
-                    "the MCAP writer is behind (or finished): estimates are dropped while it is"
-                );
+                tracing::warn!("the MCAP writer is behind: estimates are dropped while it is");
             }
         });
     }

@@ -134,6 +134,17 @@ fn z_onto(normal: [f64; 3]) -> [f64; 4] {
     [q.i, q.j, q.k, q.w]
 }
 
+/// `c` projected onto the plane through `point` of normal `normal` (`point` for a zero
+/// normal, which a scenario refuses).
+fn on_plane(c: [f64; 3], point: [f64; 3], normal: [f64; 3]) -> [f64; 3] {
+    let n = Vector3::from(normal);
+    let Some(n) = n.try_normalize(0.0) else {
+        return point;
+    };
+    let c = Vector3::from(c);
+    (c - n * (c - Vector3::from(point)).dot(&n)).into()
+}
+
 /// The 12 edges of the box `lo`..`hi` as a line list.
 fn box_edges(lo: [f64; 3], hi: [f64; 3]) -> Vec<[f64; 3]> {
     let corner = |i: usize| {
@@ -183,18 +194,26 @@ impl Scene {
             (0..3).map(|i| hi[i] - lo[i]).fold(1.0, f64::max)
         });
         for (i, (name, point, normal)) in self.world.reflectors.iter().enumerate() {
+            let centre = match self.world.bounds {
+                Some((lo, hi)) => on_plane(
+                    std::array::from_fn(|k| (lo[k] + hi[k]) / 2.0),
+                    *point,
+                    *normal,
+                ),
+                None => *point,
+            };
             out.push(Entity {
                 id: format!("world/reflector/{i}"),
                 metadata: vec![("name".into(), name.clone())],
                 cubes: vec![Solid {
                     pose: Pose {
-                        position: *point,
+                        position: centre,
                         orientation: z_onto(*normal),
                     },
                     size: [side, side, 0.005],
                     color: REFLECTOR,
                 }],
-                texts: vec![label(*point, name, REFLECTOR)],
+                texts: vec![label(centre, name, REFLECTOR)],
                 ..Entity::default()
             });
         }
