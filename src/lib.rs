@@ -7,6 +7,7 @@ pub mod decode;
 pub mod eval;
 pub mod files;
 pub mod fleet;
+pub mod foxglove;
 pub mod gateway;
 pub mod http;
 pub mod inventory;

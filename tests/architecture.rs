@@ -24,6 +24,7 @@ const APPLICATION: &[&str] = &[
     "http",
     "fleet",
     "record",
+    "foxglove",
     "gateway",
     "inventory",
     "cli",
@@ -46,6 +47,7 @@ const ASYNC: &[&str] = &[
     "hyper",
     "hyper_util",
     "rumqttc",
+    "tokio_tungstenite",
 ];
 
 const LAYERS: &[Layer] = &[
@@ -80,6 +82,7 @@ const LAYERS: &[Layer] = &[
                 "net",
                 "http",
                 "fleet",
+                "foxglove",
                 "gateway",
                 "inventory",
                 "cli",
@@ -92,6 +95,7 @@ const LAYERS: &[Layer] = &[
             "hyper",
             "hyper_util",
             "rumqttc",
+            "tokio_tungstenite",
             "llrp_gateway_sim",
             "llrp_gateway_localize",
             "clap",

@@ -56,10 +56,9 @@ async fn capabilities_follow_the_scenario() {
         panic!("unexpected {r:?}")
     };
     let g = caps.general_device_capabilities.expect("general");
-    assert_eq!(
-        usize::from(g.max_number_of_antenna_supported),
-        scenario.readers[0].antennas.len()
-    );
+    // The default device's ports (a Speedway R420's four), whatever the scenario connects.
+    assert!(scenario.readers[0].antennas.len() <= 4);
+    assert_eq!(g.max_number_of_antenna_supported, 4);
     assert_eq!(g.device_manufacturer_name, 25882);
     let reg = caps.regulatory_capabilities.expect("regulatory");
     let band = reg.uhf_band_capabilities.expect("band");

@@ -3,7 +3,8 @@
 //! more often than without a filter; masks on the EPC, TID and user banks against the tags'
 //! memory as written; the state-unaware and state-aware actions; two filters in order; the
 //! reader configuration's filters; the filters echoed by GET_ROSPECS and GET_READER_CONFIG;
-//! and the status each kind of bad filter gets.
+//! truncation (T = 2): the EPC bits after the mask in EPCData, shorter replies; and the
+//! status each kind of bad filter gets.
 
 mod common;
 
@@ -64,6 +65,11 @@ fn aware(m: C1g2TagInventoryMask, target: u8, action: u8) -> C1g2Filter {
         }),
         ..Default::default()
     }
+}
+
+/// `f` truncating (C1G2Filter T = 2).
+fn truncating(f: C1g2Filter) -> C1g2Filter {
+    C1g2Filter { t: 2, ..f }
 }
 
 fn command(filters: Vec<C1g2Filter>) -> C1g2InventoryCommand {
@@ -216,7 +222,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
     assert_eq!(keys(run(&mut v, spec(500, Some(and)))), [5]);
     let or = command(vec![unaware(bit(0), Some(0)), unaware(bit(2), Some(1))]);
     assert_eq!(keys(run(&mut v, spec(500, Some(or)))), [1, 3, 4, 5]);
-    // State-aware on SL (target 4), Query Sel = SL from the singulation action.
+    // State-aware on SL (LLRP target 0), Query Sel = SL from the singulation action.
     let singulation = |s: bool, i: bool| C1g2SingulationControl {
         session: 2,
         state_aware_singulation_action: Some(C1g2TagInventoryStateAwareSingulationAction {
@@ -229,7 +235,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
     let sl = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
         c1g2_singulation_control: Some(singulation(false, false)),
-        ..command(vec![aware(last_is(2), 4, 0)])
+        ..command(vec![aware(last_is(2), 0, 0)])
     };
     assert_eq!(keys(run(&mut v, spec(500, Some(sl.clone())))), [2]);
     // Sel = not SL: the others.
@@ -238,7 +244,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
         ..sl
     };
     assert_eq!(keys(run(&mut v, spec(500, Some(not_sl)))), [1, 3, 4, 5]);
-    // On session 2's inventoried flag: the matching tag to B, the others to A (action 4), a
+    // On session 2's inventoried flag (LLRP target 3): the matching tag to B, the others to A (action 4), a
     // single-target Query for A in session 2 (Impinj search mode 1).
     let flag = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
@@ -249,7 +255,7 @@ fn state_unaware_and_state_aware_actions_decide_who_answers() {
                 ..Default::default()
             },
         )],
-        ..command(vec![aware(last_is(4), 2, 4)])
+        ..command(vec![aware(last_is(4), 3, 4)])
     };
     // Sel = SL would take none (no tag's SL is asserted): Sel = All instead.
     let flag_all = C1g2InventoryCommand {
@@ -331,11 +337,14 @@ fn bad_filters_get_the_status_a_reader_gives_and_change_nothing() {
             command(vec![good.clone(); 3]),
             (331, P_OverflowParameter, None),
         ),
+        // Truncation off the EPC bank, and on a filter other than the last (Gen2: only the
+        // last Select before the Query, only on the EPC bank).
         (
-            command(vec![C1g2Filter {
-                t: 2,
-                ..good.clone()
-            }]),
+            command(vec![truncating(unaware(mask(2, 0, &[0xE2]), Some(0)))]),
+            (331, P_FieldError, Some((0, A_Invalid))),
+        ),
+        (
+            command(vec![truncating(good.clone()), good.clone()]),
             (331, P_FieldError, Some((0, A_Invalid))),
         ),
         (
@@ -387,4 +396,92 @@ fn bad_filters_get_the_status_a_reader_gives_and_change_nothing() {
     // A pointer past every tag's memory is accepted; no tag matches it.
     let far = command(vec![unaware(mask(3, u16::MAX, &[0xFF]), Some(0))]);
     assert!(run(&mut v, spec(500, Some(far))).is_empty());
+}
+
+/// ROSpec 1 on antenna 1 for half a second with `cmd`, reporting every field and the PC word.
+fn spec_with_pc(cmd: C1g2InventoryCommand) -> RoSpec {
+    let mut report = full_report(RoReportTriggerType::UponNTagsOrEndOfRoSpec, 0);
+    report
+        .tag_report_content_selector
+        .air_protocol_epc_memory_selector = vec![C1g2EpcMemorySelector {
+        enable_crc: true,
+        enable_pc_bits: true,
+        ..Default::default()
+    }];
+    rospec(1, vec![1], ro_duration(500), ai_null(), report)
+        .with_antenna_configuration(on_all_antennas(cmd))
+}
+
+/// The EPC bank's first `bits` bits of EPC (from 20h) equal those of `bytes`.
+fn epc_prefix(bytes: &[u8], bits: u16) -> C1g2TagInventoryMask {
+    C1g2TagInventoryMask {
+        tag_mask: BitVec {
+            bits,
+            bytes: bytes.to_vec(),
+        },
+        ..mask(1, 0x20, &[])
+    }
+}
+
+#[test]
+fn a_truncating_filter_reports_the_epc_bits_after_the_mask_in_epcdata() {
+    let s = crowd(4);
+    let mut v = VirtualReader::new(&s);
+    // The EPCs are E200 0000 … 00kk: a 20-bit mask E2000 on them, truncating.
+    let filter = command(vec![truncating(unaware(
+        epc_prefix(&[0xE2, 0x00, 0x00], 20),
+        Some(0),
+    ))]);
+    let tags = v.run_rospec(spec_with_pc(filter), 5_000_000, |t| !t.is_empty());
+    let mut lasts = Vec::new();
+    for t in &tags {
+        let Epc::EpcData(d) = &t.epc else {
+            panic!("a truncated EPC is sent in EPCData: {:?}", t.epc)
+        };
+        // 96 - 20 bits: 0 0000 0000 0000 0000 00kk, packed from the first byte.
+        assert_eq!(d.epc.bits, 76, "{d:?}");
+        assert_eq!(d.epc.bytes.len(), 10);
+        assert!(d.epc.bytes[..8].iter().all(|&b| b == 0), "{d:?}");
+        lasts.push(d.epc.bytes[8] << 4 | d.epc.bytes[9] >> 4);
+        // A truncated reply has no PC word (nor CRC) to report, though the selector asks.
+        assert!(
+            t.air_protocol_tag_data.is_empty(),
+            "{:?}",
+            t.air_protocol_tag_data
+        );
+    }
+    lasts.sort();
+    lasts.dedup();
+    assert_eq!(lasts, [1, 2, 3, 4]);
+    // The same filter without truncation reports the EPC-96 and its PC.
+    let plain = command(vec![unaware(epc_prefix(&[0xE2, 0x00, 0x00], 20), Some(0))]);
+    let tags = v.run_rospec(spec_with_pc(plain), 5_000_000, |t| !t.is_empty());
+    assert!(!tags.is_empty());
+    for t in &tags {
+        assert!(matches!(t.epc, Epc::Epc96(_)), "{:?}", t.epc);
+        assert!(t
+            .air_protocol_tag_data
+            .iter()
+            .any(|p| matches!(p, AirProtocolTagData::C1g2Pc(_))));
+    }
+}
+
+#[test]
+fn truncated_replies_are_shorter_so_the_same_time_gives_more_reads() {
+    let s = crowd(6);
+    let prefix = || unaware(epc_prefix(&[0xE2, 0x00], 16), Some(0));
+    let full = run(
+        &mut VirtualReader::new(&s),
+        spec(2000, Some(command(vec![prefix()]))),
+    );
+    let short = run(
+        &mut VirtualReader::new(&s),
+        spec(2000, Some(command(vec![truncating(prefix())]))),
+    );
+    let (n_full, n_short): (u32, u32) = (full.values().sum(), short.values().sum());
+    assert_eq!(full.len(), 6, "{full:?}");
+    assert_eq!(short.len(), 6, "{short:?}");
+    // 80 of 96 EPC bits and no PC (5 + 80 + 16 bits instead of 128): a shorter successful
+    // slot, so more of them in two seconds.
+    assert!(n_short > n_full, "{n_short} truncated vs {n_full} in full");
 }

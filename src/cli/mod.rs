@@ -84,6 +84,10 @@ pub enum Command {
         /// (ROS 2 messages; docs/robotics.md).
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
+        /// Serve the same messages live to Foxglove on this address (its WebSocket protocol,
+        /// e.g. 127.0.0.1:8765; docs/robotics.md "Live in Foxglove").
+        #[arg(long, value_name = "ADDR")]
+        foxglove: Option<String>,
         /// Replace an existing truth or MCAP file (without it, an existing file is refused).
         #[arg(long)]
         force: bool,
@@ -196,6 +200,7 @@ pub fn main() -> ExitCode {
             speed,
             truth,
             mcap,
+            foxglove,
             force,
             tag_memory,
             record,
@@ -226,6 +231,7 @@ pub fn main() -> ExitCode {
                     speed,
                     truth,
                     mcap,
+                    foxglove,
                     force,
                     record,
                     record_options: crate::record::RecordOptions {

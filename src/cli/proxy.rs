@@ -12,6 +12,7 @@ use tokio::task::JoinHandle;
 
 use super::live::{start_sinks, LiveArgs, SinksError};
 use super::root::Consumers;
+use crate::foxglove::LiveServer;
 use crate::gateway::{live, log_stats, ConfigError, GatewayConfig, ProxyEntry, Region};
 use crate::net::proxy::{Proxy, ProxyConfig};
 use crate::net::tls::{self, TlsError};
@@ -39,6 +40,10 @@ pub struct ProxyArgs {
     /// (ROS 2 messages; docs/robotics.md). An existing file is refused.
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
+    /// Serve the same messages live to Foxglove on this address (its WebSocket protocol;
+    /// docs/robotics.md "Live in Foxglove").
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<String>,
     /// Start a numbered next recording file once a file would pass this many bytes.
     #[arg(long, value_name = "BYTES", value_parser = crate::cli::options::parser::<u64>("record-max-bytes"))]
     pub record_max_bytes: Option<u64>,
@@ -145,6 +150,9 @@ pub enum ProxyCommandError {
     /// The MCAP file cannot be created.
     #[error("cannot write the MCAP file: {0}")]
     Mcap(McapError),
+    /// The Foxglove live view could not listen.
+    #[error("{0}")]
+    Live(#[from] crate::foxglove::LiveError),
     /// At the stop, recordings were not written whole (each failure, `; ` between them).
     #[error("{}", joined(.0))]
     Recordings(Vec<RecordingFailure>),
@@ -213,8 +221,9 @@ fn entries(args: &ProxyArgs) -> Result<Vec<ProxyEntry>, ProxyCommandError> {
 struct Running {
     tasks: Vec<JoinHandle<std::io::Result<()>>>,
     writers: Vec<RecorderTask>,
-    /// The `--mcap` file's writer, which every recorder hands its entries to.
-    mcap: Option<(PathBuf, McapThread)>,
+    /// The `--mcap` file's (or `--foxglove` live view's) writer, which every recorder hands
+    /// its entries to, and the file's path.
+    mcap: Option<(Option<PathBuf>, McapThread)>,
 }
 
 /// Starts the localizer and publisher and every proxy, and runs them until a stop signal.
@@ -223,10 +232,14 @@ async fn serve(args: ProxyArgs, entries: Vec<ProxyEntry>) -> Result<(), ProxyCom
     let sinks = start_sinks(&args.live, "proxy").await?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let mut running = Running::default();
-    if let Some(path) = &args.mcap {
-        let mcap = McapThread::create(path, false).map_err(ProxyCommandError::Mcap)?;
-        running.mcap = Some((path.clone(), mcap));
-    }
+    let live = match &args.foxglove {
+        Some(addr) => Some(LiveServer::bind(addr).await?),
+        None => None,
+    };
+    let tap = live.as_ref().map(LiveServer::tap);
+    let mcap =
+        McapThread::open(args.mcap.as_deref(), false, tap).map_err(ProxyCommandError::Mcap)?;
+    running.mcap = mcap.map(|m| (args.mcap.clone(), m));
     for e in entries {
         start(&args, e, &sinks, &stop_rx, &mut running).await?;
     }
@@ -234,6 +247,9 @@ async fn serve(args: ProxyArgs, entries: Vec<ProxyEntry>) -> Result<(), ProxyCom
     eprintln!("llrp-gateway proxy: stopping: closing every session");
     let _ = stop_tx.send(true);
     let failures = running.finish().await;
+    if let Some(live) = live {
+        live.shutdown().await;
+    }
     sinks.stop().await;
     eprintln!("llrp-gateway proxy: stopped");
     if failures.is_empty() {
@@ -368,12 +384,13 @@ impl Running {
         if let Some((path, mcap)) = self.mcap {
             let end = deadline + Duration::from_secs(2);
             let finished = tokio::time::timeout_at(end, mcap.finish_async()).await;
-            match finished.unwrap_or(Err(McapError::ThreadGone)) {
-                Ok(s) => eprintln!(
+            match (finished.unwrap_or(Err(McapError::ThreadGone)), path) {
+                (Ok(s), Some(path)) => eprintln!(
                     "llrp-gateway proxy: {} frames, {} tag reads, {} reader events: {} messages on {} channels in {}",
                     s.frames, s.reads, s.events, s.messages, s.channels, path.display()
                 ),
-                Err(e) => failures.push(RecordingFailure::Mcap(e)),
+                (Ok(_), None) => {}
+                (Err(e), _) => failures.push(RecordingFailure::Mcap(e)),
             }
         }
         failures

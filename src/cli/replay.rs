@@ -8,6 +8,7 @@ use std::sync::Arc;
 use tokio::sync::watch;
 
 use super::live::{start_sinks, LiveArgs, SinksError};
+use crate::foxglove::LiveServer;
 use crate::net::clock::Speed;
 use crate::net::tls::{Acceptor, ServerFiles, TlsError};
 use crate::record::mcap::{McapError, McapThread};
@@ -50,6 +51,10 @@ pub struct ReplayArgs {
     /// events (ROS 2 messages; docs/robotics.md). An existing file is refused.
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
+    /// Serve the same messages live to Foxglove on this address (its WebSocket protocol;
+    /// docs/robotics.md "Live in Foxglove").
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<String>,
     /// The live localizer and its HTTP API (`--http ADDR`), fed with what is replayed.
     #[command(flatten)]
     pub live: LiveArgs,
@@ -94,6 +99,9 @@ pub enum ReplayCommandError {
     /// The localizer, its API or the publisher could not be started.
     #[error("{0}")]
     Sinks(#[from] SinksError),
+    /// The Foxglove live view could not listen.
+    #[error("{0}")]
+    Live(#[from] crate::foxglove::LiveError),
     /// The MCAP file cannot be written (or was not written whole).
     #[error("{}: {source}", path.display())]
     McapOut {
@@ -118,25 +126,32 @@ pub fn run(args: ReplayArgs) -> Result<(), ReplayCommandError> {
             source,
         })?;
     let tls = acceptor(&args)?;
-    let mcap =
-        match &args.mcap {
-            Some(path) => Some(McapThread::create(path, false).map_err(|source| {
-                ReplayCommandError::McapOut {
-                    path: path.clone(),
-                    source,
-                }
-            })?),
-            None => None,
-        };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .map_err(ReplayCommandError::Runtime)?;
-    runtime.block_on(serve(&args, &recording, Arc::new(script), tls, mcap))
+    runtime.block_on(async {
+        let live = match &args.foxglove {
+            Some(addr) => Some(LiveServer::bind(addr).await?),
+            None => None,
+        };
+        let tap = live.as_ref().map(LiveServer::tap);
+        let mcap = McapThread::open(args.mcap.as_deref(), false, tap).map_err(|source| {
+            ReplayCommandError::McapOut {
+                path: args.mcap.clone().unwrap_or_default(),
+                source,
+            }
+        })?;
+        let served = serve(&args, &recording, Arc::new(script), tls, mcap).await;
+        if let Some(live) = live {
+            live.shutdown().await;
+        }
+        served
+    })
 }
 
 /// A recorder that hands the replayed sessions to `mcap` (nothing kept otherwise), named as
-/// `export` names the recording's reader; none without `--mcap`.
+/// `export` names the recording's reader; none without `--mcap` or `--foxglove`.
 fn mcap_recorder(
     recording: &Recording,
     mcap: Option<&McapThread>,
@@ -153,22 +168,26 @@ fn mcap_recorder(
     Recorder::start(Discard, Header::new(upstream.clone(), 0), options).map(Some)
 }
 
-/// Finishes the MCAP file once its recorder has handed on everything; what it holds, said.
+/// Finishes the MCAP output once its recorder has handed on everything; what the file
+/// holds, said.
 async fn finish_mcap(
     args: &ReplayArgs,
     mcap: Option<(McapThread, RecorderTask)>,
 ) -> Result<(), ReplayCommandError> {
-    let (Some(path), Some((mcap, task))) = (&args.mcap, mcap) else {
+    let Some((mcap, task)) = mcap else {
         return Ok(());
     };
     let error = |source| ReplayCommandError::McapOut {
-        path: path.clone(),
+        path: args.mcap.clone().unwrap_or_default(),
         source,
     };
     if let Ok(Err(e)) = task.await {
         tracing::warn!(error = %e, "the replay's recorder failed");
     }
     let s = mcap.finish_async().await.map_err(error)?;
+    let Some(path) = &args.mcap else {
+        return Ok(());
+    };
     eprintln!(
         "llrp-gateway replay: {} frames, {} tag reads, {} reader events: {} messages on {} channels in {}",
         s.frames, s.reads, s.events, s.messages, s.channels, path.display()

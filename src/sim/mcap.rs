@@ -1,4 +1,4 @@
-//! `sim --mcap FILE`: the simulated readers' sessions (each reader's recorder hands its
+//! `sim --mcap FILE` (and `--foxglove ADDR`, the same messages live): the simulated readers' sessions (each reader's recorder hands its
 //! entries on, as `proxy --mcap` does), their antennas' poses and the ground truth (from the
 //! truth writer, [`super::truth`]) and the live localizer's estimates in one MCAP file of
 //! ROS 2 messages (docs/robotics.md).
@@ -8,6 +8,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::{record_path, SimError, SimOptions, Start};
+use crate::foxglove::LiveServer;
 use crate::localize::estimate::State;
 use crate::localize::shared::{reason, Shared, TagView};
 use crate::record::mcap::estimates::{EstimateItem, EstimateState};
@@ -16,18 +17,22 @@ use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
 use crate::scenario::{ReaderSpec, Scenario};
 
-/// Creates the `--mcap` file (an existing one is refused unless `--force`), starts its
-/// writer and hands it the scene's world (`scenario`'s bounds, reflectors and antenna
-/// beamwidths); none without `--mcap`.
-pub(super) fn open(opts: &SimOptions, scenario: &Scenario) -> Result<Option<McapThread>, SimError> {
-    let Some(path) = &opts.mcap else {
-        return Ok(None);
-    };
-    let mcap = McapThread::create(path, opts.force).map_err(SimError::Mcap)?;
-    // The queue is new and empty: there is room.
-    mcap.sender()
-        .try_send(McapItem::SceneWorld(scene_world(scenario)));
-    Ok(Some(mcap))
+/// Creates the `--mcap` file (an existing one is refused unless `--force`) and starts its
+/// writer, which also feeds the `--foxglove` live view `live`, and hands it the scene's world
+/// (`scenario`'s bounds, reflectors and antenna beamwidths); none without either.
+pub(super) fn open(
+    opts: &SimOptions,
+    scenario: &Scenario,
+    live: Option<&LiveServer>,
+) -> Result<Option<McapThread>, SimError> {
+    let mcap = McapThread::open(opts.mcap.as_deref(), opts.force, live.map(LiveServer::tap))
+        .map_err(SimError::Mcap)?;
+    if let Some(mcap) = &mcap {
+        // The queue is new and empty: there is room.
+        mcap.sender()
+            .try_send(McapItem::SceneWorld(scene_world(scenario)));
+    }
+    Ok(mcap)
 }
 
 /// What the scene shows of `scenario`'s world that does not move.
@@ -57,7 +62,7 @@ pub(super) async fn finish(mcap: McapThread) {
             events = s.events,
             messages = s.messages,
             channels = s.channels,
-            "the MCAP file is finished"
+            "the MCAP output is finished"
         ),
         Err(e) => tracing::error!(error = %e, "the MCAP file was not finished"),
     }

@@ -57,6 +57,9 @@ pub struct SimOptions {
     /// Where to write the readers' sessions, poses and ground truth as MCAP
     /// (docs/robotics.md), if anywhere.
     pub mcap: Option<PathBuf>,
+    /// Serve what the MCAP file would hold, live, to Foxglove clients on this address
+    /// (`--foxglove`; with or without `mcap`).
+    pub foxglove: Option<String>,
     /// Replace an existing truth file (`--force`); without it an existing one is refused.
     pub force: bool,
     /// Record every reader's sessions (one file per reader when there are several:
@@ -100,6 +103,7 @@ impl Default for SimOptions {
             speed: Speed::Factor(1.0),
             truth: None,
             mcap: None,
+            foxglove: None,
             force: false,
             record: None,
             record_options: RecordOptions::default(),
@@ -147,6 +151,9 @@ pub enum SimError {
     /// The MCAP file could not be created.
     #[error("cannot write the MCAP file: {0}")]
     Mcap(crate::record::mcap::McapError),
+    /// The Foxglove live view could not listen.
+    #[error("{0}")]
+    Live(#[from] crate::foxglove::LiveError),
     /// The tag memory file could not be read.
     #[error("{0}")]
     TagMemory(#[from] tag_memory::TagMemoryError),
@@ -169,6 +176,8 @@ pub struct RunningSim {
     recordings: Vec<RecorderTask>,
     /// The `--mcap` file's writer, finished last.
     mcap: Option<crate::record::mcap::McapThread>,
+    /// The Foxglove live view (`--foxglove`), stopped after the MCAP output.
+    live: Option<crate::foxglove::LiveServer>,
     own: Vec<JoinHandle<()>>,
     /// Writes the tags' memory back to its file (`--tag-memory`).
     saver: Option<Arc<tag_memory::Saver>>,
@@ -209,6 +218,9 @@ impl RunningSim {
         }
         if let Some(m) = self.mcap {
             mcap::finish(m).await;
+        }
+        if let Some(live) = self.live {
+            live.shutdown().await;
         }
         // The readers have stopped: what they wrote last is in the file.
         if let Some(saver) = &self.saver {
@@ -257,7 +269,11 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         ))),
         None => None,
     };
-    let mcap = mcap::open(opts, scenario)?;
+    let live = match &opts.foxglove {
+        Some(addr) => Some(crate::foxglove::LiveServer::bind(addr).await?),
+        None => None,
+    };
+    let mcap = mcap::open(opts, scenario, live.as_ref())?;
     let truth = (out.is_some() || mcap.is_some()).then(|| {
         Arc::new(Truth::new(
             out,
@@ -303,6 +319,7 @@ pub async fn start(scenario: &Scenario, opts: &SimOptions) -> Result<RunningSim,
         truth: s.truth.clone(),
         recordings: Vec::new(),
         mcap,
+        live,
         own: Vec::new(),
         saver: saver.clone(),
         clock: s.clock.clone(),

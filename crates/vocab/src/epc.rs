@@ -74,6 +74,19 @@ impl Epc {
         Epc(s)
     }
 
+    /// The EPC of the first `bits` bits of `bytes` (an EPCData's bit string, e.g. a truncated
+    /// EPC): its ceil(bits / 8) bytes in hex, the bits past `bits` in the last byte cleared.
+    /// So a 76-bit EPC shows as 10 bytes, its last 4 bits 0: the bit count is not shown.
+    pub fn from_bits(bytes: &[u8], bits: u16) -> Epc {
+        let n = usize::from(bits).div_ceil(8).min(bytes.len());
+        let mut head = bytes[..n].to_vec();
+        let spare = n * 8 - usize::from(bits).min(n * 8);
+        if let Some(last) = head.last_mut() {
+            *last &= 0xFFu8 << spare;
+        }
+        Epc::from_bytes(&head)
+    }
+
     /// The EPC as upper-case hex.
     pub fn as_str(&self) -> &str {
         &self.0

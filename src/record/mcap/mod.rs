@@ -7,6 +7,7 @@
 //! * [`export()`]: a recording ([`crate::record::Recording`]) as an MCAP file;
 //! * [`McapThread`]: an [`McapOut`] on a thread of its own, which running commands hand their
 //!   data to (file IO never on an async worker);
+//! * [`McapTap`]: every message written handed on as well (the live Foxglove view);
 //! * the message set ([`msgs`]) and its CDR encoder ([`cdr`]).
 //!
 //! Times are UTC nanoseconds since the Unix epoch throughout: an MCAP message's log time is
@@ -24,10 +25,12 @@ pub mod recording_in;
 pub mod ros_in;
 pub mod scene;
 pub mod scene_msgs;
+mod tap;
 mod thread;
 mod writer;
 
 pub use export::export;
+pub use tap::{McapTap, TapMessage, MESSAGE_ENCODING, SCHEMA_ENCODING};
 pub use thread::{McapItem, McapSender, McapTee, McapThread};
 pub use writer::McapOut;
 

@@ -95,7 +95,11 @@ impl McapThread {
     /// Starts the file on `out` (on the caller's thread, so that an error shows at once) and
     /// the thread that writes it.
     pub fn start<W: Write + Send + 'static>(out: W) -> Result<McapThread, McapError> {
-        let mcap = McapOut::new(out)?;
+        McapThread::start_out(McapOut::new(out)?)
+    }
+
+    /// Starts the thread that writes `mcap` (a file already started, perhaps with a tap).
+    pub fn start_out<W: Write + Send + 'static>(mcap: McapOut<W>) -> Result<McapThread, McapError> {
         let (tx, rx) = mpsc::channel(QUEUE);
         let handle = std::thread::Builder::new()
             .name("mcap-writer".into())

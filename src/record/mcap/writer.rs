@@ -12,6 +12,7 @@ use llrp::params::Timestamp;
 
 use super::cdr::Cdr;
 use super::msgs::{self, EventMsg, FrameMsg, MsgType};
+use super::tap::{McapTap, TapMessage};
 use super::{topic_token, McapError, Summary};
 use crate::reads::{Read, ReadDecoder};
 use crate::record::{Direction, Entry, Event};
@@ -46,6 +47,8 @@ pub struct McapOut<W: Write> {
     pub(super) scene: super::scene::Scene,
     reads: Vec<Read>,
     summary: Summary,
+    /// Where every message is also handed (the live view), if anywhere.
+    tap: Option<Box<dyn McapTap>>,
 }
 
 impl<W: Write> McapOut<W> {
@@ -57,7 +60,12 @@ impl<W: Write> McapOut<W> {
             .compression(Some(::mcap::Compression::Zstd))
             .disable_seeking(true)
             .create(NoSeek::new(out))?;
-        Ok(McapOut {
+        Ok(McapOut::with_writer(writer))
+    }
+
+    /// Around an MCAP writer already started.
+    pub(super) fn with_writer(writer: ::mcap::Writer<NoSeek<W>>) -> McapOut<W> {
+        McapOut {
             writer,
             schemas: HashMap::new(),
             channels: HashMap::new(),
@@ -67,7 +75,14 @@ impl<W: Write> McapOut<W> {
             scene: Default::default(),
             reads: Vec::new(),
             summary: Summary::default(),
-        })
+            tap: None,
+        }
+    }
+
+    /// Hands every message written from now on to `tap` as well.
+    pub fn with_tap(mut self, tap: Box<dyn McapTap>) -> McapOut<W> {
+        self.tap = Some(tap);
+        self
     }
 
     /// The topic token of `reader` (unique in this file: a second name that cleans to the same
@@ -96,6 +111,15 @@ impl<W: Write> McapOut<W> {
         publish_ns: u64,
         data: &[u8],
     ) -> Result<(), McapError> {
+        if let Some(tap) = &mut self.tap {
+            tap.message(&TapMessage {
+                topic,
+                ty,
+                log_ns,
+                publish_ns,
+                data,
+            });
+        }
         let channel = match self.channels.get_mut(topic) {
             Some(c) => c,
             None => {

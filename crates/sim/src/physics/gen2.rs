@@ -20,7 +20,7 @@ use std::sync::Arc;
 use rand::{Rng, RngCore};
 
 mod selected;
-pub use selected::Selected;
+pub use selected::{Reply, Selected, FULL_REPLY_BITS};
 
 /// Bits of a Query command.
 pub const QUERY_BITS: u32 = 22;
@@ -185,6 +185,12 @@ impl RfMode {
 
     /// The durations of an inventory round's parts, for tags with `epc_bits` of EPC.
     pub fn slot_times(&self, epc_bits: u32) -> SlotTimes {
+        self.slot_times_replying(16 + epc_bits + 16)
+    }
+
+    /// The durations of an inventory round's parts, for tags that answer an ACK with
+    /// `reply_bits` (PC, EPC and CRC-16; fewer when they truncate their reply).
+    pub fn slot_times_replying(&self, reply_bits: u32) -> SlotTimes {
         let data0 = self.tari_us;
         let data1 = self.pie * self.tari_us;
         let rtcal = data0 + data1;
@@ -206,7 +212,7 @@ impl RfMode {
         let t3 = (2.0 * rtcal - t1).max(0.0);
         let query_rep = command(QUERY_REP_BITS);
         let rn16 = reply(RN16_BITS);
-        let epc_reply = reply(16 + epc_bits + 16);
+        let epc_reply = reply(reply_bits);
         SlotTimes {
             query_extra_us: command(QUERY_BITS) + trcal - query_rep,
             adjust_extra_us: command(QUERY_ADJUST_BITS) - query_rep,

@@ -447,7 +447,11 @@ impl Model {
             antenna,
             tx_power_dbm: tx,
             air,
-            times: air.mode.slot_times(EPC_BITS),
+            // Tags that truncate their replies (a Select with Truncate) spend less on each.
+            times: match air.select.as_ref().and_then(|s| s.reply_bits()) {
+                Some(bits) => air.mode.slot_times_replying(bits),
+                None => air.mode.slot_times(EPC_BITS),
+            },
             want,
             prefix: self.gen2_prefix(antenna),
             from_us: window.0,

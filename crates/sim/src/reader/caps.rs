@@ -17,7 +17,7 @@ pub const RF_MODES: [u32; 5] = [0, 1, 2, 3, 1000];
 
 fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
     GeneralDeviceCapabilities {
-        max_number_of_antenna_supported: p.antennas,
+        max_number_of_antenna_supported: p.ports,
         can_set_antenna_properties: false,
         has_utc_clock_capability: true,
         device_manufacturer_name: p.device.manufacturer,
@@ -31,7 +31,7 @@ fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
                 ..Default::default()
             })
             .collect(),
-        per_antenna_receive_sensitivity_range: (1..=p.antennas)
+        per_antenna_receive_sensitivity_range: (1..=p.ports)
             .map(|a| PerAntennaReceiveSensitivityRange {
                 antenna_id: a,
                 receive_sensitivity_index_min: 1,
@@ -44,7 +44,7 @@ fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
             num_gpos: p.gpos,
             ..Default::default()
         },
-        per_antenna_air_protocol: (1..=p.antennas)
+        per_antenna_air_protocol: (1..=p.ports)
             .map(|a| PerAntennaAirProtocol {
                 antenna_id: a,
                 protocol_ids: vec![1],

@@ -41,7 +41,7 @@ pub struct ReaderConfig {
 impl ReaderConfig {
     /// Factory defaults (what ResetToFactoryDefault restores).
     pub fn factory(p: &ReaderProfile) -> Self {
-        let antennas = (1..=p.antennas)
+        let antennas = (1..=p.ports)
             .map(|a| AntennaConfiguration {
                 antenna_id: a,
                 rf_receiver: Some(RfReceiver {
@@ -342,7 +342,7 @@ impl ReaderConfig {
     ) -> Result<(), LlrpStatus> {
         validate_antenna_config(p, c)?;
         let targets: Vec<u16> = if c.antenna_id == 0 {
-            (1..=p.antennas).collect()
+            (1..=p.ports).collect()
         } else {
             vec![c.antenna_id]
         };
@@ -369,7 +369,7 @@ fn get_error(p: &ReaderProfile, m: &GetReaderConfig) -> Option<LlrpStatus> {
     if !m.requested_data.is_known() {
         return Some(field_error(1, StatusCode::A_OutOfRange, "RequestedData"));
     }
-    if m.antenna_id > p.antennas {
+    if m.antenna_id > p.ports {
         return Some(field_error(0, StatusCode::A_OutOfRange, "AntennaID"));
     }
     if m.gpi_port_num > p.gpis && want(ConfigRequest::GpiPortCurrentState) {
@@ -381,17 +381,19 @@ fn get_error(p: &ReaderProfile, m: &GetReaderConfig) -> Option<LlrpStatus> {
     None
 }
 
-/// The AntennaProperties of the reader's antennas that `antenna_ok` selects; `connected`
-/// per port (index = port − 1; a port it does not list is connected).
+/// The AntennaProperties of the reader's ports that `antenna_ok` selects; `connected` per
+/// port (index = port − 1; a port it does not list is connected), and a port past the
+/// scenario's antennas has nothing connected.
 fn antenna_properties(
     p: &ReaderProfile,
     antenna_ok: impl Fn(u16) -> bool,
     connected: &[bool],
 ) -> Vec<AntennaProperties> {
-    (1..=p.antennas)
+    (1..=p.ports)
         .filter(|&a| antenna_ok(a))
         .map(|a| AntennaProperties {
-            antenna_connected: connected.get(usize::from(a - 1)).copied().unwrap_or(true),
+            antenna_connected: a <= p.antennas
+                && connected.get(usize::from(a - 1)).copied().unwrap_or(true),
             antenna_id: a,
             antenna_gain: p
                 .antenna_gain_dbi
@@ -435,7 +437,7 @@ pub fn validate_antenna_config(
     p: &ReaderProfile,
     c: &AntennaConfiguration,
 ) -> Result<(), LlrpStatus> {
-    if c.antenna_id > p.antennas {
+    if c.antenna_id > p.ports {
         return Err(param_field_error(222, 0, 0, StatusCode::A_OutOfRange));
     }
     if let Some(tx) = &c.rf_transmitter {

@@ -66,8 +66,12 @@ pub struct ReaderProfile {
     pub name: ReaderName,
     /// The device it presents itself as (the scenario reader's `device`).
     pub device: &'static device::Device,
-    /// Number of antenna ports.
+    /// Antennas the scenario connects, on ports 1..=antennas (AISpec antenna 0 inventories
+    /// these).
     pub antennas: u16,
+    /// Antenna ports of the device (MaxNumberOfAntennaSupported): those past `antennas` exist
+    /// with nothing connected.
+    pub ports: u16,
     /// Frequency hopping (FCC) or a fixed channel list (ETSI).
     pub hopping: bool,
     /// The advertised channel table, kHz (ChannelIndex k is entry k − 1).
@@ -117,6 +121,8 @@ impl ReaderProfile {
             name: r.name.clone(),
             device,
             antennas: model.antenna_count(),
+            // The scenario checked that its antennas fit the device's ports.
+            ports: device.antenna_ports.max(model.antenna_count()),
             hopping: r.region.hopping(),
             frequencies_khz: model.frequencies_khz().to_vec(),
             communications_standard: r.region.communications_standard(),

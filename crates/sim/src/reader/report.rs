@@ -43,6 +43,9 @@ pub struct Observation {
     pub access_spec_id: u32,
     /// TID words (for Impinj serialized TID).
     pub tid: Vec<u16>,
+    /// The leading EPC bits the tag left out of a truncated reply (a Select with Truncate);
+    /// `None`: it sent its whole EPC.
+    pub truncated: Option<u16>,
 }
 
 /// Which Impinj fields to add (from ImpinjTagReportContentSelector; all off when absent).
@@ -217,6 +220,8 @@ impl Key {
             (long_id, 0)
         };
         let field = |on: bool, bit: u32, v: u64| (u64::from(on) << bit, if on { v } else { 0 });
+        // A truncated read (skip + 1, up to 497) is not the whole EPC's read.
+        let trunc = o.truncated.map_or(0, |skip| u64::from(skip) + 1);
         let (f0, ro) = field(s.enable_ro_spec_id, 32, u64::from(o.ro_spec_id));
         let (f1, si) = field(s.enable_spec_index, 33, u64::from(o.spec_index));
         let (f2, ips) = field(
@@ -229,7 +234,7 @@ impl Key {
         let (f5, acc) = field(s.enable_access_spec_id, 37, u64::from(o.access_spec_id));
         Key([
             head,
-            tail | f0 | f1 | f2 | f3 | f4 | f5 | (len as u64) << 40,
+            tail | f0 | f1 | f2 | f3 | f4 | f5 | (len as u64) << 40 | trunc << 48,
             ro | si << 32 | ips << 48,
             ant | ch << 16 | acc << 32,
         ])
@@ -302,8 +307,16 @@ impl ReportBuffer {
 /// A TagReportData for one read, with exactly the fields the selectors enable, in spec order.
 pub fn build(o: &Observation, c: &Content) -> TagReportData {
     let s = &c.selector;
+    let epc = match o.truncated {
+        // The bits the tag sent, in EPCData with their length (never EPC-96).
+        Some(skip) => Epc::EpcData(EpcData {
+            epc: super::select::truncated_epc(&o.epc, skip),
+            ..Default::default()
+        }),
+        None => epc_parameter(&o.epc),
+    };
     let mut t = TagReportData {
-        epc: epc_parameter(&o.epc),
+        epc,
         ..Default::default()
     };
     if s.enable_ro_spec_id {
@@ -350,6 +363,10 @@ fn add_air_protocol_data(
     o: &Observation,
     s: &TagReportContentSelector,
 ) {
+    if o.truncated.is_some() {
+        // A truncated reply carries no PC word; its CRC is not modelled.
+        return;
+    }
     for m in &s.air_protocol_epc_memory_selector {
         if m.enable_pc_bits {
             data.push(AirProtocolTagData::C1g2Pc(C1g2Pc(o.pc)));
@@ -443,6 +460,7 @@ mod tests {
             op_spec_results: vec![],
             access_spec_id: 0,
             tid: vec![],
+            truncated: None,
         }
     }
 

@@ -17,6 +17,15 @@
 //! where a real tag would alternate; an SL a tag kept from Selects before a write to its
 //! memory is not kept either (ours). The masks compare the tag's memory as it is now
 //! ([`TagMemory`]), so an EPC written earlier filters as written.
+//!
+//! Truncation (C1G2Filter T = 2) sets the Select's Truncate bit. Gen2 lets an interrogator
+//! assert it only in the last Select before the Query, only on the EPC bank, only with target
+//! SL and only with a mask that ends in the EPC (§6.3.2.12.1.1); a filter that breaks one of
+//! those is refused (A_Invalid on T), as the reader cannot send it. A tag that takes part and
+//! matches the truncating filter, under a Query whose Sel is SL or not SL, answers with the
+//! EPC bits after the mask only ([`Reply::Truncated`]); a tag whose EPC ends before the
+//! mask's end answers in full (ours: it cannot truncate its EPC there). T = 0 (the reader
+//! decides) does not truncate.
 
 use std::sync::Arc;
 
@@ -26,11 +35,25 @@ use llrp::StatusCode;
 
 use super::caps::MAX_SELECT_FILTERS;
 use super::memory::{Chip, TagMemory};
-use crate::physics::gen2::{Air, Selected, Target};
+use crate::physics::gen2::{Air, Reply, Selected, Target};
 use crate::physics::Model;
+use crate::scenario::tagmem::TagEpc;
 
 /// Longest TagMask a Select carries: its Length field has 8 bits (Gen2 v2.0.1 Table 6.29).
 pub const MAX_MASK_BITS: u16 = 255;
+
+/// C1G2Filter T: truncate (LLRP C1G2TruncateAction 2; 0 is unspecified, 1 do not truncate).
+pub const TRUNCATE: u8 = 2;
+
+/// Bit address of the EPC in the EPC bank (after StoredCRC and PC).
+const EPC_START: u32 = 0x20;
+
+/// Whether a state-aware filter's Target names SL: LLRP's C1G2StateAwareTarget is 0 SL, 1–4
+/// the inventoried flag of S0–S3 (LLRP 1.1 §16.2.1.2.1.1.2, the LTK's enumeration; Gen2's
+/// own Target field numbers them the other way, S0–S3 then SL).
+fn targets_sl(target: u8) -> bool {
+    target == 0
+}
 
 /// LLRP parameter types the errors name.
 mod ty {
@@ -99,9 +122,11 @@ impl<'a> Query<'a> {
                 let Some(a) = &f.state_aware_action else {
                     continue;
                 };
-                let flag = match a.target {
-                    0..=3 => &mut inventoried[usize::from(a.target)],
-                    _ => &mut sl,
+                let flag = if targets_sl(a.target) {
+                    &mut sl
+                } else {
+                    // Validated 1–4: S0–S3.
+                    &mut inventoried[usize::from(a.target - 1).min(3)]
                 };
                 apply(flag, aware_effect(a.action, m));
             } else {
@@ -115,6 +140,35 @@ impl<'a> Query<'a> {
         let sel_ok = self.sel.is_none_or(|want| sl == want);
         let in_target = inventoried[usize::from(self.session.min(3))] != self.target_b;
         sel_ok && (self.dual || in_target)
+    }
+
+    /// How the tag whose memory is `chip` answers this Query's ACKs: `None` when it takes no
+    /// part, truncated when the last filter truncates and it matches that filter's mask.
+    pub fn reply(&self, chip: &Chip) -> Option<Reply> {
+        self.takes_part(chip)
+            .then(|| self.truncation(chip).unwrap_or(Reply::Full))
+    }
+
+    /// The truncated reply of `chip` if the last filter truncates, it matches that filter and
+    /// the Query's Sel is SL or not SL (state-unaware filtering asks for SL).
+    fn truncation(&self, chip: &Chip) -> Option<Reply> {
+        let last = self.filters.last().filter(|f| f.t == TRUNCATE)?;
+        if self.state_aware && self.sel.is_none() {
+            return None;
+        }
+        let mask = &last.c1g2_tag_inventory_mask;
+        if mask.mb != 1 || !matches(mask, chip) {
+            return None;
+        }
+        let end = u32::from(mask.pointer) + u32::from(mask.tag_mask.bits);
+        let skip = end.checked_sub(EPC_START)?;
+        let epc_bits = chip.reported_epc().as_bytes().len() as u32 * 8;
+        let bits = epc_bits.checked_sub(skip)?;
+        Some(Reply::Truncated {
+            // At most 496 bits (31 words) each.
+            skip: skip as u16,
+            bits: bits as u16,
+        })
     }
 }
 
@@ -193,6 +247,30 @@ pub fn matches(mask: &C1g2TagInventoryMask, chip: &Chip) -> bool {
     (0..len).all(|i| memory_bit(&words, start + i) == mask_bit(&mask.tag_mask, i))
 }
 
+/// The bits of `epc` from bit `skip` on, as a truncated reply sends them (an empty string
+/// when `skip` reaches the end).
+pub fn truncated_epc(epc: &TagEpc, skip: u16) -> BitVec {
+    let bytes = epc.as_bytes();
+    let total = bytes.len() * 8;
+    let skip = usize::from(skip).min(total);
+    let bits = total - skip;
+    let mut out = vec![0u8; bits.div_ceil(8)];
+    for i in 0..bits {
+        if mask_bit_of(bytes, skip + i) {
+            out[i / 8] |= 0x80 >> (i % 8);
+        }
+    }
+    BitVec {
+        // At most 496 bits (31 words).
+        bits: bits as u16,
+        bytes: out,
+    }
+}
+
+fn mask_bit_of(bytes: &[u8], i: usize) -> bool {
+    bytes.get(i / 8).is_some_and(|b| b >> (7 - i % 8) & 1 == 1)
+}
+
 fn memory_bit(words: &[u16], i: usize) -> bool {
     words
         .get(i / 16)
@@ -200,9 +278,7 @@ fn memory_bit(words: &[u16], i: usize) -> bool {
 }
 
 fn mask_bit(v: &BitVec, i: usize) -> bool {
-    v.bytes
-        .get(i / 8)
-        .is_some_and(|b| b >> (7 - i % 8) & 1 == 1)
+    mask_bit_of(&v.bytes, i)
 }
 
 /// The participating sets worked out so far, each with the memory generation it holds for.
@@ -247,8 +323,8 @@ impl Selections {
                 return Some(Arc::clone(&e.selected));
             }
         }
-        let selected = Selected::from_fn(model.tag_count(), |tag| {
-            memory.inspect(model, tag, |chip| q.takes_part(chip))
+        let selected = Selected::from_replies(model.tag_count(), |tag| {
+            memory.inspect(model, tag, |chip| q.reply(chip))
         });
         let selected = Arc::new(selected);
         self.entries
@@ -287,9 +363,9 @@ impl Selections {
 }
 
 /// Checks the filters of an inventory command against what the reader does: at most
-/// [`MAX_SELECT_FILTERS`] (MaxNumSelectFiltersPerQuery), no truncation, no Select on Reserved
-/// memory, masks of at most [`MAX_MASK_BITS`] bits, actions and targets in range, and a
-/// state-aware action on each filter of a state-aware inventory.
+/// [`MAX_SELECT_FILTERS`] (MaxNumSelectFiltersPerQuery), truncation only as Gen2 allows it,
+/// no Select on Reserved memory, masks of at most [`MAX_MASK_BITS`] bits, actions and targets
+/// in range, and a state-aware action on each filter of a state-aware inventory.
 pub fn validate(cmd: &C1g2InventoryCommand) -> Result<(), LlrpStatus> {
     use ty::*;
     let n = cmd.c1g2_filter.len();
@@ -300,13 +376,39 @@ pub fn validate(cmd: &C1g2InventoryCommand) -> Result<(), LlrpStatus> {
             format!("{n} C1G2Filters: the reader takes at most {MAX_SELECT_FILTERS} per query"),
         ));
     }
-    for f in &cmd.c1g2_filter {
-        validate_filter(f, cmd.tag_inventory_state_aware)?;
+    for (k, f) in cmd.c1g2_filter.iter().enumerate() {
+        validate_filter(f, cmd.tag_inventory_state_aware, k + 1 == n)?;
     }
     Ok(())
 }
 
-fn validate_filter(f: &C1g2Filter, state_aware: bool) -> Result<(), LlrpStatus> {
+/// Why truncating filter `f` cannot be sent as a Select with Truncate (Gen2 v2.0.1
+/// §6.3.2.12.1.1), if it cannot; `last`: it is the last filter, the Select before the Query.
+fn truncation_refused(f: &C1g2Filter, last: bool) -> Option<String> {
+    let mask = &f.c1g2_tag_inventory_mask;
+    let end = u32::from(mask.pointer) + u32::from(mask.tag_mask.bits);
+    let why = if !last {
+        "only the last C1G2Filter (the Select before the Query) may truncate".to_string()
+    } else if mask.mb != 1 {
+        format!(
+            "truncation needs a mask on the EPC bank (MB 1), not MB {}",
+            mask.mb
+        )
+    } else if end < EPC_START {
+        format!("truncation needs a mask that ends in the EPC (from bit 20h), this one ends at bit {end}")
+    } else if f
+        .state_aware_action
+        .as_ref()
+        .is_some_and(|a| !targets_sl(a.target))
+    {
+        "truncation needs a filter whose target is SL".to_string()
+    } else {
+        return None;
+    };
+    Some(format!("C1G2Filter T 2: {why}"))
+}
+
+fn validate_filter(f: &C1g2Filter, state_aware: bool, last: bool) -> Result<(), LlrpStatus> {
     use ty::*;
     use StatusCode::{A_Invalid, A_OutOfRange};
     let field = |inner: u16, field: u16, code: StatusCode, what: String| {
@@ -319,9 +421,10 @@ fn validate_filter(f: &C1g2Filter, state_aware: bool) -> Result<(), LlrpStatus> 
     };
     match f.t {
         0 | 1 => {}
-        2 => {
-            let what = "C1G2Filter T 2: the reader does not truncate replies".to_string();
-            return field(FILTER, 0, A_Invalid, what);
+        TRUNCATE => {
+            if let Some(what) = truncation_refused(f, last) {
+                return field(FILTER, 0, A_Invalid, what);
+            }
         }
         t => return field(FILTER, 0, A_OutOfRange, format!("C1G2Filter T {t}: 0-2")),
     }

@@ -256,7 +256,7 @@ impl ReadDecoder {
             .map(|khz| u64::from(khz) * 1000);
         let antenna = r.antenna_id.or(self.sole_antenna).unwrap_or(0);
         Read {
-            epc: Epc::from_bytes(r.epc),
+            epc: Epc::from_bits(r.epc, r.epc_bits),
             reader: self.reader.clone(),
             antenna,
             t_us,

@@ -246,6 +246,44 @@ fn an_epc_of_other_than_96_bits_is_read_from_epc_data() {
 }
 
 #[test]
+fn a_truncated_epc_of_any_bit_length_is_its_bytes_with_the_spare_bits_cleared() {
+    use llrp::codec::BitVec;
+    use llrp::message::RoAccessReport;
+    use llrp::params::{Epc, EpcData, TagReportData};
+    // A reader may leave anything in the bits past the count: they are not the EPC's.
+    let data = |bits: u16, bytes: &[u8]| TagReportData {
+        epc: Epc::EpcData(EpcData {
+            epc: BitVec {
+                bits,
+                bytes: bytes.to_vec(),
+            },
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let frame = Message::new(
+        1,
+        RoAccessReport {
+            tag_report_data: vec![
+                // 76 bits (an EPC-96 truncated after 20): 10 bytes, the last 4 bits spare.
+                data(76, &[0, 0, 0, 0, 0, 0, 0, 0, 0, 0x7F]),
+                // 13 bits: 2 bytes, 3 spare; 8 bits: 1 byte, none.
+                data(13, &[0xAB, 0xFF]),
+                data(8, &[0xAB]),
+            ],
+            ..Default::default()
+        },
+    )
+    .to_bytes();
+    let mut out = Vec::new();
+    ReadDecoder::new(None)
+        .frame(&frame, 0, &mut out)
+        .expect("decodes");
+    let epcs: Vec<&str> = out.iter().map(|r| r.epc.as_str()).collect();
+    assert_eq!(epcs, ["00000000000000000070", "ABF8", "AB"]);
+}
+
+#[test]
 fn optional_fields_may_be_absent_and_a_bad_field_is_named() {
     let ok = br#"{"epc":"AB","antenna":1,"t_us":5,"phase_rad":0.5,"rssi_dbm":-60}"#;
     let r = read_jsonl(&ok[..]).expect("parses");

@@ -60,7 +60,7 @@ impl AccessSpecs {
             e.error_description = "a new AccessSpec must be Disabled".into();
             return e;
         }
-        if spec.antenna_id > p.antennas {
+        if spec.antenna_id > p.ports {
             return param_field_error(207, 0, 1, StatusCode::A_OutOfRange);
         }
         if spec.protocol_id != AirProtocol::EpcGlobalClass1Gen2 {

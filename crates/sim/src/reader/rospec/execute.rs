@@ -133,8 +133,12 @@ impl Specs {
             return ((t + idle).min(end), false);
         }
         // The rest of an empty round, nothing to run before the AISpec's setup is over, or an
-        // unplugged port (its dwell passes, no tag answers).
-        if run.slice_idle || end <= slice.t0_us || !ctx.faults.connected(slice.antenna) {
+        // unplugged port or one with nothing connected (its dwell passes, no tag answers).
+        if run.slice_idle
+            || end <= slice.t0_us
+            || !ctx.faults.connected(slice.antenna)
+            || !wired(ctx, slice.antenna)
+        {
             return (end, false);
         }
         let reads = match plan.channel {
@@ -196,6 +200,10 @@ impl Specs {
     ) -> Option<u64> {
         let (antenna, power, air) = (slice.antenna, slice.power_dbm, &slice.air);
         let (air_t, end) = (slice.t0_us, slice.t1_us);
+        if !wired(ctx, antenna) {
+            // Nothing connected: no field to look at (the dwell passes in `step`).
+            return None;
+        }
         let fresh = !run.slice_checked && end > t;
         let mut idle = None;
         if fresh {
@@ -272,6 +280,8 @@ impl Specs {
             } else {
                 Vec::new()
             },
+            // A tag matching a truncating Select sent only part of its EPC.
+            truncated: slice.air.select.as_ref().and_then(|s| s.truncated(r.tag)),
         };
         if applied.at_once && applied.access_spec_id != 0 {
             // The access results go out now, in a report of their own with the ROSpec's
@@ -387,6 +397,7 @@ impl Specs {
                 let antenna = antennas[k % n];
                 if until.is_some_and(|u| t0_us >= u)
                     || !fixed_channel_list(ips, config, antenna).is_empty()
+                    || antenna > model.antenna_count()
                 {
                     return None;
                 }

@@ -150,6 +150,12 @@ pub(super) fn observation_done(
     attempts || quiet
 }
 
+/// Whether an antenna is connected to port `antenna` (the scenario's antennas take the first
+/// ports; the device's others have nothing connected and never read).
+pub(super) fn wired(ctx: &RunContext<'_>, antenna: u16) -> bool {
+    (1..=ctx.model.antenna_count()).contains(&antenna)
+}
+
 /// The antenna ports of `ai` (0: all the reader's `count`).
 pub(super) fn ai_antennas(ai: &AiSpec, count: u16) -> Vec<u16> {
     if ai.antenna_ids.contains(&0) {

@@ -88,13 +88,13 @@ pub(super) fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(),
 
 fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
     let bad_antenna = ai.antenna_ids.is_empty()
-        || ai.antenna_ids.iter().any(|&a| a > p.antennas)
+        || ai.antenna_ids.iter().any(|&a| a > p.ports)
         || (ai.antenna_ids.contains(&0) && ai.antenna_ids.len() > 1);
     if bad_antenna {
         let mut e = nested_field_error(&[177, 183], 0, StatusCode::A_OutOfRange);
         e.error_description = format!(
-            "AntennaIDs {:?}: the reader has antennas 1..={} (0 = all)",
-            ai.antenna_ids, p.antennas
+            "AntennaIDs {:?}: the reader has antenna ports 1..={} (0 = all)",
+            ai.antenna_ids, p.ports
         );
         return Err(e);
     }

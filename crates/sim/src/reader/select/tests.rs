@@ -172,7 +172,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
         (7, false, true),
     ];
     for (action, sl_hit, sl_miss) in on_sl {
-        let filters = [aware(last_is(1), 4, action)];
+        let filters = [aware(last_is(1), 0, action)];
         // Sel = SL (S = 0) in a state-aware inventory: the tags with SL asserted answer.
         let q = Query {
             state_aware: true,
@@ -194,7 +194,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
     }
     // The same actions on S2's flag, which starts at A; single target A in session 2.
     for action in 0..8u8 {
-        let filters = [aware(last_is(1), 2, action)];
+        let filters = [aware(last_is(1), 3, action)];
         let q = Query {
             state_aware: true,
             dual: false,
@@ -214,7 +214,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
         let dual = Query { dual: true, ..q };
         assert!(dual.takes_part(&hit) && dual.takes_part(&miss));
         // Another session's flag does not matter to a session-2 Query.
-        let other = [aware(last_is(1), 1, action)];
+        let other = [aware(last_is(1), 2, action)];
         let q1 = Query {
             filters: &other,
             ..q
@@ -227,7 +227,7 @@ fn state_aware_actions_follow_gen2_table_6_30_on_sl_and_on_the_sessions_flag() {
 fn a_state_aware_query_reads_from_the_singulation_action_and_the_air() {
     let cmd = C1g2InventoryCommand {
         tag_inventory_state_aware: true,
-        c1g2_filter: vec![aware(last_is(1), 4, 0)],
+        c1g2_filter: vec![aware(last_is(1), 0, 0)],
         ..Default::default()
     };
     let sing = C1g2TagInventoryStateAwareSingulationAction {
@@ -301,10 +301,8 @@ fn validation_refuses_what_the_reader_cannot_send_naming_the_field() {
         (331, P_OverflowParameter, None)
     );
     let t = |t| C1g2Filter { t, ..good.clone() };
-    assert_eq!(
-        refused(with(vec![t(2)])),
-        (331, P_FieldError, Some((0, A_Invalid)))
-    );
+    // Truncation on the EPC bank's last filter is sent; its refusals are tested below.
+    assert!(validate(&with(vec![t(2)])).is_ok());
     assert_eq!(
         refused(with(vec![t(3)])),
         (331, P_FieldError, Some((0, A_OutOfRange)))
@@ -348,4 +346,122 @@ fn validation_refuses_what_the_reader_cannot_send_naming_the_field() {
         ..with(vec![good])
     };
     assert_eq!(refused(missing), (333, P_MissingParameter, None));
+}
+
+/// `f` truncating (T = 2).
+fn truncating(f: C1g2Filter) -> C1g2Filter {
+    C1g2Filter { t: TRUNCATE, ..f }
+}
+
+#[test]
+fn a_tag_matching_a_truncating_filter_replies_with_its_epc_after_the_mask() {
+    // Mask: the EPC's first 20 bits (E2000): the tags reply with the EPC's last 76 bits.
+    let filters = [truncating(unaware(
+        C1g2TagInventoryMask {
+            tag_mask: BitVec {
+                bits: 20,
+                bytes: vec![0xE2, 0x00, 0x00],
+            },
+            ..mask(1, 0x20, &[])
+        },
+        Some(0),
+    ))];
+    let q = unaware_query(&filters);
+    let (c, other) = (chip(7), chip(7));
+    assert_eq!(q.reply(&c), Some(Reply::Truncated { skip: 20, bits: 76 }));
+    let epc = c.reported_epc();
+    let sent = truncated_epc(&epc, 20);
+    assert_eq!(sent.bits, 76);
+    // E200 0000 … 0007 from bit 20: 0 0000 … 0007, packed from the first byte, 4 pad bits.
+    assert_eq!(sent.bytes, vec![0, 0, 0, 0, 0, 0, 0, 0, 0, 0x70]);
+    assert_eq!(truncated_epc(&epc, 96).bits, 0);
+    // Without T = 2 (or with T = 0, the reader's choice) the same tag replies in full.
+    let plain = [unaware(filters[0].c1g2_tag_inventory_mask.clone(), Some(0))];
+    assert_eq!(unaware_query(&plain).reply(&other), Some(Reply::Full));
+    // A tag the filter leaves out does not reply at all.
+    let mut miss = chip(7);
+    miss.epc[1] = 0x3000;
+    assert_eq!(q.reply(&miss), None);
+}
+
+#[test]
+fn only_tags_matching_the_last_filter_truncate_and_only_under_sel_sl() {
+    // Select the tags ending in 1 or 2, truncating on "ends in 2" (DoNothing/... keeps SL).
+    let ends_in = |b| unaware(last_is(b), Some(0));
+    let filters = [ends_in(1), truncating(unaware(last_is(2), Some(1)))];
+    let q = unaware_query(&filters);
+    assert_eq!(q.reply(&chip(1)), Some(Reply::Full));
+    // The mask ends at the EPC's end: nothing of the EPC is left to send.
+    assert_eq!(
+        q.reply(&chip(2)),
+        Some(Reply::Truncated { skip: 96, bits: 0 })
+    );
+    assert_eq!(q.reply(&chip(3)), None);
+    // State-aware on SL: truncated under Sel = SL, not under Sel = All (Gen2: Sel 10 or 11).
+    let aware_filters = [truncating(aware(last_is(2), 0, 0))];
+    let sl = Query {
+        state_aware: true,
+        sel: Some(true),
+        ..unaware_query(&aware_filters)
+    };
+    assert!(matches!(sl.reply(&chip(2)), Some(Reply::Truncated { .. })));
+    let all = Query { sel: None, ..sl };
+    assert_eq!(all.reply(&chip(2)), Some(Reply::Full));
+}
+
+#[test]
+fn truncation_gen2_does_not_allow_is_refused_on_t() {
+    use StatusCode::*;
+    let on_t = (331, P_FieldError, Some((0, A_Invalid)));
+    // On the TID bank (MB 2) and on User memory (MB 3).
+    let tid = truncating(unaware(mask(2, 0, &[0xE2]), Some(0)));
+    assert_eq!(refused(with(vec![tid])), on_t);
+    let user = truncating(unaware(mask(3, 0, &[0xBE]), Some(0)));
+    assert_eq!(refused(with(vec![user])), on_t);
+    // Not the last filter (the Select before the Query).
+    let first = truncating(unaware(last_is(1), Some(0)));
+    let second = unaware(last_is(1), Some(1));
+    assert_eq!(refused(with(vec![first.clone(), second.clone()])), on_t);
+    // The same filters the other way round are sent.
+    assert!(validate(&with(vec![second, first])).is_ok());
+    // A mask ending in the PC, before the EPC.
+    let pc = truncating(unaware(mask(1, 0x10, &[0x30]), Some(0)));
+    assert_eq!(refused(with(vec![pc])), on_t);
+    // A state-aware filter on an inventoried flag (S2) rather than SL.
+    let s2 = C1g2InventoryCommand {
+        tag_inventory_state_aware: true,
+        ..with(vec![truncating(aware(last_is(1), 3, 0))])
+    };
+    assert_eq!(refused(s2), on_t);
+    let sl = C1g2InventoryCommand {
+        tag_inventory_state_aware: true,
+        ..with(vec![truncating(aware(last_is(1), 0, 0))])
+    };
+    assert!(validate(&sl).is_ok());
+}
+
+#[test]
+fn llrp_state_aware_targets_are_sl_0_then_the_sessions_flags_1_to_4() {
+    let (hit, miss) = (chip(1), chip(2));
+    // Action 4 (matching: deassert SL / B; others: assert SL / A), single target A.
+    let query = |filters: &[C1g2Filter], session: u8, sel: Option<bool>| {
+        let q = Query {
+            state_aware: true,
+            sel,
+            dual: false,
+            session,
+            ..unaware_query(filters)
+        };
+        (q.takes_part(&hit), q.takes_part(&miss))
+    };
+    // Target 0 is SL: under Sel = SL only the non-matching tag answers.
+    let sl = [aware(last_is(1), 0, 4)];
+    assert_eq!(query(&sl, 0, Some(true)), (false, true));
+    // Target 1 is S0's flag: under Sel = All in session 0, the matching tag is in B.
+    let s0 = [aware(last_is(1), 1, 4)];
+    assert_eq!(query(&s0, 0, None), (false, true));
+    // ... and it leaves session 3's flag alone, which target 4 sets.
+    assert_eq!(query(&s0, 3, None), (true, true));
+    let s3 = [aware(last_is(1), 4, 4)];
+    assert_eq!(query(&s3, 3, None), (false, true));
 }
