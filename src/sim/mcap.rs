@@ -1,7 +1,8 @@
-//! `sim --mcap FILE` (and `--foxglove ADDR`, the same messages live): the simulated readers' sessions (each reader's recorder hands its
-//! entries on, as `proxy --mcap` does), their antennas' poses and the ground truth (from the
-//! truth writer, [`super::truth`]) and the live localizer's estimates in one MCAP file of
-//! ROS 2 messages (docs/robotics.md).
+//! `sim --mcap FILE` (and `--foxglove ADDR`, the same messages live): the simulated readers'
+//! sessions (each reader's recorder hands its entries on, as `proxy --mcap` does), their
+//! antennas' poses and the ground truth (from the truth writer, [`super::truth`]), the live
+//! localizer's estimates and the 3D scene in one MCAP file of ROS 2 messages
+//! (docs/robotics.md).
 //! The file is written on the MCAP writer's thread; a failed write is logged there and ends
 //! the file, not the simulation.
 
@@ -99,10 +100,10 @@ impl Start<'_> {
 }
 
 impl super::RunningSim {
-    /// Hands every estimate `shared` publishes from now on to the `--mcap` file (none
-    /// without `--mcap`), logged at the simulation's clock. The localizer's thread offers
-    /// them without waiting: an estimate with no room in the queue is dropped, with a warning
-    /// (those published once the file is finished, silently).
+    /// Hands every estimate `shared` publishes from now on to the `--mcap` file and the
+    /// `--foxglove` view (none without either), logged at the simulation's clock. The
+    /// localizer's thread offers them without waiting: an estimate with no room in the queue
+    /// is dropped, with a warning (those published once the file is finished, silently).
     pub fn estimates_to_mcap(&self, shared: &Shared) {
         let Some(mcap) = &self.mcap else {
             return;
