@@ -157,7 +157,7 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
         "--mcap",
         &path("sim.mcap"),
     ]);
-    let (client, mut out) = live_client(&ws, "poses,tf,tags,events");
+    let (client, mut out) = live_client(&ws, "poses,tf,tags,events,scenes");
     run(&[
         "inventory",
         &llrp,
@@ -195,6 +195,7 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
         ("/tf", "tf2_msgs/msg/TFMessage"),
         ("/truth/tags", "llrp_gateway_msgs/msg/TagPosition"),
         ("/log", "foxglove_msgs/msg/Log"),
+        ("/scene", "foxglove_msgs/msg/SceneUpdate"),
     ] {
         assert_eq!(live.get(topic).map(String::as_str), Some(schema), "{topic}");
     }
@@ -225,9 +226,24 @@ fn a_foxglove_client_gets_the_simulation_s_channels_and_reads_live_and_a_hostile
     }
     // The poses and transforms, the still tags' positions sent once at the start (a new
     // subscriber gets a channel's latest message), the reader's events.
-    for key in ["poses", "tf", "tags", "events"] {
+    for key in ["poses", "tf", "tags", "events", "scenes"] {
         assert!(v[key].as_u64().expect("a count") > 0, "{key}: {v}");
     }
+    // The scene, decoded by the client: the world, the antenna and each tag of the file's
+    // ground truth.
+    let ids: BTreeSet<String> = (v["scene_ids"].as_array().expect("ids").iter())
+        .map(|i| i.as_str().expect("an id").to_string())
+        .collect();
+    let mut want = BTreeSet::from([
+        "world/bounds".to_string(),
+        "antenna/s1_reader/antenna_1".to_string(),
+    ]);
+    for t in in_file["mcap_ros2"]["tags"].as_array().expect("tags") {
+        let epc = t["epc"].as_str().expect("an EPC").to_uppercase();
+        want.insert(format!("truth/tag/{epc}"));
+    }
+    assert!(want.len() > 2, "{want:?}");
+    assert!(ids.is_superset(&want), "{ids:?} vs {want:?}");
 }
 
 #[test]

@@ -253,8 +253,7 @@ fn assert_scenes(scenes: &[Value], truth: &[Value], estimates: &[Value]) {
         let epc = &id["estimate/".len()..];
         let center = &e["spheres"][0]["position"];
         let m = (estimates.iter())
-            .filter(|m| m["epc"] == epc && m["position"] == *center)
-            .next_back()
+            .rfind(|m| m["epc"] == epc && m["position"] == *center)
             .unwrap_or_else(|| panic!("{id}: no estimate at {center}"));
         assert_ellipsoid(
             &e["spheres"][1],
@@ -282,6 +281,69 @@ fn assert_ellipsoid(sphere: &Value, c: &Matrix3<f64>) {
         for j in 0..i {
             let w = axis_of(&sphere["orientation"], j);
             assert!((u.transpose() * c * w)[(0, 0)].abs() < 1e-9 * scale.max(1e-12));
+        }
+    }
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn localize_s_mcap_file_holds_its_output_s_estimates_and_their_scene() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (json, mcap) = (dir.path().join("est.json"), dir.path().join("est.mcap"));
+    let fixture = |ext: &str| {
+        let p = root().join(format!("fixtures/localize/s1-report-per-read{ext}"));
+        p.to_str().expect("utf-8").to_string()
+    };
+    run(&[
+        "localize",
+        &fixture(".jsonl"),
+        "--poses",
+        &fixture(".poses.jsonl"),
+        "--settings",
+        &fixture(".settings.json"),
+        "--output",
+        json.to_str().expect("utf-8"),
+        "--mcap",
+        mcap.to_str().expect("utf-8"),
+    ]);
+    let output: Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("the output")).expect("JSON");
+    let tags = output["tags"].as_array().expect("tags");
+    assert!(tags.len() >= 3, "{output}");
+    let v = check(&mcap);
+    let ch = channels(&v);
+    assert_eq!(ch["/estimates/tags"].1, tags.len() as u64);
+    assert_eq!(ch["/scene"].1, 1);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs()).max(1.0);
+    for decoder in ["mcap_ros2", "rosbags"] {
+        let estimates = v[decoder]["estimates"].as_array().expect("estimates");
+        let scene = &v[decoder]["scenes"][0]["entities"];
+        for (t, e) in tags.iter().zip(estimates) {
+            assert_eq!(e["epc"], t["epc"], "{decoder}");
+            let state = ["converging", "converged", "insufficient_geometry"]
+                [e["state"].as_u64().expect("a state") as usize];
+            assert_eq!(t["state"], state, "{decoder}");
+            assert_eq!(e["samples"], t["samples"], "{decoder}");
+            assert_eq!(
+                e["stamp_ns"].as_u64(),
+                t["last_seen"].as_u64().map(|u| u * 1000)
+            );
+            let Some(c) = covariance(&t["covariance"]) else {
+                assert!(e["position"][0].is_null(), "{decoder}: {e}");
+                continue;
+            };
+            let (p, want) = (vec3(&e["position"]), &t["estimate"]);
+            for (got, k) in p.iter().zip(["x", "y", "z"]) {
+                assert!(close(*got, f(&want[k])), "{decoder}: {k} {got} vs {want}");
+            }
+            let got = covariance(&e["covariance"]).expect("a covariance");
+            assert!(got.iter().zip(c.iter()).all(|(a, b)| close(*a, *b)));
+            let id = format!("estimate/{}", t["epc"].as_str().expect("epc"));
+            let entity = (scene.as_array().expect("entities").iter())
+                .find(|x| x["id"] == id)
+                .unwrap_or_else(|| panic!("{decoder}: no {id}"));
+            assert_eq!(vec3(&entity["spheres"][0]["position"]), p);
+            assert_ellipsoid(&entity["spheres"][1], &got);
         }
     }
 }

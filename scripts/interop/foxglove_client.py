@@ -14,15 +14,16 @@ from the `ros2msg` schemas the server advertises); none of llrp-gateway's code.
 3. A well-behaved client: serverInfo, the advertised channels; prints the line `READY` once
    it has subscribed to every channel advertised so far (and subscribes to later ones as
    they come), then decodes every message until it holds READS tag reads and at least one
-   message of each kind NEED names (comma-separated among poses, tf, tags, events; default
-   all four), or TIMEOUT_S pass.
+   message of each kind NEED names (comma-separated among poses, tf, tags, events, scenes;
+   default the first four), or TIMEOUT_S pass.
 
 Prints ONE JSON object after READY:
   {"refused_status": n, "hostile_status": [{"level", "message"}],
    "server_info": {...}, "channels": [{"id", "topic", "encoding", "schemaName",
    "schemaEncoding"}], "counts": {topic: n},
    "reads": [{"topic", "epc", "reader", "antenna", "rssi_dbm", "log_time", "frame_id"}],
-   "poses": n, "tf": n, "tags": n, "events": n, "bad_subscription_ids": n}
+   "poses": n, "tf": n, "tags": n, "events": n, "scenes": n, "scene_ids": [the entity ids of
+   the newest SceneUpdate], "bad_subscription_ids": n}
 """
 
 import asyncio
@@ -40,6 +41,7 @@ POSE = "foxglove_msgs/msg/PoseInFrame"
 TF = "tf2_msgs/msg/TFMessage"
 TAG = "llrp_gateway_msgs/msg/TagPosition"
 EVENT = "llrp_gateway_msgs/msg/ReaderEvent"
+SCENE = "foxglove_msgs/msg/SceneUpdate"
 
 
 async def refused_status(url):
@@ -84,7 +86,7 @@ async def hostile(url):
 
 async def good(url, want_reads, timeout, need):
     out = {"counts": {}, "reads": [], "poses": 0, "tf": 0, "tags": 0, "events": 0,
-           "channels": [],
+           "scenes": 0, "scene_ids": [], "channels": [],
            "bad_subscription_ids": 0}
     factory = DecoderFactory()
     channels, decoders, by_sub = {}, {}, {}
@@ -151,6 +153,9 @@ async def good(url, want_reads, timeout, need):
                 out["tags"] += len(msg.epc) > 0
             elif c["schemaName"] == EVENT:
                 out["events"] += 1
+            elif c["schemaName"] == SCENE:
+                out["scenes"] += 1
+                out["scene_ids"] = sorted(e.id for e in msg.entities)
     return out
 
 

@@ -55,6 +55,10 @@ pub struct LocalizeArgs {
     /// Replace an existing output file (without it, an existing file is refused).
     #[arg(long)]
     pub force: bool,
+    /// Also write the estimates, and a 3D scene of them, to this MCAP file (ROS 2 messages;
+    /// docs/robotics.md).
+    #[arg(long, value_name = "FILE", conflicts_with = "subscribe")]
+    pub mcap: Option<PathBuf>,
     /// Run as a localizer worker on this MQTT broker's reads instead
     /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).
     #[command(flatten)]
@@ -97,6 +101,14 @@ pub enum LocalizeCommandError {
     /// The input's reads could not be had.
     #[error("{0}")]
     Reads(#[from] ReadsError),
+    /// The MCAP file could not be written.
+    #[error("{}: {source}", path.display())]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::record::mcap::McapError,
+    },
     /// The estimates could not be written as JSON.
     #[error("{0}")]
     Json(serde_json::Error),
@@ -137,6 +149,18 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         inputs.extend(args.settings.as_deref());
         Some(crate::files::Output::create(output, &inputs, args.force).map_err(output_error)?)
     };
+    let mut inputs: Vec<&std::path::Path> = vec![input, output];
+    inputs.extend(args.poses.as_deref());
+    inputs.extend(args.settings.as_deref());
+    let mcap = match &args.mcap {
+        Some(path) => Some(
+            crate::files::Output::create(path, &inputs, args.force).map_err(|e| E::Mcap {
+                path: path.clone(),
+                source: e.into(),
+            })?,
+        ),
+        None => None,
+    };
     let reads = if crate::record::mcap::read::is_mcap(input) {
         crate::cli::localize_bag::bag_reads(input)?
     } else {
@@ -156,6 +180,12 @@ pub fn run(args: &LocalizeArgs) -> Result<(), LocalizeCommandError> {
         None => Poses::new(),
     };
     let outcome = localize_with_progress(reads, poses, &settings, args.estimator);
+    if let (Some(file), Some(path)) = (mcap, &args.mcap) {
+        crate::cli::localize_mcap::write(file, &outcome.tags.tags).map_err(|source| E::Mcap {
+            path: path.clone(),
+            source,
+        })?;
+    }
     let json = serde_json::to_string_pretty(&outcome.tags).map_err(E::Json)?;
     match out.take() {
         None => println!("{json}"),

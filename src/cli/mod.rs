@@ -31,6 +31,7 @@ pub mod inventory;
 pub mod live;
 pub mod localize;
 pub mod localize_bag;
+pub mod localize_mcap;
 pub mod options;
 pub mod proxy;
 pub mod replay;
@@ -78,8 +79,9 @@ pub enum Command {
         /// Write ground truth (tag positions, antenna poses over time) to this JSONL file.
         #[arg(long)]
         truth: Option<PathBuf>,
-        /// Write every reader's sessions (frames, tag reads, events), its antennas' poses and
-        /// the ground truth to this MCAP file (ROS 2 messages; docs/robotics.md).
+        /// Write every reader's sessions (frames, tag reads, events), its antennas' poses, the
+        /// ground truth, the live localizer's estimates and the 3D scene to this MCAP file
+        /// (ROS 2 messages; docs/robotics.md).
         #[arg(long, value_name = "FILE")]
         mcap: Option<PathBuf>,
         /// Serve the same messages live to Foxglove on this address (its WebSocket protocol,

@@ -1,17 +1,18 @@
-//! `sim --mcap FILE` (and `--foxglove ADDR`, the same messages live): the simulated readers' sessions (each reader's recorder hands its
-//! entries on, as `proxy --mcap` does), their antennas' poses and the ground truth (from the
-//! truth writer, [`super::truth`]) and the live localizer's estimates in one MCAP file of
-//! ROS 2 messages (docs/robotics.md).
+//! `sim --mcap FILE` (and `--foxglove ADDR`, the same messages live): the simulated readers'
+//! sessions (each reader's recorder hands its entries on, as `proxy --mcap` does), their
+//! antennas' poses and the ground truth (from the truth writer, [`super::truth`]), the live
+//! localizer's estimates and the 3D scene in one MCAP file of ROS 2 messages
+//! (docs/robotics.md).
 //! The file is written on the MCAP writer's thread; a failed write is logged there and ends
 //! the file, not the simulation.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
 
 use super::{record_path, SimError, SimOptions, Start};
 use crate::foxglove::LiveServer;
-use crate::localize::shared::Shared;
-use crate::record::mcap::estimates::EstimateItem;
+use crate::localize::estimate::State;
+use crate::localize::shared::{reason, Shared, TagView};
+use crate::record::mcap::estimates::{EstimateItem, EstimateState};
 use crate::record::mcap::scene::SceneWorld;
 use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
@@ -99,9 +100,10 @@ impl Start<'_> {
 }
 
 impl super::RunningSim {
-    /// Hands every estimate `shared` publishes from now on to the `--mcap` file (none
-    /// without `--mcap`), logged at the simulation's clock. The localizer's thread offers
-    /// them without waiting: an estimate with no room in the queue is dropped, with a warning.
+    /// Hands every estimate `shared` publishes from now on to the `--mcap` file and the
+    /// `--foxglove` view (none without either), logged at the simulation's clock. The
+    /// localizer's thread offers them without waiting: an estimate with no room in the queue
+    /// is dropped, with a warning (those published once the file is finished, silently).
     pub fn estimates_to_mcap(&self, shared: &Shared) {
         let Some(mcap) = &self.mcap else {
             return;
@@ -110,17 +112,37 @@ impl super::RunningSim {
         let (clock, utc0) = (self.clock.clone(), self.utc0);
         let dropped = AtomicU64::new(0);
         shared.on_publish(move |tag| {
-            let item = EstimateItem {
-                logged_us: utc0.saturating_add(clock.now_us()),
-                tag: Arc::clone(tag),
-            };
+            let item = estimate_item(utc0.saturating_add(clock.now_us()), tag);
             if !sender.try_send(McapItem::Estimate(item))
+                && !sender.is_closed()
                 && dropped.fetch_add(1, Ordering::Relaxed) == 0
             {
-                tracing::warn!(
-                    "the MCAP writer is behind (or finished): estimates are dropped while it is"
-                );
+                tracing::warn!("the MCAP writer is behind: estimates are dropped while it is");
             }
         });
+    }
+}
+
+/// The MCAP file's estimate of `tag`, published at `logged_us`.
+fn estimate_item(logged_us: u64, tag: &TagView) -> EstimateItem {
+    let e = &tag.estimate;
+    EstimateItem {
+        logged_us,
+        epc: e.epc.to_uppercase(),
+        estimator: e.estimator.to_string(),
+        state: match e.state {
+            State::Converging => EstimateState::Converging,
+            State::Converged => EstimateState::Converged,
+            State::InsufficientGeometry => EstimateState::InsufficientGeometry,
+        },
+        position: e.estimate,
+        covariance: e.covariance,
+        pose_sigma_m: e.pose_sigma_m,
+        samples: u32::try_from(e.samples).unwrap_or(u32::MAX),
+        newest_phase_us: e.last_update_us,
+        reads: tag.reads,
+        reads_per_s: tag.reads_per_s,
+        last_seen_us: tag.last_seen_us,
+        reason: reason(e).unwrap_or_default(),
     }
 }

@@ -7,18 +7,16 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
-use std::sync::Arc;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
+use super::estimates::{EstimateItem, EstimateState};
 use super::geo::{orientation, Truth, WORLD};
 use super::msgs::MsgType;
 use super::scene_msgs::{
     scene_update, Arrow, Color, Cylinder, Entity, Line, LineType, Pose, Solid, Text,
 };
 use super::{McapError, McapOut};
-use crate::localize::estimate::State;
-use crate::localize::shared::TagView;
 use llrp_gateway_vocab::pose::Pose as AntennaPose;
 
 /// The topic of the scene.
@@ -92,6 +90,9 @@ pub fn ellipsoid(covariance: &[f64; 9]) -> Option<Ellipsoid> {
     })
 }
 
+/// An antenna's newest true pose and the positions it has been at.
+type Tracked = (AntennaPose, Vec<[f64; 3]>);
+
 /// What the scene shows, as the file's items come.
 #[derive(Debug, Default)]
 pub(super) struct Scene {
@@ -99,20 +100,19 @@ pub(super) struct Scene {
     /// When the next update is due (UTC µs); none before the first instant.
     next_us: Option<u64>,
     /// Each antenna's true pose and path, by reader token and port.
-    antennas: BTreeMap<(String, u16), (AntennaPose, Vec<[f64; 3]>)>,
+    antennas: BTreeMap<(String, u16), Tracked>,
     /// Each tag's true position, by EPC (upper-case).
     tags: BTreeMap<String, [f64; 3]>,
     /// Each tag's newest estimate, by EPC.
-    estimates: BTreeMap<String, Arc<TagView>>,
+    estimates: BTreeMap<String, EstimateItem>,
     /// The estimates drawn in the last update (to be deleted once they have no position).
     drawn: BTreeSet<String>,
 }
 
 impl Scene {
-    /// Takes tag `tag`'s new estimate.
-    pub(super) fn estimate(&mut self, tag: &Arc<TagView>) {
-        let epc = tag.estimate.epc.to_uppercase();
-        self.estimates.insert(epc, Arc::clone(tag));
+    /// Takes a tag's new estimate.
+    pub(super) fn estimate(&mut self, e: &EstimateItem) {
+        self.estimates.insert(e.epc.to_uppercase(), e.clone());
     }
 }
 
@@ -132,6 +132,17 @@ fn z_onto(normal: [f64; 3]) -> [f64; 4] {
         UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
     });
     [q.i, q.j, q.k, q.w]
+}
+
+/// `c` projected onto the plane through `point` of normal `normal` (`point` for a zero
+/// normal, which a scenario refuses).
+fn on_plane(c: [f64; 3], point: [f64; 3], normal: [f64; 3]) -> [f64; 3] {
+    let n = Vector3::from(normal);
+    let Some(n) = n.try_normalize(0.0) else {
+        return point;
+    };
+    let c = Vector3::from(c);
+    (c - n * (c - Vector3::from(point)).dot(&n)).into()
 }
 
 /// The 12 edges of the box `lo`..`hi` as a line list.
@@ -183,18 +194,26 @@ impl Scene {
             (0..3).map(|i| hi[i] - lo[i]).fold(1.0, f64::max)
         });
         for (i, (name, point, normal)) in self.world.reflectors.iter().enumerate() {
+            let centre = match self.world.bounds {
+                Some((lo, hi)) => on_plane(
+                    std::array::from_fn(|k| (lo[k] + hi[k]) / 2.0),
+                    *point,
+                    *normal,
+                ),
+                None => *point,
+            };
             out.push(Entity {
                 id: format!("world/reflector/{i}"),
                 metadata: vec![("name".into(), name.clone())],
                 cubes: vec![Solid {
                     pose: Pose {
-                        position: *point,
+                        position: centre,
                         orientation: z_onto(*normal),
                     },
                     size: [side, side, 0.005],
                     color: REFLECTOR,
                 }],
-                texts: vec![label(*point, name, REFLECTOR)],
+                texts: vec![label(centre, name, REFLECTOR)],
                 ..Entity::default()
             });
         }
@@ -278,13 +297,12 @@ impl Scene {
     /// converged, orange while converging; the ids of those drawn before that now have none.
     fn estimate_entities(&mut self, out: &mut Vec<Entity>) -> Vec<String> {
         let mut drawn = BTreeSet::new();
-        for (epc, tag) in &self.estimates {
-            let e = &tag.estimate;
-            let Some(p) = e.estimate else {
+        for (epc, e) in &self.estimates {
+            let Some(p) = e.position else {
                 continue;
             };
             let color = match e.state {
-                State::Converged => CONVERGED,
+                EstimateState::Converged => CONVERGED,
                 _ => CONVERGING,
             };
             let id = format!("estimate/{epc}");
@@ -303,17 +321,12 @@ impl Scene {
                     color: [color[0], color[1], color[2], 0.25],
                 });
             }
-            let state = match e.state {
-                State::Converged => "converged",
-                State::Converging => "converging",
-                State::InsufficientGeometry => "insufficient_geometry",
-            };
             out.push(Entity {
                 id: id.clone(),
                 metadata: vec![
                     ("epc".into(), epc.clone()),
-                    ("estimator".into(), e.estimator.into()),
-                    ("state".into(), state.into()),
+                    ("estimator".into(), e.estimator.clone()),
+                    ("state".into(), e.state.name().into()),
                     ("samples".into(), e.samples.to_string()),
                 ],
                 spheres,
@@ -371,12 +384,17 @@ impl<W: Write> McapOut<W> {
             return Ok(());
         }
         self.scene.next_us = Some(t.utc_us.saturating_add(SCENE_INTERVAL_US));
+        self.scene_at(t.utc_us)
+    }
+
+    /// Writes the scene as it stands, stamped `utc_us` (UTC µs).
+    pub fn scene_at(&mut self, utc_us: u64) -> Result<(), McapError> {
         let mut entities = Vec::new();
         self.scene.world_entities(&mut entities);
         self.scene.antenna_entities(&mut entities);
         self.scene.tag_entities(&mut entities);
         let gone = self.scene.estimate_entities(&mut entities);
-        let ns = t.utc_us.saturating_mul(1000);
+        let ns = utc_us.saturating_mul(1000);
         let bytes = scene_update(&mut self.cdr, ns, WORLD, &gone, &entities);
         self.write(TOPIC, MsgType::SceneUpdate, ns, ns, &bytes)
     }

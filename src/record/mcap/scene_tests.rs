@@ -64,3 +64,30 @@ fn a_flat_covariance_gives_a_flat_ellipsoid_and_a_nan_one_none() {
     }
     assert_eq!(ellipsoid(&[f64::NAN; 9]), None);
 }
+
+#[test]
+fn a_reflector_patch_is_centred_where_the_world_s_centre_projects_onto_its_plane() {
+    // The wall y = 8 (normal −y, not unit length) and a world centred at (6, 4, 1.5).
+    let c = on_plane([6.0, 4.0, 1.5], [0.0, 8.0, 0.0], [0.0, -2.0, 0.0]);
+    assert_eq!(c, [6.0, 8.0, 1.5]);
+    // Its local +z is the plane's normal.
+    let z = rotate(z_onto([0.0, -2.0, 0.0]), [0.0, 0.0, 1.0]);
+    for (g, w) in z.iter().zip([0.0, -1.0, 0.0]) {
+        assert!((g - w).abs() < 1e-12, "{z:?}");
+    }
+}
+
+#[test]
+fn an_antenna_s_lobe_opens_along_its_boresight() {
+    let pose = AntennaPose {
+        position: [1.0, 2.0, 0.5],
+        yaw_rad: 0.7,
+        pitch_rad: -0.2,
+    };
+    // The cone's axis (its local +z, from the apex at min z) is the boresight.
+    let axis = rotate(z_onto_x(orientation(&pose)), [0.0, 0.0, 1.0]);
+    let bore = super::super::geo::boresight(&pose);
+    for (g, w) in axis.iter().zip(bore) {
+        assert!((g - w).abs() < 1e-12, "{axis:?} vs {bore:?}");
+    }
+}

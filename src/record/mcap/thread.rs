@@ -164,6 +164,11 @@ impl McapSender {
     pub fn try_send(&self, item: McapItem) -> bool {
         self.0.try_send(item).is_ok()
     }
+
+    /// The file is finished (or its writer gone): nothing sent is written any more.
+    pub fn is_closed(&self) -> bool {
+        self.0.is_closed()
+    }
 }
 
 /// The thread: writes every item until the queue closes, then finishes the file. A failed
