@@ -21,7 +21,7 @@ use llrp_gateway::sim::{self, SimOptions};
 async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
     let dir = tempfile::tempdir().expect("temp dir");
     let truth = dir.path().join("truth.jsonl");
-    // Clean reads: the pipeline's own accuracy (S1's `impinj-r420` reads give about 24 mm,
+    // Clean reads: the pipeline's own accuracy (S1's `impinj-r420` reads give about 12 cm,
     // docs/benchmarks.md).
     let scenario = s1_ideal();
     let opts = SimOptions {
@@ -117,6 +117,7 @@ async fn relock_localizes_every_s1_tag_from_the_stream_and_true_poses() {
         readers: Default::default(),
         pose_error: None,
         pose_corrections: None,
+        tag_curvature_sigma_rad: 0.0,
     };
     let estimates = estimate::estimate_all(&ingest, estimate::Estimator::Relock, &geometry);
     assert_eq!(estimates.len(), 10);

@@ -68,8 +68,9 @@ pub struct BenchLocalizeArgs {
     /// Set aside reads weaker than this (dBm), as the settings file's `min_rssi_dbm` does.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::cli::options::parser::<f64>("min-rssi"))]
     pub min_rssi: Option<f64>,
-    /// Run the scenario with this reader model (`ideal`, `impinj-r420`; docs/measurement.md
-    /// "Reader models"); default: the scenario's own.
+    /// Run the scenario with this reader model (`ideal`, `impinj-r420`,
+    /// `impinj-r420-stationary`; docs/measurement.md "Reader models"); default: the
+    /// scenario's own.
     #[arg(long)]
     pub reader_model: Option<String>,
 }

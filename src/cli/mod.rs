@@ -66,6 +66,7 @@ pub enum Command {
         #[arg(long)]
         scenario: Option<PathBuf>,
         /// Read as this reader model does (`ideal`, `impinj-r420`: as a real Impinj reader;
+        /// `impinj-r420-stationary`: that model before each tag's curvature;
         /// docs/measurement.md "Reader models"), in place of the scenario's own.
         #[arg(long)]
         reader_model: Option<String>,

@@ -204,6 +204,8 @@ pub fn pose_error(scenario: &Scenario) -> Option<PoseErrorModel> {
 /// scenario's, at their positions.
 pub fn settings(scenario: &Scenario, base: Settings) -> Settings {
     let mut s = base;
+    // The localizer is told the tags' curvature law, as it is told the poses' error.
+    s.geometry.tag_curvature_sigma_rad = scenario.tag_variation.phase_curvature_sigma_rad;
     let world = World::new(scenario);
     for (i, spec) in scenario.readers.iter().enumerate() {
         let model = Model::in_world(&world, scenario, i);

@@ -215,8 +215,20 @@ pub fn estimate_from(
             } else {
                 2
             };
-            let (covariance, pose_sigma_m) =
+            let (mut covariance, pose_sigma_m) =
                 with_pose_share(&observed, f.position, f.covariance, dims, g);
+            if g.tag_curvature_sigma_rad > 0.0 {
+                if let Some(share) = uncertainty::curvature_share(
+                    &observed.obs,
+                    f.position,
+                    dims,
+                    g.tag_curvature_sigma_rad,
+                ) {
+                    for (c, s) in covariance.iter_mut().zip(share) {
+                        *c += s;
+                    }
+                }
+            }
             Estimate {
                 estimate: Some(f.position),
                 covariance: Some(covariance),
@@ -402,6 +414,7 @@ mod tests {
             readers: BTreeMap::new(),
             pose_error: None,
             pose_corrections: None,
+            tag_curvature_sigma_rad: 0.0,
         };
         let all = estimate_all(&ingest, Estimator::Relock, &g);
         assert_eq!(all.len(), 2);
@@ -498,6 +511,7 @@ mod tests {
             readers: BTreeMap::new(),
             pose_error: None,
             pose_corrections: None,
+            tag_curvature_sigma_rad: 0.0,
         };
         // One track per (reader, antenna), both channels merged in time order, as reported
         // (times the phase sign: +1 here).

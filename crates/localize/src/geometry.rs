@@ -29,6 +29,10 @@ pub struct Geometry {
     /// Corrections of the antenna positions the phases were filed with, per reader and time
     /// (the live localizer's pose refinement); `None`: the positions as filed.
     pub pose_corrections: Option<std::sync::Arc<crate::refine::PoseCorrections>>,
+    /// σ across tags of each tag's own phase curvature a·θ² (rad per rad²; 0: none), which a
+    /// fix cannot tell from a nearer or farther tag: added to every estimate's covariance
+    /// ([`crate::uncertainty::curvature_share`]).
+    pub tag_curvature_sigma_rad: f64,
 }
 
 /// One reader's own settings.

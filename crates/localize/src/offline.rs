@@ -120,6 +120,7 @@ pub fn geometry(file: &SettingsFile, reads: &[Read], poses: &Poses) -> Geometry 
             .as_ref()
             .map(|e| PoseErrorModel::new(e.sigma_m, e.correlation_s)),
         pose_corrections: None,
+        tag_curvature_sigma_rad: file.tag_curvature_sigma_rad.unwrap_or(0.0).max(0.0),
     }
 }
 

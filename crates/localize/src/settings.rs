@@ -80,6 +80,7 @@ impl Default for Settings {
                 readers: BTreeMap::new(),
                 pose_error: None,
                 pose_corrections: None,
+                tag_curvature_sigma_rad: 0.0,
             },
             ambiguity: Ambiguity::None,
             max_gap_us: crate::series::DEFAULT_MAX_GAP_US,
@@ -142,6 +143,10 @@ pub struct SettingsFile {
     /// The robot's pose error, where its poses come from a localization stack: the poses
     /// are then refined from the tags' phases ([`crate::refine`]).
     pub pose_error: Option<PoseErrorSettings>,
+    /// σ across tags of each tag's own phase curvature (rad per rad²), widening every
+    /// estimate's covariance ([`Geometry::tag_curvature_sigma_rad`]); none: 0.
+    #[serde(default)]
+    pub tag_curvature_sigma_rad: Option<f64>,
 }
 
 /// An antenna's offset in the robot frame (x forward, y left, z up; the settings file's

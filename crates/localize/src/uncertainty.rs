@@ -94,6 +94,96 @@ pub fn pose_share(
     out.iter().all(|v| v.is_finite()).then_some(out)
 }
 
+/// The covariance (3×3 row-major, m²; rows and columns past `dims` 0) that a tag's own
+/// phase curvature a·θ² brings to a fix at `position` from `obs`, a drawn from N(0,
+/// `sigma_rad`²) (rad per rad²): θ the angle between the direction a phase was read from and
+/// the horizontal one of its segment's nearest read (the boresight of an antenna that faces
+/// the path level).
+/// Such a term bends the phase curve as a tag nearer or farther would and leaves no residual
+/// (docs/measurement.md); through the least squares with each segment's offset free it moves
+/// the fix by g·a, g = A Σᵢ wᵢ J̃ᵢ θᵢ², so its covariance is σ²·g gᵀ. `None` when the phases
+/// do not fix the position.
+pub fn curvature_share(
+    obs: &[Obs],
+    position: [f64; 3],
+    dims: usize,
+    sigma_rad: f64,
+) -> Option<[f64; 9]> {
+    let dims = dims.clamp(2, 3);
+    let segments = obs.iter().map(|o| o.segment + 1).max().unwrap_or(0);
+    let mut rows: Vec<[f64; 3]> = Vec::with_capacity(obs.len());
+    let mut units: Vec<[f64; 3]> = Vec::with_capacity(obs.len());
+    let mut mean = vec![[0.0; 3]; segments];
+    let mut weight = vec![0.0; segments];
+    let mut nearest = vec![(f64::INFINITY, [0.0; 3]); segments];
+    for o in obs {
+        let v = [0, 1, 2].map(|a| position[a] - o.antenna[a]);
+        let d = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-9);
+        let k = 4.0 * std::f64::consts::PI / o.wavelength_m;
+        let row = [0, 1, 2].map(|a| if a < dims { k * v[a] / d } else { 0.0 });
+        for a in 0..3 {
+            mean[o.segment][a] += o.weight * row[a];
+        }
+        weight[o.segment] += o.weight;
+        let u = v.map(|x| x / d);
+        if d < nearest[o.segment].0 {
+            nearest[o.segment] = (d, u);
+        }
+        rows.push(row);
+        units.push(u);
+    }
+    for (m, w) in mean.iter_mut().zip(&weight) {
+        if *w > 0.0 {
+            *m = m.map(|x| x / w);
+        }
+    }
+    // The boresight: the nearest read's direction made horizontal (antennas that face the
+    // path level, at whatever height: S1, S2, the rail).
+    for n in &mut nearest {
+        let h = n.1[0].hypot(n.1[1]);
+        if h > 1e-6 {
+            n.1 = [n.1[0] / h, n.1[1] / h, 0.0];
+        }
+    }
+    // The curvature's phase is centred on each segment's offset, as the fit centres it.
+    let mut bend = vec![0.0; segments];
+    let thetas: Vec<f64> = obs
+        .iter()
+        .zip(&units)
+        .map(|(o, u)| {
+            let c = nearest[o.segment].1;
+            let cos = (u[0] * c[0] + u[1] * c[1] + u[2] * c[2]).clamp(-1.0, 1.0);
+            let t2 = cos.acos().powi(2);
+            bend[o.segment] += o.weight * t2;
+            t2
+        })
+        .collect();
+    for (b, w) in bend.iter_mut().zip(&weight) {
+        if *w > 0.0 {
+            *b /= w;
+        }
+    }
+    let mut info = DMatrix::<f64>::zeros(dims, dims);
+    let mut push = nalgebra::DVector::<f64>::zeros(dims);
+    for ((o, row), t2) in obs.iter().zip(&rows).zip(&thetas) {
+        let j = [0, 1, 2].map(|a| row[a] - mean[o.segment][a]);
+        for a in 0..dims {
+            for b in 0..dims {
+                info[(a, b)] += o.weight * j[a] * j[b];
+            }
+            push[a] += o.weight * j[a] * (t2 - bend[o.segment]);
+        }
+    }
+    let g = info.try_inverse()? * push;
+    let mut out = [0.0; 9];
+    for x in 0..dims {
+        for y in 0..dims {
+            out[3 * x + y] = sigma_rad * sigma_rad * g[x] * g[y];
+        }
+    }
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,5 +270,45 @@ mod tests {
         let m = PoseErrorModel::new(0.02, 10.0);
         let alone = pose_share(&apart, p, 2, &m, &|group| group).expect("a share");
         assert!(alone[0] * 10.0 < share(10.0, &|_| 0)[0]);
+    }
+
+    #[test]
+    fn the_95_percent_ellipse_holds_a_tags_own_curvature_only_with_its_share() {
+        // A pass along x from −1 to 2 m past a tag 1.1 m off; the tag adds a·θ², a drawn
+        // from N(0, 2²) per run (θ off the perpendicular, the antenna facing the path).
+        let tag = [0.4, 1.1, 0.5];
+        let sigma = 2.0;
+        let n = Normal::new(0.0, sigma).expect("valid σ");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (mut with, mut without, runs) = (0, 0, 100);
+        for seed in 0..runs {
+            let a = n.sample(&mut rng);
+            let mut obs = synthetic::passes(tag, &[tag[2]], (0.9, 0.0), 0.1, seed);
+            for o in &mut obs {
+                let theta = ((o.antenna[0] - tag[0]) / (tag[1] - o.antenna[1])).atan();
+                o.phase_rad += a * theta * theta;
+            }
+            let fix = relock::locate(&obs, tag[2], 1.0, [0.0, 1.0], 3.0).expect("a fix");
+            let share = curvature_share(&obs, fix.position, 2, sigma).expect("a share");
+            let own = fix.covariance;
+            let wide = [
+                own[0] + share[0],
+                own[1] + share[1],
+                own[2] + share[3],
+                own[3] + share[4],
+            ];
+            without += usize::from(mahalanobis2(tag, fix.position, own) <= CHI2_2_95);
+            with += usize::from(mahalanobis2(tag, fix.position, wide) <= CHI2_2_95);
+        }
+        // Binomial(100, 0.95) falls under 85 with odds of about 1 in 10⁴.
+        assert!(
+            with >= 85,
+            "{with}/{runs} inside with the curvature's share"
+        );
+        assert!(without <= 50, "{without}/{runs} inside without it");
+        // No curvature, no share.
+        let obs = synthetic::passes(tag, &[tag[2]], (0.9, 0.0), 0.1, 1);
+        let none = curvature_share(&obs, tag, 2, 0.0).expect("a share");
+        assert!(none.iter().all(|&v| v == 0.0));
     }
 }

@@ -110,6 +110,19 @@ pub fn pattern_growth(off_axis_rad: f64, growth_rad: f64) -> f64 {
     1.0 + (theta / growth_rad).powi(2)
 }
 
+/// The phase (rad) a tag of curvature `a` (rad per rad²) adds when read `off_axis_rad` off
+/// the antenna's boresight: a·θ², θ held at [`PATTERN_GROWTH_HELD_DEG`]. Along an aperture x
+/// at range R, 4π/λ·(R + x²/2R) + a·(x/R)² has the curvature of a tag at
+/// R / (1 + a·λ/(2πR)), about a·λ/2π nearer: a range offset of the same sign and nearly the
+/// same size at every distance (docs/measurement.md).
+pub fn curvature_phase(a: f64, off_axis_rad: f64) -> f64 {
+    if a == 0.0 || !off_axis_rad.is_finite() {
+        return 0.0;
+    }
+    let theta = off_axis_rad.abs().min(PATTERN_GROWTH_HELD_DEG.to_radians());
+    a * theta * theta
+}
+
 /// An antenna's share of what hardware adds, prepared once per model.
 #[derive(Clone, Debug, Default)]
 pub struct AntennaHardware {
@@ -297,6 +310,46 @@ mod tests {
         // No growth angle: the same everywhere, as before the growth existed.
         assert_eq!(pattern_growth(1.2, 0.0), 1.0);
         assert_eq!(pattern_growth(f64::NAN, w), 1.0);
+    }
+
+    #[test]
+    fn a_curvature_moves_the_fitted_range_by_a_wavelength_over_two_pi() {
+        // The rail's aperture (±0.49 m) at its nearest and farthest tags: the range whose
+        // phase curve, its offset free, fits the curved one best is the one of the same
+        // curvature, R' = R / (1 + a·λ/(2πR)): about a·λ/2π nearer, the same sign at every R.
+        let lambda = 299_792_458.0 / 922.375e6;
+        let k = 4.0 * std::f64::consts::PI / lambda;
+        let xs: Vec<f64> = (0..50).map(|i| f64::from(i) * 0.02 - 0.49).collect();
+        for r in [0.51, 0.88] {
+            for a in [-2.3, 1.5] {
+                let seen: Vec<f64> = xs
+                    .iter()
+                    .map(|x| k * x.hypot(r) + curvature_phase(a, (x / r).atan()))
+                    .collect();
+                let cost = |rr: f64| {
+                    let d: Vec<f64> = xs
+                        .iter()
+                        .zip(&seen)
+                        .map(|(x, s)| s - k * x.hypot(rr))
+                        .collect();
+                    let m = d.iter().sum::<f64>() / d.len() as f64;
+                    d.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+                };
+                let best = (0..4000)
+                    .map(|i| r - 0.2 + f64::from(i) * 1e-4)
+                    .min_by(|p, q| cost(*p).total_cmp(&cost(*q)))
+                    .unwrap_or(r);
+                let expected = r / (1.0 + a * lambda / (std::f64::consts::TAU * r)) - r;
+                assert!(expected * a < 0.0);
+                assert!(
+                    ((best - r) - expected).abs() < 0.1 * expected.abs(),
+                    "R {r}, a {a}: shift {} against {expected}",
+                    best - r
+                );
+            }
+        }
+        assert_eq!(curvature_phase(0.0, 0.5), 0.0);
+        assert_eq!(curvature_phase(2.0, 1.5), curvature_phase(2.0, 1.2));
     }
 
     #[test]

@@ -347,11 +347,15 @@ impl Model {
 
     /// The smooth angle-dependent phase error (rad) of `tag` read by `antenna` at `t_us`:
     /// the antenna's pattern in its own frame plus the tag's against the direction it is read
-    /// from, both grown by the angle off the antenna's boresight (0 when neither has one).
+    /// from, both grown by the angle off the antenna's boresight, plus the tag's curvature
+    /// a·θ² (0 when there is none of them).
     fn pattern_phase(&self, antenna: u16, tag: usize, t_us: u64) -> f64 {
         let a = &self.antennas[usize::from(antenna) - 1];
         let radio = &self.tags[tag].radio;
-        if a.hardware.phase_field.is_none() && radio.phase_field.is_none() {
+        if a.hardware.phase_field.is_none()
+            && radio.phase_field.is_none()
+            && radio.phase_curvature_rad == 0.0
+        {
             return 0.0;
         }
         let pose = self.antenna_pose(antenna, t_us);
@@ -368,6 +372,7 @@ impl Model {
         // Both grow off the antenna's boresight (seen[2] is the cosine of that angle).
         let off_axis = seen[2].clamp(-1.0, 1.0).acos();
         sum * hardware::pattern_growth(off_axis, a.hardware.pattern_growth_rad)
+            + hardware::curvature_phase(radio.phase_curvature_rad, off_axis)
     }
 
     /// Doppler shift (Hz) of `tag` seen by `antenna` at `t_us`, from the radial velocity

@@ -36,6 +36,9 @@ pub struct TagRadio {
     pub delay_ns: f64,
     /// The tag's angle-dependent phase error, if the scenario gives one.
     pub phase_field: Option<super::hardware::SmoothField>,
+    /// The tag's phase curvature a (rad per rad²): a·θ² added to its phase, θ the angle off
+    /// the reading antenna's boresight ([`super::hardware::curvature_phase`]).
+    pub phase_curvature_rad: f64,
 }
 
 impl TagRadio {
@@ -61,6 +64,12 @@ impl TagRadio {
             v.phase_pattern_rad,
             v.phase_pattern_deg.to_radians(),
         );
+        // A stream of its own, so that a scenario without curvature keeps every other draw.
+        let phase_curvature_rad = {
+            let sigma = v.phase_curvature_sigma_rad;
+            let mut own = seed::stream(&[scenario.seed, seed::domain::TAG, index as u64, 2]);
+            noise::gaussian(&mut own, sigma).clamp(-CLIP_SIGMAS * sigma, CLIP_SIGMAS * sigma)
+        };
         let sensitivity_db = spec.sensitivity_offset_db.unwrap_or(sensitivity);
         TagRadio {
             sensitivity_db,
@@ -73,6 +82,7 @@ impl TagRadio {
             phase_rad,
             delay_ns,
             phase_field,
+            phase_curvature_rad,
         }
     }
 

@@ -109,6 +109,11 @@ pub struct TagVariation {
     /// Angle (degrees) over which that phase error decorrelates.
     #[serde(default = "default_pattern_deg")]
     pub phase_pattern_deg: f64,
+    /// Standard deviation across tags of the tag's phase curvature a (rad per rad²): each tag
+    /// adds a·θ² to its phase, θ the angle off the reading antenna's boresight (held at
+    /// 60°), so a localizer sees it nearer or farther by about a·λ/2π; 0: none.
+    #[serde(default)]
+    pub phase_curvature_sigma_rad: f64,
     /// Standard deviation across tags of the tag's own group delay (ns): a phase linear in
     /// frequency that differs from tag to tag.
     #[serde(default)]
@@ -128,6 +133,7 @@ impl Default for TagVariation {
             backscatter_sigma_db: default_tag_spread(),
             phase_pattern_rad: 0.0,
             phase_pattern_deg: default_pattern_deg(),
+            phase_curvature_sigma_rad: 0.0,
             delay_sigma_ns: 0.0,
             channel_phase_sigma_rad: 0.0,
             channel_rssi_sigma_db: 0.0,

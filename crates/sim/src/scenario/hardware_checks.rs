@@ -17,6 +17,12 @@ pub(super) fn tag_variation(v: &TagVariation) -> Check {
         v.phase_pattern_deg,
         360.0,
     )?;
+    in_range(
+        "tag_variation.phase_curvature_sigma_rad",
+        v.phase_curvature_sigma_rad,
+        0.0,
+        20.0,
+    )?;
     in_range("tag_variation.delay_sigma_ns", v.delay_sigma_ns, 0.0, 100.0)?;
     in_range(
         "tag_variation.channel_phase_sigma_rad",

@@ -8,7 +8,7 @@ use serde_json::{json, Map, Value};
 use super::ScenarioError;
 
 /// The reader models a scenario can name.
-pub const MODELS: [&str; 2] = ["ideal", "impinj-r420"];
+pub const MODELS: [&str; 3] = ["ideal", "impinj-r420", "impinj-r420-stationary"];
 
 /// The reader's, its antennas' and the tags' variation defaults of `model`.
 struct Defaults {
@@ -29,34 +29,27 @@ fn defaults(model: &str) -> Option<Defaults> {
             })
         }
         // Fitted to an Impinj reader's reads of the parked rail (real-reads.md) where no
-        // datasheet gives the figure; docs/measurement.md gives each one's source.
+        // datasheet gives the figure; docs/measurement.md gives each one's source. Its angle-
+        // dependent phase error: a small field growing off boresight (fitted to the 24 real
+        // runs' residual against the angle) and each tag's own curvature a·θ² (fitted to the
+        // real tags' range offsets, ±12 cm RMS).
         "impinj-r420" => (
-            json!({
-                "beamwidth_deg": 120.0,
-                "cable_delay_ns": 35.0,
-                "phase_noise_rad": 0.011,
-                "phase_noise_ref_dbm": -42.0,
-                "noise_exponent": 0.75,
-                "rssi_sigma_db": 0.05,
-                "rssi_sigma_grows": true,
-                "phase_noise_dof": 8.0,
-                "phase_outlier_rate": 0.001,
-                "rssi_outlier_rate": 0.0005,
-                "phase_resolution_bits": 10,
-                "backscatter_compression": 0.95,
-                "compression_knee_db": 3.0,
-                "rssi_tilt_db_per_mhz": 0.17,
-                "phase_pattern_rad": 0.2,
-                "phase_pattern_deg": 6.0
-            }),
-            json!({
-                "backscatter_sigma_db": 2.8,
-                "phase_pattern_rad": 0.45,
-                "phase_pattern_deg": 6.0,
-                "delay_sigma_ns": 1.8,
-                "channel_phase_sigma_rad": 0.014,
-                "channel_rssi_sigma_db": 0.2
-            }),
+            r420_antenna(json!({
+                "phase_pattern_rad": 0.08,
+                "phase_pattern_deg": 4.0,
+                "phase_pattern_growth_deg": 25.0
+            })),
+            r420_tags(json!({
+                "phase_pattern_rad": 0.17,
+                "phase_pattern_deg": 4.0,
+                "phase_curvature_sigma_rad": 2.3
+            })),
+        ),
+        // `impinj-r420` until 2026-12-08: a stationary phase error the same size at every
+        // angle and no per-tag curvature.
+        "impinj-r420-stationary" => (
+            r420_antenna(json!({ "phase_pattern_rad": 0.2, "phase_pattern_deg": 6.0 })),
+            r420_tags(json!({ "phase_pattern_rad": 0.45, "phase_pattern_deg": 6.0 })),
         ),
         _ => return None,
     };
@@ -69,6 +62,47 @@ fn defaults(model: &str) -> Option<Defaults> {
         antenna,
         tags,
     })
+}
+
+/// The antenna defaults both Impinj R420 models share, with `pattern`'s phase error.
+fn r420_antenna(pattern: Value) -> Value {
+    let mut a = json!({
+        "beamwidth_deg": 120.0,
+        "cable_delay_ns": 35.0,
+        "phase_noise_rad": 0.011,
+        "phase_noise_ref_dbm": -42.0,
+        "noise_exponent": 0.75,
+        "rssi_sigma_db": 0.05,
+        "rssi_sigma_grows": true,
+        "phase_noise_dof": 8.0,
+        "phase_outlier_rate": 0.001,
+        "rssi_outlier_rate": 0.0005,
+        "phase_resolution_bits": 10,
+        "backscatter_compression": 0.95,
+        "compression_knee_db": 3.0,
+        "rssi_tilt_db_per_mhz": 0.17
+    });
+    fill_from(&mut a, &pattern);
+    a
+}
+
+/// The tags' variation both Impinj R420 models share, with `pattern`'s phase error.
+fn r420_tags(pattern: Value) -> Value {
+    let mut t = json!({
+        "backscatter_sigma_db": 2.8,
+        "delay_sigma_ns": 1.8,
+        "channel_phase_sigma_rad": 0.014,
+        "channel_rssi_sigma_db": 0.2
+    });
+    fill_from(&mut t, &pattern);
+    t
+}
+
+/// Adds `extra`'s keys to the object `v`.
+fn fill_from(v: &mut Value, extra: &Value) {
+    if let Some(obj) = v.as_object_mut() {
+        fill(obj, extra);
+    }
 }
 
 /// Fills `obj`'s missing keys from `defaults`.
@@ -166,6 +200,34 @@ mod tests {
         assert_eq!(v["readers"][0]["aispec_setup_ms"], 9.8);
         assert_eq!(v["readers"][0]["round_gap_ms"], 15.0);
         assert!(v["readers"][1].get("aispec_setup_ms").is_none());
+    }
+
+    #[test]
+    fn the_stationary_r420_keeps_the_old_phase_error_and_the_new_one_curves_each_tag() {
+        let of = |model: &str| {
+            let mut v = json!({"reader_model": model, "readers": [{"antennas": [{}]}]});
+            apply(&mut v).expect("known model");
+            v
+        };
+        let (new, old) = (of("impinj-r420"), of("impinj-r420-stationary"));
+        assert_eq!(new["tag_variation"]["phase_curvature_sigma_rad"], 2.3);
+        assert_eq!(
+            new["readers"][0]["antennas"][0]["phase_pattern_growth_deg"],
+            25.0
+        );
+        assert!(old["tag_variation"]
+            .get("phase_curvature_sigma_rad")
+            .is_none());
+        assert!(old["readers"][0]["antennas"][0]
+            .get("phase_pattern_growth_deg")
+            .is_none());
+        assert_eq!(old["tag_variation"]["phase_pattern_rad"], 0.45);
+        assert_eq!(old["readers"][0]["antennas"][0]["phase_pattern_rad"], 0.2);
+        // Everything else is shared.
+        for m in [&new, &old] {
+            assert_eq!(m["readers"][0]["antennas"][0]["cable_delay_ns"], 35.0);
+            assert_eq!(m["tag_variation"]["backscatter_sigma_db"], 2.8);
+        }
     }
 
     #[test]
