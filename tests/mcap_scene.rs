@@ -24,11 +24,14 @@ const CHI2_95_3DOF: f64 = 7.814_727_903_251_178;
 const SURE_M: f64 = 0.1;
 
 /// `sim` at ten times real time with its localizer and HTTP API on free loopback ports,
-/// writing `mcap` and the truth file `truth`; it and its HTTP address.
+/// writing `mcap` and the truth file `truth`; it and its HTTP address. Clean reads
+/// (`--reader-model ideal`): S1's own `impinj-r420` gives each tag a phase curvature worth
+/// ±12 cm in range, which the covariance owns up to, so no estimate gets as sure as
+/// [`SURE_M`]; this test is about the scene and the estimates' messages, not accuracy.
 fn sim(mcap: &Path, truth: &Path) -> (Proc, String) {
     let mut child = bin()
         .args(["sim", "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0"])
-        .args(["--speed", "10", "--mcap"])
+        .args(["--speed", "10", "--reader-model", "ideal", "--mcap"])
         .arg(mcap)
         .arg("--truth")
         .arg(truth)
