@@ -50,7 +50,17 @@ fn scene_world(scenario: &Scenario) -> SceneWorld {
             .map(|r| (r.name.clone(), r.point, r.normal))
             .collect(),
         beamwidths,
+        robots: (crate::physics::distinct_robots(scenario).iter().enumerate())
+            .map(|(i, r)| (super::truth::robot_frame(i), robot_box(r)))
+            .collect(),
     }
+}
+
+/// A robot's box in the scene: `wheel_base` wide, as long plus a wheel's radius at either
+/// end, and a wheel's diameter high.
+fn robot_box(r: &crate::scenario::RobotSpec) -> [f64; 3] {
+    let wheel = 2.0 * r.wheel_radius;
+    [r.wheel_base + wheel, r.wheel_base, wheel]
 }
 
 /// Finishes the file once the readers and their recorders have stopped; what it holds is
