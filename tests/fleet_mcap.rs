@@ -1,13 +1,17 @@
-//! A localizer worker's `--mcap FILE` (docs/robotics.md): `sim --publish` → a real mosquitto
-//! → `localize --subscribe URL --mcap FILE`, whose file holds the estimates it computed on
-//! `/estimates/tags` and a scene of them on `/scene`, read by the independent readers of
-//! `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`).
+//! A localizer worker's `--mcap FILE` and `--foxglove ADDR` (docs/robotics.md): `sim
+//! --publish` → a real mosquitto → `localize --subscribe URL`, whose file holds the estimates
+//! it computed on `/estimates/tags` and a scene of them on `/scene`, read by the independent
+//! readers of `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`), and whose live view
+//! streams the same two channels to the independent client
+//! `scripts/interop/foxglove_client.py`.
 
 mod broker_support;
 mod http_support;
 mod mcap_support;
 
 use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use broker_support::{publishing_sim, worker, Mosquitto};
@@ -91,4 +95,78 @@ fn a_worker_s_mcap_file_holds_the_estimates_it_computed_and_their_scene() {
         drawn.insert(epc.to_string());
     }
     assert!(drawn.is_superset(&placed), "{drawn:?} vs {placed:?}");
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers) and the Foxglove client's venv (LLRP_MCAP_PYTHON); ./scripts/test runs it"]
+fn a_worker_s_live_view_streams_its_estimates_and_their_scene() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("f");
+    let (mut w, _http) = worker(
+        &url,
+        &[
+            "--client-id",
+            "foxglove-worker",
+            "--foxglove",
+            "127.0.0.1:0",
+        ],
+    );
+    let ws = w.address("Foxglove live view on ");
+    let python = std::env::var("LLRP_MCAP_PYTHON").expect(
+        "LLRP_MCAP_PYTHON must name the python of scripts/venv-mcap.sh (set by ./scripts/test)",
+    );
+    // No reads to wait for; done once a scene that draws an estimate has come. Its channels are advertised with
+    // the worker's first estimate, so the client subscribes once the simulation runs.
+    let mut client = Command::new(python)
+        .arg(mcap_support::root().join("scripts/interop/foxglove_client.py"))
+        .args([ws.as_str(), "0", "30", "estimate_scenes"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("the client starts");
+    let mut out = BufReader::new(client.stdout.take().expect("piped")).lines();
+    let report: serde_json::Value = {
+        let _sim = publishing_sim(&url, &["--poses", "truth"]);
+        let ready = out.next().expect("a line").expect("utf-8");
+        assert_eq!(ready, "READY", "the client subscribed");
+        let line = out.next().expect("the client's report").expect("utf-8");
+        serde_json::from_str(&line).expect("JSON")
+    };
+    assert!(client.wait().expect("the client ends").success());
+    assert!(w.stop().success(), "the worker stopped cleanly");
+    let channels: BTreeSet<(String, String)> = (report["channels"].as_array())
+        .expect("channels")
+        .iter()
+        .map(|c| {
+            assert_eq!(
+                (c["encoding"].as_str(), c["schemaEncoding"].as_str()),
+                (Some("cdr"), Some("ros2msg")),
+                "{c}"
+            );
+            (
+                c["topic"].as_str().expect("a topic").to_string(),
+                c["schemaName"].as_str().expect("a schema").to_string(),
+            )
+        })
+        .collect();
+    let want: BTreeSet<(String, String)> = [
+        ("/estimates/tags", "llrp_gateway_msgs/msg/TagEstimate"),
+        ("/scene", "foxglove_msgs/msg/SceneUpdate"),
+    ]
+    .map(|(t, s)| (t.to_string(), s.to_string()))
+    .into();
+    assert_eq!(
+        channels, want,
+        "a worker streams its estimates and their scene only"
+    );
+    assert!(
+        report["counts"]["/estimates/tags"].as_u64() >= Some(1),
+        "{report}"
+    );
+    assert!(report["estimate_scenes"].as_u64() >= Some(1), "{report}");
+    let ids = report["scene_ids"].as_array().expect("ids");
+    assert!(!ids.is_empty(), "{report}");
+    for id in ids {
+        let id = id.as_str().expect("an id");
+        assert!(id.starts_with("estimate/"), "a worker knows no truth: {id}");
+    }
 }
