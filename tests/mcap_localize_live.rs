@@ -1,7 +1,8 @@
-//! `replay --http ADDR --mcap FILE` (docs/robotics.md): the live localizer's estimates of a
-//! replayed recording on `/estimates/tags` and a scene of them on `/scene`, with no truth,
-//! read by the independent readers of `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`)
-//! and compared with what the HTTP API said.
+//! `replay --http ADDR --mcap FILE` and `proxy --http ADDR --mcap FILE` (docs/robotics.md):
+//! the live localizer's estimates of a replayed recording on `/estimates/tags` and a scene of
+//! them on `/scene`, with no truth, read by the independent readers of
+//! `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`) and compared with what the HTTP API
+//! said.
 
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -19,13 +20,11 @@ fn fixture(name: &str) -> String {
     p.to_str().expect("utf-8").to_string()
 }
 
-/// `replay` of the S1 recording with its poses and settings, the localizer's HTTP API and
-/// LLRP on free loopback ports, writing `mcap`; it, its LLRP and its HTTP address.
-fn replay(mcap: &str) -> (Proc, String, String) {
+/// `llrp-gateway ARGS` with the S1 recording's poses and settings, its localizer's HTTP API
+/// on a free loopback port, writing `mcap`; it, its LLRP and its HTTP address.
+fn localizing(args: &[&str], mcap: &str) -> (Proc, String, String) {
     let mut child = bin()
-        .arg("replay")
-        .arg(fixture("s1-report-per-read.jsonl"))
-        .args(["--listen", "127.0.0.1:0", "--speed", "max"])
+        .args(args)
         .args(["--http", "127.0.0.1:0", "--poses"])
         .arg(fixture("s1-report-per-read.poses.jsonl"))
         .arg("--localize-settings")
@@ -39,7 +38,7 @@ fn replay(mcap: &str) -> (Proc, String, String) {
     let until = Instant::now() + GUARD;
     let (mut http, mut llrp) = (None, None);
     while http.is_none() || llrp.is_none() {
-        assert!(Instant::now() < until, "replay did not listen");
+        assert!(Instant::now() < until, "{args:?} did not listen");
         let line = lines.next().expect("a line").expect("utf-8");
         if let Some(rest) = line.split("live map on http://").nth(1) {
             http = Some(rest.trim_end_matches('/').to_string());
@@ -93,24 +92,74 @@ fn wait_for_estimates(http: &str) -> BTreeSet<String> {
     }
 }
 
-#[test]
-#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
-fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let mcap = dir.path().join("replay.mcap");
-    let (mut replay, llrp, http) = replay(mcap.to_str().expect("utf-8"));
+/// The client the recording was made with, asking what it asked then, of `llrp`.
+fn inventory(llrp: &str) {
     run(&[
         "inventory",
-        &llrp,
+        llrp,
         "--impinj",
         "--report-every",
         "1",
         "--seconds",
         "3",
     ]);
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mcap = dir.path().join("replay.mcap");
+    let recording = fixture("s1-report-per-read.jsonl");
+    let args = [
+        "replay",
+        &recording,
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+    ];
+    let (mut replay, llrp, http) = localizing(&args, mcap.to_str().expect("utf-8"));
+    inventory(&llrp);
     let placed = wait_for_estimates(&http);
     terminate(&mut replay);
-    let v = check(&mcap);
+    assert_estimates_and_scene(&mcap, &placed);
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_proxy_that_localizes_writes_its_estimates_and_their_scene_without_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let recording = fixture("s1-report-per-read.jsonl");
+    let (mut replay, upstream) = spawn_listening(&[
+        "replay",
+        &recording,
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+    ]);
+    // The proxy names its reader as the recording and the pose file do.
+    let config = dir.path().join("gateway.json");
+    let proxies = serde_json::json!({"proxies": [
+        {"name": "s1-reader", "upstream": upstream, "listen": "127.0.0.1:0"}
+    ]});
+    std::fs::write(&config, proxies.to_string()).expect("the config");
+    let mcap = dir.path().join("proxy.mcap");
+    let args = ["proxy", "--config", config.to_str().expect("utf-8")];
+    let (mut proxy, llrp, http) = localizing(&args, mcap.to_str().expect("utf-8"));
+    inventory(&llrp);
+    let placed = wait_for_estimates(&http);
+    terminate(&mut proxy);
+    terminate(&mut replay);
+    assert_estimates_and_scene(&mcap, &placed);
+}
+
+/// Both readers decode `mcap`'s estimates and scenes alike; every tag of `placed` has
+/// estimates, and the last scene holds estimates only (no truth), each placed tag's drawn at
+/// the position of one of its estimates logged by then.
+fn assert_estimates_and_scene(mcap: &std::path::Path, placed: &BTreeSet<String>) {
+    let v = check(mcap);
     let ch = channels(&v);
     assert_eq!(ch["/estimates/tags"].0, "llrp_gateway_msgs/msg/TagEstimate");
     assert_eq!(ch["/scene"].0, "foxglove_msgs/msg/SceneUpdate");
@@ -125,7 +174,7 @@ fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() 
     let epcs: BTreeSet<String> = (estimates.iter())
         .map(|e| e["epc"].as_str().expect("epc").to_string())
         .collect();
-    assert!(epcs.is_superset(&placed), "{epcs:?} vs {placed:?}");
+    assert!(epcs.is_superset(placed), "{epcs:?} vs {placed:?}");
     let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
     let last = scenes.last().expect("a scene");
     let mut drawn = BTreeSet::new();
@@ -145,5 +194,5 @@ fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() 
             .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
         drawn.insert(epc.to_string());
     }
-    assert!(drawn.is_superset(&placed), "{drawn:?} vs {placed:?}");
+    assert!(drawn.is_superset(placed), "{drawn:?} vs {placed:?}");
 }
