@@ -11,6 +11,7 @@ pub mod foxglove;
 pub mod gateway;
 pub mod http;
 pub mod inventory;
+pub mod mcap_estimates;
 pub mod metrics;
 pub mod net;
 pub mod realism;

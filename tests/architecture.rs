@@ -25,6 +25,7 @@ const APPLICATION: &[&str] = &[
     "fleet",
     "record",
     "foxglove",
+    "mcap_estimates",
     "gateway",
     "inventory",
     "cli",
@@ -79,6 +80,7 @@ const LAYERS: &[Layer] = &[
             SIMULATOR,
             &[
                 "localize",
+                "mcap_estimates",
                 "net",
                 "http",
                 "fleet",

@@ -179,6 +179,22 @@ fn boresight(m: &serde_json::Value) -> [f64; 3] {
     ]
 }
 
+/// The transform `parent` then `child` (each x, y, z and a quaternion), as one.
+fn compose(parent: &serde_json::Value, child: &serde_json::Value) -> serde_json::Value {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let q = |m: &serde_json::Value| {
+        UnitQuaternion::from_quaternion(Quaternion::new(
+            f(m, "qw"),
+            f(m, "qx"),
+            f(m, "qy"),
+            f(m, "qz"),
+        ))
+    };
+    let t = |m: &serde_json::Value| Vector3::new(f(m, "x"), f(m, "y"), f(m, "z"));
+    let (r, p) = (q(parent) * q(child), t(parent) + q(parent) * t(child));
+    serde_json::json!({"x": p.x, "y": p.y, "z": p.z, "qx": r.i, "qy": r.j, "qz": r.k, "qw": r.w})
+}
+
 /// Asserts that `m` (x, y, z and a quaternion) is `pose` of the truth file (`position`,
 /// `yaw_rad`, `pitch_rad`).
 fn assert_pose(m: &serde_json::Value, position: &serde_json::Value, yaw: f64, pitch: f64) {
@@ -274,7 +290,10 @@ fn assert_truth(d: &serde_json::Value, truth: &Path) {
     let tf = d["tf"].as_array().expect("tf");
     let tags = d["tags"].as_array().expect("tags");
     let antennas = truth[0]["antennas"].as_array().expect("antennas").len();
-    assert_eq!(tf.len(), truth.len() * antennas);
+    // S1's one robot carries every antenna: its frame at each instant, then theirs.
+    let robots: Vec<_> = tf.iter().filter(|t| t["child"] == "robot_1").collect();
+    assert_eq!(robots.len(), truth.len());
+    assert_eq!(tf.len(), truth.len() * (antennas + 1));
     let tag_total: usize = truth
         .iter()
         .map(|l| l["tags"].as_array().expect("tags").len())
@@ -306,9 +325,11 @@ fn assert_truth(d: &serde_json::Value, truth: &Path) {
             let position = serde_json::json!([f(e, "x"), f(e, "y"), f(e, "z")]);
             let (yaw, pitch) = (f(e, "yaw_deg").to_radians(), f(e, "pitch_deg").to_radians());
             assert_pose(&reported[i], &position, yaw, pitch);
-            assert_eq!(frames[i]["parent"], "map");
+            assert_eq!(frames[i]["parent"], "robot_1");
             assert_eq!(frames[i]["stamp_ns"].as_u64(), Some(ns));
-            assert_pose(frames[i], &position, yaw, pitch);
+            assert_eq!(robots[i]["parent"], "map");
+            assert_eq!(robots[i]["stamp_ns"].as_u64(), Some(ns));
+            assert_pose(&compose(robots[i], frames[i]), &position, yaw, pitch);
         }
     }
     let first = &truth[0]["tags"][0];

@@ -147,6 +147,111 @@ fn a_simulation_s_scene_and_estimates_decode_and_the_sure_estimates_lie_near_the
     assert_estimates(estimates, &truth[0]);
     let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
     assert_scenes(scenes, &truth, estimates);
+    assert_robot(scenes);
+    assert_robot_frames(&v["mcap_ros2"]);
+}
+
+/// The S1 scenario's robot: its start `[x, y]` and its antenna's offset (position, yaw).
+fn s1_robot() -> ([f64; 2], [f64; 3], f64) {
+    let s: Value = serde_json::from_str(
+        &std::fs::read_to_string(root().join("fixtures/scenarios/s1.json")).expect("S1"),
+    )
+    .expect("JSON");
+    let mount = &s["readers"][0]["antennas"][0]["mount"];
+    let start = &mount["robot"]["start"];
+    let offset = &mount["offset"];
+    (
+        [f(&start[0]), f(&start[1])],
+        vec3(&offset["position"]),
+        f(&offset["yaw_deg"]).to_radians(),
+    )
+}
+
+/// Every scene draws S1's robot as a box standing on the floor; in the last one its antenna's
+/// arrow is where the scenario mounts it on the box (its offset turned by the box's heading,
+/// its boresight the box's +x turned by the mount's yaw), and the robot's path starts at the
+/// scenario's start and ends under the box.
+fn assert_robot(scenes: &[Value]) {
+    let (start, offset, yaw) = s1_robot();
+    let by_id = |s: &Value, id: &str| {
+        (s["entities"].as_array().expect("entities").iter())
+            .find(|e| e["id"] == id)
+            .cloned()
+    };
+    for s in scenes {
+        let robot = by_id(s, "robot/robot_1").expect("the robot in every scene");
+        let cube = &robot["cubes"][0];
+        assert!((f(&cube["position"][2]) - f(&cube["size"][2]) / 2.0).abs() < 1e-9);
+    }
+    let last = scenes.last().expect("a scene");
+    let cube = &by_id(last, "robot/robot_1").expect("the robot")["cubes"][0];
+    let arrow = &by_id(last, "antenna/s1_reader/antenna_1").expect("the antenna")["arrows"][0];
+    let p = vec3(&cube["position"]);
+    let (x, y) = (
+        axis_of(&cube["orientation"], 0),
+        axis_of(&cube["orientation"], 1),
+    );
+    assert!(x.z.abs() < 1e-9, "the box is not level: {x}");
+    let want = [
+        p[0] + x.x * offset[0] + y.x * offset[1],
+        p[1] + x.y * offset[0] + y.y * offset[1],
+        offset[2],
+    ];
+    let got = vec3(&arrow["position"]);
+    assert!(
+        (0..3).all(|i| (got[i] - want[i]).abs() < 1e-6),
+        "{got:?} vs {want:?}"
+    );
+    let bore = x * yaw.cos() + y * yaw.sin();
+    assert!((axis_of(&arrow["orientation"], 0) - bore).norm() < 1e-6);
+    let path = &by_id(last, "path/robot_1").expect("the robot's path")["lines"][0];
+    assert_eq!(path["type"], 0, "a line strip");
+    let points = path["points"].as_array().expect("points");
+    assert!(points.len() >= 2, "{path}");
+    let first = vec3(&points[0]);
+    assert!(
+        (first[0] - start[0]).hypot(first[1] - start[1]) < 1e-9,
+        "{first:?}"
+    );
+    let end = vec3(points.last().expect("a point"));
+    assert!(
+        (end[0] - p[0]).hypot(end[1] - p[1]) <= 0.011,
+        "{end:?} vs {p:?}"
+    );
+}
+
+/// The transform's rotation and translation: `(q, t)`.
+fn transform(t: &Value) -> (UnitQuaternion<f64>, Vector3<f64>) {
+    let q = nalgebra::Quaternion::new(f(&t["qw"]), f(&t["qx"]), f(&t["qy"]), f(&t["qz"]));
+    let v = Vector3::new(f(&t["x"]), f(&t["y"]), f(&t["z"]));
+    (UnitQuaternion::from_quaternion(q), v)
+}
+
+/// On `/tf` the robot's frame hangs from `map` and the antenna's from the robot's; at every
+/// instant the two compose to the pose the antenna reports on its pose topic.
+fn assert_robot_frames(decoded: &Value) {
+    let tf = decoded["tf"].as_array().expect("tf");
+    let poses = decoded["poses"].as_array().expect("poses");
+    let mut checked = 0;
+    for a in tf.iter().filter(|t| t["child"] == "s1_reader/antenna_1") {
+        assert_eq!(a["parent"], "robot_1", "{a}");
+        let r = (tf.iter())
+            .find(|t| t["child"] == "robot_1" && t["stamp_ns"] == a["stamp_ns"])
+            .unwrap_or_else(|| panic!("no robot frame at {}", a["stamp_ns"]));
+        assert_eq!(r["parent"], "map");
+        let ((qr, tr), (qa, ta)) = (transform(r), transform(a));
+        let (q, t) = (qr * qa, tr + qr * ta);
+        let reported = (poses.iter())
+            .find(|p| {
+                p["topic"] == "/llrp/s1_reader/antenna_1/pose" && p["stamp_ns"] == a["stamp_ns"]
+            })
+            .expect("the reported pose at that instant");
+        let (qp, tp) = transform(reported);
+        assert!((t - tp).norm() < 1e-9, "{t} vs {tp}");
+        assert!(q.angle_to(&qp) < 1e-9, "{q} vs {qp}");
+        checked += 1;
+    }
+    assert!(checked >= 2, "antenna frames: {checked}");
 }
 
 /// Every estimate is in `map`, with a position exactly when its state has one and a

@@ -14,7 +14,8 @@ from the `ros2msg` schemas the server advertises); none of llrp-gateway's code.
 3. A well-behaved client: serverInfo, the advertised channels; prints the line `READY` once
    it has subscribed to every channel advertised so far (and subscribes to later ones as
    they come), then decodes every message until it holds READS tag reads and at least one
-   message of each kind NEED names (comma-separated among poses, tf, tags, events, scenes;
+   message of each kind NEED names (comma-separated among poses, tf, tags, events, scenes,
+   estimate_scenes: scenes that draw at least one estimate;
    default the first four), or TIMEOUT_S pass.
 
 Prints ONE JSON object after READY:
@@ -22,7 +23,7 @@ Prints ONE JSON object after READY:
    "server_info": {...}, "channels": [{"id", "topic", "encoding", "schemaName",
    "schemaEncoding"}], "counts": {topic: n},
    "reads": [{"topic", "epc", "reader", "antenna", "rssi_dbm", "log_time", "frame_id"}],
-   "poses": n, "tf": n, "tags": n, "events": n, "scenes": n, "scene_ids": [the entity ids of
+   "poses": n, "tf": n, "tags": n, "events": n, "scenes": n, "estimate_scenes": n, "scene_ids": [the entity ids of
    the newest SceneUpdate], "bad_subscription_ids": n}
 """
 
@@ -86,7 +87,7 @@ async def hostile(url):
 
 async def good(url, want_reads, timeout, need):
     out = {"counts": {}, "reads": [], "poses": 0, "tf": 0, "tags": 0, "events": 0,
-           "scenes": 0, "scene_ids": [], "channels": [],
+           "scenes": 0, "estimate_scenes": 0, "scene_ids": [], "channels": [],
            "bad_subscription_ids": 0}
     factory = DecoderFactory()
     channels, decoders, by_sub = {}, {}, {}
@@ -156,6 +157,8 @@ async def good(url, want_reads, timeout, need):
             elif c["schemaName"] == SCENE:
                 out["scenes"] += 1
                 out["scene_ids"] = sorted(e.id for e in msg.entities)
+                if any(i.startswith("estimate/") for i in out["scene_ids"]):
+                    out["estimate_scenes"] += 1
     return out
 
 

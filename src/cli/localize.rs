@@ -56,8 +56,8 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub force: bool,
     /// Also write the estimates, and a 3D scene of them, to this MCAP file (ROS 2 messages;
-    /// docs/robotics.md).
-    #[arg(long, value_name = "FILE", conflicts_with = "subscribe")]
+    /// a worker writes them as it computes them; docs/robotics.md).
+    #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
     /// Run as a localizer worker on this MQTT broker's reads instead
     /// (`mqtt://[USER:PASS@]HOST[:PORT][/PREFIX]`; docs/fleet.md).

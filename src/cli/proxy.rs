@@ -239,6 +239,8 @@ async fn serve(args: ProxyArgs, entries: Vec<ProxyEntry>) -> Result<(), ProxyCom
     let tap = live.as_ref().map(LiveServer::tap);
     let mcap =
         McapThread::open(args.mcap.as_deref(), false, tap).map_err(ProxyCommandError::Mcap)?;
+    let shared = sinks.live().map(|l| l.shared.clone());
+    crate::mcap_estimates::by_wall_clock(shared.as_deref(), mcap.as_ref());
     running.mcap = mcap.map(|m| (args.mcap.clone(), m));
     for e in entries {
         start(&args, e, &sinks, &stop_rx, &mut running).await?;
@@ -246,6 +248,8 @@ async fn serve(args: ProxyArgs, entries: Vec<ProxyEntry>) -> Result<(), ProxyCom
     stop.wait().await;
     eprintln!("llrp-gateway proxy: stopping: closing every session");
     let _ = stop_tx.send(true);
+    let mcap = running.mcap.as_ref().map(|(_, m)| m);
+    crate::mcap_estimates::last_scene(shared.as_deref(), mcap);
     let failures = running.finish().await;
     if let Some(live) = live {
         live.shutdown().await;

@@ -261,6 +261,8 @@ async fn serve(
             source,
         })?;
     let tap = sinks.tap().map(|t| (name, t));
+    let shared = sinks.live().map(|l| l.shared.clone());
+    crate::mcap_estimates::by_wall_clock(shared.as_deref(), mcap.as_ref());
     let options = ReplayOptions {
         speed: match args.speed {
             Speed::Max => None,
@@ -275,6 +277,7 @@ async fn serve(
     stop.wait().await;
     let _ = tx.send(true);
     let _ = task.await;
+    crate::mcap_estimates::last_scene(shared.as_deref(), mcap.as_ref());
     finish_mcap(args, mcap.zip(recorder_task)).await?;
     sinks.stop().await;
     eprintln!("llrp-gateway replay: stopped");

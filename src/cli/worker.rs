@@ -10,10 +10,12 @@ use crate::fleet::args::PublishConfig;
 use crate::fleet::schema::DEFAULT_SHARDS;
 use crate::fleet::url::{BrokerAddress, BrokerUrl};
 use crate::fleet::worker::{parse_shards, Worker, WorkerOptions};
+use crate::foxglove::LiveServer;
 use crate::http::launch::LaunchOptions;
 use crate::localize::live::Input;
 use crate::localize::offline::SettingsFile;
 use crate::localize::poses::Poses;
+use crate::record::mcap::McapThread;
 
 /// The worker options of `localize`.
 #[derive(Clone, Debug, Default, PartialEq, clap::Args)]
@@ -57,6 +59,10 @@ pub struct WorkerArgs {
     /// The HTTP API and live map for the worker's shards (off unless given).
     #[command(flatten)]
     pub http: super::args::HttpArgs,
+    /// Serve the worker's estimates and their scene live to Foxglove on this address (its
+    /// WebSocket protocol; docs/robotics.md "Live in Foxglove").
+    #[arg(long, value_name = "ADDR", requires = "subscribe")]
+    pub foxglove: Option<String>,
 }
 
 /// Why the worker of `localize --subscribe` could not run.
@@ -107,6 +113,12 @@ pub enum WorkerCommandError {
     /// The localizer or its HTTP API could not be started.
     #[error("{0}")]
     Consumers(#[from] super::root::ConsumersError),
+    /// The Foxglove live view could not listen.
+    #[error("{0}")]
+    Live(#[from] crate::foxglove::LiveError),
+    /// The `--mcap` file could not be written.
+    #[error("cannot write the MCAP file: {0}")]
+    Mcap(crate::record::mcap::McapError),
 }
 
 /// What the worker's options ask for: the worker, and the localizer it feeds.
@@ -118,6 +130,10 @@ struct WorkerPlan {
     settings: crate::localize::live::Settings,
     /// Per reader, reader time − robot time of the poses robots publish (µs).
     clock_offsets_us: Vec<(ReaderName, i64)>,
+    /// `--mcap`: the file the worker's estimates and their scene go to.
+    mcap: Option<PathBuf>,
+    /// `--force`: an existing `--mcap` file is replaced.
+    force: bool,
 }
 
 /// Runs the worker of `args` (which has `--subscribe`) until Ctrl-C or SIGTERM.
@@ -186,6 +202,8 @@ fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
         http: LaunchOptions::try_from(w.http.clone())?,
         settings,
         clock_offsets_us: file.clock_offsets_us.clone().into_iter().collect(),
+        mcap: args.mcap.clone(),
+        force: args.force,
     })
 }
 
@@ -193,6 +211,16 @@ fn options(args: &LocalizeArgs) -> Result<WorkerPlan, WorkerCommandError> {
 /// for, until Ctrl-C or SIGTERM.
 async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandError> {
     let stop = crate::stop::StopSignal::watch();
+    let view = match &w.foxglove {
+        Some(addr) => Some(LiveServer::bind(addr).await?),
+        None => None,
+    };
+    let mcap = McapThread::open(
+        plan.mcap.as_deref(),
+        plan.force,
+        view.as_ref().map(LiveServer::tap),
+    )
+    .map_err(WorkerCommandError::Mcap)?;
     let http_options = plan.http;
     // Each reader's clock offset, before anything else reaches the localizer.
     let prime = (plan.clock_offsets_us.iter())
@@ -223,6 +251,7 @@ async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandErro
     let live = consumers
         .live()
         .expect("a headless plan runs its localizer");
+    crate::mcap_estimates::by_wall_clock(Some(&live.shared), mcap.as_ref());
     let (url, shards) = (plan.worker.url.clone(), plan.worker.shards.clone());
     let started = Worker::start(
         plan.worker,
@@ -244,6 +273,20 @@ async fn serve(plan: WorkerPlan, w: &WorkerArgs) -> Result<(), WorkerCommandErro
     );
     stop.wait().await;
     worker.stop();
+    crate::mcap_estimates::last_scene(Some(&live.shared), mcap.as_ref());
+    if let Some(mcap) = mcap {
+        match mcap.finish_async().await {
+            Ok(s) => tracing::info!(
+                messages = s.messages,
+                channels = s.channels,
+                "the MCAP output is finished"
+            ),
+            Err(e) => tracing::error!(error = %e, "the MCAP file was not finished"),
+        }
+    }
+    if let Some(view) = view {
+        view.shutdown().await;
+    }
     consumers.stop().await;
     eprintln!("llrp-gateway localize: stopped");
     Ok(())

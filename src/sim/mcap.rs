@@ -6,13 +6,10 @@
 //! The file is written on the MCAP writer's thread; a failed write is logged there and ends
 //! the file, not the simulation.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-
 use super::{record_path, SimError, SimOptions, Start};
 use crate::foxglove::LiveServer;
-use crate::localize::estimate::State;
-use crate::localize::shared::{reason, Shared, TagView};
-use crate::record::mcap::estimates::{EstimateItem, EstimateState};
+use crate::localize::shared::Shared;
+use crate::mcap_estimates::ScenePacing;
 use crate::record::mcap::scene::SceneWorld;
 use crate::record::mcap::{McapError, McapItem, McapThread};
 use crate::record::{Discard, Header, RecordOptions, Recorder, RecorderTask};
@@ -50,7 +47,17 @@ fn scene_world(scenario: &Scenario) -> SceneWorld {
             .map(|r| (r.name.clone(), r.point, r.normal))
             .collect(),
         beamwidths,
+        robots: (crate::physics::distinct_robots(scenario).iter().enumerate())
+            .map(|(i, r)| (super::truth::robot_frame(i), robot_box(r)))
+            .collect(),
     }
+}
+
+/// A robot's box in the scene: `wheel_base` wide, as long plus a wheel's radius at either
+/// end, and a wheel's diameter high.
+fn robot_box(r: &crate::scenario::RobotSpec) -> [f64; 3] {
+    let wheel = 2.0 * r.wheel_radius;
+    [r.wheel_base + wheel, r.wheel_base, wheel]
 }
 
 /// Finishes the file once the readers and their recorders have stopped; what it holds is
@@ -101,48 +108,18 @@ impl Start<'_> {
 
 impl super::RunningSim {
     /// Hands every estimate `shared` publishes from now on to the `--mcap` file and the
-    /// `--foxglove` view (none without either), logged at the simulation's clock. The
-    /// localizer's thread offers them without waiting: an estimate with no room in the queue
-    /// is dropped, with a warning (those published once the file is finished, silently).
+    /// `--foxglove` view (none without either), logged at the simulation's clock
+    /// ([`crate::mcap_estimates`]; the truth paces the scene).
     pub fn estimates_to_mcap(&self, shared: &Shared) {
         let Some(mcap) = &self.mcap else {
             return;
         };
-        let sender = mcap.sender();
         let (clock, utc0) = (self.clock.clone(), self.utc0);
-        let dropped = AtomicU64::new(0);
-        shared.on_publish(move |tag| {
-            let item = estimate_item(utc0.saturating_add(clock.now_us()), tag);
-            if !sender.try_send(McapItem::Estimate(item))
-                && !sender.is_closed()
-                && dropped.fetch_add(1, Ordering::Relaxed) == 0
-            {
-                tracing::warn!("the MCAP writer is behind: estimates are dropped while it is");
-            }
-        });
-    }
-}
-
-/// The MCAP file's estimate of `tag`, published at `logged_us`.
-fn estimate_item(logged_us: u64, tag: &TagView) -> EstimateItem {
-    let e = &tag.estimate;
-    EstimateItem {
-        logged_us,
-        epc: e.epc.to_uppercase(),
-        estimator: e.estimator.to_string(),
-        state: match e.state {
-            State::Converging => EstimateState::Converging,
-            State::Converged => EstimateState::Converged,
-            State::InsufficientGeometry => EstimateState::InsufficientGeometry,
-        },
-        position: e.estimate,
-        covariance: e.covariance,
-        pose_sigma_m: e.pose_sigma_m,
-        samples: u32::try_from(e.samples).unwrap_or(u32::MAX),
-        newest_phase_us: e.last_update_us,
-        reads: tag.reads,
-        reads_per_s: tag.reads_per_s,
-        last_seen_us: tag.last_seen_us,
-        reason: reason(e).unwrap_or_default(),
+        crate::mcap_estimates::estimates_to_mcap(
+            shared,
+            mcap.sender(),
+            move || utc0.saturating_add(clock.now_us()),
+            ScenePacing::ByTruth,
+        );
     }
 }

@@ -14,7 +14,7 @@ use crate::localize::poses::PoseSample;
 use crate::net::clock::{Clock, Speed};
 use crate::physics::{AntennaPose, Model};
 use crate::reads::ReaderName;
-use crate::record::mcap::geo::Truth as McapTruth;
+use crate::record::mcap::geo::{RobotAt, Truth as McapTruth};
 use crate::record::mcap::{McapItem, McapSender};
 
 /// Ground-truth writer shared by the readers: to the truth file (`--truth`), to the MCAP
@@ -109,6 +109,16 @@ pub(super) fn truth_writer(
     m: Arc<Model>,
 ) -> impl FnMut(u64) + Send {
     let mut next = 0u64;
+    // Each robot carrying one of the reader's antennas, with the ports it carries.
+    let mut carriers: Vec<(usize, Vec<u16>)> = Vec::new();
+    for a in 1..=m.antenna_count() {
+        if let Some(robot) = m.antenna_robot(a) {
+            match carriers.iter_mut().find(|(r, _)| *r == robot) {
+                Some((_, ports)) => ports.push(a),
+                None => carriers.push((robot, vec![a])),
+            }
+        }
+    }
     move |now_us: u64| {
         while next <= now_us {
             let t = next;
@@ -140,11 +150,22 @@ pub(super) fn truth_writer(
                 .iter()
                 .map(|(epc, p)| serde_json::json!({"epc": epc, "position": p}))
                 .collect();
+            let robots = (carriers.iter())
+                .filter_map(|(robot, ports)| {
+                    Some(RobotAt {
+                        name: robot_frame(*robot),
+                        true_pose: m.robot_pose(*robot, t)?,
+                        reported: m.robot_reported_pose(*robot, t)?,
+                        ports: ports.clone(),
+                    })
+                })
+                .collect();
             truth.mcap(McapTruth {
                 reader: name.to_string(),
                 utc_us: utc0 + t,
                 antennas: poses,
                 tags,
+                robots,
             });
             truth.line(&serde_json::json!({
                 "reader": name,
@@ -156,6 +177,12 @@ pub(super) fn truth_writer(
             next += TRUTH_INTERVAL_US;
         }
     }
+}
+
+/// The frame of robot `robot` (an index into the scenario's distinct robots): `robot_N`,
+/// N from 1.
+pub(super) fn robot_frame(robot: usize) -> String {
+    format!("robot_{}", robot + 1)
 }
 
 /// Writes the truth by the clock (real-time speeds), whoever drives the inventory: a client,

@@ -73,6 +73,43 @@ fn pose_fields(cdr: &mut Cdr, pose: &AntennaPose) {
     }
 }
 
+/// A robot at one instant, as one reader's truth sees it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotAt {
+    /// Its frame's name (`robot_N`, N from 1 in the scenario's order).
+    pub name: String,
+    /// Its true pose `[x m, y m, heading rad]` (the scene's).
+    pub true_pose: [f64; 3],
+    /// The pose it reports (its frame on `/tf`, the parent of the antennas it carries).
+    pub reported: [f64; 3],
+    /// The ports of the reader's antennas it carries.
+    pub ports: Vec<u16>,
+}
+
+/// The pose of `antenna` in the frame of a robot at `robot` `[x, y, heading]` (a rotation
+/// about +z only, so yaw and pitch stay a yaw and a pitch).
+fn in_robot_frame(robot: [f64; 3], antenna: &AntennaPose) -> AntennaPose {
+    let (s, c) = robot[2].sin_cos();
+    let (dx, dy) = (
+        antenna.position[0] - robot[0],
+        antenna.position[1] - robot[1],
+    );
+    AntennaPose {
+        position: [c * dx + s * dy, -s * dx + c * dy, antenna.position[2]],
+        yaw_rad: antenna.yaw_rad - robot[2],
+        pitch_rad: antenna.pitch_rad,
+    }
+}
+
+/// A robot's pose `[x, y, heading]` on the floor as a pose.
+fn floor_pose(robot: [f64; 3]) -> AntennaPose {
+    AntennaPose {
+        position: [robot[0], robot[1], 0.0],
+        yaw_rad: robot[2],
+        pitch_rad: 0.0,
+    }
+}
+
 /// What the simulator knows of one reader at one instant.
 #[derive(Clone, Debug)]
 pub struct Truth {
@@ -84,20 +121,30 @@ pub struct Truth {
     pub antennas: Vec<(u16, AntennaPose, AntennaPose)>,
     /// Tags and their true positions (every tag at the start, then the moving ones).
     pub tags: Vec<(String, [f64; 3])>,
+    /// The robots carrying the reader's antennas.
+    pub robots: Vec<RobotAt>,
 }
 
 impl<W: Write> McapOut<W> {
     /// One instant of a simulated reader: each antenna's reported pose on
-    /// `/llrp/READER/antenna_N/pose` and as a transform from `map` to `READER/antenna_N` on
-    /// `/tf`; its true pose on `/truth/READER/antenna_N/pose`; the tags on `/truth/tags`;
-    /// and, when one is due, the scene ([`super::scene`]).
+    /// `/llrp/READER/antenna_N/pose`; on `/tf` each robot's reported pose as a transform
+    /// from `map` to `robot_N` and each antenna's as one to `READER/antenna_N` from its
+    /// robot's frame (from `map` when no robot carries it); its true pose on
+    /// `/truth/READER/antenna_N/pose`; the tags on `/truth/tags`; and, when one is due, the
+    /// scene ([`super::scene`]).
     pub fn truth(&mut self, t: &Truth) -> Result<(), McapError> {
         let token = self.token(&t.reader);
         let ns = t.utc_us.saturating_mul(1000);
         let mut tf = Cdr::new();
-        tf.u32(u32::try_from(t.antennas.len()).unwrap_or(u32::MAX));
+        let transforms = t.antennas.len() + t.robots.len();
+        tf.u32(u32::try_from(transforms).unwrap_or(u32::MAX));
+        for r in &t.robots {
+            tf.header(ns, WORLD).string(&r.name);
+            pose_fields(&mut tf, &floor_pose(r.reported));
+        }
         for (port, true_pose, reported) in &t.antennas {
             let frame = format!("{token}/antenna_{port}");
+            let carrier = t.robots.iter().find(|r| r.ports.contains(port));
             for (topic, pose) in [
                 (format!("/llrp/{token}/antenna_{port}/pose"), reported),
                 (format!("/truth/{token}/antenna_{port}/pose"), true_pose),
@@ -107,10 +154,18 @@ impl<W: Write> McapOut<W> {
                 let bytes = self.cdr.finish();
                 self.write(&topic, MsgType::PoseInFrame, ns, ns, &bytes)?;
             }
-            tf.header(ns, WORLD).string(&frame);
-            pose_fields(&mut tf, reported);
+            match carrier {
+                Some(r) => {
+                    tf.header(ns, &r.name).string(&frame);
+                    pose_fields(&mut tf, &in_robot_frame(r.reported, reported));
+                }
+                None => {
+                    tf.header(ns, WORLD).string(&frame);
+                    pose_fields(&mut tf, reported);
+                }
+            }
         }
-        if !t.antennas.is_empty() {
+        if transforms > 0 {
             self.write("/tf", MsgType::TfMessage, ns, ns, &tf.finish())?;
         }
         for (epc, p) in &t.tags {
@@ -163,5 +218,26 @@ mod tests {
         }
         let n: f64 = orientation(&pose).iter().map(|c| c * c).sum();
         assert!((n - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_antenna_in_its_robot_s_frame_composes_back_to_its_pose_in_the_world() {
+        let robot = [2.0, 3.0, 0.8];
+        let antenna = AntennaPose {
+            position: [2.5, 3.4, 0.7],
+            yaw_rad: 2.0,
+            pitch_rad: 0.2,
+        };
+        let rel = in_robot_frame(robot, &antenna);
+        let q = orientation(&floor_pose(robot));
+        let p = rotate(q, rel.position);
+        let world = [p[0] + robot[0], p[1] + robot[1], p[2]];
+        let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|i| (a[i] - b[i]).abs() < 1e-12);
+        assert!(close(world, antenna.position), "{world:?}");
+        for axis in [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] {
+            let composed = rotate(q, rotate(orientation(&rel), axis));
+            let direct = rotate(orientation(&antenna), axis);
+            assert!(close(composed, direct), "{composed:?} vs {direct:?}");
+        }
     }
 }

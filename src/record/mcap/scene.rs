@@ -1,6 +1,7 @@
 //! The 3D scene of a simulation as Foxglove's `SceneUpdate` on `/scene`: the world's bounds
 //! and reflectors, each tag's true position, each antenna (an arrow along its boresight and
-//! the cone of its −3 dB beamwidth) and the path it drove, and the live localizer's
+//! the cone of its −3 dB beamwidth) and the path it drove, each robot (a box of its
+//! footprint) and the path it drove, and the live localizer's
 //! estimates with their 95 % ellipsoids, coloured by state. Written every
 //! [`SCENE_INTERVAL_US`] of the simulation's clock (at its truth instants), every entity in
 //! each update under an id that stays the same, so Foxglove replaces it.
@@ -44,6 +45,8 @@ const CONVERGED: Color = [0.1, 0.8, 0.25, 1.0];
 const CONVERGING: Color = [1.0, 0.55, 0.0, 1.0];
 const ANTENNA: Color = [0.9, 0.15, 0.15, 1.0];
 const PATH: Color = [0.2, 0.5, 1.0, 1.0];
+const ROBOT: Color = [0.95, 0.8, 0.1, 0.6];
+const ROBOT_PATH: Color = [0.95, 0.8, 0.1, 1.0];
 const BOUNDS: Color = [0.6, 0.6, 0.6, 1.0];
 const REFLECTOR: Color = [0.4, 0.6, 0.9, 0.15];
 
@@ -56,6 +59,8 @@ pub struct SceneWorld {
     pub reflectors: Vec<(String, [f64; 3], [f64; 3])>,
     /// Each antenna's full −3 dB beamwidth (degrees), by reader name and port.
     pub beamwidths: Vec<(String, u16, f64)>,
+    /// Each robot's frame name (`robot_N`) and its box: length, width, height (m).
+    pub robots: Vec<(String, [f64; 3])>,
 }
 
 /// A covariance's 95 % ellipsoid: its semi-axes and the orientation that takes the local
@@ -101,6 +106,8 @@ pub(super) struct Scene {
     next_us: Option<u64>,
     /// Each antenna's true pose and path, by reader token and port.
     antennas: BTreeMap<(String, u16), Tracked>,
+    /// Each robot's true pose `[x, y, heading]` and the path it drove, by frame name.
+    robots: BTreeMap<String, ([f64; 3], Vec<[f64; 3]>)>,
     /// Each tag's true position, by EPC (upper-case).
     tags: BTreeMap<String, [f64; 3]>,
     /// Each tag's newest estimate, by EPC.
@@ -164,6 +171,26 @@ fn box_edges(lo: [f64; 3], hi: [f64; 3]) -> Vec<[f64; 3]> {
         }
     }
     points
+}
+
+/// Adds `p` to `path` when it is more than 1 cm from the last point; beyond [`MAX_PATH`]
+/// points the path keeps every other one (and its newest).
+fn extend_path(path: &mut Vec<[f64; 3]>, p: [f64; 3]) {
+    let moved = path
+        .last()
+        .is_none_or(|last| (0..3).map(|i| (last[i] - p[i]).powi(2)).sum::<f64>() > 1e-4);
+    if moved {
+        path.push(p);
+    }
+    if path.len() > MAX_PATH {
+        let last = path.last().copied();
+        let mut k = 0;
+        path.retain(|_| {
+            k += 1;
+            k % 2 == 1
+        });
+        path.extend(last.filter(|l| path.last() != Some(l)));
+    }
 }
 
 fn label(position: [f64; 3], text: &str, color: Color) -> Text {
@@ -276,6 +303,46 @@ impl Scene {
         }
     }
 
+    /// Each robot: a box of its footprint on the floor, its label and the path it drove.
+    fn robot_entities(&self, out: &mut Vec<Entity>) {
+        for (name, (pose, path)) in &self.robots {
+            let size = (self.world.robots.iter())
+                .find(|(n, _)| n == name)
+                .map_or([0.5, 0.5, 0.3], |(_, s)| *s);
+            let floor = AntennaPose {
+                position: [pose[0], pose[1], size[2] / 2.0],
+                yaw_rad: pose[2],
+                pitch_rad: 0.0,
+            };
+            out.push(Entity {
+                id: format!("robot/{name}"),
+                metadata: vec![("frame".into(), name.clone())],
+                cubes: vec![Solid {
+                    pose: Pose {
+                        position: floor.position,
+                        orientation: orientation(&floor),
+                    },
+                    size,
+                    color: ROBOT,
+                }],
+                texts: vec![label(floor.position, name, ROBOT_PATH)],
+                ..Entity::default()
+            });
+            if path.len() >= 2 {
+                out.push(Entity {
+                    id: format!("path/{name}"),
+                    lines: vec![Line {
+                        kind: LineType::Strip,
+                        thickness_px: 2.0,
+                        points: path.clone(),
+                        color: ROBOT_PATH,
+                    }],
+                    ..Entity::default()
+                });
+            }
+        }
+    }
+
     /// Each tag's true position, a small cube with its EPC.
     fn tag_entities(&self, out: &mut Vec<Entity>) {
         for (epc, p) in &self.tags {
@@ -358,24 +425,14 @@ impl<W: Write> McapOut<W> {
                 .entry((token.to_string(), *port))
                 .or_insert_with(|| (*true_pose, Vec::new()));
             *pose = *true_pose;
-            let moved = path.last().is_none_or(|last| {
-                (0..3)
-                    .map(|i| (last[i] - pose.position[i]).powi(2))
-                    .sum::<f64>()
-                    > 1e-4
-            });
-            if moved {
-                path.push(pose.position);
-            }
-            if path.len() > MAX_PATH {
-                let last = path.last().copied();
-                let mut k = 0;
-                path.retain(|_| {
-                    k += 1;
-                    k % 2 == 1
-                });
-                path.extend(last.filter(|l| path.last() != Some(l)));
-            }
+            extend_path(path, pose.position);
+        }
+        for r in &t.robots {
+            let (pose, path) = (self.scene.robots)
+                .entry(r.name.clone())
+                .or_insert_with(|| (r.true_pose, Vec::new()));
+            *pose = r.true_pose;
+            extend_path(path, [pose[0], pose[1], 0.0]);
         }
         for (epc, p) in &t.tags {
             self.scene.tags.insert(epc.to_uppercase(), *p);
@@ -392,6 +449,7 @@ impl<W: Write> McapOut<W> {
         let mut entities = Vec::new();
         self.scene.world_entities(&mut entities);
         self.scene.antenna_entities(&mut entities);
+        self.scene.robot_entities(&mut entities);
         self.scene.tag_entities(&mut entities);
         let gone = self.scene.estimate_entities(&mut entities);
         let ns = utc_us.saturating_mul(1000);

@@ -192,7 +192,7 @@ pub struct Model {
 
 /// Every distinct robot of the scenario, in order of first appearance over all readers, so
 /// antennas sharing a robot (on any reader) share one drive and one odometry.
-fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
+pub fn distinct_robots(scenario: &Scenario) -> Vec<&RobotSpec> {
     let mut robots: Vec<&RobotSpec> = Vec::new();
     for antenna in scenario.readers.iter().flat_map(|r| &r.antennas) {
         if let Mount::Robot { robot, .. } = &antenna.mount {

@@ -6,6 +6,30 @@ use super::multipath::Aim;
 use super::{fastmath, motion, robot, seconds, AntennaPose, Model, Mover};
 
 impl Model {
+    /// The robot antenna `antenna` rides on, as an index into [`super::distinct_robots`] of
+    /// the scenario; none for a fixed or recorded antenna.
+    pub fn antenna_robot(&self, antenna: u16) -> Option<usize> {
+        let a = usize::from(antenna)
+            .checked_sub(1)
+            .and_then(|i| self.antennas.get(i))?;
+        match &a.mover {
+            Mover::Robot { robot, .. } => Some(*robot),
+            _ => None,
+        }
+    }
+
+    /// Robot `robot`'s true pose `[x m, y m, heading rad]` at `t_us` (`robot` as
+    /// [`Model::antenna_robot`] numbers it); none for an unknown one.
+    pub fn robot_pose(&self, robot: usize, t_us: u64) -> Option<[f64; 3]> {
+        Some(self.robots.get(robot)?.true_pose(seconds(t_us)))
+    }
+
+    /// The pose `[x m, y m, heading rad]` robot `robot` reports at `t_us` (its estimate of its
+    /// own pose, that of [`Model::estimated_pose`]); none for an unknown one.
+    pub fn robot_reported_pose(&self, robot: usize, t_us: u64) -> Option<[f64; 3]> {
+        Some(self.robots.get(robot)?.estimated_pose(seconds(t_us)))
+    }
+
     /// True position of antenna `antenna` at `t_us` (that of [`Model::antenna_pose`] up to
     /// rounding, the heading's sine and cosine through [`fastmath::cis`], without working out
     /// the boresight).

@@ -1,0 +1,172 @@
+//! A localizer worker's `--mcap FILE` and `--foxglove ADDR` (docs/robotics.md): `sim
+//! --publish` → a real mosquitto → `localize --subscribe URL`, whose file holds the estimates
+//! it computed on `/estimates/tags` and a scene of them on `/scene`, read by the independent
+//! readers of `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`), and whose live view
+//! streams the same two channels to the independent client
+//! `scripts/interop/foxglove_client.py`.
+
+mod broker_support;
+mod http_support;
+mod mcap_support;
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use broker_support::{publishing_sim, worker, Mosquitto};
+use http_support::request;
+
+/// Waits (a hang guard, not a measurement) until the worker at `http` has a position for
+/// three tags at least; the EPCs it has a position for.
+fn wait_for_estimates(http: std::net::SocketAddr) -> BTreeSet<String> {
+    let until = Instant::now() + mcap_support::GUARD;
+    loop {
+        let tags = request(http, "GET", "/api/tags", &[], b"").json();
+        let placed: BTreeSet<String> = (tags["tags"].as_array().expect("tags").iter())
+            .filter(|t| t["state"] == "converged" || t["state"] == "converging")
+            .map(|t| t["epc"].as_str().expect("epc").to_uppercase())
+            .collect();
+        if placed.len() >= 3 {
+            return placed;
+        }
+        assert!(
+            Instant::now() < until,
+            "the worker has not placed them: {tags}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers) and the MCAP readers (LLRP_MCAP_PYTHON); ./scripts/test runs it"]
+fn a_worker_s_mcap_file_holds_the_estimates_it_computed_and_their_scene() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("x");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mcap = dir.path().join("worker.mcap");
+    let (mut w, http) = worker(
+        &url,
+        &[
+            "--client-id",
+            "mcap-worker",
+            "--mcap",
+            mcap.to_str().expect("utf-8"),
+        ],
+    );
+    let placed = {
+        let _sim = publishing_sim(&url, &["--poses", "truth"]);
+        wait_for_estimates(http)
+    };
+    assert!(w.stop().success(), "the worker stopped cleanly");
+    let v = mcap_support::check(&mcap);
+    let ch = mcap_support::channels(&v);
+    assert_eq!(ch["/estimates/tags"].0, "llrp_gateway_msgs/msg/TagEstimate");
+    assert_eq!(ch["/scene"].0, "foxglove_msgs/msg/SceneUpdate");
+    for decoder in ["mcap_ros2", "rosbags"] {
+        assert_eq!(v[decoder]["scenes"], v["mcap_ros2"]["scenes"], "{decoder}");
+        assert_eq!(
+            v[decoder]["estimates"], v["mcap_ros2"]["estimates"],
+            "{decoder}"
+        );
+    }
+    let estimates = v["mcap_ros2"]["estimates"].as_array().expect("estimates");
+    let epcs: BTreeSet<String> = (estimates.iter())
+        .map(|e| e["epc"].as_str().expect("epc").to_string())
+        .collect();
+    assert!(epcs.is_superset(&placed), "{epcs:?} vs {placed:?}");
+    let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
+    let last = scenes.last().expect("a scene");
+    let mut drawn = BTreeSet::new();
+    for e in last["entities"].as_array().expect("entities") {
+        let id = e["id"].as_str().expect("an id");
+        let epc = id
+            .strip_prefix("estimate/")
+            .unwrap_or_else(|| panic!("a worker knows no truth, only estimates: {id}"));
+        let center = &e["spheres"][0]["position"];
+        let stamp = e["stamp_ns"].as_u64().expect("a stamp");
+        (estimates.iter())
+            .rfind(|m| {
+                m["epc"] == epc
+                    && m["position"] == *center
+                    && m["log_time"].as_u64().is_some_and(|t| t <= stamp)
+            })
+            .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
+        drawn.insert(epc.to_string());
+    }
+    assert!(drawn.is_superset(&placed), "{drawn:?} vs {placed:?}");
+}
+
+#[test]
+#[ignore = "needs mosquitto (./scripts/install-brokers) and the Foxglove client's venv (LLRP_MCAP_PYTHON); ./scripts/test runs it"]
+fn a_worker_s_live_view_streams_its_estimates_and_their_scene() {
+    let broker = Mosquitto::start("");
+    let url = broker.url("f");
+    let (mut w, _http) = worker(
+        &url,
+        &[
+            "--client-id",
+            "foxglove-worker",
+            "--foxglove",
+            "127.0.0.1:0",
+        ],
+    );
+    let ws = w.address("Foxglove live view on ");
+    let python = std::env::var("LLRP_MCAP_PYTHON").expect(
+        "LLRP_MCAP_PYTHON must name the python of scripts/venv-mcap.sh (set by ./scripts/test)",
+    );
+    // No reads to wait for; done once a scene that draws an estimate has come. Its channels are advertised with
+    // the worker's first estimate, so the client subscribes once the simulation runs.
+    let mut client = Command::new(python)
+        .arg(mcap_support::root().join("scripts/interop/foxglove_client.py"))
+        .args([ws.as_str(), "0", "30", "estimate_scenes"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("the client starts");
+    let mut out = BufReader::new(client.stdout.take().expect("piped")).lines();
+    let report: serde_json::Value = {
+        let _sim = publishing_sim(&url, &["--poses", "truth"]);
+        let ready = out.next().expect("a line").expect("utf-8");
+        assert_eq!(ready, "READY", "the client subscribed");
+        let line = out.next().expect("the client's report").expect("utf-8");
+        serde_json::from_str(&line).expect("JSON")
+    };
+    assert!(client.wait().expect("the client ends").success());
+    assert!(w.stop().success(), "the worker stopped cleanly");
+    let channels: BTreeSet<(String, String)> = (report["channels"].as_array())
+        .expect("channels")
+        .iter()
+        .map(|c| {
+            assert_eq!(
+                (c["encoding"].as_str(), c["schemaEncoding"].as_str()),
+                (Some("cdr"), Some("ros2msg")),
+                "{c}"
+            );
+            (
+                c["topic"].as_str().expect("a topic").to_string(),
+                c["schemaName"].as_str().expect("a schema").to_string(),
+            )
+        })
+        .collect();
+    let want: BTreeSet<(String, String)> = [
+        ("/estimates/tags", "llrp_gateway_msgs/msg/TagEstimate"),
+        ("/scene", "foxglove_msgs/msg/SceneUpdate"),
+    ]
+    .map(|(t, s)| (t.to_string(), s.to_string()))
+    .into();
+    assert_eq!(
+        channels, want,
+        "a worker streams its estimates and their scene only"
+    );
+    assert!(
+        report["counts"]["/estimates/tags"].as_u64() >= Some(1),
+        "{report}"
+    );
+    assert!(report["estimate_scenes"].as_u64() >= Some(1), "{report}");
+    let ids = report["scene_ids"].as_array().expect("ids");
+    assert!(!ids.is_empty(), "{report}");
+    for id in ids {
+        let id = id.as_str().expect("an id");
+        assert!(id.starts_with("estimate/"), "a worker knows no truth: {id}");
+    }
+}

@@ -1,0 +1,198 @@
+//! `replay --http ADDR --mcap FILE` and `proxy --http ADDR --mcap FILE` (docs/robotics.md):
+//! the live localizer's estimates of a replayed recording on `/estimates/tags` and a scene of
+//! them on `/scene`, with no truth, read by the independent readers of
+//! `scripts/interop/mcap_check.py` (`LLRP_MCAP_PYTHON`) and compared with what the HTTP API
+//! said.
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+mod mcap_support;
+use mcap_support::*;
+
+fn fixture(name: &str) -> String {
+    let p = root().join("fixtures/localize").join(name);
+    p.to_str().expect("utf-8").to_string()
+}
+
+/// `llrp-gateway ARGS` with the S1 recording's poses and settings, its localizer's HTTP API
+/// on a free loopback port, writing `mcap`; it, its LLRP and its HTTP address.
+fn localizing(args: &[&str], mcap: &str) -> (Proc, String, String) {
+    let mut child = bin()
+        .args(args)
+        .args(["--http", "127.0.0.1:0", "--poses"])
+        .arg(fixture("s1-report-per-read.poses.jsonl"))
+        .arg("--localize-settings")
+        .arg(fixture("s1-report-per-read.settings.json"))
+        .args(["--mcap", mcap])
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("it starts");
+    let mut lines = BufReader::new(child.stderr.take().expect("piped")).lines();
+    let until = Instant::now() + GUARD;
+    let (mut http, mut llrp) = (None, None);
+    while http.is_none() || llrp.is_none() {
+        assert!(Instant::now() < until, "{args:?} did not listen");
+        let line = lines.next().expect("a line").expect("utf-8");
+        if let Some(rest) = line.split("live map on http://").nth(1) {
+            http = Some(rest.trim_end_matches('/').to_string());
+        }
+        if let Some(rest) = line.split("listening on ").nth(1) {
+            llrp = Some(
+                rest.split([' ', ','])
+                    .next()
+                    .expect("an address")
+                    .to_string(),
+            );
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    let (llrp, http) = (llrp.expect("LLRP"), http.expect("HTTP"));
+    (Proc(child), llrp, http)
+}
+
+/// `GET path` of the HTTP API at `addr`: the JSON body.
+fn get(addr: &str, path: &str) -> Value {
+    let mut s = TcpStream::connect(addr).expect("connects");
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .expect("request");
+    let mut text = String::new();
+    s.read_to_string(&mut text).expect("response");
+    let body = text.split("\r\n\r\n").nth(1).expect("a body");
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
+}
+
+/// Waits (a hang guard, not a measurement) until the localizer has a position for each of
+/// the recording's ten tags; their EPCs.
+fn wait_for_estimates(http: &str) -> BTreeSet<String> {
+    let until = Instant::now() + 3 * GUARD;
+    loop {
+        let tags = get(http, "/api/tags");
+        let placed: BTreeSet<String> = (tags["tags"].as_array().expect("tags").iter())
+            .filter(|t| t["state"] == "converged" || t["state"] == "converging")
+            .map(|t| t["epc"].as_str().expect("epc").to_uppercase())
+            .collect();
+        if placed.len() == 10 {
+            return placed;
+        }
+        assert!(
+            Instant::now() < until,
+            "the localizer has not placed them: {tags}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The client the recording was made with, asking what it asked then, of `llrp`.
+fn inventory(llrp: &str) {
+    run(&[
+        "inventory",
+        llrp,
+        "--impinj",
+        "--report-every",
+        "1",
+        "--seconds",
+        "3",
+    ]);
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mcap = dir.path().join("replay.mcap");
+    let recording = fixture("s1-report-per-read.jsonl");
+    let args = [
+        "replay",
+        &recording,
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+    ];
+    let (mut replay, llrp, http) = localizing(&args, mcap.to_str().expect("utf-8"));
+    inventory(&llrp);
+    let placed = wait_for_estimates(&http);
+    terminate(&mut replay);
+    assert_estimates_and_scene(&mcap, &placed);
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn a_proxy_that_localizes_writes_its_estimates_and_their_scene_without_truth() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let recording = fixture("s1-report-per-read.jsonl");
+    let (mut replay, upstream) = spawn_listening(&[
+        "replay",
+        &recording,
+        "--listen",
+        "127.0.0.1:0",
+        "--speed",
+        "max",
+    ]);
+    // The proxy names its reader as the recording and the pose file do.
+    let config = dir.path().join("gateway.json");
+    let proxies = serde_json::json!({"proxies": [
+        {"name": "s1-reader", "upstream": upstream, "listen": "127.0.0.1:0"}
+    ]});
+    std::fs::write(&config, proxies.to_string()).expect("the config");
+    let mcap = dir.path().join("proxy.mcap");
+    let args = ["proxy", "--config", config.to_str().expect("utf-8")];
+    let (mut proxy, llrp, http) = localizing(&args, mcap.to_str().expect("utf-8"));
+    inventory(&llrp);
+    let placed = wait_for_estimates(&http);
+    terminate(&mut proxy);
+    terminate(&mut replay);
+    assert_estimates_and_scene(&mcap, &placed);
+}
+
+/// Both readers decode `mcap`'s estimates and scenes alike; every tag of `placed` has
+/// estimates, and the last scene holds estimates only (no truth), each placed tag's drawn at
+/// the position of one of its estimates logged by then.
+fn assert_estimates_and_scene(mcap: &std::path::Path, placed: &BTreeSet<String>) {
+    let v = check(mcap);
+    let ch = channels(&v);
+    assert_eq!(ch["/estimates/tags"].0, "llrp_gateway_msgs/msg/TagEstimate");
+    assert_eq!(ch["/scene"].0, "foxglove_msgs/msg/SceneUpdate");
+    for decoder in ["mcap_ros2", "rosbags"] {
+        assert_eq!(v[decoder]["scenes"], v["mcap_ros2"]["scenes"], "{decoder}");
+        assert_eq!(
+            v[decoder]["estimates"], v["mcap_ros2"]["estimates"],
+            "{decoder}"
+        );
+    }
+    let estimates = v["mcap_ros2"]["estimates"].as_array().expect("estimates");
+    let epcs: BTreeSet<String> = (estimates.iter())
+        .map(|e| e["epc"].as_str().expect("epc").to_string())
+        .collect();
+    assert!(epcs.is_superset(placed), "{epcs:?} vs {placed:?}");
+    let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
+    let last = scenes.last().expect("a scene");
+    let mut drawn = BTreeSet::new();
+    for e in last["entities"].as_array().expect("entities") {
+        let id = e["id"].as_str().expect("an id");
+        let epc = id
+            .strip_prefix("estimate/")
+            .unwrap_or_else(|| panic!("no truth here, only estimates: {id}"));
+        let center = &e["spheres"][0]["position"];
+        let stamp = e["stamp_ns"].as_u64().expect("a stamp");
+        (estimates.iter())
+            .rfind(|m| {
+                m["epc"] == epc
+                    && m["position"] == *center
+                    && m["log_time"].as_u64().is_some_and(|t| t <= stamp)
+            })
+            .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
+        drawn.insert(epc.to_string());
+    }
+    assert!(drawn.is_superset(placed), "{drawn:?} vs {placed:?}");
+}
