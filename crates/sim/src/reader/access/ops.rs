@@ -57,6 +57,24 @@ pub(super) fn check(op: &OpSpec) -> Result<(), LlrpStatus> {
     }
 }
 
+/// What ADD_ACCESSSPEC refuses among the AccessCommand's parameters the codec does not know
+/// (LLRP 1.1's C1G2BlockPermalock, say; a vendor's Custom aside): unsupported, rather than
+/// ignored.
+pub(super) fn check_unknown(extra: &[llrp::raw::Extra]) -> Result<(), LlrpStatus> {
+    let unknown = (extra.iter())
+        .filter_map(|x| x.param.header())
+        .map(|h| h.ty())
+        .find(|&ty| ty != 1023);
+    match unknown {
+        Some(ty) => Err(nested(
+            ty,
+            ParameterError::new(ty, StatusCode::P_UnsupportedParameter),
+            &format!("parameter type {ty} in an AccessCommand is not supported"),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// An M_ParameterError whose detail is AccessSpec → AccessCommand → `inner` (the
 /// operation's own error, or the operation's parameter holding it when `op` differs).
 fn nested(op: u16, inner: ParameterError, why: &str) -> LlrpStatus {

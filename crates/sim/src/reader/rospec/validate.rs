@@ -37,6 +37,25 @@ pub(super) fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(),
     if sp.ro_spec_stop_trigger_type == RoSpecStopTriggerType::GpiWithTimeout {
         gpi_port(p, sp.gpi_trigger_value.as_ref(), &[177, 178, 182, 181])?;
     }
+    // A parameter the codec does not know (LLRP 1.1's LoopSpec, say) is kept as it came; the
+    // reader cannot do what it asks, so it refuses it rather than ignore it.
+    let unknown = (s.extra.iter())
+        .filter_map(|x| x.param.header())
+        .map(|h| h.ty())
+        .find(|&ty| ty != 1023);
+    if let Some(ty) = unknown {
+        let mut e = LlrpStatus::new(
+            StatusCode::M_ParameterError,
+            format!("parameter type {ty} in an ROSpec is not supported"),
+        );
+        let mut pe = ParameterError::new(177, StatusCode::P_ParameterError);
+        pe.parameter_error = Some(Box::new(ParameterError::new(
+            ty,
+            StatusCode::P_UnsupportedParameter,
+        )));
+        e.parameter_error = Some(pe);
+        return Err(e);
+    }
     for spec in &s.specs {
         match spec {
             SpecParameter::AiSpec(ai) => validate_ai(p, ai)?,
