@@ -255,3 +255,78 @@ async fn an_access_command_parameter_the_reader_does_not_know_is_refused() {
     assert!(g.access_specs.is_empty(), "nothing was added");
     sim.shutdown().await;
 }
+
+/// Puts a parameter somewhere in an AISpec.
+type Put = fn(&mut AiSpec, llrp::raw::Extra);
+
+/// A parameter the codec does not know inside an AISpec, an InventoryParameterSpec or an
+/// AntennaConfiguration of an ROSpec is refused as unsupported too, with the path to it.
+#[tokio::test]
+async fn unknown_parameters_deeper_in_an_rospec_are_refused_with_their_path() {
+    let sim = start(&s1(), Speed::Factor(1.0)).await;
+    let mut c = connect(&sim).await;
+    let unknown = || llrp::raw::Extra {
+        at: 0,
+        param: llrp::raw::RawParam::new(hex("0384 0008 00000001")),
+    };
+    let place: [(&str, Put, Vec<u16>); 3] = [
+        ("AISpec", |ai, x| ai.extra.push(x), vec![177, 183, 900]),
+        (
+            "InventoryParameterSpec",
+            |ai, x| ai.inventory_parameter_specs[0].extra.push(x),
+            vec![177, 183, 186, 900],
+        ),
+        (
+            "AntennaConfiguration",
+            |ai, x| {
+                let ips = &mut ai.inventory_parameter_specs[0];
+                ips.antenna_configuration.push(AntennaConfiguration {
+                    antenna_id: 1,
+                    ..Default::default()
+                });
+                ips.antenna_configuration[0].extra.push(x);
+            },
+            vec![177, 183, 186, 222, 900],
+        ),
+    ];
+    for (id, (what, put, want)) in (1u32..).zip(place) {
+        let mut spec = RoSpec::immediate(id, vec![0]);
+        let SpecParameter::AiSpec(ai) = &mut spec.specs[0] else {
+            panic!("an immediate ROSpec has an AISpec")
+        };
+        put(ai, unknown());
+        let r = c
+            .request(
+                AddRospec {
+                    ro_spec: spec,
+                    ..Default::default()
+                },
+                T,
+            )
+            .await
+            .expect("answer");
+        let st = status(&r);
+        assert_eq!(
+            st.status_code,
+            StatusCode::M_ParameterError,
+            "{what}: {st:?}"
+        );
+        let mut path = Vec::new();
+        let mut pe = st.parameter_error.as_ref();
+        while let Some(p) = pe {
+            path.push(p.parameter_type);
+            pe = p.parameter_error.as_deref();
+        }
+        assert_eq!(path, want, "{what}");
+    }
+    let MessageBody::GetRospecsResponse(g) = c
+        .request(GetRospecs::default(), T)
+        .await
+        .expect("answer")
+        .body
+    else {
+        panic!("GET_ROSPECS_RESPONSE")
+    };
+    assert!(g.ro_specs.is_empty(), "nothing was added");
+    sim.shutdown().await;
+}
