@@ -526,3 +526,47 @@ fn killed_tags_spend_no_air_time_so_the_rest_are_read_more_often() {
         "the last live tag: {crowded} reads among 12, {alone} once the rest are killed"
     );
 }
+
+/// With an AccessSpec reading user word 0 of the tag whose EPC ends in 01, stopped by
+/// `trigger` (OperationCountValue `count`): the reads of that tag that carry its results in
+/// 40 reads of the tag, and the AccessSpecs left afterwards.
+fn with_stop_trigger(trigger: AccessSpecStopTriggerType, count: u16) -> (usize, usize) {
+    let mut v = VirtualReader::new(&scenario());
+    v.add_access_spec(AccessSpec {
+        access_spec_id: 4,
+        protocol_id: AirProtocol::EpcGlobalClass1Gen2,
+        access_spec_stop_trigger: AccessSpecStopTrigger {
+            access_spec_stop_trigger_type: trigger,
+            operation_count_value: count,
+            ..Default::default()
+        },
+        access_command: AccessCommand {
+            c1g2_tag_spec: last_byte_is(1),
+            op_specs: vec![read(1, 3, 0, 1, 0)],
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    let first = |t: &&TagReportData| t.epc_bytes().last() == Some(&1);
+    let tags = inventory(&mut v, |t| t.iter().filter(first).count() >= 40);
+    let carried = tags
+        .iter()
+        .filter(first)
+        .filter(|t| !t.op_spec_results.is_empty())
+        .count();
+    let m = v.request(llrp::message::GetAccessspecs::default());
+    let llrp::MessageBody::GetAccessspecsResponse(r) = &m.body else {
+        panic!("expected GET_ACCESSSPECS_RESPONSE, got {m:?}")
+    };
+    (carried, r.access_specs.len())
+}
+
+#[test]
+fn an_operation_count_stop_trigger_runs_the_accessspec_that_often_then_deletes_it() {
+    use AccessSpecStopTriggerType::{Null, OperationCount};
+    assert_eq!(with_stop_trigger(OperationCount, 3), (3, 0));
+    // No stop trigger: every read of the tag runs it, and it stays.
+    let (carried, left) = with_stop_trigger(Null, 3);
+    assert!(carried >= 40, "{carried} of 40 reads ran it");
+    assert_eq!(left, 1);
+}

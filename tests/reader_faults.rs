@@ -420,3 +420,55 @@ fn the_scenarios_timeline_applies_each_fault_at_its_simulated_time() {
         "then the connection drops at 4 s"
     );
 }
+
+/// Events of the time no client was connected (a cable pulled, a reader exception) reach the
+/// next client at its ENABLE_EVENTS_AND_REPORTS when the last client set
+/// HoldEventsAndReportsUponReconnect (LLRP 1.1 §13.2.6.4), and are lost otherwise.
+#[test]
+fn events_with_no_client_reach_the_next_client_only_when_held() {
+    let exception =
+        |m: &Message| (event(m)?.reader_exception_event.as_ref()).map(|e| e.message.clone());
+    for hold in [false, true] {
+        let mut v = VirtualReader::new(&two_antennas());
+        enable_events(
+            &mut v,
+            &[
+                NotificationEventType::AntennaEvent,
+                NotificationEventType::ReaderExceptionEvent,
+            ],
+        );
+        let set = SetReaderConfig {
+            events_and_reports: Some(EventsAndReports {
+                hold_events_and_reports_upon_reconnect: hold,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(v.status(set), StatusCode::M_Success);
+        v.disconnect();
+        v.inject(Fault::AntennaDisconnect { antenna: 1 });
+        v.inject(Fault::ReaderException {
+            message: "RF synthesizer unlocked".into(),
+        });
+        v.idle_for(1_000_000);
+        v.connect();
+        let greeting = v.take();
+        assert!(
+            greeting
+                .iter()
+                .all(|m| antenna_event(m).is_none() && exception(m).is_none()),
+            "hold {hold}: nothing before ENABLE_EVENTS_AND_REPORTS"
+        );
+        v.send(EnableEventsAndReports::default());
+        let released = v.take();
+        let antennas: Vec<_> = released.iter().filter_map(antenna_event).collect();
+        let exceptions: Vec<_> = released.iter().filter_map(exception).collect();
+        if hold {
+            assert_eq!(antennas, [(false, 1)]);
+            assert_eq!(exceptions, ["RF synthesizer unlocked"]);
+        } else {
+            assert!(antennas.is_empty() && exceptions.is_empty(), "{released:?}");
+        }
+        assert_eq!(connected(&mut v)[0], (1, false), "unplugged either way");
+    }
+}

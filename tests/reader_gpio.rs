@@ -433,3 +433,49 @@ fn a_photo_eye_gates_one_run_per_pulse() {
         ]
     );
 }
+
+/// Sets EventsAndReports' HoldEventsAndReportsUponReconnect to `hold`.
+fn hold_upon_reconnect(v: &mut VirtualReader, hold: bool) {
+    let set = SetReaderConfig {
+        events_and_reports: Some(EventsAndReports {
+            hold_events_and_reports_upon_reconnect: hold,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert_eq!(v.status(set), StatusCode::M_Success);
+}
+
+/// A GPI that changes while no client is connected: the next client hears of it at its
+/// ENABLE_EVENTS_AND_REPORTS when the last one set HoldEventsAndReportsUponReconnect, never
+/// otherwise; no trigger fires meanwhile.
+#[test]
+fn gpi_changes_with_no_client_reach_the_next_client_only_when_held() {
+    for hold in [false, true] {
+        let mut v = VirtualReader::new(&Scenario::default_s1());
+        v.enable_events(EVENTS);
+        add_and_enable(&mut v, gated(1, 0));
+        hold_upon_reconnect(&mut v, hold);
+        v.run_for(1_000_000);
+        v.take();
+        v.disconnect();
+        v.set_gpi(1, true);
+        v.idle_for(500_000);
+        v.set_gpi(1, false);
+        v.idle_for(500_000);
+        v.connect();
+        assert_eq!(notes(&mut v), (vec![], 0), "hold {hold}: nothing unasked");
+        v.send(EnableEventsAndReports::default());
+        let want = if hold {
+            vec![
+                Note::Gpi(1, true, 1_000_000),
+                Note::Gpi(1, false, 1_500_000),
+            ]
+        } else {
+            vec![]
+        };
+        assert_eq!(notes(&mut v), (want, 0), "hold {hold}");
+        // The lines are where the changes left them.
+        assert_eq!(gpi_states(&mut v)[0], (1, true, 0), "hold {hold}");
+    }
+}

@@ -2,7 +2,8 @@
 //! sim` on a crowded dock door (300 tags, 4 antennas) at 100 times real time, a client whose
 //! ROSpec reports every read, which then reads nothing for 6 s (10 simulated minutes). The
 //! simulator's memory stays within the stated bound, and when the client reads again it finds
-//! the ReportBufferOverflowErrorEvent LLRP defines, then reports again.
+//! the ReportBufferLevelWarningEvent it enabled, the ReportBufferOverflowErrorEvent LLRP
+//! defines, then reports again.
 
 mod http_support;
 
@@ -98,6 +99,18 @@ fn a_client_that_stops_reading_gets_a_bounded_buffer_and_the_overflow_event() {
     s.set_read_timeout(Some(Duration::from_secs(20)))
         .expect("timeout");
     let _ = read_message(&mut s);
+    let warnings = SetReaderConfig {
+        reader_event_notification_spec: Some(ReaderEventNotificationSpec {
+            event_notification_state: vec![EventNotificationState {
+                event_type: llrp::enums::NotificationEventType::ReportBufferFillWarning,
+                notification_state: true,
+                ..Default::default()
+            }],
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    request(&mut s, 1, warnings);
     let spec = RoSpec::immediate(1, vec![0]).with_report(
         RoReportSpec::new(RoReportTriggerType::UponNTagsOrEndOfAiSpec, 1)
             .with_content(TagReportContentSelector::all()),
@@ -137,8 +150,10 @@ fn a_client_that_stops_reading_gets_a_bounded_buffer_and_the_overflow_event() {
         "the simulator grew by {} KiB while the client did not read (bound {BOUND_KIB} KiB)",
         most - before
     );
-    // Reading again: the buffered reports, then the overflow event, then reports again.
+    // Reading again: the buffered reports, the warning (the client enabled it), then the
+    // overflow event, then reports again.
     let deadline = Instant::now() + Duration::from_secs(60);
+    let mut warned = false;
     let mut overflow = false;
     let mut after = 0;
     while after < 10 {
@@ -150,7 +165,15 @@ fn a_client_that_stops_reading_gets_a_bounded_buffer_and_the_overflow_event() {
                     .report_buffer_overflow_error_event
                     .is_some() =>
             {
+                assert!(warned, "the ReportBufferLevelWarningEvent came first");
                 overflow = true
+            }
+            MessageBody::ReaderEventNotification(n)
+                if n.reader_event_notification_data
+                    .report_buffer_level_warning_event
+                    .is_some() =>
+            {
+                warned = true
             }
             MessageBody::RoAccessReport(_) if overflow => after += 1,
             _ => {}

@@ -322,3 +322,55 @@ fn llrp_gateway_inventory_rides_out_a_reboot_refused_while_booting_then_reading_
     assert!(inv.stop().success());
     assert!(sim.stop().success());
 }
+
+/// The faults the test above does not inject, over HTTP into a running sim: a client still
+/// gets its answer while responses are delayed, stays connected while keepalives are lost,
+/// and hears of a reader exception; each fault is logged and counted on `/metrics`.
+#[test]
+fn delayed_responses_lost_keepalives_and_an_exception_are_seen_logged_and_counted() {
+    let (mut sim, http) = Proc::sim(&[]);
+    let llrp = sim.address("listening on ");
+    let rt = runtime();
+    rt.block_on(async {
+        let mut c = Client::connect_reader(&llrp, T).await.expect("connects");
+        c.answer_keepalives(true);
+        enable_events(&mut c, &[NotificationEventType::ReaderExceptionEvent]).await;
+
+        inject(
+            http,
+            r#"{"fault": "delay_responses", "ms": 300, "for_ms": 2000}"#,
+        );
+        c.check(GetReaderCapabilities::default(), T)
+            .await
+            .expect("answered, late");
+        inject(http, r#"{"fault": "lose_keepalives", "count": 2}"#);
+        inject(
+            http,
+            r#"{"fault": "reader_exception", "message": "RF synthesizer unlocked"}"#,
+        );
+        let m = c
+            .wait_for(
+                |m| event(m).is_some_and(|e| e.reader_exception_event.is_some()),
+                T,
+            )
+            .await
+            .expect("the exception event");
+        let said = event(&m).and_then(|e| e.reader_exception_event.as_ref());
+        assert_eq!(
+            said.map(|e| e.message.as_str()),
+            Some("RF synthesizer unlocked")
+        );
+        // Still connected: the reader answers.
+        c.check(GetReaderCapabilities::default(), T)
+            .await
+            .expect("still connected");
+    });
+    let reasons = sim.lines_with("fault injected", 3);
+    assert_eq!(reasons.len(), 3, "each fault is logged: {reasons:?}");
+    let metrics = request(http, "GET", "/metrics", &[], b"").text();
+    for fault in ["delay_responses", "lose_keepalives", "reader_exception"] {
+        let line = format!("llrp_gateway_faults_total{{reader=\"s1-reader\",fault=\"{fault}\"}} 1");
+        assert!(metrics.lines().any(|l| l == line), "{line}\n{metrics}");
+    }
+    assert!(sim.stop().success());
+}

@@ -8,7 +8,6 @@
 use std::sync::Mutex;
 
 use llrp::enums::{AntennaEventType, NotificationEventType};
-use llrp::message::ReaderEventNotification;
 use llrp::params::{AntennaEvent, ReaderEventNotificationData, ReaderExceptionEvent};
 
 use super::{access, rospec, Output, Reader, ReaderConfig};
@@ -172,7 +171,8 @@ impl Reader {
     }
 
     /// Unplugs (`connected` false) or plugs back antenna port `antenna` at `at_us`: the
-    /// client hears of a change by an AntennaEvent, if it enabled them.
+    /// client hears of a change by an AntennaEvent, if it enabled them (with no client
+    /// connected, the next one, if the last asked for holding: [`Reader::deliver`]).
     pub(crate) fn plug(&mut self, antenna: u16, connected: bool, at_us: u64) -> Vec<Output> {
         let mut out = Vec::new();
         let k = usize::from(antenna).wrapping_sub(1);
@@ -183,10 +183,9 @@ impl Reader {
             self.faults.unplugged.resize(k + 1, false);
         }
         self.faults.unplugged[k] = !connected;
-        if !self.connected
-            || !self
-                .config
-                .event_enabled(NotificationEventType::AntennaEvent)
+        if !self
+            .config
+            .event_enabled(NotificationEventType::AntennaEvent)
         {
             return out;
         }
@@ -204,20 +203,15 @@ impl Reader {
             antenna_event: Some(event),
             ..Default::default()
         };
-        let m = self.message(ReaderEventNotification {
-            reader_event_notification_data: data,
-            ..Default::default()
-        });
-        self.deliver(m, &mut out);
+        self.notify(data, &mut out);
         out
     }
 
-    /// A ReaderExceptionEvent with `message`, if the client enabled them.
+    /// A ReaderExceptionEvent with `message`, if the client enabled them (held for the next
+    /// client as an AntennaEvent is).
     pub(crate) fn exception(&mut self, message: String) -> Vec<Output> {
         let mut out = Vec::new();
-        if !self.connected
-            || !(self.config).event_enabled(NotificationEventType::ReaderExceptionEvent)
-        {
+        if !(self.config).event_enabled(NotificationEventType::ReaderExceptionEvent) {
             return out;
         }
         let data = ReaderEventNotificationData {
@@ -228,11 +222,7 @@ impl Reader {
             }),
             ..Default::default()
         };
-        let m = self.message(ReaderEventNotification {
-            reader_event_notification_data: data,
-            ..Default::default()
-        });
-        self.deliver(m, &mut out);
+        self.notify(data, &mut out);
         out
     }
 

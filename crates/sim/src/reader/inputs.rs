@@ -3,7 +3,6 @@
 //! changes come from the scenario's schedule and from the [`GpioPanel`](super::gpio::GpioPanel).
 
 use llrp::enums::NotificationEventType;
-use llrp::message::ReaderEventNotification;
 use llrp::params::{GpiEvent, ReaderEventNotificationData, Timestamp, UtcTimestamp};
 
 use super::gpio::Edge;
@@ -78,25 +77,7 @@ impl Reader {
         if !enabled {
             return;
         }
-        if self.config.event_enabled(NotificationEventType::GpiEvent) {
-            let data = ReaderEventNotificationData {
-                timestamp: Timestamp::Utc(UtcTimestamp {
-                    microseconds: self.utc_us(edge.at_us),
-                    ..Default::default()
-                }),
-                gpi_event: Some(GpiEvent {
-                    gpi_port_number: edge.port,
-                    gpi_event: edge.high,
-                    ..Default::default()
-                }),
-                ..Default::default()
-            };
-            let m = self.message(ReaderEventNotification {
-                reader_event_notification_data: data,
-                ..Default::default()
-            });
-            self.deliver(m, out);
-        }
+        self.gpi_event(edge, out);
         let produced = self.specs.gpi_edge(
             edge.port,
             edge.high,
@@ -106,23 +87,60 @@ impl Reader {
         self.produce(produced, out);
     }
 
+    /// The GPIEvent of `edge` on an enabled port, if the client enabled them.
+    fn gpi_event(&mut self, edge: Edge, out: &mut Vec<Output>) {
+        if !self.config.event_enabled(NotificationEventType::GpiEvent) {
+            return;
+        }
+        let data = ReaderEventNotificationData {
+            timestamp: Timestamp::Utc(UtcTimestamp {
+                microseconds: self.utc_us(edge.at_us),
+                ..Default::default()
+            }),
+            gpi_event: Some(GpiEvent {
+                gpi_port_number: edge.port,
+                gpi_event: edge.high,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        self.notify(data, out);
+    }
+
     /// Without a client: the lines follow their schedule and what is asked from outside up
-    /// to `now_us`, silently (no inventory runs, so no trigger fires and no one hears).
+    /// to `now_us`. No inventory runs, so no trigger fires; a change on an enabled port is
+    /// heard only if the last client asked for holding (its GPIEvent is held for the next
+    /// client, [`Reader::deliver`]).
     pub(super) fn idle_inputs(&mut self, now_us: u64) {
         let now_us = now_us.max(self.now_us);
         self.lines.skip_eyes_to(now_us);
         let commands = self.lines.take_commands(now_us);
         let mut changed = !commands.is_empty();
+        let mut held = Vec::new();
         while let Some(edge) = self.lines.pop_due(now_us) {
-            changed |= self.lines.apply(edge);
+            if self.lines.apply(edge) {
+                changed = true;
+                self.idle_edge(edge, &mut held);
+            }
         }
         for edge in commands {
             let level = if edge.high { "high" } else { "low" };
             tracing::info!(reader = %self.profile.name, port = edge.port, level, "GPI set (no client connected)");
-            self.lines.apply(edge);
+            if self.lines.apply(edge) {
+                self.idle_edge(edge, &mut held);
+            }
         }
+        debug_assert!(held.is_empty(), "nothing is sent without a client");
         if changed {
             self.publish_gpio();
+        }
+    }
+
+    /// A line changed with no client connected: its GPIEvent, on an enabled port, is held
+    /// if the last client asked for holding (no one hears otherwise).
+    fn idle_edge(&mut self, edge: Edge, out: &mut Vec<Output>) {
+        if self.config.gpi_enabled(edge.port) {
+            self.gpi_event(edge, out);
         }
     }
 

@@ -18,6 +18,7 @@ pub mod device;
 mod device_tests;
 pub mod faults;
 pub mod gpio;
+mod held;
 mod inputs;
 pub mod memory;
 pub mod memory_file;
@@ -548,18 +549,6 @@ impl Reader {
                 ..Default::default()
             });
             self.deliver(m, out);
-        }
-    }
-
-    fn deliver(&mut self, m: Message, out: &mut Vec<Output>) {
-        if self.holding {
-            if self.held.len() >= MAX_HELD {
-                // A real reader's buffer is finite too: the oldest held message is lost.
-                self.held.remove(0);
-            }
-            self.held.push(m);
-        } else {
-            out.push(Output::Send(m));
         }
     }
 }

@@ -78,6 +78,9 @@ impl AccessSpecs {
         if self.entries.len() >= p.device.max_access_specs as usize {
             return LlrpStatus::new(StatusCode::M_OverflowParameter, "too many AccessSpecs");
         }
+        if let Err(status) = ops::check_unknown(&spec.access_command.extra) {
+            return status;
+        }
         for op in &spec.access_command.op_specs {
             if let Err(status) = ops::check(op) {
                 return status;

@@ -37,6 +37,7 @@ pub(super) fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(),
     if sp.ro_spec_stop_trigger_type == RoSpecStopTriggerType::GpiWithTimeout {
         gpi_port(p, sp.gpi_trigger_value.as_ref(), &[177, 178, 182, 181])?;
     }
+    unknown_in(&[177], &s.extra)?;
     for spec in &s.specs {
         match spec {
             SpecParameter::AiSpec(ai) => validate_ai(p, ai)?,
@@ -86,7 +87,39 @@ pub(super) fn validate(p: &ReaderProfile, s: &RoSpec, version: u8) -> Result<(),
     Ok(())
 }
 
+/// The first parameter in `extra` that the codec did not know (LLRP 1.1's LoopSpec, say; a
+/// vendor's Custom aside), kept as it came: the reader cannot do what it asks, so it refuses
+/// it as unsupported, with the path `path` of parameter types to it, rather than ignore it.
+fn unknown_in(path: &[u16], extra: &[llrp::raw::Extra]) -> Result<(), LlrpStatus> {
+    let unknown = (extra.iter())
+        .filter_map(|x| x.param.header())
+        .map(|h| h.ty())
+        .find(|&ty| ty != 1023);
+    let Some(ty) = unknown else {
+        return Ok(());
+    };
+    let mut inner = ParameterError::new(ty, StatusCode::P_UnsupportedParameter);
+    for &outer in path.iter().rev() {
+        let mut pe = ParameterError::new(outer, StatusCode::P_ParameterError);
+        pe.parameter_error = Some(Box::new(inner));
+        inner = pe;
+    }
+    let mut e = LlrpStatus::new(
+        StatusCode::M_ParameterError,
+        format!("parameter type {ty} is not supported"),
+    );
+    e.parameter_error = Some(inner);
+    Err(e)
+}
+
 fn validate_ai(p: &ReaderProfile, ai: &AiSpec) -> Result<(), LlrpStatus> {
+    unknown_in(&[177, 183], &ai.extra)?;
+    for ips in &ai.inventory_parameter_specs {
+        unknown_in(&[177, 183, 186], &ips.extra)?;
+        for ac in &ips.antenna_configuration {
+            unknown_in(&[177, 183, 186, 222], &ac.extra)?;
+        }
+    }
     let bad_antenna = ai.antenna_ids.is_empty()
         || ai.antenna_ids.iter().any(|&a| a > p.ports)
         || (ai.antenna_ids.contains(&0) && ai.antenna_ids.len() > 1);
