@@ -9,6 +9,7 @@ mod broker_support;
 mod http_support;
 mod mcap_support;
 
+use serde_json::Value;
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
@@ -77,9 +78,35 @@ fn a_worker_s_mcap_file_holds_the_estimates_it_computed_and_their_scene() {
     assert!(epcs.is_superset(&placed), "{epcs:?} vs {placed:?}");
     let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
     let last = scenes.last().expect("a scene");
+    // The antenna poses the worker received over MQTT: on their topics, on /tf, and drawn
+    // where one of them put the antenna.
+    let pose_topic = "/llrp/s1_reader/antenna_1/pose";
+    assert_eq!(ch[pose_topic].0, "foxglove_msgs/msg/PoseInFrame");
+    let poses: Vec<&Value> = (v["mcap_ros2"]["poses"].as_array().expect("poses").iter())
+        .filter(|p| p["topic"] == pose_topic)
+        .collect();
+    let tf = v["mcap_ros2"]["tf"].as_array().expect("tf");
+    for p in &poses {
+        let at = |m: &Value| ["x", "y", "z"].map(|k| m[k].as_f64());
+        assert!(
+            (tf.iter()).any(|t| t["child"] == "s1_reader/antenna_1" && at(t) == at(p)),
+            "{p} is on /tf"
+        );
+    }
     let mut drawn = BTreeSet::new();
     for e in last["entities"].as_array().expect("entities") {
         let id = e["id"].as_str().expect("an id");
+        if id == "antenna/s1_reader/antenna_1" {
+            let arrow = &e["arrows"][0]["position"];
+            assert!(
+                (poses.iter()).any(|p| *arrow == serde_json::json!([p["x"], p["y"], p["z"]])),
+                "the antenna is drawn where a pose put it: {arrow}"
+            );
+            continue;
+        }
+        if id.starts_with("antenna/") || id.starts_with("path/") {
+            continue;
+        }
         let epc = id
             .strip_prefix("estimate/")
             .unwrap_or_else(|| panic!("a worker knows no truth, only estimates: {id}"));
@@ -151,12 +178,17 @@ fn a_worker_s_live_view_streams_its_estimates_and_their_scene() {
     let want: BTreeSet<(String, String)> = [
         ("/estimates/tags", "llrp_gateway_msgs/msg/TagEstimate"),
         ("/scene", "foxglove_msgs/msg/SceneUpdate"),
+        (
+            "/llrp/s1_reader/antenna_1/pose",
+            "foxglove_msgs/msg/PoseInFrame",
+        ),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
     ]
     .map(|(t, s)| (t.to_string(), s.to_string()))
     .into();
     assert_eq!(
         channels, want,
-        "a worker streams its estimates and their scene only"
+        "a worker streams its estimates, their scene and the antenna poses it received only"
     );
     assert!(
         report["counts"]["/estimates/tags"].as_u64() >= Some(1),
@@ -167,6 +199,10 @@ fn a_worker_s_live_view_streams_its_estimates_and_their_scene() {
     assert!(!ids.is_empty(), "{report}");
     for id in ids {
         let id = id.as_str().expect("an id");
-        assert!(id.starts_with("estimate/"), "a worker knows no truth: {id}");
+        // The antenna the poses it received put there, or an estimate: no truth.
+        assert!(
+            id.starts_with("estimate/") || id.ends_with("s1_reader/antenna_1"),
+            "a worker knows no truth: {id}"
+        );
     }
 }

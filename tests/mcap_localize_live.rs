@@ -71,6 +71,81 @@ fn get(addr: &str, path: &str) -> Value {
     serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
 }
 
+/// `POST path` of `body` (JSON) to the HTTP API at `addr`; its status must be 202.
+fn post(addr: &str, path: &str, body: &str) {
+    let mut s = TcpStream::connect(addr).expect("connects");
+    write!(
+        s,
+        "POST {path} HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\n\
+         Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("request");
+    let mut text = String::new();
+    s.read_to_string(&mut text).expect("response");
+    assert!(text.starts_with("HTTP/1.1 202"), "{text}");
+}
+
+/// Waits (a hang guard) until the API shows `reader`'s antenna 2 at `x`: the localizer has
+/// taken the poses posted.
+fn wait_for_poses(http: &str, reader: &str, x: f64) {
+    let until = Instant::now() + GUARD;
+    loop {
+        let readers = get(http, "/api/readers");
+        let found = (readers["readers"].as_array().into_iter().flatten())
+            .filter(|r| r["name"] == reader)
+            .flat_map(|r| r["antennas"].as_array().into_iter().flatten())
+            .any(|a| a["antenna"] == 2 && a["pose"]["x"].as_f64() == Some(x));
+        if found {
+            return;
+        }
+        assert!(
+            Instant::now() < until,
+            "the poses were not taken: {readers}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// The poses posted of `robot-a`'s antenna 2 (at `written` x, each y 1.5, z 0.75, facing
+/// +y), as both readers decode them: on its pose topic and on `/tf` from `map`, the one at
+/// `skipped` on neither; and its antenna drawn in the last scene at the newest.
+fn assert_posted_poses(mcap: &std::path::Path, written: &[f64], skipped: f64) {
+    let v = check(mcap);
+    let ch = channels(&v);
+    let topic = "/llrp/robot_a/antenna_2/pose";
+    assert_eq!(ch[topic].0, "foxglove_msgs/msg/PoseInFrame");
+    assert_eq!(ch["/tf"].0, "tf2_msgs/msg/TFMessage");
+    let half = std::f64::consts::FRAC_1_SQRT_2;
+    for decoder in ["mcap_ros2", "rosbags"] {
+        let poses: Vec<&Value> = (v[decoder]["poses"].as_array().expect("poses").iter())
+            .filter(|p| p["topic"] == topic)
+            .collect();
+        let xs: Vec<f64> = poses.iter().map(|p| p["x"].as_f64().expect("x")).collect();
+        assert_eq!(xs, written, "{decoder}: {poses:?}");
+        for p in &poses {
+            assert_eq!(p["frame_id"], "map", "{decoder}");
+            assert_eq!((p["y"].as_f64(), p["z"].as_f64()), (Some(1.5), Some(0.75)));
+            assert!((p["qz"].as_f64().expect("qz") - half).abs() < 1e-12, "{p}");
+            assert!((p["qw"].as_f64().expect("qw") - half).abs() < 1e-12, "{p}");
+        }
+        let tf: Vec<f64> = (v[decoder]["tf"].as_array().expect("tf").iter())
+            .filter(|t| t["child"] == "robot_a/antenna_2")
+            .inspect(|t| assert_eq!(t["parent"], "map", "{decoder}"))
+            .map(|t| t["x"].as_f64().expect("x"))
+            .collect();
+        assert_eq!(tf, written, "{decoder}");
+        assert!(!xs.contains(&skipped) && !tf.contains(&skipped));
+    }
+    let scenes = v["mcap_ros2"]["scenes"].as_array().expect("scenes");
+    let last = scenes.last().expect("a scene");
+    let antenna = (last["entities"].as_array().expect("entities").iter())
+        .find(|e| e["id"] == "antenna/robot_a/antenna_2")
+        .unwrap_or_else(|| panic!("the posted antenna is not drawn: {last}"));
+    let newest = written.last().expect("a pose written");
+    assert_eq!(antenna["arrows"][0]["position"][0].as_f64(), Some(*newest));
+}
+
 /// Waits (a hang guard, not a measurement) until the localizer has a position for `want` of
 /// the recording's ten tags; their EPCs.
 fn wait_for_estimates(http: &str, want: usize) -> BTreeSet<String> {
@@ -122,8 +197,20 @@ fn a_replay_that_localizes_writes_its_estimates_and_their_scene_without_truth() 
     let (mut replay, llrp, http) = localizing(&args, mcap.to_str().expect("utf-8"));
     inventory(&llrp);
     let placed = wait_for_estimates(&http, 10);
+    // A robot's antenna, posted as a robot would: 100 ms of its clock apart at most one
+    // is written, so the second is not.
+    let posted = [(1_000_000, 2.5), (1_050_000, 2.75), (1_200_000, 3.25)];
+    let body: Vec<Value> = (posted.iter())
+        .map(|(t, x)| {
+            serde_json::json!({"t_us": t, "reader": "robot-a", "antenna": 2, "x": x,
+                "y": 1.5, "z": 0.75, "yaw_deg": 90.0, "pitch_deg": 0.0})
+        })
+        .collect();
+    post(&http, "/api/poses", &Value::Array(body).to_string());
+    wait_for_poses(&http, "robot-a", 3.25);
     terminate(&mut replay);
     assert_estimates_and_scene(&mcap, &placed);
+    assert_posted_poses(&mcap, &[2.5, 3.25], 2.75);
 }
 
 #[test]
@@ -183,6 +270,10 @@ fn assert_estimates_and_scene(mcap: &std::path::Path, placed: &BTreeSet<String>)
     let mut drawn = BTreeSet::new();
     for e in last["entities"].as_array().expect("entities") {
         let id = e["id"].as_str().expect("an id");
+        // The antennas of the poses received are drawn too (the pose file's, here).
+        if id.starts_with("antenna/") || id.starts_with("path/") {
+            continue;
+        }
         let epc = id
             .strip_prefix("estimate/")
             .unwrap_or_else(|| panic!("no truth here, only estimates: {id}"));

@@ -137,16 +137,22 @@ fn inventory_and_the_export_of_its_recorded_session_give_the_reads_file_s_reads(
     let v = check(Path::new(&path("inventory.mcap")));
     let token = llrp_gateway::record::mcap::topic_token(&addr);
     let topic = format!("/llrp/{token}/reads");
-    assert_eq!(
-        channels(&v),
-        BTreeMap::from([(
-            topic.clone(),
-            (
-                "llrp_gateway_msgs/msg/TagRead".to_string(),
-                reads.len() as u64
-            )
-        )])
-    );
+    // Each read with a phase also as its phase unwrapped.
+    let phased = reads.iter().filter(|r| r.phase_rad.is_some()).count() as u64;
+    let mut want = BTreeMap::from([(
+        topic.clone(),
+        (
+            "llrp_gateway_msgs/msg/TagRead".to_string(),
+            reads.len() as u64,
+        ),
+    )]);
+    if phased > 0 {
+        want.insert(
+            format!("/llrp/{token}/phase_unwrapped"),
+            ("llrp_gateway_msgs/msg/TagPhase".to_string(), phased),
+        );
+    }
+    assert_eq!(channels(&v), want);
     for decoder in ["mcap_ros2", "rosbags"] {
         let mut got = decoded_reads(&v[decoder]);
         // The reads file does not carry the last-seen time.
@@ -175,4 +181,72 @@ fn inventory_and_the_export_of_its_recorded_session_give_the_reads_file_s_reads(
         }
         assert_eq!(got, reads, "{decoder}");
     }
+}
+
+#[test]
+#[ignore = "needs the MCAP readers (LLRP_MCAP_PYTHON: scripts/venv-mcap.sh, set by ./scripts/test)"]
+fn an_exported_recording_s_unwrapped_phases_differ_from_the_read_phases_by_whole_turns_and_never_jump(
+) {
+    use std::collections::HashMap;
+    use std::f64::consts::{PI, TAU};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = root().join("fixtures/sessions/s1-sllurp-impinj.jsonl");
+    let out = dir.path().join("s1.mcap");
+    run(&[
+        "export",
+        input.to_str().expect("utf-8"),
+        "--mcap",
+        out.to_str().expect("utf-8"),
+    ]);
+    let v = check(&out);
+    let chans = channels(&v);
+    let topic = "/llrp/s1_reader/phase_unwrapped";
+    let reads = v["mcap_ros2"]["reads"].as_array().expect("reads");
+    let with_phase = reads.iter().filter(|r| !r["phase_rad"].is_null()).count();
+    assert!(with_phase > 0, "the fixture's reads carry a phase");
+    assert_eq!(
+        chans.get(topic),
+        Some(&(
+            "llrp_gateway_msgs/msg/TagPhase".to_string(),
+            with_phase as u64
+        ))
+    );
+    let sorted = |d: &str| {
+        let mut p: Vec<String> = (v[d]["phases"].as_array().expect("phases").iter())
+            .map(Value::to_string)
+            .collect();
+        p.sort();
+        p
+    };
+    assert_eq!(sorted("rosbags"), sorted("mcap_ros2"));
+    // In file order (the order the reads were received), per stream.
+    let phases = v["mcap_ros2"]["phases"].as_array().expect("phases");
+    let mut last: HashMap<(String, u64, u64, u64), f64> = HashMap::new();
+    let mut wrapped = 0;
+    for p in phases {
+        assert_eq!(p["topic"], topic);
+        let raw = p["phase_rad"].as_f64().expect("a phase");
+        let unwrapped = p["phase_unwrapped_rad"].as_f64().expect("unwrapped");
+        let turns = (unwrapped - raw) / TAU;
+        assert!((turns - turns.round()).abs() < 1e-9, "{p}");
+        if turns.round() != 0.0 {
+            wrapped += 1;
+        }
+        let key = (
+            p["epc"].as_str().expect("epc").to_string(),
+            p["antenna"].as_u64().expect("antenna"),
+            p["channel_index"].as_u64().expect("channel"),
+            p["channel_frequency_hz"].as_u64().expect("frequency"),
+        );
+        if let Some(previous) = last.insert(key, unwrapped) {
+            assert!(
+                (unwrapped - previous).abs() <= PI + 1e-12,
+                "{p} after {previous}"
+            );
+        }
+    }
+    assert!(
+        wrapped > 0,
+        "some stream crossed 2π: the unwrapping was put to the test"
+    );
 }

@@ -21,7 +21,9 @@ where DECODED is {"reads": [...], "frames": {topic: hex of the data concatenated
 "frame_count": {topic: n}, "events": [...], "logs": [...], "count": n, "poses": [...],
 "tf": [...], "tags": [...]} (poses: PoseInFrame with topic, frame_id, stamp_ns and x, y, z,
 qx, qy, qz, qw; tf: every transform of every TFMessage, parent, child, stamp_ns and the same
-fields; tags: TagPosition's epc, frame_id, stamp_ns, x, y, z; estimates: TagEstimate's
+fields; phases: TagPhase's fields (topic, reader, epc, antenna, channel_index,
+channel_frequency_hz, phase_rad, phase_unwrapped_rad, rssi_dbm, frame_id, t_us), in file
+order; tags: TagPosition's epc, frame_id, stamp_ns, x, y, z; estimates: TagEstimate's
 fields, position [x, y, z] and covariance with null for NaN; scenes: each SceneUpdate's
 log_time, deleted ids and entities: id, frame_id, stamp_ns, metadata, arrows (position,
 orientation, shaft_length), cubes, spheres and cylinders (position, orientation, size, color),
@@ -44,6 +46,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 READ = "llrp_gateway_msgs/msg/TagRead"
+PHASE = "llrp_gateway_msgs/msg/TagPhase"
 FRAME = "llrp_gateway_msgs/msg/LlrpFrame"
 EVENT = "llrp_gateway_msgs/msg/ReaderEvent"
 LOG = "foxglove_msgs/msg/Log"
@@ -141,11 +144,21 @@ class Decoded:
         self.events, self.logs, self.count = [], [], 0
         self.poses, self.tf, self.tags = [], [], []
         self.estimates, self.scenes = [], []
+        self.phases = []
 
     def add(self, schema, topic, m, log_time, publish_time):
         self.count += 1
         if schema == READ:
             self.reads.append(read_of(m, topic, log_time, publish_time))
+        elif schema == PHASE:
+            self.phases.append({
+                "topic": topic, "reader": m.reader, "epc": m.epc, "antenna": m.antenna,
+                "channel_index": m.channel_index,
+                "channel_frequency_hz": m.channel_frequency_hz,
+                "phase_rad": m.phase_rad, "phase_unwrapped_rad": m.phase_unwrapped_rad,
+                "rssi_dbm": num(m.rssi_dbm), "frame_id": m.header.frame_id,
+                "t_us": ns(m.header.stamp) // 1000,
+            })
         elif schema == FRAME:
             self.frames[topic] = self.frames.get(topic, "") + bytes(m.data).hex()
             self.frame_count[topic] = self.frame_count.get(topic, 0) + 1
@@ -184,7 +197,7 @@ class Decoded:
         return {"reads": self.reads, "frames": self.frames, "frame_count": self.frame_count,
                 "events": self.events, "logs": self.logs, "count": self.count,
                 "poses": self.poses, "tf": self.tf, "tags": self.tags,
-                "estimates": self.estimates, "scenes": self.scenes}
+                "estimates": self.estimates, "scenes": self.scenes, "phases": self.phases}
 
 
 def with_mcap(path):

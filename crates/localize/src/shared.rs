@@ -35,6 +35,19 @@ type Subscriber = Box<dyn Fn(&Arc<TagView>) + Send + Sync>;
 #[derive(Default)]
 struct Subscribers(RwLock<Vec<Subscriber>>);
 
+/// One told of every batch of antenna poses taken ([`Shared::on_poses`]).
+type PoseSubscriber = Box<dyn Fn(&[PoseSample]) + Send + Sync>;
+
+/// Those told of every batch of antenna poses taken.
+#[derive(Default)]
+struct PoseSubscribers(RwLock<Vec<PoseSubscriber>>);
+
+impl std::fmt::Debug for PoseSubscribers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} pose subscribers", read(&self.0).len())
+    }
+}
+
 impl std::fmt::Debug for Subscribers {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} subscribers", read(&self.0).len())
@@ -237,6 +250,7 @@ pub struct Shared {
     links: Arc<Links>,
     truth: RwLock<Option<Truth>>,
     subscribers: Subscribers,
+    pose_subscribers: PoseSubscribers,
     /// Counters for `/metrics`.
     pub metrics: Metrics,
     generation: AtomicU64,
@@ -266,6 +280,7 @@ impl Shared {
             links: Arc::default(),
             truth: RwLock::default(),
             subscribers: Subscribers::default(),
+            pose_subscribers: PoseSubscribers::default(),
             metrics: Metrics::new(),
             generation: AtomicU64::new(0),
         }
@@ -323,6 +338,20 @@ impl Shared {
     /// must not block (the application's event streams hand it to a bounded channel).
     pub fn on_publish(&self, f: impl Fn(&Arc<TagView>) + Send + Sync + 'static) {
         write(&self.subscribers.0).push(Box::new(f));
+    }
+
+    /// Calls `f` with every batch of antenna poses the localizer takes from now on (from
+    /// `POST /api/poses`, MQTT or a pose file), on the reads' clock, on the localizer's
+    /// thread: `f` must not block.
+    pub fn on_poses(&self, f: impl Fn(&[PoseSample]) + Send + Sync + 'static) {
+        write(&self.pose_subscribers.0).push(Box::new(f));
+    }
+
+    /// Tells the pose subscribers of `poses`.
+    pub(crate) fn poses_taken(&self, poses: &[PoseSample]) {
+        for f in read(&self.pose_subscribers.0).iter() {
+            f(poses);
+        }
     }
 
     /// How many times the tags changed (for pollers).

@@ -205,3 +205,34 @@ fn a_scene_update_encodes_as_rosbags_writes_it() {
     let got = scene_update(&mut Cdr::new(), stamp, "map", &["estimate/E2".into()], &[e]);
     assert_eq!(got, rosbags);
 }
+
+#[test]
+fn a_tag_phase_encodes_as_rosbags_writes_it_nan_for_a_missing_rssi() {
+    // TagPhase(header=Header(stamp=Time(1796150652, 1000), frame_id="s1/antenna_2"),
+    //   reader="s1", epc="E2801160", antenna=2, channel_index=7,
+    //   channel_frequency_hz=902750000, phase_rad=1.5,
+    //   phase_unwrapped_rad=1.5-2*3.141592653589793*3, rssi_dbm=nan)
+    let rosbags = hex(
+        "000100007c150f6be80300000d00000073312f616e74656e6e615f32000000000300000073310000\
+         090000004532383031313630000002000700000030dfce3500000000000000000000f83fd221337f\
+         7c5931c0000000000000f87f",
+    );
+    let read = Read {
+        epc: Epc::parse("E2801160").expect("epc"),
+        reader: Some(ReaderName::parse("s1").expect("name")),
+        antenna: 2,
+        t_us: 1_796_150_652_000_001,
+        phase_rad: Some(1.5),
+        rssi_dbm: None,
+        channel_index: Some(7),
+        channel_frequency_hz: Some(902_750_000),
+        doppler_hz: Some(-0.25),
+        antenna_pose: None,
+        last_seen_us: None,
+    };
+    let unwrapped = 1.5 - 2.0 * std::f64::consts::PI * 3.0;
+    assert_eq!(
+        msgs::tag_phase(&mut Cdr::new(), &read, "s1/antenna_2", unwrapped),
+        rosbags
+    );
+}

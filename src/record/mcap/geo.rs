@@ -180,6 +180,41 @@ impl<W: Write> McapOut<W> {
     }
 }
 
+/// Antenna poses a running gateway received (`POST /api/poses`, MQTT, a pose file).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReceivedPoses {
+    /// When the gateway took them, UTC µs (the MCAP log time).
+    pub received_us: u64,
+    /// Each pose: its reader's name, its time (the reads' clock, µs), its port and the pose.
+    pub poses: Vec<(String, u64, u16, AntennaPose)>,
+}
+
+impl<W: Write> McapOut<W> {
+    /// Antenna poses received from outside: each on `/llrp/READER/antenna_N/pose` (as a
+    /// simulation's reported poses) and on `/tf` as a transform from `map` to
+    /// `READER/antenna_N`, stamped with its own time; each antenna and its path join the
+    /// scene (written when the estimates or the poses pace it).
+    pub fn received_poses(&mut self, p: &ReceivedPoses) -> Result<(), McapError> {
+        let log_ns = p.received_us.saturating_mul(1000);
+        for (reader, t_us, port, pose) in &p.poses {
+            let token = self.token(reader);
+            let ns = t_us.saturating_mul(1000);
+            let frame = format!("{token}/antenna_{port}");
+            self.cdr.time(ns).string(WORLD);
+            pose_fields(&mut self.cdr, pose);
+            let bytes = self.cdr.finish();
+            let topic = format!("/llrp/{token}/antenna_{port}/pose");
+            self.write(&topic, MsgType::PoseInFrame, log_ns, ns, &bytes)?;
+            self.cdr.u32(1).header(ns, WORLD).string(&frame);
+            pose_fields(&mut self.cdr, pose);
+            let bytes = self.cdr.finish();
+            self.write("/tf", MsgType::TfMessage, log_ns, ns, &bytes)?;
+            self.scene_antenna(&token, *port, pose);
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,7 +8,8 @@
 //! * [`McapThread`]: an [`McapOut`] on a thread of its own, which running commands hand their
 //!   data to (file IO never on an async worker);
 //! * [`McapTap`]: every message written handed on as well (the live Foxglove view);
-//! * the message set ([`msgs`]) and its CDR encoder ([`cdr`]).
+//! * the message set ([`msgs`]) and its CDR encoder ([`cdr`]); each tag's phase unwrapped
+//!   per stream ([`phase`]).
 //!
 //! Times are UTC nanoseconds since the Unix epoch throughout: an MCAP message's log time is
 //! when the gateway received it, its publish time the reader's own timestamp where it has one
@@ -20,6 +21,7 @@ pub mod estimates;
 mod export;
 pub mod geo;
 pub mod msgs;
+pub mod phase;
 pub mod read;
 pub mod recording_in;
 pub mod ros_in;

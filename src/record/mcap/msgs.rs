@@ -19,6 +19,8 @@ pub enum MsgType {
     LlrpFrame,
     /// `llrp_gateway_msgs/msg/TagRead`.
     TagRead,
+    /// `llrp_gateway_msgs/msg/TagPhase`.
+    TagPhase,
     /// `llrp_gateway_msgs/msg/ReaderEvent`.
     ReaderEvent,
     /// `foxglove_msgs/msg/Log`.
@@ -58,9 +60,10 @@ uint32 line
 
 impl MsgType {
     /// Every type, in the order the schemas are written.
-    pub const ALL: [MsgType; 9] = [
+    pub const ALL: [MsgType; 10] = [
         MsgType::LlrpFrame,
         MsgType::TagRead,
+        MsgType::TagPhase,
         MsgType::ReaderEvent,
         MsgType::Log,
         MsgType::PoseInFrame,
@@ -75,6 +78,7 @@ impl MsgType {
         match self {
             MsgType::LlrpFrame => "llrp_gateway_msgs/msg/LlrpFrame",
             MsgType::TagRead => "llrp_gateway_msgs/msg/TagRead",
+            MsgType::TagPhase => "llrp_gateway_msgs/msg/TagPhase",
             MsgType::ReaderEvent => "llrp_gateway_msgs/msg/ReaderEvent",
             MsgType::Log => "foxglove_msgs/msg/Log",
             MsgType::PoseInFrame => "foxglove_msgs/msg/PoseInFrame",
@@ -92,6 +96,9 @@ impl MsgType {
                 include_str!("../../../ros2/llrp_gateway_msgs/msg/LlrpFrame.msg")
             }
             MsgType::TagRead => include_str!("../../../ros2/llrp_gateway_msgs/msg/TagRead.msg"),
+            MsgType::TagPhase => {
+                include_str!("../../../ros2/llrp_gateway_msgs/msg/TagPhase.msg")
+            }
             MsgType::ReaderEvent => {
                 include_str!("../../../ros2/llrp_gateway_msgs/msg/ReaderEvent.msg")
             }
@@ -111,7 +118,9 @@ impl MsgType {
     /// The types it uses, each once, in the order of the schema text.
     fn dependencies(self) -> &'static [(&'static str, &'static str)] {
         match self {
-            MsgType::LlrpFrame | MsgType::TagRead | MsgType::ReaderEvent => &[HEADER, TIME],
+            MsgType::LlrpFrame | MsgType::TagRead | MsgType::TagPhase | MsgType::ReaderEvent => {
+                &[HEADER, TIME]
+            }
             MsgType::Log => &[TIME],
             MsgType::PoseInFrame => &[TIME, geo::POSE, geo::POINT, geo::QUATERNION],
             MsgType::TfMessage => &[
@@ -216,6 +225,21 @@ pub fn tag_read(cdr: &mut Cdr, r: &Read, frame_id: &str) -> Vec<u8> {
         .u16(r.channel_index.unwrap_or(0))
         .u64(r.channel_frequency_hz.unwrap_or(0))
         .f64(or_nan(r.doppler_hz))
+        .finish()
+}
+
+/// `llrp_gateway_msgs/msg/TagPhase` of a read with a phase, whose antenna frame is
+/// `frame_id`, its phase unwrapped along its stream to `unwrapped_rad`.
+pub fn tag_phase(cdr: &mut Cdr, r: &Read, frame_id: &str, unwrapped_rad: f64) -> Vec<u8> {
+    cdr.header(r.t_us.saturating_mul(1000), frame_id)
+        .string(r.reader.as_deref().unwrap_or(""))
+        .string(r.epc.as_str())
+        .u16(r.antenna)
+        .u16(r.channel_index.unwrap_or(0))
+        .u64(r.channel_frequency_hz.unwrap_or(0))
+        .f64(or_nan(r.phase_rad))
+        .f64(unwrapped_rad)
+        .f64(or_nan(r.rssi_dbm))
         .finish()
 }
 

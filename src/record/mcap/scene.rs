@@ -417,15 +417,20 @@ impl<W: Write> McapOut<W> {
         self.scene.world = w;
     }
 
+    /// Antenna `port` of reader `token` at `pose`: its arrow and its path in the scene.
+    pub(super) fn scene_antenna(&mut self, token: &str, port: u16, pose: &AntennaPose) {
+        let (p, path) = (self.scene.antennas)
+            .entry((token.to_string(), port))
+            .or_insert_with(|| (*pose, Vec::new()));
+        *p = *pose;
+        extend_path(path, p.position);
+    }
+
     /// Takes instant `t` of reader `token` into the scene and writes the scene when an
     /// update is due.
     pub(super) fn scene_truth(&mut self, token: &str, t: &Truth) -> Result<(), McapError> {
         for (port, true_pose, _) in &t.antennas {
-            let (pose, path) = (self.scene.antennas)
-                .entry((token.to_string(), *port))
-                .or_insert_with(|| (*true_pose, Vec::new()));
-            *pose = *true_pose;
-            extend_path(path, pose.position);
+            self.scene_antenna(token, *port, true_pose);
         }
         for r in &t.robots {
             let (pose, path) = (self.scene.robots)

@@ -48,6 +48,8 @@ pub enum McapItem {
     },
     /// What a simulation knows of a reader at one instant: poses and ground truth.
     Truth(super::geo::Truth),
+    /// Antenna poses a running gateway received from outside.
+    Poses(super::geo::ReceivedPoses),
     /// Write the scene as it stands, stamped at this instant (UTC µs): where no simulation's
     /// truth paces it.
     Scene(u64),
@@ -220,6 +222,7 @@ fn write_item<W: Write>(mcap: &mut McapOut<W>, item: McapItem) -> Result<(), Mca
             }
         }
         McapItem::Truth(t) => mcap.truth(&t)?,
+        McapItem::Poses(p) => mcap.received_poses(&p)?,
         McapItem::Estimate(e) => mcap.estimate(&e)?,
         McapItem::SceneWorld(w) => mcap.scene_world(&w),
         McapItem::Scene(utc_us) => mcap.scene_at(utc_us)?,

@@ -46,6 +46,8 @@ pub struct McapOut<W: Write> {
     /// What the `/scene` topic shows.
     pub(super) scene: super::scene::Scene,
     reads: Vec<Read>,
+    /// Each tag stream's phase unwrapped so far.
+    phases: super::phase::Unwrapper,
     summary: Summary,
     /// Where every message is also handed (the live view), if anywhere.
     tap: Option<Box<dyn McapTap>>,
@@ -74,6 +76,7 @@ impl<W: Write> McapOut<W> {
             cdr: Cdr::new(),
             scene: Default::default(),
             reads: Vec::new(),
+            phases: Default::default(),
             summary: Summary::default(),
             tap: None,
         }
@@ -226,7 +229,8 @@ impl<W: Write> McapOut<W> {
     }
 
     /// One tag read, received at `received_ns` (the MCAP log time; its publish time and
-    /// header stamp are the reader's first-seen time), on its reader's reads channel.
+    /// header stamp are the reader's first-seen time), on its reader's reads channel; with a
+    /// phase, its phase unwrapped along its stream on its reader's `phase_unwrapped` channel.
     pub fn read(&mut self, received_ns: u64, r: &Read) -> Result<(), McapError> {
         let token = self.token(r.reader.as_deref().unwrap_or(""));
         let frame_id = format!("{token}/antenna_{}", r.antenna);
@@ -239,6 +243,16 @@ impl<W: Write> McapOut<W> {
             publish_ns,
             &bytes,
         )?;
+        if let Some(unwrapped) = self.phases.unwrap(&token, r) {
+            let bytes = msgs::tag_phase(&mut self.cdr, r, &frame_id, unwrapped);
+            self.write(
+                &format!("/llrp/{token}/phase_unwrapped"),
+                MsgType::TagPhase,
+                received_ns,
+                publish_ns,
+                &bytes,
+            )?;
+        }
         self.summary.reads += 1;
         Ok(())
     }

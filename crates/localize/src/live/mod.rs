@@ -366,10 +366,18 @@ impl Worker {
             .map(name)
             .collect();
         let mut newest: HashMap<(String, u16), PoseSample> = HashMap::new();
+        let mut taken = Vec::with_capacity(poses.len());
         for p in poses {
             newest.insert((name(&p), p.antenna), p.clone());
-            self.ingest.poses_mut().add(p);
+            self.ingest.poses_mut().add(p.clone());
+            // On the reads' clock, as the API shows them.
+            let offset = self.ingest.poses_mut().offset(&name(&p));
+            taken.push(PoseSample {
+                t_us: p.t_us.saturating_add_signed(offset),
+                ..p
+            });
         }
+        self.shared.poses_taken(&taken);
         for ((reader, antenna), mut p) in newest {
             // Shown on the reads' clock (UTC µs for LLRP readers), as every other time
             // of the API is: a pose comes on the robot's.
