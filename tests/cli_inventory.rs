@@ -520,7 +520,7 @@ fn settings_the_reader_cannot_do_are_refused_with_the_reason() {
     let (status, _, err) = inventory(&[&addr, "--seconds", "1", "--mode", "7"]);
     assert!(!status.success());
     assert!(
-        err.contains("RF mode 7 is not in the reader's mode table (0, 1, 2, 3, 1000)"),
+        err.contains("RF mode 7 is not in the reader's mode table (0, 1, 2, 3, 4, 5, 1000, 1002, 1003, 1004)"),
         "{err}"
     );
     let (status, _, err) = inventory(&[&addr, "--seconds", "1", "--antennas", "1,9"]);

@@ -13,7 +13,7 @@ pub const IMPINJ_VENDOR: u32 = super::device::IMPINJ_PEN;
 /// Highest index of the default device's transmit power table (its highest power).
 pub const POWER_LEVELS: u16 = DEFAULT.power.last_index;
 /// ModeIdentifiers of the default device's C1G2 RF mode table.
-pub const RF_MODES: [u32; 5] = [0, 1, 2, 3, 1000];
+pub const RF_MODES: [u32; 10] = [0, 1, 2, 3, 4, 5, 1000, 1002, 1003, 1004];
 
 fn general(p: &ReaderProfile) -> GeneralDeviceCapabilities {
     GeneralDeviceCapabilities {
@@ -239,12 +239,20 @@ mod tests {
     use super::*;
     use crate::reader::device::IMPINJ_R420;
 
-    /// The default device's RF mode table is the one the simulator advertised before devices
-    /// existed (the physics' Impinj links, advertised as Impinj readers do).
+    /// The default device's RF modes that the simulator advertised before devices existed
+    /// keep their entries (the physics' Impinj links, advertised as Impinj readers do); the
+    /// others (4, 5, 1002–1004) run as mode 2 and as AutoSet.
     #[test]
     fn the_default_mode_table_is_the_one_advertised_before() {
+        let ids: Vec<u32> = IMPINJ_R420.modes.iter().map(|m| m.id).collect();
+        assert_eq!(ids, RF_MODES);
         for (m, &id) in IMPINJ_R420.modes.iter().zip(RF_MODES.iter()) {
-            let link = crate::physics::gen2::RfMode::impinj(id).expect("an Impinj mode");
+            let Some(link) = crate::physics::gen2::RfMode::impinj(id) else {
+                let like = if id < 1000 { 2 } else { 1000 };
+                let same = IMPINJ_R420.mode(like).expect("mode 2 and 1000 are there");
+                assert_eq!(m.link, same.link, "{id}");
+                continue;
+            };
             let miller = link.miller;
             let tari = (link.tari_us * 1e3).round() as u32;
             let want = (

@@ -206,7 +206,16 @@ pub const IMPINJ_R420: Device = Device {
         impinj_entry(1, M1, (6250, 6250)),
         impinj_entry(2, M2, (20000, 20000)),
         impinj_entry(3, M3, (20000, 20000)),
+        // Modes 4 (Max Miller) and 5 (Dense Reader M4 Two), Miller 4, and AutoSet 1002–1004,
+        // which Impinj's "Reader Modes (RF Modes) Made Easy" lists for Speedway readers (1005,
+        // "Impinj Internal, Do Not Use", is not advertised); no link rate is published for 4
+        // and 5: they run as mode 2, the AutoSet modes as 1000 (as the R700's).
+        impinj_entry(4, M2, (20000, 20000)),
+        impinj_entry(5, M2, (20000, 20000)),
         impinj_entry(1000, AUTOSET, (20000, 25000)),
+        impinj_entry(1002, AUTOSET, (20000, 25000)),
+        impinj_entry(1003, AUTOSET, (20000, 25000)),
+        impinj_entry(1004, AUTOSET, (20000, 25000)),
     ],
     default_mode: 1000,
     gpis: 4,
