@@ -107,19 +107,7 @@ fn a_worker_s_mcap_file_holds_the_estimates_it_computed_and_their_scene() {
         if id.starts_with("antenna/") || id.starts_with("path/") {
             continue;
         }
-        let epc = id
-            .strip_prefix("estimate/")
-            .unwrap_or_else(|| panic!("a worker knows no truth, only estimates: {id}"));
-        let center = &e["spheres"][0]["position"];
-        let stamp = e["stamp_ns"].as_u64().expect("a stamp");
-        (estimates.iter())
-            .rfind(|m| {
-                m["epc"] == epc
-                    && m["position"] == *center
-                    && m["log_time"].as_u64().is_some_and(|t| t <= stamp)
-            })
-            .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
-        drawn.insert(epc.to_string());
+        drawn.insert(mcap_support::drawn_estimate(e, estimates));
     }
     assert!(drawn.is_superset(&placed), "{drawn:?} vs {placed:?}");
 }

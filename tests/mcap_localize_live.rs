@@ -57,20 +57,6 @@ fn localizing(args: &[&str], mcap: &str) -> (Proc, String, String) {
     (Proc(child), llrp, http)
 }
 
-/// `GET path` of the HTTP API at `addr`: the JSON body.
-fn get(addr: &str, path: &str) -> Value {
-    let mut s = TcpStream::connect(addr).expect("connects");
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
-    )
-    .expect("request");
-    let mut text = String::new();
-    s.read_to_string(&mut text).expect("response");
-    let body = text.split("\r\n\r\n").nth(1).expect("a body");
-    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
-}
-
 /// `POST path` of `body` (JSON) to the HTTP API at `addr`; its status must be 202.
 fn post(addr: &str, path: &str, body: &str) {
     let mut s = TcpStream::connect(addr).expect("connects");
@@ -91,7 +77,7 @@ fn post(addr: &str, path: &str, body: &str) {
 fn wait_for_poses(http: &str, reader: &str, x: f64) {
     let until = Instant::now() + GUARD;
     loop {
-        let readers = get(http, "/api/readers");
+        let readers = get_json(http, "/api/readers");
         let found = (readers["readers"].as_array().into_iter().flatten())
             .filter(|r| r["name"] == reader)
             .flat_map(|r| r["antennas"].as_array().into_iter().flatten())
@@ -151,7 +137,7 @@ fn assert_posted_poses(mcap: &std::path::Path, written: &[f64], skipped: f64) {
 fn wait_for_estimates(http: &str, want: usize) -> BTreeSet<String> {
     let until = Instant::now() + 3 * GUARD;
     loop {
-        let tags = get(http, "/api/tags");
+        let tags = get_json(http, "/api/tags");
         let placed: BTreeSet<String> = (tags["tags"].as_array().expect("tags").iter())
             .filter(|t| t["state"] == "converged" || t["state"] == "converging")
             .map(|t| t["epc"].as_str().expect("epc").to_uppercase())
@@ -274,19 +260,7 @@ fn assert_estimates_and_scene(mcap: &std::path::Path, placed: &BTreeSet<String>)
         if id.starts_with("antenna/") || id.starts_with("path/") {
             continue;
         }
-        let epc = id
-            .strip_prefix("estimate/")
-            .unwrap_or_else(|| panic!("no truth here, only estimates: {id}"));
-        let center = &e["spheres"][0]["position"];
-        let stamp = e["stamp_ns"].as_u64().expect("a stamp");
-        (estimates.iter())
-            .rfind(|m| {
-                m["epc"] == epc
-                    && m["position"] == *center
-                    && m["log_time"].as_u64().is_some_and(|t| t <= stamp)
-            })
-            .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
-        drawn.insert(epc.to_string());
+        drawn.insert(drawn_estimate(e, estimates));
     }
     assert!(drawn.is_superset(placed), "{drawn:?} vs {placed:?}");
 }

@@ -5,8 +5,7 @@
 //! ground truth file.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
@@ -54,20 +53,6 @@ fn sim(mcap: &Path, truth: &Path) -> (Proc, String) {
     (Proc(child), http.expect("an HTTP address"))
 }
 
-/// `GET path` of the HTTP API at `addr`: the JSON body.
-fn get(addr: &str, path: &str) -> Value {
-    let mut s = TcpStream::connect(addr).expect("connects");
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
-    )
-    .expect("request");
-    let mut text = String::new();
-    s.read_to_string(&mut text).expect("response");
-    let body = text.split("\r\n\r\n").nth(1).expect("a body");
-    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
-}
-
 /// σ along the worse axis of a 3×3 covariance (JSON numbers or nulls), m.
 fn worse_sigma(c: &Value) -> Option<f64> {
     let c: Vec<f64> = c
@@ -82,7 +67,7 @@ fn worse_sigma(c: &Value) -> Option<f64> {
 fn wait_for_sure_estimates(http: &str) {
     let until = Instant::now() + 3 * GUARD;
     loop {
-        let tags = get(http, "/api/tags");
+        let tags = get_json(http, "/api/tags");
         let sure = (tags["tags"].as_array().expect("tags").iter())
             .filter(|t| worse_sigma(&t["covariance"]).is_some_and(|s| s <= SURE_M))
             .count();

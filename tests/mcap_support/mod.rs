@@ -229,3 +229,37 @@ pub fn terminate(p: &mut Proc) {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+/// `GET path` of the HTTP API at `addr` (`host:port`): the JSON body.
+pub fn get_json(addr: &str, path: &str) -> Value {
+    use std::io::{Read as _, Write as _};
+    let mut s = std::net::TcpStream::connect(addr).expect("connects");
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .expect("request");
+    let mut text = String::new();
+    s.read_to_string(&mut text).expect("response");
+    let body = text.split("\r\n\r\n").nth(1).expect("a body");
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
+}
+
+/// The EPC of scene entity `e` (`estimate/EPC`), which must be drawn at the position of one
+/// of `estimates` (TagEstimate messages as `mcap_check.py` prints them) logged by its stamp.
+pub fn drawn_estimate(e: &Value, estimates: &[Value]) -> String {
+    let id = e["id"].as_str().expect("an id");
+    let epc = id
+        .strip_prefix("estimate/")
+        .unwrap_or_else(|| panic!("no truth here, only estimates: {id}"));
+    let center = &e["spheres"][0]["position"];
+    let stamp = e["stamp_ns"].as_u64().expect("a stamp");
+    (estimates.iter())
+        .rfind(|m| {
+            m["epc"] == epc
+                && m["position"] == *center
+                && m["log_time"].as_u64().is_some_and(|t| t <= stamp)
+        })
+        .unwrap_or_else(|| panic!("{id}: no estimate at {center} by {stamp}"));
+    epc.to_string()
+}
